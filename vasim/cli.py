@@ -1,0 +1,55 @@
+"""The ``vasim`` command line: one entry point, one subcommand per activity.
+
+Each subsystem contributes its subcommands through a ``register(subparsers)`` function so
+that this module only wires them together. Errors vasim raises on purpose (``VasimError``)
+print as one line on stderr and exit with code 2; argparse usage errors exit 2 as well.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from vasim import __version__
+from vasim.errors import VasimError
+
+Registrar = Callable[["argparse._SubParsersAction[argparse.ArgumentParser]"], None]
+
+
+def _registrars() -> list[Registrar]:
+    from vasim.fixtures import cli as fixtures_cli
+    from vasim.study import cli as study_cli
+    from vasim.viewer import cli as viewer_cli
+
+    return [study_cli.register, viewer_cli.register, fixtures_cli.register]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vasim",
+        description="Haptic surgical training simulator with task-oriented virtual fixtures.",
+    )
+    parser.add_argument("--version", action="version", version=f"vasim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for register in _registrars():
+        register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = args.func(args)
+    except VasimError as exc:
+        print(f"vasim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"vasim {args.command}: interrupted", file=sys.stderr)
+        return 130
+    return int(code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
