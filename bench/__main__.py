@@ -1,0 +1,21 @@
+"""Runs every benchmark and prints its figures: ``python -m bench [NAME ...]``."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+BENCHES = ["bench.fixtures_pipeline"]
+
+
+def main(argv: list[str]) -> int:
+    names = [f"bench.{n}" for n in argv] if argv else BENCHES
+    for name in names:
+        mod = importlib.import_module(name)
+        print(f"\n=== {name} ===", flush=True)
+        mod.main()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,180 @@
+"""The trial loop: determinism, metrics against an independent recomputation, NaN input,
+and the `vasim trial` command (storage, errors, a SIGKILL mid-trial)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vasim.cli import main
+from vasim.errors import ConfigError
+from vasim.study.store import TrialStore
+from vasim.study.trial import TrialConfig, TrialRunner, run_trial
+
+
+@pytest.fixture(scope="module")
+def ff_trial():
+    return run_trial(TrialConfig(schema="ff", seed=1, skill="expert"))[0]
+
+
+def test_same_seed_same_samples() -> None:
+    a = TrialRunner(TrialConfig(schema="trajectory_following", seed=5))
+    b = TrialRunner(TrialConfig(schema="trajectory_following", seed=5))
+    a.advance(2.0)
+    b.advance(2.0)
+    np.testing.assert_array_equal(a.samples.view()["x"], b.samples.view()["x"])
+    np.testing.assert_array_equal(a.samples.view()["force"], b.samples.view()["force"])
+    c = TrialRunner(TrialConfig(schema="trajectory_following", seed=6))
+    c.advance(2.0)
+    assert not np.array_equal(a.samples.view()["x"], c.samples.view()["x"])
+
+
+def test_trial_reaches_every_point_and_metrics_match_recomputation(ff_trial) -> None:
+    r = ff_trial
+    v = r.samples.view()
+    pts = r.task.points
+    assert r.summary["finished"] and int(r.metrics["reached"].sum()) == len(pts)
+    # Independent recomputation of eq. 6.5 with plain loops over the samples.
+    e = np.zeros(len(pts))
+    reach_t = np.full(len(pts), np.nan)
+    for j in range(len(v["t"])):
+        i = int(v["goal_index"][j])
+        e[i] += np.abs(v["x"][j] - pts[i]).sum()
+        if np.isnan(reach_t[i]) and np.linalg.norm(v["x"][j] - pts[i]) <= r.task.reach_radius:
+            reach_t[i] = v["t"][j]
+    lat = np.diff(np.concatenate([[0.0], reach_t]))
+    np.testing.assert_allclose(r.metrics["error_l1"].to_numpy(), e, rtol=1e-12)
+    np.testing.assert_allclose(r.metrics["latency"].to_numpy(), lat, rtol=1e-9, atol=1e-12)
+    # The control step is 1 ms and the trial ends when the last point is reached.
+    np.testing.assert_allclose(np.diff(v["t"]), 1e-3, atol=1e-12)
+    assert v["t"][-1] == pytest.approx(reach_t[-1])
+
+
+def test_ff_force_is_saturated_and_finite(ff_trial) -> None:
+    f = ff_trial.samples.view()["force"]
+    assert np.isfinite(f).all()
+    assert np.linalg.norm(f, axis=1).max() <= 3.3 + 1e-9
+    assert np.linalg.norm(f, axis=1).max() > 0.0
+
+
+class _NaNOperator:
+    """Wraps an operator and returns NaN/inf increments on some steps (a faulty device)."""
+
+    def __init__(self, inner, bad_steps: set[int]):
+        self.inner, self.bad, self.k = inner, bad_steps, -1
+
+    def reset(self, tcp):
+        self.inner.reset(tcp)
+
+    def step(self, obs):
+        self.k += 1
+        dx = self.inner.step(obs)
+        if self.k in self.bad:
+            return np.array([np.nan, np.inf, 0.0])
+        return dx
+
+
+def test_nonfinite_device_input_never_reaches_task_or_force() -> None:
+    runner = TrialRunner(TrialConfig(schema="trajectory_following", seed=2, max_time=1.0))
+    runner.operator = _NaNOperator(runner.operator, {10, 11, 500})
+    runner.advance(1.0)
+    v = runner.samples.view()
+    assert np.isfinite(v["x"]).all() and np.isfinite(v["force"]).all()
+    kinds = [e[1] for e in runner.events]
+    assert kinds.count("nonfinite_input") == 3
+    # The dropped steps did not move the tool.
+    assert np.array_equal(v["x"][10], v["x"][9]) and np.array_equal(v["x"][11], v["x"][10])
+
+
+def test_schema_for_the_wrong_task_is_refused() -> None:
+    with pytest.raises(ConfigError, match="point_targeting"):
+        TrialRunner(TrialConfig(task="trajectory", schema="point_targeting"))
+
+
+def test_bad_config_values_name_the_field() -> None:
+    with pytest.raises(ConfigError, match="dt"):
+        TrialConfig(dt=0.5)
+    with pytest.raises(ConfigError, match="operator"):
+        TrialConfig(operator="omni")
+
+
+def test_cli_trial_stores_samples_and_metrics(tmp_path: Path, capsys) -> None:
+    db = tmp_path / "study.sqlite"
+    code = main(["trial", "--task", "trajectory", "--schema", "ff", "--operator", "scripted",
+                 "--seed", "1", "--skill", "expert", "--db", str(db)])
+    assert code == 0
+    out = capsys.readouterr().out
+    assert "points reached" in out and "cumulative error" in out
+    with TrialStore(db) as store:
+        trials = store.trials()
+        assert list(trials["status"]) == ["completed"]
+        tid = int(trials["id"].iloc[0])
+        samples = store.samples(tid)
+        metrics = store.point_metrics(tid)
+    assert len(samples) == int(trials["n_samples"].iloc[0]) > 1000
+    assert metrics["reached"].all()
+    e = sum(
+        np.abs(samples.loc[samples.goal_index == i, ["x_x", "x_y", "x_z"]].to_numpy()
+               - samples.loc[samples.goal_index == i, ["g_x", "g_y", "g_z"]].to_numpy()).sum()
+        for i in range(len(metrics))
+    )
+    assert metrics["error_l1"].sum() == pytest.approx(e, rel=1e-12)
+
+
+def test_cli_errors_are_one_line_exit_2(tmp_path: Path) -> None:
+    exe = [sys.executable, "-m", "vasim.cli"]
+    p = subprocess.run([*exe, "trial", "--schema", "nope"], capture_output=True, text=True)
+    assert p.returncode == 2
+    assert p.stderr.count("\n") == 1 and "nope" in p.stderr and "Traceback" not in p.stderr
+    p = subprocess.run([*exe, "trial", "--subject", "Jane Doe", "--db",
+                        str(tmp_path / "s.sqlite"), "--max-time", "0.01"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "Jane Doe" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_sigkill_mid_trial_leaves_earlier_trials_intact(tmp_path: Path) -> None:
+    db = tmp_path / "study.sqlite"
+    for seed in (1, 2):
+        assert main(["trial", "--schema", "ff", "--seed", str(seed), "--skill", "expert",
+                     "--db", str(db)]) == 0
+    with TrialStore(db) as store:
+        before = {int(i): store.samples(int(i)) for i in store.trials()["id"]}
+    # A long trial in a child process, killed once its 'running' row is visible.
+    child = subprocess.Popen(
+        [sys.executable, "-m", "vasim.cli", "trial", "--schema", "trajectory_following",
+         "--skill", "novice", "--max-time", "600", "--seed", "3", "--db", str(db)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            con = sqlite3.connect(db, timeout=5)
+            n = con.execute("select count(*) from trials where status='running'").fetchone()[0]
+            con.close()
+            if n:
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail("the child never started its trial")
+        time.sleep(0.5)
+        os.kill(child.pid, signal.SIGKILL)
+    finally:
+        child.wait(timeout=30)
+    with TrialStore(db) as store:
+        trials = store.trials().set_index("id")
+        assert store.integrity_check() == "ok"
+        for tid, df in before.items():
+            assert trials.loc[tid, "status"] == "completed"
+            assert store.samples(tid).equals(df)
+        killed = [int(i) for i in trials.index if int(i) not in before]
+        assert len(killed) == 1
+        assert trials.loc[killed[0], "status"] == "interrupted"
+        assert len(store.samples(killed[0])) == 0

@@ -1,0 +1,351 @@
+"""The per-trial sample buffer the 1 kHz loop writes into (spec/study.md §2).
+
+``SampleBuffer`` is a columnar, preallocated, growable buffer: one numpy array per
+column, whose capacity doubles when full, so that ``append`` never allocates in the
+steady state (amortised O(1), ~1-2 µs per sample on the reference machine; see
+``tests/study/test_store.py::test_append_is_fast``).
+
+Columns (one row per logged step k; vectors in the world frame of the scene):
+
+==============  ========  ======  ==================================================
+column          dtype     shape   meaning
+==============  ========  ======  ==================================================
+``k``           int64     (n,)    step index of the logging loop
+``t``           float64   (n,)    time since trial start [s]
+``x``           float64   (n,3)   tool centre point x(k) [m]
+``g``           float64   (n,3)   current goal point g(k) [m] (after the step-k
+                                  goal-advance check, see ``vasim.study.metrics``)
+``goal_index``  int32     (n,)    index i of the goal point, ``N`` once all N points
+                                  are reached
+``force``       float64   (n,3)   force rendered to the operator [N] (0 if none)
+``ms``          float64   (n,3)   motion-scaling factors per axis (1 if none)
+``zoom``        float64   (n,)    Mag camera magnification (1 if none)
+``audio_pitch``  float64  (n,)    AG pitch (0 if none)
+``audio_period`` float64  (n,)    AG beep period [s] (0 if none)
+``audio_volume`` float64  (n,)    AG volume in [0, 1] (0 if none)
+``contact``     int8      (n,)    tissue-contact flag (0/1; 0 until contact exists)
+==============  ========  ======  ==================================================
+
+The active fixtures are a trial-level string (``active_fixtures``, e.g. ``"VG+FF"`` or
+``""`` for a VF-free trial): they do not change within a trial.
+
+The flat (tabular) names used by ``to_frame`` and by the store's ``samples`` table are
+``FRAME_COLUMNS``: ``x`` becomes ``x_x, x_y, x_z``, ``g`` becomes ``g_x, ...``, ``force``
+becomes ``f_x, f_y, f_z`` and ``ms`` becomes ``ms_x, ms_y, ms_z``.
+
+One writer only: the buffer is not thread-safe. Readers should take ``view()`` or
+``to_frame()`` after the trial (or hand over a copy).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+# (name, dtype, width; 1 = scalar column, 3 = vector column, flat names of the parts)
+_AXES = ("x", "y", "z")
+COLUMN_SPECS: tuple[tuple[str, type, tuple[str, ...]], ...] = (
+    ("k", np.int64, ("k",)),
+    ("t", np.float64, ("t",)),
+    ("x", np.float64, tuple(f"x_{a}" for a in _AXES)),
+    ("g", np.float64, tuple(f"g_{a}" for a in _AXES)),
+    ("goal_index", np.int32, ("goal_index",)),
+    ("force", np.float64, tuple(f"f_{a}" for a in _AXES)),
+    ("ms", np.float64, tuple(f"ms_{a}" for a in _AXES)),
+    ("zoom", np.float64, ("zoom",)),
+    ("audio_pitch", np.float64, ("audio_pitch",)),
+    ("audio_period", np.float64, ("audio_period",)),
+    ("audio_volume", np.float64, ("audio_volume",)),
+    ("contact", np.int8, ("contact",)),
+)
+"""Every buffer column: name, numpy dtype, and its flat (frame / SQL) column names."""
+
+COLUMNS: tuple[str, ...] = tuple(name for name, _, _ in COLUMN_SPECS)
+"""Buffer column names, in storage order."""
+
+FRAME_COLUMNS: tuple[str, ...] = tuple(flat for _, _, parts in COLUMN_SPECS for flat in parts)
+"""Flat column names of ``to_frame()`` and of the store's ``samples`` table, in order."""
+
+FRAME_DTYPES: dict[str, type] = {
+    flat: dtype for _, dtype, parts in COLUMN_SPECS for flat in parts
+}
+"""numpy dtype of each flat column."""
+
+_DEFAULT_FILL = {"force": 0.0, "ms": 1.0, "zoom": 1.0, "audio_pitch": 0.0,
+                 "audio_period": 0.0, "audio_volume": 0.0, "contact": 0}
+
+
+class SampleBuffer:
+    """Preallocated columnar buffer of one trial's samples.
+
+    Args:
+        capacity: initial number of rows (grows by doubling; a 60 s trial at 1 kHz is
+            60,000 rows, so ``65536`` avoids every reallocation for such a trial).
+        active_fixtures: trial-level string naming the active fixture(s), ``""`` for none.
+
+    Example:
+        >>> buf = SampleBuffer(capacity=2, active_fixtures="VG")
+        >>> for k in range(3):
+        ...     buf.append(k, k * 1e-3, (0.0, 0.0, k * 1e-3), (0.0, 0.0, 0.01), 0)
+        >>> len(buf), buf.capacity
+        (3, 4)
+        >>> buf.view()["x"][:, 2].tolist()
+        [0.0, 0.001, 0.002]
+    """
+
+    __slots__ = (
+        "_arrays",
+        "_cap",
+        "_contact",
+        "_f",
+        "_g",
+        "_gi",
+        "_k",
+        "_ms",
+        "_n",
+        "_period",
+        "_pitch",
+        "_t",
+        "_volume",
+        "_x",
+        "_zoom",
+        "active_fixtures",
+    )
+
+    def __init__(self, capacity: int = 4096, *, active_fixtures: str = ""):
+        capacity = int(capacity)
+        if capacity < 1:
+            raise ValueError(f"capacity must be >= 1, got {capacity!r}")
+        if not isinstance(active_fixtures, str):
+            raise ValueError(f"active_fixtures must be a string, got {active_fixtures!r}")
+        self.active_fixtures = active_fixtures
+        self._n = 0
+        self._allocate(capacity, copy_from=None)
+
+    # ------------------------------------------------------------------ storage
+    def _allocate(self, capacity: int, copy_from: dict[str, NDArray[Any]] | None) -> None:
+        arrays: dict[str, NDArray[Any]] = {}
+        for name, dtype, parts in COLUMN_SPECS:
+            shape: tuple[int, ...] = (capacity,) if len(parts) == 1 else (capacity, len(parts))
+            a = np.empty(shape, dtype=dtype)
+            if copy_from is not None:
+                a[: self._n] = copy_from[name][: self._n]
+            arrays[name] = a
+        self._arrays = arrays
+        self._cap = capacity
+        # bound attributes: one attribute lookup per column in the hot path
+        self._k = arrays["k"]
+        self._t = arrays["t"]
+        self._x = arrays["x"]
+        self._g = arrays["g"]
+        self._gi = arrays["goal_index"]
+        self._f = arrays["force"]
+        self._ms = arrays["ms"]
+        self._zoom = arrays["zoom"]
+        self._pitch = arrays["audio_pitch"]
+        self._period = arrays["audio_period"]
+        self._volume = arrays["audio_volume"]
+        self._contact = arrays["contact"]
+
+    def reserve(self, capacity: int) -> None:
+        """Grows the buffer to hold at least ``capacity`` rows (call before a trial)."""
+        if capacity > self._cap:
+            self._allocate(int(capacity), copy_from=self._arrays)
+
+    def _grow(self, needed: int) -> None:
+        cap = self._cap
+        while cap < needed:
+            cap *= 2
+        self._allocate(cap, copy_from=self._arrays)
+
+    @property
+    def capacity(self) -> int:
+        """Rows the buffer holds before it next doubles."""
+        return self._cap
+
+    def __len__(self) -> int:
+        return self._n
+
+    def clear(self) -> None:
+        """Forgets every row (keeps the capacity); arrays from earlier ``view(copy=False)``
+        calls may then be overwritten."""
+        self._n = 0
+
+    # ------------------------------------------------------------------ writing
+    def append(
+        self,
+        k: int,
+        t: float,
+        x: Sequence[float] | NDArray[np.float64],
+        g: Sequence[float] | NDArray[np.float64],
+        goal_index: int,
+        force: Sequence[float] | NDArray[np.float64] | None = None,
+        ms: Sequence[float] | NDArray[np.float64] | None = None,
+        zoom: float = 1.0,
+        pitch: float = 0.0,
+        period: float = 0.0,
+        volume: float = 0.0,
+        contact: int = 0,
+    ) -> None:
+        """Appends one sample (the hot path of the logging loop; no per-call allocation).
+
+        Args:
+            k: step index. t: time since trial start [s].
+            x: (3,) TCP position [m]. g: (3,) goal point [m]. goal_index: goal point index.
+            force: (3,) rendered force [N], ``None`` = zeros.
+            ms: (3,) motion-scaling factors, ``None`` = ones.
+            zoom: Mag magnification. pitch, period [s], volume: AG audio outputs.
+            contact: tissue-contact flag (0/1).
+        """
+        i = self._n
+        if i == self._cap:
+            self._grow(i + 1)
+        self._k[i] = k
+        self._t[i] = t
+        self._x[i] = x
+        self._g[i] = g
+        self._gi[i] = goal_index
+        self._f[i] = 0.0 if force is None else force
+        self._ms[i] = 1.0 if ms is None else ms
+        self._zoom[i] = zoom
+        self._pitch[i] = pitch
+        self._period[i] = period
+        self._volume[i] = volume
+        self._contact[i] = contact
+        self._n = i + 1
+
+    def extend(
+        self,
+        k: ArrayLike,
+        t: ArrayLike,
+        x: ArrayLike,
+        g: ArrayLike,
+        goal_index: ArrayLike,
+        force: ArrayLike | None = None,
+        ms: ArrayLike | None = None,
+        zoom: ArrayLike | None = None,
+        audio_pitch: ArrayLike | None = None,
+        audio_period: ArrayLike | None = None,
+        audio_volume: ArrayLike | None = None,
+        contact: ArrayLike | None = None,
+    ) -> None:
+        """Appends m samples at once (replays, simulated cohorts, tests).
+
+        Args are the columns of ``append`` as arrays: scalars ``(m,)``, vectors ``(m, 3)``.
+        A column left ``None`` takes its default (force 0, ms 1, zoom 1, audio 0,
+        contact 0). Scalars broadcast.
+
+        Raises:
+            ValueError: if the columns do not share one length m or a vector is not (m, 3).
+        """
+        given = {"k": k, "t": t, "x": x, "g": g, "goal_index": goal_index, "force": force,
+                 "ms": ms, "zoom": zoom, "audio_pitch": audio_pitch,
+                 "audio_period": audio_period, "audio_volume": audio_volume,
+                 "contact": contact}
+        m = int(np.shape(k)[0]) if np.ndim(k) else 1
+        cols: dict[str, NDArray[Any]] = {}
+        for name, dtype, parts in COLUMN_SPECS:
+            v = given[name]
+            if v is None:
+                v = _DEFAULT_FILL[name]
+            shape = (m,) if len(parts) == 1 else (m, len(parts))
+            a = np.asarray(v, dtype=dtype)
+            try:
+                a = np.broadcast_to(a, shape)
+            except ValueError:
+                raise ValueError(
+                    f"column {name!r} has shape {np.shape(v)}, expected {shape} "
+                    f"(m = {m} from column 'k')"
+                ) from None
+            cols[name] = a
+        n0 = self._n
+        if n0 + m > self._cap:
+            self._grow(n0 + m)
+        for name, a in cols.items():
+            self._arrays[name][n0 : n0 + m] = a
+        self._n = n0 + m
+
+    # ------------------------------------------------------------------ reading
+    def view(self, copy: bool = False) -> dict[str, NDArray[Any]]:
+        """Returns the filled part of every column, keyed by ``COLUMNS`` names.
+
+        Args:
+            copy: return independent copies; otherwise read-only views into the buffer
+                (they stay valid, and unchanged, while appending continues; ``clear()``
+                lets later appends overwrite them).
+
+        Returns:
+            dict: ``k (n,)``, ``t (n,)``, ``x (n, 3)``, ``g (n, 3)``, ``goal_index (n,)``,
+            ``force (n, 3)``, ``ms (n, 3)``, ``zoom``, ``audio_pitch``, ``audio_period``,
+            ``audio_volume`` ``(n,)``, ``contact (n,)``.
+        """
+        n = self._n
+        out: dict[str, NDArray[Any]] = {}
+        for name, a in self._arrays.items():
+            v = a[:n]
+            if copy:
+                v = v.copy()
+            else:
+                v = v.view()
+                v.flags.writeable = False
+            out[name] = v
+        return out
+
+    def columns(self) -> dict[str, NDArray[Any]]:
+        """Returns the filled part as flat 1-D columns keyed by ``FRAME_COLUMNS`` (views)."""
+        n = self._n
+        out: dict[str, NDArray[Any]] = {}
+        for name, _, parts in COLUMN_SPECS:
+            a = self._arrays[name][:n]
+            if len(parts) == 1:
+                out[parts[0]] = a
+            else:
+                for j, flat in enumerate(parts):
+                    out[flat] = a[:, j]
+        return out
+
+    def to_frame(self) -> pd.DataFrame:
+        """Returns a copy as a DataFrame with the flat ``FRAME_COLUMNS``, in order."""
+        return pd.DataFrame({c: np.array(v) for c, v in self.columns().items()},
+                            columns=list(FRAME_COLUMNS))
+
+    def rows(self) -> Iterator[tuple[Any, ...]]:
+        """Yields one tuple of Python scalars per sample, in ``FRAME_COLUMNS`` order.
+
+        This is what the store hands to ``executemany``; it converts column by column
+        (``tolist``), which is far faster than converting row by row.
+        """
+        cols = [v.tolist() for v in self.columns().values()]
+        return zip(*cols, strict=True)
+
+    @classmethod
+    def from_columns(
+        cls, columns: Mapping[str, ArrayLike], *, active_fixtures: str = ""
+    ) -> SampleBuffer:
+        """Builds a buffer from flat columns (``FRAME_COLUMNS`` keys), e.g. a DataFrame.
+
+        Raises:
+            ValueError: if a column is missing.
+        """
+        missing = [c for c in FRAME_COLUMNS if c not in columns]
+        if missing:
+            raise ValueError(f"missing sample columns: {missing}")
+        n = len(np.asarray(columns["k"]))
+        buf = cls(capacity=max(n, 1), active_fixtures=active_fixtures)
+        vec: dict[str, Any] = {}
+        for name, _, parts in COLUMN_SPECS:
+            if len(parts) == 1:
+                vec[name] = np.asarray(columns[parts[0]])
+            else:
+                vec[name] = np.column_stack([np.asarray(columns[p]) for p in parts]) if n else (
+                    np.empty((0, len(parts))))
+        buf.extend(**vec)
+        return buf
+
+    def __repr__(self) -> str:
+        return (f"SampleBuffer(n={self._n}, capacity={self._cap}, "
+                f"active_fixtures={self.active_fixtures!r})")

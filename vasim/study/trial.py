@@ -1,0 +1,368 @@
+"""One trial: the 1 kHz control loop that ties operator, fixtures and task together.
+
+The same runner serves a headless trial (``vasim trial``), the viewer's demo and (later) the
+study sessions; only the input device differs. Per control step k (``dt`` = 1 ms by default),
+in the order of spec/fixtures.md §4:
+
+1. the operator (a device: here the scripted operator) perceives the last frame and moves the
+   master by ``dX_M``; a non-finite increment is dropped (zero motion) and logged as an event,
+   so NaN/inf never reaches the task or the force output;
+2. MS (stage 1 of the schema) scales the increment: ``dX_S = dX_M / MS``;
+3. the task updates: ``x(k) = x(k-1) + dX_S``; the goal advances when ``|x - p_i| <= r_reach``
+   (spec/study.md §2 **decision**, ``r_reach`` = ``task.reach_radius``, default 5 mm), and the
+   reach time ``t_p`` is stored;
+4. the parallel channels (FF + cone walls, AG, VG, Mag) are rendered from the updated state;
+5. the sample (k, t, x, g, goal index, force, MS factors, zoom, audio) is appended to a
+   preallocated buffer (no allocation per sample).
+
+The TCP velocity used by FF's damping term is the finite difference of x filtered by a
+first-order low-pass (``velocity_cutoff_hz``, default 30 Hz): raw 1 kHz differences of a
+tremor-laden hand would make the damping force buzz.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from vasim.errors import ConfigError
+from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
+from vasim.fixtures.schema import Schema, load_schema
+from vasim.fixtures.types import TaskState, Vec3
+from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
+from vasim.study.metrics import point_metrics, trial_summary
+from vasim.study.samples import SampleBuffer
+from vasim.tasks import Task, point_task, trajectory_task
+
+TaskName = Literal["trajectory", "point"]
+SkillName = Literal["novice", "intermediate", "expert"]
+
+
+@dataclass(frozen=True)
+class TrialConfig:
+    """Everything that defines one trial (stored with it; same config + seed = same trial).
+
+    Attributes:
+        task: ``"trajectory"`` (trajectory following) or ``"point"`` (point targeting).
+        variant: trajectory variant, 0 = original, 1..6 mirrored/rotated.
+        schema: fixture schema name (``protocols/schemas/NAME.toml``) or path to a TOML file.
+        operator: input device; ``"scripted"`` is the only one in this release.
+        skill: scripted operator preset.
+        seed: random seed of the operator (noise, tremor).
+        practice: number of earlier trials of this subject (learning).
+        dt: control step [s] (1 ms: the haptic rate).
+        max_time: simulated time limit [s]; the trial ends there even if points remain.
+        subject: subject code (never a name).
+    """
+
+    task: TaskName = "trajectory"
+    variant: int = 0
+    schema: str = "none"
+    operator: str = "scripted"
+    skill: SkillName = "intermediate"
+    seed: int = 0
+    practice: int = 0
+    dt: float = 1e-3
+    max_time: float = 180.0
+    subject: str = "S00"
+    velocity_cutoff_hz: float = 30.0
+    profile: OperatorProfile | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        if self.task not in ("trajectory", "point"):
+            raise ConfigError(f"unknown task {self.task!r} (expected 'trajectory' or 'point')",
+                              field="task")
+        if self.operator != "scripted":
+            raise ConfigError(f"unknown operator {self.operator!r} (available: 'scripted')",
+                              field="operator")
+        if self.skill not in ("novice", "intermediate", "expert"):
+            raise ConfigError(f"unknown skill {self.skill!r} (novice, intermediate, expert)",
+                              field="skill")
+        if not (math.isfinite(self.dt) and 0 < self.dt <= 0.02):
+            raise ConfigError(f"dt must be in (0, 0.02] s, got {self.dt!r}", field="dt")
+        if not (math.isfinite(self.max_time) and self.max_time > 0):
+            raise ConfigError(f"max_time must be > 0 s, got {self.max_time!r}", field="max_time")
+        if self.practice < 0:
+            raise ConfigError(f"practice must be >= 0, got {self.practice!r}", field="practice")
+        if not (math.isfinite(self.velocity_cutoff_hz) and self.velocity_cutoff_hz > 0):
+            raise ConfigError(f"velocity_cutoff_hz must be > 0, got {self.velocity_cutoff_hz!r}",
+                              field="velocity_cutoff_hz")
+
+
+@dataclass(frozen=True, eq=False)
+class TrialFrame:
+    """An immutable snapshot of the trial after step k (what the viewer and recorder read).
+
+    Attributes:
+        k: step index. t: simulated time [s]. tcp: (3,) slave TCP [m]. master: (3,) master
+        (hand) position [m]. goal: (3,) current goal point [m]. goal_index: index of the goal
+        (== n_points when all are reached). outputs: the fixture outputs of this step.
+        last_latency: latency l_i of the last reached point [s] (None before the first).
+        error_l1: cumulative Manhattan error accumulated for the current goal so far [m].
+    """
+
+    k: int
+    t: float
+    tcp: Vec3
+    master: Vec3
+    goal: Vec3
+    goal_index: int
+    n_points: int
+    done: bool
+    outputs: FixtureOutputs
+    last_latency: float | None = None
+    error_l1: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class TrialResult:
+    """A finished (or stopped) trial: config, samples, per-point metrics and summary."""
+
+    config: TrialConfig
+    schema: Schema
+    task: Task
+    samples: SampleBuffer
+    metrics: pd.DataFrame
+    summary: dict[str, float | int | bool | str]
+    events: list[tuple[float, str, str]]
+    wall_time: float
+
+
+def make_task(config: TrialConfig) -> Task:
+    """Builds the task a config names."""
+    if config.task == "trajectory":
+        return trajectory_task(config.variant)
+    return point_task()
+
+
+def make_profile(config: TrialConfig) -> OperatorProfile:
+    if config.profile is not None:
+        return config.profile
+    if config.skill == "novice":
+        return OperatorProfile.novice()
+    if config.skill == "expert":
+        return OperatorProfile.expert()
+    return OperatorProfile.intermediate()
+
+
+class TrialRunner:
+    """Runs one trial step by step (a thin stateful shell around the pure fixtures).
+
+    Example:
+        >>> runner = TrialRunner(TrialConfig(schema="ff", seed=1, max_time=0.01))
+        >>> frame = runner.advance(0.005)
+        >>> frame.k
+        4
+    """
+
+    def __init__(self, config: TrialConfig, schema: Schema | None = None):
+        self.config = config
+        self.schema = schema if schema is not None else load_schema(config.schema)
+        self.task = make_task(config)
+        if self.schema.task not in ("any", self.task.kind):
+            raise ConfigError(
+                f"schema {self.schema.name!r} is for {self.schema.task!r} tasks, "
+                f"not {self.task.kind!r}", field="schema")
+        self.runtime = SchemaRuntime(self.schema)
+        self.operator = ScriptedOperator(make_profile(config), self.task, seed=config.seed,
+                                         practice=config.practice)
+        self.samples = SampleBuffer()
+        self.events: list[tuple[float, str, str]] = []
+        self._points = np.asarray(self.task.points, dtype=np.float64)
+        self._n = len(self._points)
+        self._r2 = self.task.reach_radius ** 2
+        # The task geometry is static within a trial here: look-ahead points (Mag's aim) and
+        # normals are computed once per POI, not per step.
+        self._lookahead = [self.task.lookahead(i) for i in range(self._n)]
+        self._normals = None if self.task.normals is None else np.asarray(self.task.normals)
+        self._tcp = np.array(self.task.start, dtype=np.float64)
+        self._master = self._tcp.copy()
+        self._vel = np.zeros(3)
+        self._alpha = 1.0 - math.exp(-2.0 * math.pi * config.velocity_cutoff_hz * config.dt)
+        self._k = -1
+        self._t = 0.0
+        self._i = 0
+        self._reach_times: list[float] = []
+        self._err = 0.0
+        self.runtime.reset(self._tcp)
+        self.operator.reset(self._tcp)
+        self._frame = TrialFrame(k=-1, t=0.0, tcp=self._tcp.copy(), master=self._master.copy(),
+                                 goal=self._points[0].copy(), goal_index=0, n_points=self._n,
+                                 done=False, outputs=self.runtime.render(self._state(
+                                     np.zeros(3))))
+        self.done = False
+
+    # -- helpers -----------------------------------------------------------------------
+    def _goal(self) -> Vec3:
+        return self._points[min(self._i, self._n - 1)]
+
+    def _state(self, dx_master: Vec3) -> TaskState:
+        i = min(self._i, self._n - 1)
+        normals = self._normals
+        return TaskState(
+            tcp=self._tcp, goal=self._points[i], tcp_velocity=self._vel,
+            dx_master=dx_master, scale=self.task.scale, t=self._t, kind=self.task.kind,
+            lookahead=self._lookahead[i],
+            normal=None if normals is None else normals[i],
+        )
+
+    def _observation(self) -> OperatorObservation:
+        out = self._frame.outputs
+        force = out.force.force if out.force is not None else _ZERO3
+        audio = out.audio
+        return OperatorObservation(
+            t=self._t, dt=self.config.dt, tcp=self._tcp, goal=self._goal(),
+            goal_index=min(self._i, self._n - 1), force=force, ms_factors=out.ms_factors,
+            guidance=any(a.opacity > 0.05 for a in out.arrows if a.kind == "guidance"),
+            audio_volume=0.0 if audio is None else audio.volume,
+            audio_pitch_hz=0.0 if audio is None else audio.pitch_hz,
+            zoom=1.0 if out.camera is None else out.camera.zoom,
+        )
+
+    # -- the loop ------------------------------------------------------------------------
+    @property
+    def frame(self) -> TrialFrame:
+        """The latest immutable snapshot (safe to read from another thread)."""
+        return self._frame
+
+    def step(self) -> TrialFrame:
+        """Advances one control step; returns the new frame."""
+        if self.done:
+            return self._frame
+        dt = self.config.dt
+        self._k += 1
+        self._t = (self._k + 1) * dt
+        dx_m = np.asarray(self.operator.step(self._observation()), dtype=np.float64)
+        if not np.all(np.isfinite(dx_m)):
+            self.events.append((self._t, "nonfinite_input", f"dX_M={dx_m.tolist()!r}"))
+            dx_m = np.zeros(3)
+        self._master = self._master + dx_m
+        scaled = self.runtime.scale_motion(self._state(dx_m))
+        dx_s = scaled.dx_slave
+        prev = self._tcp
+        self._tcp = prev + dx_s
+        self._vel = self._vel + self._alpha * (dx_s / dt - self._vel)
+        goal = self._points[self._i]
+        d = self._tcp - goal
+        self._err += abs(d[0]) + abs(d[1]) + abs(d[2])
+        gi = self._i
+        if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self._r2:
+            self._reach_times.append(self._t)
+            self._i += 1
+            self._err = 0.0
+        finished = self._i >= self._n
+        out = self.runtime.render(self._state(dx_m))
+        f = out.force.force if out.force is not None else _ZERO3
+        audio = out.audio
+        self.samples.append(
+            self._k, self._t, self._tcp, goal, gi, f, out.ms_factors,
+            1.0 if out.camera is None else out.camera.zoom,
+            0.0 if audio is None else audio.pitch_hz,
+            0.0 if audio is None else audio.period_s,
+            0.0 if audio is None else audio.volume, 0,
+        )
+        self.done = finished or self._t >= self.config.max_time - 1e-12
+        rt = self._reach_times
+        last_latency = None
+        if rt:
+            last_latency = rt[-1] - (rt[-2] if len(rt) > 1 else 0.0)
+        self._frame = TrialFrame(
+            k=self._k, t=self._t, tcp=self._tcp, master=self._master,
+            goal=self._points[min(self._i, self._n - 1)], goal_index=self._i,
+            n_points=self._n, done=self.done, outputs=out, last_latency=last_latency,
+            error_l1=self._err,
+        )
+        return self._frame
+
+    def advance(self, seconds: float) -> TrialFrame:
+        """Runs the control loop for ``seconds`` of simulated time (or until done)."""
+        n = max(1, round(seconds / self.config.dt))
+        for _ in range(n):
+            if self.done:
+                break
+            self.step()
+        return self._frame
+
+    def result(self, wall_time: float = 0.0) -> TrialResult:
+        """The trial's samples, per-point metrics (spec/study.md §2) and summary."""
+        view = self.samples.view()
+        metrics = point_metrics(
+            view["t"], view["x"], view["g"], view["goal_index"], self._points,
+            r_reach=self.task.reach_radius,
+        )
+        summary = trial_summary(metrics)
+        summary.update({
+            "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
+            "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
+        })
+        return TrialResult(config=self.config, schema=self.schema, task=self.task,
+                           samples=self.samples, metrics=metrics, summary=summary,
+                           events=list(self.events), wall_time=wall_time)
+
+
+_ZERO3 = np.zeros(3)
+_ZERO3.setflags(write=False)
+
+
+def run_trial(config: TrialConfig, store: object | None = None, *,
+              progress: bool = False) -> tuple[TrialResult, int | None]:
+    """Runs a whole trial headless, as fast as the machine allows.
+
+    With a ``TrialStore``, the trial row is created as 'running' before the first step and
+    made durable (samples + per-point metrics + status 'completed') in one transaction at the
+    end; any exception or Ctrl-C marks it 'interrupted' and re-raises.
+
+    Returns:
+        (result, trial_id) — trial_id is None without a store.
+    """
+    from vasim.study.store import TrialMeta, TrialStore
+
+    runner = TrialRunner(config)
+    trial_id: int | None = None
+    if store is not None:
+        assert isinstance(store, TrialStore)
+        trial_id = store.begin_trial(TrialMeta(
+            subject=config.subject, task=config.task, variant=config.variant,
+            schema=runner.schema.name, operator=config.operator, seed=config.seed,
+            dt=config.dt, active_fixtures=",".join(runner.schema.fixture_names),
+            pid=os.getpid(), host=socket.gethostname(),
+        ))
+    t0 = time.perf_counter()
+    try:
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=runner._n, unit="pt", desc=f"trial {config.schema}", leave=False)
+        chunk = 0.25
+        last_i = 0
+        while not runner.done:
+            frame = runner.advance(chunk)
+            if bar is not None and frame.goal_index != last_i:
+                bar.update(frame.goal_index - last_i)
+                last_i = frame.goal_index
+        if bar is not None:
+            bar.close()
+        result = runner.result(wall_time=time.perf_counter() - t0)
+        if store is not None and trial_id is not None:
+            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
+                               events=result.events)
+    except BaseException:
+        if store is not None and trial_id is not None:
+            store.mark_interrupted(trial_id)
+        raise
+    return result, trial_id
+
+
+__all__ = ["TrialConfig", "TrialFrame", "TrialResult", "TrialRunner", "make_task", "run_trial"]
+
+
+def with_schema(config: TrialConfig, schema: str) -> TrialConfig:
+    """A copy of ``config`` with another schema (used by the viewer's schema menu)."""
+    return replace(config, schema=schema)
