@@ -37,7 +37,7 @@ from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
-from vasim.study.metrics import point_metrics, trial_summary
+from vasim.study.metrics import evaluate_trial
 from vasim.study.samples import SampleBuffer
 from vasim.tasks import Task, point_task, trajectory_task
 
@@ -193,11 +193,9 @@ class TrialRunner:
         self._err = 0.0
         self.runtime.reset(self._tcp)
         self.operator.reset(self._tcp)
-        self._frame = TrialFrame(k=-1, t=0.0, tcp=self._tcp.copy(), master=self._master.copy(),
-                                 goal=self._points[0].copy(), goal_index=0, n_points=self._n,
-                                 done=False, outputs=self.runtime.render(self._state(
-                                     np.zeros(3))))
         self.done = False
+        self._out: FixtureOutputs = self.runtime.render(self._state(np.zeros(3)))
+        self._publish()
 
     # -- helpers -----------------------------------------------------------------------
     def _goal(self) -> Vec3:
@@ -214,13 +212,17 @@ class TrialRunner:
         )
 
     def _observation(self) -> OperatorObservation:
-        out = self._frame.outputs
+        out = self._out
         force = out.force.force if out.force is not None else _ZERO3
         audio = out.audio
+        guidance = False
+        for a in out.arrows:
+            if a.kind == "guidance" and a.opacity > 0.05:
+                guidance = True
         return OperatorObservation(
             t=self._t, dt=self.config.dt, tcp=self._tcp, goal=self._goal(),
             goal_index=min(self._i, self._n - 1), force=force, ms_factors=out.ms_factors,
-            guidance=any(a.opacity > 0.05 for a in out.arrows if a.kind == "guidance"),
+            guidance=guidance,
             audio_volume=0.0 if audio is None else audio.volume,
             audio_pitch_hz=0.0 if audio is None else audio.pitch_hz,
             zoom=1.0 if out.camera is None else out.camera.zoom,
@@ -229,36 +231,54 @@ class TrialRunner:
     # -- the loop ------------------------------------------------------------------------
     @property
     def frame(self) -> TrialFrame:
-        """The latest immutable snapshot (safe to read from another thread)."""
+        """The latest published snapshot (immutable: safe to read from another thread).
+
+        ``step()`` publishes after every step, ``advance()`` once at the end of its run.
+        """
         return self._frame
 
     def step(self) -> TrialFrame:
         """Advances one control step; returns the new frame."""
-        if self.done:
-            return self._frame
+        if not self.done:
+            self._tick()
+            self._publish()
+        return self._frame
+
+    def advance(self, seconds: float) -> TrialFrame:
+        """Runs the control loop for ``seconds`` of simulated time (or until done)."""
+        n = max(1, round(seconds / self.config.dt))
+        for _ in range(n):
+            if self.done:
+                break
+            self._tick()
+        self._publish()
+        return self._frame
+
+    def _tick(self) -> None:
+        """One control step (module docstring, steps 1-5)."""
         dt = self.config.dt
         self._k += 1
         self._t = (self._k + 1) * dt
-        dx_m = np.asarray(self.operator.step(self._observation()), dtype=np.float64)
-        if not np.all(np.isfinite(dx_m)):
-            self.events.append((self._t, "nonfinite_input", f"dX_M={dx_m.tolist()!r}"))
+        dx_m = self.operator.step(self._observation())
+        if not (math.isfinite(dx_m[0]) and math.isfinite(dx_m[1]) and math.isfinite(dx_m[2])):
+            self.events.append((self._t, "nonfinite_input", f"dX_M={list(map(float, dx_m))!r}"))
             dx_m = np.zeros(3)
+        else:
+            dx_m = np.asarray(dx_m, dtype=np.float64)
         self._master = self._master + dx_m
-        scaled = self.runtime.scale_motion(self._state(dx_m))
-        dx_s = scaled.dx_slave
-        prev = self._tcp
-        self._tcp = prev + dx_s
+        dx_s = self.runtime.scale_motion(self._state(dx_m)).dx_slave
+        self._tcp = self._tcp + dx_s
         self._vel = self._vel + self._alpha * (dx_s / dt - self._vel)
         goal = self._points[self._i]
-        d = self._tcp - goal
-        self._err += abs(d[0]) + abs(d[1]) + abs(d[2])
+        d0, d1, d2 = (self._tcp - goal).tolist()
+        self._err += abs(d0) + abs(d1) + abs(d2)
         gi = self._i
-        if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self._r2:
+        if d0 * d0 + d1 * d1 + d2 * d2 <= self._r2:
             self._reach_times.append(self._t)
             self._i += 1
             self._err = 0.0
-        finished = self._i >= self._n
         out = self.runtime.render(self._state(dx_m))
+        self._out = out
         f = out.force.force if out.force is not None else _ZERO3
         audio = out.audio
         self.samples.append(
@@ -268,7 +288,9 @@ class TrialRunner:
             0.0 if audio is None else audio.period_s,
             0.0 if audio is None else audio.volume, 0,
         )
-        self.done = finished or self._t >= self.config.max_time - 1e-12
+        self.done = self._i >= self._n or self._t >= self.config.max_time - 1e-12
+
+    def _publish(self) -> None:
         rt = self._reach_times
         last_latency = None
         if rt:
@@ -276,28 +298,17 @@ class TrialRunner:
         self._frame = TrialFrame(
             k=self._k, t=self._t, tcp=self._tcp, master=self._master,
             goal=self._points[min(self._i, self._n - 1)], goal_index=self._i,
-            n_points=self._n, done=self.done, outputs=out, last_latency=last_latency,
+            n_points=self._n, done=self.done, outputs=self._out, last_latency=last_latency,
             error_l1=self._err,
         )
-        return self._frame
-
-    def advance(self, seconds: float) -> TrialFrame:
-        """Runs the control loop for ``seconds`` of simulated time (or until done)."""
-        n = max(1, round(seconds / self.config.dt))
-        for _ in range(n):
-            if self.done:
-                break
-            self.step()
-        return self._frame
 
     def result(self, wall_time: float = 0.0) -> TrialResult:
         """The trial's samples, per-point metrics (spec/study.md §2) and summary."""
         view = self.samples.view()
-        metrics = point_metrics(
+        metrics, summary = evaluate_trial(
             view["t"], view["x"], view["g"], view["goal_index"], self._points,
             r_reach=self.task.reach_radius,
         )
-        summary = trial_summary(metrics)
         summary.update({
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
             "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
