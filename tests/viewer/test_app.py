@@ -1,0 +1,371 @@
+"""The viewer through its Python API (no browser; browser tests come with the full viewer):
+the server serves the page, the scene nodes exist, the trial runs in real time, commands
+change the schema/task, errors do not kill it, and stop() ends every thread."""
+
+from __future__ import annotations
+
+import argparse
+import socket
+import time
+import urllib.request
+from collections.abc import Callable
+from types import SimpleNamespace
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from vasim.cli import main
+from vasim.fixtures.types import Arrow, AudioCue, CameraView
+from vasim.viewer import CameraController, CameraPose, ViewerApp
+from vasim.viewer import cli as viewer_cli
+from vasim.viewer.views import (
+    arrow_mesh,
+    arrow_vertices,
+    audio_text,
+    hud_markdown,
+    quat_from_z,
+    rotation_from_z,
+)
+
+
+def wait_for(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.02) -> bool:
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        time.sleep(step)
+    return cond()
+
+
+@pytest.fixture(scope="module")
+def app():
+    a = ViewerApp(port=0, schema="trajectory_following", seed=1).start()
+    try:
+        assert wait_for(lambda: a.stats()["view_updates"] >= 5)
+        yield a
+    finally:
+        a.stop()
+
+
+def use_schema(app: ViewerApp, name: str) -> None:
+    app.request_schema(name)
+    assert wait_for(lambda: app.snapshot.info.schema == name
+                    and app._shown is app.snapshot.info), name
+
+
+# -- the running app ------------------------------------------------------------------
+
+
+def test_serves_the_page_on_loopback(app: ViewerApp) -> None:
+    assert app.url == f"http://127.0.0.1:{app.port}/"
+    assert app.port != 0
+    with urllib.request.urlopen(app.url, timeout=5) as resp:
+        assert resp.status == 200
+        assert b"<html" in resp.read(4096).lower()
+
+
+def test_scene_nodes_exist(app: ViewerApp) -> None:
+    nodes = set(app.scene_nodes())
+    for name in ("liver", "stomach", "vessel", "abdominal_wall", "intestine_0"):
+        assert f"/organs/{name}" in nodes
+    assert {"/tool/shaft", "/tool/tip", "/trajectory/points", "/trajectory/path",
+            "/trajectory/goal", "/overlays/arrow_0", "/overlays/ghost"} <= nodes
+    # The views' handles are registered on the server itself.
+    registry = app.server.scene._handle_from_node_name  # private: no public listing
+    assert nodes <= set(registry)
+
+
+def test_trial_runs_in_real_time_and_the_tool_moves(app: ViewerApp) -> None:
+    use_schema(app, "trajectory_following")
+    p0 = np.array(app.tool.tip.position)
+    t0, w0 = app.snapshot.frame.t, time.monotonic()
+    time.sleep(0.6)
+    p1 = np.array(app.tool.tip.position)
+    t1, w1 = app.snapshot.frame.t, time.monotonic()
+    assert np.linalg.norm(p1 - p0) > 1e-4
+    np.testing.assert_allclose(p1, app.snapshot.frame.tcp, atol=0.01)  # views follow
+    # Paced by the wall clock: never faster; slower only if this machine is overloaded.
+    assert 0.4 < (t1 - t0) / (w1 - w0) < 1.1
+    assert app.alive()
+
+
+def test_vg_and_ff_schema_draws_both_arrows_and_the_ghost(app: ViewerApp) -> None:
+    use_schema(app, "trajectory_following")
+    seen: set[str] = set()
+
+    def both() -> bool:
+        seen.update(app.arrows.kinds)
+        return {"guidance", "force"} <= seen
+
+    assert wait_for(both, timeout=5.0), seen
+    assert wait_for(lambda: app.ghost.handle.visible)
+    text = app.hud.text
+    assert "trajectory_following" in text and "Goal" in text and "Audio (AG)" in text
+
+
+def test_schema_change_through_the_queue_takes_effect(app: ViewerApp) -> None:
+    use_schema(app, "trajectory_following")
+    n = app.snapshot.info.number
+    use_schema(app, "vg")
+    assert app.snapshot.info.number == n + 1
+    assert app.snapshot.info.fixtures == ("vg",)
+    assert app.schema_menu.value == "vg"
+    assert wait_for(lambda: not app.ghost.handle.visible and "force" not in app.arrows.kinds)
+    # The GUI path: the dropdown's callback only queues a command.
+    app.schema_menu.value = "ff"
+    assert wait_for(lambda: app.snapshot.info.schema == "ff")
+    assert wait_for(lambda: "guidance" not in app.arrows.kinds)
+
+
+def test_point_schema_switches_the_task_and_back(app: ViewerApp) -> None:
+    use_schema(app, "point_targeting")
+    info = app.snapshot.info
+    assert info.config.task == "point" and len(info.points) == 1
+    assert wait_for(lambda: app.task_menu.value == "point")
+    assert "/trajectory/normal" in app.scene_nodes()
+    assert "/trajectory/path" not in app.scene_nodes()
+    app.request_task("trajectory")  # point_targeting does not fit: falls back
+    assert wait_for(lambda: app.snapshot.info.config.task == "trajectory")
+    assert app.snapshot.info.schema == "trajectory_following"
+
+
+def test_restart_and_bad_commands_do_not_kill_the_app(app: ViewerApp) -> None:
+    n = app.snapshot.info.number
+    app.request_restart()
+    assert wait_for(lambda: app.snapshot.info.number == n + 1)
+    errors = len(app.errors)
+    app.request_schema("no_such_schema")
+    app.request_task("juggling")
+    assert wait_for(lambda: len(app.errors) >= errors + 2)
+    assert "no_such_schema" in app.errors[-2]
+    assert app.snapshot.info.number == n + 1  # the running trial went on
+    t = app.snapshot.frame.t
+    assert wait_for(lambda: app.snapshot.frame.t > t + 0.1)
+    assert app.alive()
+
+
+def test_view_updates_are_cheap(app: ViewerApp) -> None:
+    s = app.stats()
+    assert s["view_updates"] > 10
+    assert s["view_ms_p95"] < 15.0  # generous: 2 shared cores, the sim thread runs too
+
+
+# -- trial loop, stop ------------------------------------------------------------------
+
+
+def test_trials_loop_and_stop_joins_everything() -> None:
+    a = ViewerApp(port=0, schema="none", max_time=0.3, pause_s=0.1).start()
+    port = a.port
+    try:
+        assert wait_for(lambda: a.snapshot.info.number >= 3, timeout=5.0)
+        assert a.snapshot.info.config.variant >= 1  # the next trajectory variant
+        assert a.snapshot.info.config.seed >= 2
+    finally:
+        a.stop()
+    assert not any(t.is_alive() for t in a.threads)
+    assert not a.alive()
+    a.stop()  # idempotent
+    with pytest.raises(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+        pass
+
+
+# -- CLI ---------------------------------------------------------------------------------
+
+
+class _FakeApp:
+    """Stands in for ViewerApp so the exposure test never binds a public interface."""
+
+    instances: ClassVar[list[_FakeApp]] = []
+
+    def __init__(self, host, port, schema, seed, task, **kw):
+        self.host, self.port, self.schema, self.task = host, port, schema, task
+        self.url = f"http://{host}:{port}/"
+        self.stopped = False
+        _FakeApp.instances.append(self)
+
+    def start(self):
+        return self
+
+    def alive(self) -> bool:
+        return True
+
+    def stop(self) -> None:
+        self.stopped = True
+
+
+def _serve_args(**kw) -> argparse.Namespace:
+    base = dict(host="127.0.0.1", port=0, schema=None, task="trajectory", seed=0,
+                skill="intermediate", duration=0.0)
+    base.update(kw)
+    return argparse.Namespace(**base)
+
+
+def test_cli_warns_when_binding_beyond_loopback(monkeypatch, capsys) -> None:
+    monkeypatch.setattr("vasim.viewer.app.ViewerApp", _FakeApp)
+    assert viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080)) == 0
+    err = capsys.readouterr().err
+    assert "warning" in err and "0.0.0.0" in err and "every network interface" in err
+    assert _FakeApp.instances[-1].host == "0.0.0.0" and _FakeApp.instances[-1].stopped
+    assert viewer_cli.serve(_serve_args(host="192.0.2.7")) == 0
+    assert "192.0.2.7" in capsys.readouterr().err
+    for host in ("127.0.0.1", "localhost", "::1"):
+        assert viewer_cli.serve(_serve_args(host=host)) == 0
+        assert "warning" not in capsys.readouterr().err
+    # --task point without --schema picks the point-targeting VFS.
+    viewer_cli.serve(_serve_args(task="point"))
+    assert _FakeApp.instances[-1].schema == "point_targeting"
+
+
+def test_vasim_serve_end_to_end(capsys) -> None:
+    assert main(["serve", "--port", "0", "--schema", "vg", "--duration", "0.4"]) == 0
+    out = capsys.readouterr().out
+    assert "http://127.0.0.1:" in out and "schema vg" in out
+
+
+def test_vasim_serve_bad_schema_is_a_one_line_error(capsys) -> None:
+    assert main(["serve", "--port", "0", "--schema", "no_such_schema"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no_such_schema" in err[0]
+    # A schema that does not fit the task is refused before anything binds.
+    assert main(["serve", "--port", "0", "--task", "trajectory",
+                 "--schema", "point_targeting"]) == 2
+
+
+# -- views without a server ----------------------------------------------------------------
+
+
+class _FakeCamera:
+    def __init__(self) -> None:
+        self.position = np.zeros(3)
+        self.look_at = np.array([0.0, 1.0, 0.0])
+        self.up_direction = np.array([0.0, 0.0, 1.0])
+        self.fov = 1.0
+        self.near = 0.01
+        self.far = 100.0
+
+
+class _FakeClient:
+    def __init__(self, cid: int) -> None:
+        self.client_id = cid
+        self.camera = _FakeCamera()
+
+    def atomic(self):
+        import contextlib
+
+        return contextlib.nullcontext()
+
+
+def test_camera_controller_follows_mag_rate_limited_and_falls_back() -> None:
+    clients = {1: _FakeClient(1)}
+    server = SimpleNamespace(get_clients=lambda: dict(clients))
+    default = CameraPose(np.array([0.0, -0.05, 0.15]), np.array([0.0, 0.03, 0.07]),
+                         np.array([0.0, 0.0, 1.0]), 1.2)
+    cc = CameraController(server, default, max_rate_hz=10.0)  # type: ignore[arg-type]
+    cc.on_connect(clients[1])
+    np.testing.assert_array_equal(clients[1].camera.position, default.position)
+    assert clients[1].camera.near == cc.near
+    view = CameraView(position=np.array([0.01, 0.0, 0.2]), look_at=np.array([0.0, 0.02, 0.1]),
+                      up=np.array([0.0, 0.0, 1.0]), fov=1.2, zoom=2.0)
+    cc.update(view, now=10.0)
+    np.testing.assert_array_equal(clients[1].camera.position, view.position)
+    writes = cc.writes
+    moved = CameraView(position=view.position + 0.01, look_at=view.look_at, up=view.up,
+                       fov=1.2)
+    cc.update(moved, now=10.05)  # within 0.1 s: not written
+    assert cc.writes == writes
+    cc.update(moved, now=10.2)
+    assert cc.writes == writes + 1
+    cc.update(moved, now=10.4)  # unchanged pose: not re-sent
+    assert cc.writes == writes + 1
+    clients[2] = _FakeClient(2)  # a late client gets the current pose on the next push
+    cc.update(moved, now=10.6)
+    np.testing.assert_array_equal(clients[2].camera.position, moved.position)
+    cc.update(None, now=11.0)  # Mag gone: back to the endoscope pose once
+    for c in clients.values():
+        np.testing.assert_array_equal(c.camera.position, default.position)
+    n = cc.writes
+    cc.update(None, now=12.0)
+    assert cc.writes == n  # the user may orbit freely now
+    cc.follow = False
+    cc.update(view, now=13.0)
+    assert cc.writes == n
+
+
+@pytest.mark.parametrize("d", [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0.3, -0.4, 0.2)])
+def test_rotation_from_z_maps_z_onto_the_direction(d) -> None:
+    d = np.array(d, dtype=float)
+    R = rotation_from_z(d)
+    np.testing.assert_allclose(R @ [0, 0, 1], d / np.linalg.norm(d), atol=1e-12)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert abs(np.linalg.norm(quat_from_z(d)) - 1.0) < 1e-12
+
+
+def test_arrow_vertices_span_start_to_end() -> None:
+    template, faces = arrow_mesh()
+    start, end = np.array([0.01, 0.02, 0.1]), np.array([0.03, -0.01, 0.12])
+    v = arrow_vertices(template, start, end, 0.001)
+    assert v.dtype == np.float32 and v.shape == template.shape
+    assert faces.max() < len(v)
+    s = (len(template) - 3) // 3
+    np.testing.assert_allclose(v[3 * s], end, atol=1e-6)  # apex
+    np.testing.assert_allclose(v[3 * s + 1], start, atol=1e-6)  # tail centre
+    axis = (end - start) / np.linalg.norm(end - start)
+    proj = (v.astype(float) - start) @ axis
+    assert proj.min() > -1e-6 and proj.max() < np.linalg.norm(end - start) + 1e-6
+
+
+def test_hud_text_escapes_and_names_the_audio_state() -> None:
+    from vasim.viewer.views import HudInfo
+
+    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0", trial=1, t=1.0,
+                   error_m=0.004, error_l1=0.5, goal_index=2, n_points=30,
+                   last_latency=0.8, audio=AudioCue(600.0, 0.3, 0.0), force_n=None,
+                   zoom=None, ms=None, done=False)
+    md = hud_markdown(info)
+    assert "<b>" not in md and "&lt;b&gt;" in md
+    assert "3 / 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
+    assert audio_text(None) == "off"
+    assert audio_text(AudioCue(620.0, 0.25, 0.5)) == "620 Hz, every 0.25 s"
+
+
+def test_arrow_view_hides_faint_arrows(app: ViewerApp) -> None:
+    from vasim.viewer.views import ArrowView
+
+    view = ArrowView(app.server, slots=2, prefix="/test_arrows")
+    try:
+        a = Arrow(start=np.zeros(3), end=np.array([0.0, 0.0, 0.02]), color=(0, 1, 1),
+                  opacity=0.7)
+        faint = Arrow(start=np.zeros(3), end=np.array([0.01, 0.0, 0.0]), color=(1, 0, 1),
+                      opacity=0.0, kind="force")
+        view.update([a, faint])
+        assert view.kinds == ("guidance",)
+        assert view.handles[0].visible and not view.handles[1].visible
+        assert view.handles[0].opacity == pytest.approx(0.7)
+        view.update([])
+        assert view.kinds == () and not view.handles[0].visible
+    finally:
+        for h in view.handles:
+            h.remove()
+
+
+def test_organ_view_deforms_in_place_only(app: ViewerApp) -> None:
+    view = app.organs[0]
+    v = view.organ.mesh.vertices + np.array([0.0, 0.0, 0.001])
+    view.update(v)
+    np.testing.assert_allclose(view.handle.vertices, v.astype(np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        view.update(v[:-1])
+    view.update(view.organ.mesh.vertices)
+
+
+def test_default_camera_sees_the_workspace() -> None:
+    from vasim.tasks.base import WORKSPACE_CENTRE, WORKSPACE_MAX, WORKSPACE_MIN
+    from vasim.viewer import endoscope_pose
+
+    pose = endoscope_pose()
+    fwd = (pose.look_at - pose.position) / np.linalg.norm(pose.look_at - pose.position)
+    corners = np.array(np.meshgrid(*zip(WORKSPACE_MIN, WORKSPACE_MAX, strict=True)))
+    for p in [WORKSPACE_CENTRE, *corners.reshape(3, -1).T]:
+        d = (p - pose.position) / np.linalg.norm(p - pose.position)
+        assert np.arccos(np.clip(d @ fwd, -1, 1)) < pose.fov / 2  # inside the vertical fov

@@ -1,0 +1,107 @@
+"""``vasim serve``: the browser training viewer on the demo scene.
+
+A scripted operator runs trials in real time (looping over the trajectory variants) and the
+browser shows the abdomen, the task, the tool and the fixture overlays; the page lets the
+user switch the fixture schema and the task and restart the trial.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Adds ``vasim serve`` to the ``vasim`` command line."""
+    p = sub.add_parser(
+        "serve",
+        help="start the browser viewer (demo scene with a running scripted trial)",
+        description=(
+            "Serve the training viewer: the virtual abdomen, the task, the tool and the "
+            "fixture overlays of a scripted trial running in real time. Open the printed URL "
+            "in a browser; Ctrl-C stops the server."
+        ),
+    )
+    p.add_argument("--host", default="127.0.0.1",
+                   help="interface to bind (default 127.0.0.1: this machine only; any other "
+                        "address exposes the viewer, which has no authentication)")
+    p.add_argument("--port", type=int, default=8080,
+                   help="TCP port (default 8080; if busy, the next free port is used and "
+                        "printed; 0 picks any free port)")
+    p.add_argument("--schema", default=None,
+                   help="fixture schema of the demo trials, a name in protocols/schemas "
+                        "(default: trajectory_following, or point_targeting with --task point)")
+    p.add_argument("--task", choices=["trajectory", "point"], default="trajectory",
+                   help="task of the demo trials (default trajectory)")
+    p.add_argument("--seed", type=int, default=0, help="operator seed of the first trial")
+    p.add_argument("--skill", choices=["novice", "intermediate", "expert"],
+                   default="intermediate", help="scripted operator preset")
+    p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+                   help="stop after this many seconds (default: run until Ctrl-C)")
+    p.set_defaults(func=serve)
+
+
+def exposure_warning(host: str, port: int) -> str | None:
+    """The warning printed for a non-loopback bind address, or None for loopback."""
+    from vasim.viewer.app import is_loopback
+
+    if is_loopback(host):
+        return None
+    where = "every network interface" if host in ("0.0.0.0", "::", "") else host
+    return (f"warning: --host {host} exposes the viewer on {where} (port {port}): anyone who "
+            "can reach this machine can watch the trial and use its controls (there is no "
+            "authentication); use --host 127.0.0.1 unless you mean to")
+
+
+def serve(args: argparse.Namespace) -> int:
+    """Runs ``vasim serve`` with parsed arguments; returns the exit code.
+
+    Raises:
+        VasimError: for a bad schema/task (the caller prints it as one line).
+    """
+    from vasim.viewer.app import DEFAULT_SCHEMA_FOR_TASK, ViewerApp
+
+    warning = exposure_warning(args.host, args.port)
+    if warning:
+        print(warning, file=sys.stderr, flush=True)
+    schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
+    app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill)
+    app.start()
+    previous = _stop_on_sigterm()
+    try:
+        if app.port != args.port and args.port != 0:
+            print(f"port {args.port} is busy; using {app.port}", file=sys.stderr)
+        print(f"vasim viewer: {app.url}  (schema {schema}, task {args.task}; Ctrl-C stops)",
+              flush=True)
+        t_end = None if args.duration is None else time.monotonic() + args.duration
+        while t_end is None or time.monotonic() < t_end:
+            time.sleep(0.2)
+            if not app.alive():
+                print("vasim serve: a viewer thread stopped unexpectedly; see the log",
+                      file=sys.stderr)
+                return 1
+    except KeyboardInterrupt:
+        print("vasim serve: stopping", file=sys.stderr)
+    finally:
+        app.stop()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+    return 0
+
+
+def _stop_on_sigterm() -> Any:
+    """Makes SIGTERM stop the server like Ctrl-C (main thread only); returns the old handler."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    return signal.signal(signal.SIGTERM, handler)
+
+
+__all__ = ["exposure_warning", "register", "serve"]

@@ -1,0 +1,706 @@
+"""One class per visual of the browser viewer; each owns its viser handles.
+
+Every view is built once against a ``viser.ViserServer`` and then fed immutable values
+(a ``TrialFrame``'s fields, an ``Organ``) through ``update(...)``: views only read, they
+never touch the simulation (style guide §10). ``update`` is cheap when nothing changed:
+each view remembers what it last sent and skips redundant handle writes, because every
+property write is a websocket message to every browser.
+
+Scene node names (stable: browser tests look them up)::
+
+    /organs/<organ name>           OrganView
+    /tool/shaft, /tool/tip         ToolView
+    /trajectory/points, /trajectory/path, /trajectory/goal, /trajectory/normal
+                                   TrajectoryView
+    /overlays/arrow_<i>            ArrowView (VG guidance and FF force arrows)
+    /overlays/ghost                GhostView (MS ghost cone)
+
+Frame: the scene's world frame, metres, ``z`` up (set on the server by the app).
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+import viser
+from numpy.typing import NDArray
+
+from vasim.abdomen.anatomy import Organ
+from vasim.fixtures.types import Arrow, AudioCue, CameraView
+
+FloatArray = NDArray[np.float64]
+Rgb = tuple[int, int, int]
+
+
+def rgb255(color: Sequence[float]) -> Rgb:
+    """RGB in [0, 1] -> integer RGB in [0, 255] (what viser takes)."""
+    r, g, b = (min(255, max(0, round(float(c) * 255.0))) for c in color)
+    return (r, g, b)
+
+
+def quat_from_z(direction: FloatArray) -> tuple[float, float, float, float]:
+    """(w, x, y, z) unit quaternion rotating +z onto ``direction`` (any length > 0)."""
+    d = np.asarray(direction, dtype=np.float64)
+    n = float(np.linalg.norm(d))
+    if n < 1e-12:
+        return (1.0, 0.0, 0.0, 0.0)
+    d = d / n
+    w = 1.0 + float(d[2])  # 1 + dot(z, d)
+    if w < 1e-9:  # antiparallel: half turn about x
+        return (0.0, 1.0, 0.0, 0.0)
+    # cross(z, d) = (-d_y, d_x, 0)
+    q = np.array([w, -d[1], d[0], 0.0])
+    q /= np.linalg.norm(q)
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+
+def rotation_from_z(direction: FloatArray) -> FloatArray:
+    """(3, 3) rotation matrix taking +z onto ``direction`` (see :func:`quat_from_z`)."""
+    w, x, y, z = quat_from_z(direction)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+# ---------------------------------------------------------------------------------------
+# Organs
+
+
+def organ_style(organ: Organ) -> dict[str, object]:
+    """Drawing options per organ kind.
+
+    The wall is faint and drawn front faces only: its outer surface faces out of the body and
+    its inner surface into the cavity, so a camera inside the cavity sees the ceiling, one
+    outside sees a light veil, and one inside the wall slab itself (where Mag's dolly can put
+    it) sees neither instead of a white-out.
+    """
+    if organ.kind == "wall":
+        return {"opacity": 0.12, "side": "front", "flat_shading": True,
+                "cast_shadow": False, "receive_shadow": False}
+    return {"opacity": None, "side": "front", "flat_shading": False,
+            "cast_shadow": True, "receive_shadow": True}
+
+
+class OrganView:
+    """One organ surface (``/organs/<name>``); deformable in place.
+
+    Args:
+        server: the viser server.
+        organ: the organ (mesh in metres, world frame).
+    """
+
+    def __init__(self, server: viser.ViserServer, organ: Organ):
+        self.organ = organ
+        self.name = f"/organs/{organ.name}"
+        v = np.ascontiguousarray(organ.mesh.vertices, dtype=np.float32)
+        f = np.ascontiguousarray(organ.mesh.faces, dtype=np.uint32)
+        self.n_vertices = len(v)
+        self.handle = server.scene.add_mesh_simple(
+            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]
+        )
+
+    def update(self, vertices: FloatArray) -> None:
+        """Moves the vertices (deforming organs).
+
+        Args:
+            vertices: (n_vertices, 3) positions [m], world frame; same count as at creation
+                (the browser updates its GPU buffer in place).
+
+        Raises:
+            ValueError: on a different shape.
+        """
+        v = np.asarray(vertices, dtype=np.float32)
+        if v.shape != (self.n_vertices, 3):
+            raise ValueError(
+                f"{self.name}: expected vertices of shape ({self.n_vertices}, 3), got {v.shape}"
+            )
+        self.handle.vertices = v
+
+    def node_names(self) -> list[str]:
+        return [self.name]
+
+
+# ---------------------------------------------------------------------------------------
+# Tool
+
+
+class ToolView:
+    """A laparoscopic instrument: a shaft through its trocar ending at the tip, plus a tip
+    marker (``/tool/shaft``, ``/tool/tip``).
+
+    The shaft is redrawn by rewriting its vertices (one message per update; a position +
+    orientation + scale update would be three, each ~2x dearer in viser).
+
+    Args:
+        server: the viser server.
+        trocar: (3,) trocar (port) point the shaft passes through [m].
+        shaft_radius: [m] (5 mm instruments: 2.5 mm).
+        outside: length of shaft drawn beyond the trocar, outside the body [m].
+        tip_radius: radius of the tip marker [m].
+    """
+
+    def __init__(
+        self,
+        server: viser.ViserServer,
+        trocar: FloatArray,
+        *,
+        shaft_radius: float = 0.0025,
+        outside: float = 0.05,
+        tip_radius: float = 0.0028,
+    ):
+        self.trocar = np.asarray(trocar, dtype=np.float64).reshape(3)
+        self.outside = float(outside)
+        cyl = trimesh.creation.cylinder(radius=shaft_radius, height=1.0, sections=16)
+        v = cyl.vertices.copy()
+        v[:, 2] += 0.5  # unit shaft from z = 0 (tip) to z = 1 (stretched to length)
+        self._template = v
+        self.shaft = server.scene.add_mesh_simple(
+            "/tool/shaft", self._placed(self.trocar - np.array([0.0, 0.0, 0.05])),
+            cyl.faces.astype(np.uint32), color=(150, 155, 165),
+        )
+        self.tip = server.scene.add_icosphere(
+            "/tool/tip", radius=tip_radius, color=(255, 200, 40), subdivisions=2,
+        )
+        self._last: FloatArray | None = None
+
+    def _placed(self, tip: FloatArray) -> NDArray[np.float32]:
+        d = self.trocar - tip
+        length = float(np.linalg.norm(d)) + self.outside
+        local = self._template * np.array([1.0, 1.0, max(length, 1e-4)])
+        return (local @ rotation_from_z(d).T + tip).astype(np.float32)
+
+    def set_trocar(self, trocar: FloatArray) -> None:
+        """Moves the pivot to another port (3,) [m]; takes effect at the next update."""
+        self.trocar = np.asarray(trocar, dtype=np.float64).reshape(3)
+        self._last = None
+
+    def update(self, tip: FloatArray) -> None:
+        """Places the tool with its tip at ``tip`` (3,) [m]."""
+        p = np.asarray(tip, dtype=np.float64)
+        if self._last is not None and np.array_equal(p, self._last):
+            return
+        self._last = p.copy()
+        self.shaft.vertices = self._placed(p)
+        self.tip.position = p
+
+    def node_names(self) -> list[str]:
+        return [self.shaft.name, self.tip.name]
+
+
+# ---------------------------------------------------------------------------------------
+# Trajectory / POIs
+
+PENDING_RGB: Rgb = (255, 225, 90)
+GOAL_RGB: Rgb = (60, 230, 110)
+REACHED_RGB: Rgb = (130, 130, 130)
+PATH_RGB: Rgb = (255, 235, 150)
+
+
+class TrajectoryView:
+    """The POIs as a point cloud and, for a trajectory, a spline through them; the current
+    goal is highlighted (a translucent sphere of the reach radius) and reached points are
+    greyed. For point targeting, the POI's surface normal is drawn as a short segment.
+
+    A new task updates the existing nodes' properties instead of removing and re-adding
+    them: removing a node and re-creating the same name while a browser was connected
+    left the old node on screen (observed with viser 1.1.1 on trial changes).
+
+    Args:
+        server: the viser server.
+        point_size: drawn POI size [m].
+        normal_length: length of the drawn surface normal [m].
+    """
+
+    def __init__(self, server: viser.ViserServer, *, point_size: float = 0.003,
+                 normal_length: float = 0.03):
+        self.server = server
+        self.point_size = float(point_size)
+        self.normal_length = float(normal_length)
+        self.points: FloatArray = np.zeros((0, 3))
+        self.cloud: viser.PointCloudHandle | None = None
+        self.path: viser.SplineCatmullRomHandle | None = None
+        self.normal: viser.LineSegmentsHandle | None = None
+        self.goal = server.scene.add_icosphere(
+            "/trajectory/goal", radius=1.0, color=GOAL_RGB, opacity=0.35, subdivisions=2,
+            cast_shadow=False, receive_shadow=False, visible=False,
+        )
+        self._goal_index = -1
+
+    def set_task(
+        self,
+        points: FloatArray,
+        reach_radius: float,
+        normals: FloatArray | None = None,
+    ) -> None:
+        """Shows a new task.
+
+        Args:
+            points: (N, 3) POIs in visiting order [m].
+            reach_radius: radius of the goal sphere [m].
+            normals: (N, 3) unit surface normals (point targeting) or None.
+        """
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        self.points = pts
+        colors = np.tile(np.array(PENDING_RGB, dtype=np.uint8), (len(pts), 1))
+        scene = self.server.scene
+        if self.cloud is None:
+            self.cloud = scene.add_point_cloud(
+                "/trajectory/points", pts.astype(np.float32), colors,
+                point_size=self.point_size, point_shape="circle", precision="float32",
+            )
+        else:
+            self.cloud.points = pts.astype(np.float32)
+            self.cloud.colors = colors
+        if len(pts) >= 2:
+            if self.path is None:
+                self.path = scene.add_spline_catmull_rom(
+                    "/trajectory/path", pts, curve_type="centripetal", thickness=0.0012,
+                    color=PATH_RGB,
+                )
+            else:
+                self.path.points = pts.astype(np.float32)
+                self.path.visible = True
+        elif self.path is not None:
+            self.path.visible = False
+        if normals is not None:
+            n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+            seg = np.stack([pts, pts + self.normal_length * n], axis=1).astype(np.float32)
+            if self.normal is None:
+                self.normal = scene.add_line_segments(
+                    "/trajectory/normal", seg, (120, 200, 255), thickness=0.0008,
+                )
+            else:
+                self.normal.points = seg
+                self.normal.visible = True
+        elif self.normal is not None:
+            self.normal.visible = False
+        self.goal.scale = float(reach_radius)
+        self.goal.visible = True
+        self._goal_index = -1
+
+    def update(self, goal_index: int) -> None:
+        """Highlights POI ``goal_index`` (== N when all are reached) and greys those before."""
+        if goal_index == self._goal_index or self.cloud is None:
+            return
+        self._goal_index = goal_index
+        n = len(self.points)
+        colors = np.empty((n, 3), dtype=np.uint8)
+        colors[:] = PENDING_RGB
+        colors[: min(goal_index, n)] = REACHED_RGB
+        if goal_index < n:
+            colors[goal_index] = GOAL_RGB
+            self.goal.position = self.points[goal_index]
+            self.goal.visible = True
+        else:
+            self.goal.visible = False
+        self.cloud.colors = colors
+
+    def node_names(self, *, visible_only: bool = True) -> list[str]:
+        """Names of the nodes (by default only those currently shown)."""
+        return [h.name for h in (self.cloud, self.path, self.normal, self.goal)
+                if h is not None and (h.visible or not visible_only)]
+
+
+# ---------------------------------------------------------------------------------------
+# Arrows
+
+
+def arrow_mesh(sections: int = 12) -> tuple[FloatArray, NDArray[np.uint32]]:
+    """A unit-topology arrow along +z: (V, 3) template vertices and (F, 3) faces.
+
+    Vertex rows: shaft bottom ring, shaft top ring, head base ring, apex, bottom centre,
+    head-base centre. :func:`arrow_vertices` moves them; the topology never changes.
+    """
+    s = sections
+    ang = np.linspace(0.0, 2.0 * np.pi, s, endpoint=False)
+    ring = np.column_stack([np.cos(ang), np.sin(ang), np.zeros(s)])
+    v = np.vstack([ring, ring, ring, [[0, 0, 1]], [[0, 0, 0]], [[0, 0, 0]]])
+    apex, bottom, head_c = 3 * s, 3 * s + 1, 3 * s + 2
+    j = np.arange(s)
+    k = (j + 1) % s
+    faces = np.vstack([
+        np.column_stack([j, k, s + k]), np.column_stack([j, s + k, s + j]),  # shaft
+        np.column_stack([2 * s + j, 2 * s + k, np.full(s, apex)]),  # head cone
+        np.column_stack([np.full(s, bottom), k, j]),  # shaft cap
+        np.column_stack([np.full(s, head_c), 2 * s + k, 2 * s + j]),  # head base
+        np.column_stack([s + j, s + k, 2 * s + k]), np.column_stack([s + j, 2 * s + k, 2 * s + j]),
+    ])
+    return v, faces.astype(np.uint32)
+
+
+def arrow_vertices(template: FloatArray, start: FloatArray, end: FloatArray,
+                   shaft_radius: float) -> NDArray[np.float32]:
+    """World-frame vertices of the arrow from ``start`` to ``end`` (both (3,) [m])."""
+    s = (len(template) - 3) // 3
+    d = np.asarray(end, dtype=np.float64) - np.asarray(start, dtype=np.float64)
+    length = float(np.linalg.norm(d))
+    head_r = 2.4 * shaft_radius
+    head_l = min(0.45 * length, 7.0 * shaft_radius)
+    shaft_l = length - head_l
+    local = template.copy()
+    local[:s, :2] *= shaft_radius
+    local[s:2 * s, :2] *= shaft_radius
+    local[s:2 * s, 2] = shaft_l
+    local[2 * s:3 * s, :2] *= head_r
+    local[2 * s:3 * s, 2] = shaft_l
+    local[3 * s, 2] = length
+    local[3 * s + 2, 2] = shaft_l
+    return (local @ rotation_from_z(d).T + np.asarray(start)).astype(np.float32)
+
+
+class ArrowView:
+    """The overlay arrows of a frame: VG guidance vectors and the FF force arrow.
+
+    A fixed pool of ``slots`` arrow meshes (``/overlays/arrow_<i>``) with constant vertex
+    count; an arrow's opacity and width map to the mesh's opacity and shaft radius (viser's
+    own ``add_arrows`` has no opacity, and VG fades by opacity). Unused slots and arrows
+    that are (almost) transparent or shorter than 0.1 mm are hidden.
+
+    Args:
+        server: the viser server.
+        slots: maximum number of arrows drawn at once.
+        radius_per_px: shaft radius per unit of ``Arrow.width`` [m/px].
+        prefix: parent node of the slots.
+    """
+
+    MIN_OPACITY = 0.02
+    MIN_LENGTH = 1e-4
+
+    def __init__(self, server: viser.ViserServer, *, slots: int = 4,
+                 radius_per_px: float = 0.0002, prefix: str = "/overlays"):
+        self.radius_per_px = float(radius_per_px)
+        self._template, faces = arrow_mesh()
+        self.handles = [
+            server.scene.add_mesh_simple(
+                f"{prefix}/arrow_{i}", self._template.astype(np.float32), faces,
+                color=(255, 255, 255), opacity=1.0, cast_shadow=False, receive_shadow=False,
+                visible=False,
+            )
+            for i in range(slots)
+        ]
+        self._state: list[tuple[Rgb, float] | None] = [None] * slots
+        self.kinds: tuple[str, ...] = ()
+        """Kinds of the arrows currently visible, slot order."""
+
+    def update(self, arrows: Sequence[Arrow]) -> None:
+        """Draws ``arrows`` (extra arrows beyond the pool size are dropped)."""
+        kinds = []
+        for i, h in enumerate(self.handles):
+            a = arrows[i] if i < len(arrows) else None
+            show = (
+                a is not None
+                and a.opacity >= self.MIN_OPACITY
+                and float(np.linalg.norm(a.end - a.start)) >= self.MIN_LENGTH
+            )
+            if not show or a is None:
+                if h.visible:
+                    h.visible = False
+                self._state[i] = None
+                continue
+            kinds.append(a.kind)
+            h.vertices = arrow_vertices(self._template, a.start, a.end,
+                                        max(a.width, 0.5) * self.radius_per_px)
+            color, opacity = rgb255(a.color), round(min(1.0, float(a.opacity)), 2)
+            last = self._state[i]
+            if last is None or last[0] != color:
+                h.color = color
+            if last is None or abs(last[1] - opacity) >= 0.02:
+                h.opacity = opacity
+            else:
+                opacity = last[1]
+            self._state[i] = (color, opacity)
+            if not h.visible:
+                h.visible = True
+        self.kinds = tuple(kinds)
+
+    def node_names(self) -> list[str]:
+        return [h.name for h in self.handles]
+
+
+# ---------------------------------------------------------------------------------------
+# MS ghost
+
+
+class GhostView:
+    """The MS ghost: a translucent cone whose apex is where the tool tip would be without
+    motion scaling, its axis along the tool toward the trocar (``/overlays/ghost``).
+
+    Args:
+        server: the viser server.
+        trocar: (3,) trocar point of the tool [m].
+        radius, height: cone size [m].
+    """
+
+    def __init__(self, server: viser.ViserServer, trocar: FloatArray, *,
+                 radius: float = 0.004, height: float = 0.014):
+        self.trocar = np.asarray(trocar, dtype=np.float64).reshape(3)
+        cone = trimesh.creation.cone(radius=radius, height=height, sections=20)
+        v = cone.vertices.copy()
+        v[:, 2] = height - v[:, 2]  # apex at the origin, base toward +z
+        self._template = v
+        faces = cone.faces[:, ::-1]  # the mirror flipped the winding
+        self.handle = server.scene.add_mesh_simple(
+            "/overlays/ghost", v.astype(np.float32), faces.astype(np.uint32),
+            color=(120, 220, 255), opacity=0.45, cast_shadow=False, receive_shadow=False,
+            visible=False,
+        )
+        self.position: FloatArray | None = None
+        """(3,) where the ghost is drawn [m], None when hidden."""
+
+    def update(self, ghost: FloatArray | None) -> None:
+        """Shows the ghost at ``ghost`` (3,) [m]; hides it for None (no MS in the schema)."""
+        if ghost is None:
+            if self.handle.visible:
+                self.handle.visible = False
+            self.position = None
+            return
+        p = np.asarray(ghost, dtype=np.float64)
+        if self.position is None or not np.array_equal(p, self.position):
+            rot = rotation_from_z(self.trocar - p)
+            self.handle.vertices = (self._template @ rot.T + p).astype(np.float32)
+            self.position = p.copy()
+        if not self.handle.visible:
+            self.handle.visible = True
+
+    def node_names(self) -> list[str]:
+        return [self.handle.name]
+
+
+# ---------------------------------------------------------------------------------------
+# Camera
+
+
+@dataclass(frozen=True, eq=False)
+class CameraPose:
+    """A camera placement for the browser (world frame).
+
+    Attributes:
+        position: (3,) [m]. look_at: (3,) [m]. up: (3,) direction. fov: vertical [rad].
+    """
+
+    position: FloatArray
+    look_at: FloatArray
+    up: FloatArray
+    fov: float
+
+    @staticmethod
+    def from_view(view: CameraView) -> CameraPose:
+        return CameraPose(np.asarray(view.position, dtype=np.float64),
+                          np.asarray(view.look_at, dtype=np.float64),
+                          np.asarray(view.up, dtype=np.float64), float(view.fov))
+
+    def close_to(self, other: CameraPose, *, tol_m: float = 2e-4, tol_rad: float = 2e-3) -> bool:
+        return (
+            float(np.max(np.abs(self.position - other.position))) < tol_m
+            and float(np.max(np.abs(self.look_at - other.look_at))) < tol_m
+            and float(np.max(np.abs(self.up - other.up))) < tol_rad
+            and abs(self.fov - other.fov) < tol_rad
+        )
+
+
+class CameraController:
+    """Drives every connected browser's camera: the Mag ``CameraView`` when the schema has
+    Mag, otherwise a fixed endoscope-like ``default`` pose (applied on connect and once when
+    Mag goes away; the user may orbit freely then).
+
+    Writes are rate-limited to ``max_rate_hz`` and skipped when the pose barely moved (the
+    browser eases toward each new pose within ~0.3 s anyway).
+
+    Args:
+        server: the viser server (only ``get_clients()`` and ``on_client_connect`` are used).
+        default: the pose without Mag.
+        max_rate_hz: maximum camera writes per second.
+        near, far: clipping planes [m] (viser's 1 cm default near plane is too far for
+            an abdomen).
+    """
+
+    def __init__(self, server: viser.ViserServer, default: CameraPose, *,
+                 max_rate_hz: float = 10.0, near: float = 0.002, far: float = 3.0):
+        self.server = server
+        self.default = default
+        self.min_interval = 1.0 / max_rate_hz
+        self.near, self.far = near, far
+        self._target: CameraPose = default
+        self._mag = False
+        self._sent: dict[int, CameraPose] = {}
+        self._last_push = -math.inf
+        self.follow = True
+        """False: Mag output is ignored and the user orbits freely."""
+        self.writes = 0
+        """Number of per-client camera writes so far (for tests and stats)."""
+
+    def apply_initial(self) -> None:
+        """Sets the server's initial camera (what a new page shows before connecting)."""
+        ic = self.server.initial_camera
+        ic.position = self.default.position
+        ic.look_at = self.default.look_at
+        ic.up = self.default.up
+        ic.fov = self.default.fov
+        ic.near = self.near
+        ic.far = self.far
+
+    def on_connect(self, client: viser.ClientHandle) -> None:
+        """Gives a newly connected client the current target pose."""
+        self._sent.pop(client.client_id, None)
+        client.camera.near = self.near
+        client.camera.far = self.far
+        self._write(client, self._target)
+
+    def update(self, view: CameraView | None, now: float | None = None) -> None:
+        """Follows ``view`` (Mag output) or, for None, falls back to the default pose once."""
+        now = time.perf_counter() if now is None else now
+        if view is None or not self.follow:
+            if self._mag:
+                self._mag = False
+                self._target = self.default
+                self._push_all(force=True)
+            return
+        self._mag = True
+        self._target = CameraPose.from_view(view)
+        if now - self._last_push < self.min_interval:
+            return
+        self._last_push = now
+        self._push_all()
+
+    def _push_all(self, *, force: bool = False) -> None:
+        clients = self.server.get_clients()
+        for cid in list(self._sent):
+            if cid not in clients:
+                del self._sent[cid]
+        for client in clients.values():
+            last = self._sent.get(client.client_id)
+            if force or last is None or not self._target.close_to(last):
+                self._write(client, self._target)
+
+    def _write(self, client: viser.ClientHandle, pose: CameraPose) -> None:
+        with client.atomic():
+            cam = client.camera
+            cam.up_direction = pose.up
+            cam.position = pose.position
+            cam.look_at = pose.look_at  # after position: position moves look_at along
+            cam.fov = pose.fov
+        self._sent[client.client_id] = pose
+        self.writes += 1
+
+
+# ---------------------------------------------------------------------------------------
+# HUD
+
+
+def audio_text(audio: AudioCue | None) -> str:
+    """The AG state as text: ``"off"`` (no AG), ``"silent"`` or pitch/period."""
+    if audio is None:
+        return "off"
+    if audio.silent:
+        return "silent"
+    return f"{audio.pitch_hz:.0f} Hz, every {audio.period_s:.2f} s"
+
+
+@dataclass(frozen=True)
+class HudInfo:
+    """What the HUD shows (plain values; the app builds it from a frame).
+
+    Attributes:
+        schema: schema name. fixtures: active fixture names. task: task name.
+        trial: trial counter. t: time in trial [s]. error_m: |x - g| [m].
+        error_l1: cumulative L1 error for the current goal [m].
+        goal_index, n_points: progress. last_latency: l_i of the last reached point [s].
+        audio: AG cue or None. force_n: |F| [N] or None. zoom: Mag zoom or None.
+        ms: (3,) MS factors or None. done: trial finished.
+    """
+
+    schema: str
+    fixtures: tuple[str, ...]
+    task: str
+    trial: int
+    t: float
+    error_m: float
+    error_l1: float
+    goal_index: int
+    n_points: int
+    last_latency: float | None
+    audio: AudioCue | None
+    force_n: float | None
+    zoom: float | None
+    ms: tuple[float, float, float] | None
+    done: bool
+
+
+def hud_markdown(info: HudInfo) -> str:
+    """The HUD's markdown (every string escaped: markdown is not sanitised by viser)."""
+    esc = html.escape
+    lat = "–" if info.last_latency is None else f"{info.last_latency:.2f} s"
+    goal = min(info.goal_index + 1, info.n_points)
+    status = "done" if info.done else "running"
+    rows = [
+        ("Schema", f"{esc(info.schema)} ({esc(', '.join(info.fixtures)) or 'no fixture'})"),
+        ("Task", f"{esc(info.task)}, trial {info.trial} ({status})"),
+        ("Time", f"{info.t:6.2f} s"),
+        ("Goal", f"{goal} / {info.n_points}"),
+        ("Error", f"{info.error_m * 1e3:.1f} mm, e_i so far {info.error_l1:.2f} m"),
+        ("Last latency", lat),
+        ("Audio (AG)", esc(audio_text(info.audio))),
+    ]
+    if info.force_n is not None:
+        rows.append(("Force (FF)", f"{info.force_n:.2f} N"))
+    if info.ms is not None:
+        rows.append(("MS factors", " / ".join(f"{m:.2f}" for m in info.ms)))
+    if info.zoom is not None:
+        rows.append(("Zoom (Mag)", f"{info.zoom:.2f}×"))
+    # A "|" inside a cell would end it: escape it.
+    body = "\n".join(f"| {k} | {v.replace('|', '&#124;')} |" for k, v in rows)
+    return "| | |\n|---|---|\n" + body
+
+
+class HudView:
+    """A GUI markdown panel with the live trial state; rewritten at most ``max_rate_hz``.
+
+    Args:
+        server: the viser server.
+        max_rate_hz: maximum rewrites per second (each is a message to every browser).
+    """
+
+    def __init__(self, server: viser.ViserServer, *, max_rate_hz: float = 10.0):
+        self.min_interval = 1.0 / max_rate_hz
+        self.handle = server.gui.add_markdown("*waiting for the first frame…*")
+        self.text = ""
+        self._last_t = -math.inf
+
+    def update(self, info: HudInfo, now: float | None = None, *, force: bool = False) -> None:
+        now = time.perf_counter() if now is None else now
+        if not force and now - self._last_t < self.min_interval:
+            return
+        text = hud_markdown(info)
+        self._last_t = now
+        if text != self.text:
+            self.text = text
+            self.handle.content = text
+
+
+__all__ = [
+    "ArrowView",
+    "CameraController",
+    "CameraPose",
+    "GhostView",
+    "HudInfo",
+    "HudView",
+    "OrganView",
+    "ToolView",
+    "TrajectoryView",
+    "arrow_mesh",
+    "arrow_vertices",
+    "audio_text",
+    "hud_markdown",
+    "organ_style",
+    "quat_from_z",
+    "rgb255",
+    "rotation_from_z",
+]
