@@ -74,16 +74,18 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
     m = result.metrics
     reached = int(m["reached"].sum())
     lat = m["latency"].dropna()
+    n = max(len(result.samples), 1)
     rows = [
         ("trial id", "-" if trial_id is None else str(trial_id)),
         ("database", "-" if db is None else str(db)),
-        ("task", f"{result.task.name} (variant {result.config.variant})"),
+        ("task", f"{result.task.name} ({result.task.kind}, {len(m)} points)"),
         ("schema", f"{result.schema.name} [{s['active_fixtures'] or 'no fixtures'}]"),
         ("operator", f"{result.config.operator}/{result.config.skill}, seed {result.config.seed}"),
         ("points reached", f"{reached}/{len(m)}"),
         ("completion time", f"{s['sim_time']:.2f} s"),
-        ("cumulative error", f"{m['error_l1'].sum():.3f} m (sum of e_i)"),
-        ("mean e_i", f"{m['error_l1'].mean():.4f} m"),
+        ("cumulative error", f"sum e_i = {m['error_l1'].sum():.2f} m over {n} samples "
+                             f"(mean |x - g|_1 = {1000 * m['error_l1'].sum() / n:.1f} mm)"),
+        ("mean e_i", f"{m['error_l1'].mean():.3f} m per point"),
         ("mean latency l_i", f"{lat.mean():.3f} s" if len(lat) else "-"),
         ("path length", f"{m['path_l1'].sum():.3f} m (Manhattan), "
                         f"{m['path_l2'].sum():.3f} m (Euclidean)"),
