@@ -12,7 +12,6 @@ import sqlite3
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -116,22 +115,6 @@ def test_buffer_bad_input():
         buf.append(0, 0.0, (1.0, 2.0), (0, 0, 0), 0)  # a 2-vector
     with pytest.raises(ValueError, match="missing"):
         SampleBuffer.from_columns({"k": [0]})
-
-
-def test_append_is_fast():
-    buf = SampleBuffer(capacity=1 << 16)
-    x, g, f = np.array([0.1, 0.2, 0.3]), np.array([0.0, 0.0, 0.01]), np.array([1.0, 0, 0])
-    ms = (1.0, 1.0, 1.0)
-    n = 20_000
-    best = math.inf
-    for _ in range(3):
-        buf.clear()
-        t0 = time.perf_counter()
-        for k in range(n):
-            buf.append(k, k * 1e-3, x, g, 0, f, ms, 1.0, 440.0, 0.5, 0.2, 0)
-        best = min(best, (time.perf_counter() - t0) / n)
-    print(f"append: {best * 1e6:.2f} us/sample")
-    assert best < 10e-6  # target < 5 us (~2 us measured); slack for a loaded CI machine
 
 
 # ---------------------------------------------------------------------- open / schema
@@ -328,21 +311,15 @@ def test_mark_interrupted_keeps_partial_data(store: TrialStore):
         store.finish_trial(tid, buf)
 
 
-def test_finish_trial_100k_samples_under_a_second(store: TrialStore):
+def test_finish_trial_100k_samples(store: TrialStore):
+    # Its speed is measured by bench/store.py; here: all 100k rows land, in order.
     buf = random_buffer(100_000, seed=5, n_points=20)
     v = buf.view()
     pm, summary = evaluate_trial(v["t"], v["x"], v["g"], v["goal_index"], 20)
-    times = []
-    for _ in range(2):  # best of two: the test machine is shared
-        tid = store.begin_trial(meta())
-        t0 = time.perf_counter()
-        store.finish_trial(tid, buf, pm, summary)
-        times.append(time.perf_counter() - t0)
-        if times[-1] < 1.0:
-            break
-    print(f"finish_trial(100k samples): {min(times):.3f} s")
-    assert min(times) < 1.0
+    tid = store.begin_trial(meta())
+    store.finish_trial(tid, buf, pm, summary)
     assert store.trial(tid)["n_samples"] == 100_000
+    np.testing.assert_array_equal(store.samples(tid)["k"].to_numpy(), v["k"])
 
 
 # -------------------------------------------------------------------------- recovery
@@ -457,3 +434,34 @@ def test_point_columns_match_store_table(store: TrialStore):
     assert cols == ["trial_id", *POINT_COLUMNS]
     cols = [r[1] for r in store.con.execute("PRAGMA table_info(samples)")]
     assert cols == ["trial_id", *FRAME_COLUMNS]
+
+
+def test_writer_completes_a_trial_another_process_wrongly_recovered(tmp_path: Path):
+    # A reader that cannot see the writer's pid (another pid namespace) marks the live trial
+    # interrupted; the writer's finish still lands, with an event saying what happened.
+    with TrialStore(tmp_path / "s.db") as writer:
+        tid = writer.begin_trial(meta())
+        writer.mark_interrupted(tid, reason="writer process 999999 on h no longer runs; x")
+        writer.finish_trial(tid, random_buffer(5))
+        tr = writer.trial(tid)
+        assert tr["status"] == "completed" and tr["n_samples"] == 5
+        assert "recovery_overruled" in writer.events(tid)["kind"].tolist()
+
+
+def test_a_stale_row_with_our_pid_but_another_start_time_is_recovered(tmp_path: Path):
+    path = tmp_path / "s.db"
+    with TrialStore(path) as st:
+        tid = st.begin_trial(meta())
+        st.con.execute("UPDATE trials SET proc_token = 'other-boot:1' WHERE id = ?", (tid,))
+        st.con.commit()
+    with TrialStore(path) as st:
+        assert st.recovered == [tid]
+        assert st.trial(tid)["status"] == "interrupted"
+
+
+def test_config_and_schema_are_stored_with_the_trial(store: TrialStore):
+    tid = store.begin_trial(meta(config={"schema": "ff", "seed": 3, "dt": 1e-3},
+                                 schema_toml='name = "ff"\n'))
+    tr = store.trial(tid)
+    assert tr["config"] == {"schema": "ff", "seed": 3, "dt": 1e-3}
+    assert tr["schema_toml"] == 'name = "ff"\n' and tr["vasim_version"]

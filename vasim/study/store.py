@@ -47,7 +47,10 @@ Schema, version 1 (units in brackets; times of day are ISO 8601 UTC text):
     ``summary_json`` TEXT NULL (``metrics.trial_summary`` + runner extras, JSON, NaN ->
     null); ``timing_json`` TEXT NULL (servo-loop timing statistics, JSON); ``pid``
     INTEGER, ``host`` TEXT, ``proc_token`` TEXT NULL (boot id + process start time) of the
-    writing process.
+    writing process; ``config_json`` TEXT NULL (the full trial configuration, operator
+    profile included, as JSON: with the seed it re-runs the trial); ``schema_toml`` TEXT NULL
+    (the resolved fixture schema as TOML, so a trial stays interpretable when the schema
+    file changes); ``vasim_version`` TEXT NULL.
 ``samples`` — one row per logged step, WITHOUT ROWID, PK (trial_id, k).
     ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL [s] since trial start;
     ``x_x, x_y, x_z`` REAL [m] TCP; ``g_x, g_y, g_z`` REAL [m] goal; ``goal_index`` INTEGER;
@@ -95,6 +98,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from vasim import __version__
 from vasim.errors import ConfigError, StoreError
 from vasim.study.metrics import POINT_COLUMNS
 from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
@@ -116,7 +120,7 @@ TRIAL_STATUSES: tuple[str, ...] = ("running", "completed", "interrupted")
 TRIAL_COLUMNS: tuple[str, ...] = (
     "id", "subject", "session_id", "protocol", "task", "variant", "schema", "operator", "seed",
     "status", "started_at", "ended_at", "dt", "n_samples", "active_fixtures", "summary_json",
-    "timing_json", "pid", "host", "proc_token",
+    "timing_json", "pid", "host", "proc_token", "config_json", "schema_toml", "vasim_version",
 )
 """Columns of the ``trials`` table (and of ``TrialStore.trials()``), in order."""
 
@@ -160,7 +164,10 @@ CREATE TABLE trials (
     timing_json     TEXT,
     pid             INTEGER,
     host            TEXT,
-    proc_token      TEXT
+    proc_token      TEXT,
+    config_json     TEXT,
+    schema_toml     TEXT,
+    vasim_version   TEXT
 );
 CREATE INDEX trials_subject ON trials(subject);
 CREATE INDEX trials_status ON trials(status);
@@ -231,6 +238,8 @@ class TrialMeta:
         active_fixtures: active fixture names, e.g. ``"VG,FF"``; ``""`` for VF-free.
         session_id: session id (once sessions exist), or None. protocol: protocol name.
         pid, host: the writing process (defaults: this process, this host).
+        config: the full trial configuration (JSON-serialisable mapping), or None.
+        schema_toml: the resolved fixture schema as TOML text, or None.
     """
 
     subject: str
@@ -245,6 +254,8 @@ class TrialMeta:
     protocol: str | None = None
     pid: int = field(default_factory=os.getpid)
     host: str = field(default_factory=socket.gethostname)
+    config: Mapping[str, Any] | None = None
+    schema_toml: str | None = None
 
     def __post_init__(self) -> None:
         validate_subject_code(self.subject)
@@ -271,6 +282,11 @@ class TrialMeta:
 
 
 # ------------------------------------------------------------------------- processes
+_RECOVERED_PREFIX = "writer process "
+"""Start of the event detail ``recover_interrupted`` writes (recognised by the writer)."""
+_RECOVERED_SQL = ("SELECT 1 FROM events WHERE trial_id = ? AND detail LIKE '"
+                  + _RECOVERED_PREFIX + "%no longer runs%' LIMIT 1")
+
 def _boot_id() -> str | None:
     try:
         return Path("/proc/sys/kernel/random/boot_id").read_text().strip()
@@ -303,7 +319,9 @@ def _process_alive(pid: int | None, token: str | None) -> bool:
     if pid is None:
         return True  # unknown writer: never guess
     if pid == os.getpid():
-        return True
+        # Our pid, but maybe not us: a row left by an earlier process that had this pid
+        # (pids are reused, e.g. in containers) carries another start-time token.
+        return token is None or _proc_token(pid) in (None, token)
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -550,11 +568,14 @@ class TrialStore:
             cur = con.execute(
                 "INSERT INTO trials (subject, session_id, protocol, task, variant, schema, "
                 "operator, seed, status, started_at, dt, active_fixtures, pid, host, "
-                "proc_token) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?)",
+                "proc_token, config_json, schema_toml, vasim_version) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (meta.subject, _int_or_none(meta.session_id), meta.protocol, meta.task,
                  _int_or_none(meta.variant), meta.schema, meta.operator,
                  _int_or_none(meta.seed), _now(), meta.dt, meta.active_fixtures,
-                 _int_or_none(meta.pid), meta.host, token),
+                 _int_or_none(meta.pid), meta.host, token,
+                 _to_json(meta.config), meta.schema_toml,
+                 __version__),
             )
             trial_id = cur.lastrowid
         assert trial_id is not None  # sqlite always sets it after an INSERT
@@ -625,6 +646,11 @@ class TrialStore:
             return False
         return True
 
+    def _is_writer(self, pid: int | None, host: str | None, token: str | None) -> bool:
+        """True if this process is the one that began a trial with these identifiers."""
+        return (pid == os.getpid() and host == self._host and token is not None
+                and token == _proc_token(os.getpid()))
+
     def _close_trial(
         self,
         trial_id: int,
@@ -647,10 +673,19 @@ class TrialStore:
             raise ConfigError(f"samples must be a SampleBuffer, got {type(samples).__name__}")
         try:
             with self._transaction() as con:
-                row = con.execute("SELECT status FROM trials WHERE id = ?", (tid,)).fetchone()
+                row = con.execute("SELECT status, pid, host, proc_token FROM trials "
+                                  "WHERE id = ?", (tid,)).fetchone()
                 if row is None:
                     raise StoreError(f"trial store {self.path}: no trial {tid}")
-                if row[0] != "running":
+                if (row[0] == "interrupted" and status == "completed"
+                        and self._is_writer(row[1], row[2], row[3])
+                        and con.execute(_RECOVERED_SQL, (tid,)).fetchone() is not None):
+                    # Another process's recovery took this live trial for a dead one (it
+                    # cannot see our pid, e.g. from another pid namespace); we are its
+                    # writer, so it completes rather than losing its samples.
+                    event_rows.append((None, "recovery_overruled",
+                                       "marked interrupted by another process while alive"))
+                elif row[0] != "running":
                     if status == "interrupted":
                         raise _NotRunning
                     raise StoreError(f"trial store {self.path}: trial {tid} is {row[0]!r}, "
@@ -708,7 +743,7 @@ class TrialStore:
                 if host == self._host and not _process_alive(pid, token)]
         marked = []
         for tid, pid in dead:
-            reason = (f"writer process {pid} on {self._host} no longer runs; found by "
+            reason = (f"{_RECOVERED_PREFIX}{pid} on {self._host} no longer runs; found by "
                       f"process {os.getpid()} when opening the store")
             if self.mark_interrupted(tid, reason=reason):
                 marked.append(tid)
@@ -764,6 +799,7 @@ class TrialStore:
         d = dict(zip(TRIAL_COLUMNS, row, strict=True))
         d["summary"] = json.loads(d["summary_json"]) if d["summary_json"] else None
         d["timing"] = json.loads(d["timing_json"]) if d["timing_json"] else None
+        d["config"] = json.loads(d["config_json"]) if d["config_json"] else None
         return d
 
     def samples(self, trial_id: int) -> pd.DataFrame:

@@ -25,6 +25,7 @@ import functools
 import ipaddress
 import logging
 import queue
+import socket
 import threading
 import time
 from collections.abc import Callable
@@ -63,6 +64,22 @@ DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
     "point": "point_targeting",
 }
 """Schema switched to when the chosen task does not fit the current task-specific schema."""
+
+
+def check_bind_address(host: str, port: int) -> None:
+    """Raises ``ConfigError`` unless ``port`` is a valid TCP port and ``host`` an address of
+    this machine (viser would otherwise fail in a background thread and hang the server).
+    A busy port is fine: viser moves to the next free one."""
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ConfigError(f"port must be an integer in 0..65535, got {port!r}", field="port")
+    try:
+        infos = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)
+        family, _, _, _, addr = infos[0]
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.bind(addr)
+    except OSError as exc:
+        raise ConfigError(f"cannot bind to host {host!r}: {exc.strerror or exc}",
+                          field="host") from None
 
 
 def is_loopback(host: str) -> bool:
@@ -228,6 +245,7 @@ class ViewerApp:
         """Binds the server, builds the scene and GUI, starts both threads; returns self."""
         if self.server is not None:
             raise RuntimeError("ViewerApp.start() was already called")
+        check_bind_address(self.host, self.requested_port)
         self.server = viser.ViserServer(host=self.host, port=self.requested_port,
                                         verbose=False)
         try:
