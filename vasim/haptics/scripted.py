@@ -153,6 +153,7 @@ Example:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import ClassVar, Literal
 
@@ -557,9 +558,23 @@ class ScriptedOperator:
             RuntimeError: if called before :meth:`reset`.
             ValueError: if ``obs.dt`` is not a finite positive number.
         """
+        return np.array(self.step_floats(
+            obs.dt, obs.tcp.tolist(), obs.goal.tolist(), obs.goal_index, obs.guidance,
+            obs.audio_volume, obs.zoom, obs.ms_factors.tolist(), obs.force.tolist()))
+
+    def step_floats(
+        self, dt: float, tcp: Sequence[float], goal: Sequence[float], goal_index: int,
+        guidance: bool, audio_volume: float, zoom: float, ms_factors: Sequence[float],
+        force: Sequence[float],
+    ) -> list[float]:
+        """``step`` with the observation's fields as floats (the trial loop's fast path: no
+        ``OperatorObservation`` and no arrays are built per step; same model, same numbers).
+
+        ``tcp`` and ``goal`` (3 floats each) are kept for the reaction delay: pass values
+        that are not modified afterwards (tuples). Returns dX_M as a list of 3 floats [m].
+        """
         if not self._ready:
             raise RuntimeError("call ScriptedOperator.reset() before step()")
-        dt = obs.dt
         if self._dt is None:
             self._setup(dt)
         elif dt != self._dt and not (dt > 0 and math.isfinite(dt)):
@@ -569,8 +584,8 @@ class ScriptedOperator:
         C = self._C
         nb = self._nbuf
         k = self._k
-        self._buf[k % nb] = (obs.tcp.tolist(), obs.goal.tolist(), obs.goal_index,
-                             obs.guidance, obs.audio_volume, obs.zoom, C[0], C[1], C[2])
+        self._buf[k % nb] = (tcp, goal, goal_index, guidance, audio_volume, zoom,
+                             C[0], C[1], C[2])
         xs, gs, i_s, guid, vol, zoom, c0, c1, c2 = self._buf[(k + 1) % nb]
         self._k = k + 1
         t = self._t + dt
@@ -602,7 +617,7 @@ class ScriptedOperator:
         xh1 = xs[1] + sig_p * DEPTH_WEIGHT[1] * npv[1] + C[1] - c1
         xh2 = xs[2] + sig_p * DEPTH_WEIGHT[2] * npv[2] + C[2] - c2
         # ---- motion-scaling compensation (read before planning: it sets hand distances) --
-        ms = obs.ms_factors.tolist()
+        ms = ms_factors
         if ms[0] < 1e-6 or ms[1] < 1e-6 or ms[2] < 1e-6:
             ms = [m if m > 1e-6 else 1e-6 for m in ms]
         c_ms = p.ms_compensation
@@ -701,7 +716,6 @@ class ScriptedOperator:
         karm = p.arm_stiffness
         acc = self._acc
         acc_f = p.force_acceptance
-        force = obs.force.tolist()
         out = [0.0, 0.0, 0.0]
         for ax, u in ((0, u0), (1, u1), (2, u2)):
             y = a1 * y1[ax] + a2 * y2[ax] + b * rnd[6 + ax]
@@ -716,7 +730,7 @@ class ScriptedOperator:
             C[ax] += da
             nm[ax] = rg * nm[ax] + sg * rnd[9 + ax]
             out[ax] = msc[ax] * u * dt * (1.0 + sig_g * ng[ax]) + sm * nm[ax] + dy + df
-        return np.array(out)
+        return out
 
     # -- internals -----------------------------------------------------------------------
     def _setup(self, dt: float) -> None:

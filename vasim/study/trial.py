@@ -178,54 +178,77 @@ class TrialRunner:
         self._points = np.asarray(self.task.points, dtype=np.float64)
         self._n = len(self._points)
         self._r2 = self.task.reach_radius ** 2
+        self._scale = self.task.scale
         # The task geometry is static within a trial here: look-ahead points (Mag's aim) and
-        # normals are computed once per POI, not per step.
+        # normals are computed once per POI, not per step. The loop reads goals, look-aheads
+        # and normals as tuples of floats (see _tick); the arrays serve TaskState.
         self._lookahead = [self.task.lookahead(i) for i in range(self._n)]
         self._normals = None if self.task.normals is None else np.asarray(self.task.normals)
-        self._tcp = np.array(self.task.start, dtype=np.float64)
-        self._master = self._tcp.copy()
-        self._vel = np.zeros(3)
+        self._goal_xyz = [tuple(p) for p in self._points.tolist()]
+        self._lookahead_xyz = [tuple(np.asarray(a, dtype=np.float64).tolist())
+                               for a in self._lookahead]
+        self._normal_xyz = (None if self._normals is None
+                            else [tuple(nv) for nv in self._normals.tolist()])
+        # TCP x(k), master (hand) position and filtered TCP velocity, as tuples of floats
+        start = np.array(self.task.start, dtype=np.float64)
+        self._x: tuple[float, ...] = tuple(start.tolist())
+        self._m: tuple[float, ...] = self._x
+        self._v: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._alpha = 1.0 - math.exp(-2.0 * math.pi * config.velocity_cutoff_hz * config.dt)
         self._k = -1
         self._t = 0.0
         self._i = 0
         self._reach_times: list[float] = []
         self._err = 0.0
-        self.runtime.reset(self._tcp)
-        self.operator.reset(self._tcp)
+        self.runtime.reset(start)
+        self.operator.reset(start)
         self.done = False
-        self._out: FixtureOutputs = self.runtime.render(self._state(np.zeros(3)))
+        # The first render (t = 0, no motion): what the operator perceives at the first step.
+        zero = (0.0, 0.0, 0.0)
+        state = self._state(zero) if self.runtime.needs_state else None
+        self._ms: tuple[float, ...] = self.runtime.scale_motion_xyz(
+            self._x, self._goal_xyz[0], zero, self._scale, state)[3:]
+        self._cues = self._render(zero)
         self._publish()
 
     # -- helpers -----------------------------------------------------------------------
     def _goal(self) -> Vec3:
         return self._points[min(self._i, self._n - 1)]
 
-    def _state(self, dx_master: Vec3) -> TaskState:
+    def _state(self, dx_master: tuple[float, ...]) -> TaskState:
+        """The step as a ``TaskState`` (only for schemas with a fixture that needs one)."""
         i = min(self._i, self._n - 1)
         normals = self._normals
         return TaskState(
-            tcp=self._tcp, goal=self._points[i], tcp_velocity=self._vel,
-            dx_master=dx_master, scale=self.task.scale, t=self._t, kind=self.task.kind,
-            lookahead=self._lookahead[i],
+            tcp=np.array(self._x), goal=self._points[i], tcp_velocity=np.array(self._v),
+            dx_master=np.array(dx_master), scale=self._scale, t=self._t,
+            kind=self.task.kind, lookahead=self._lookahead[i],
             normal=None if normals is None else normals[i],
         )
 
+    def _render(self, dx_master: tuple[float, ...]) -> tuple[float, ...]:
+        """Renders the fixtures' parallel channels for the current x(k) (phase 2).
+
+        Returns ``SchemaRuntime.render_xyz``'s values: (force x, y, z, zoom, audio pitch,
+        period, volume, guidance-arrow opacity).
+        """
+        i = min(self._i, self._n - 1)
+        rt = self.runtime
+        state = self._state(dx_master) if rt.needs_state else None
+        # The goals are static (zero velocity): the error rate is the TCP velocity.
+        return rt.render_xyz(
+            self._x, self._goal_xyz[i], self._v, self._t, self._scale, self.task.kind,
+            self._lookahead_xyz[i], None if self._normal_xyz is None else self._normal_xyz[i],
+            state)
+
     def _observation(self) -> OperatorObservation:
-        out = self._out
-        force = out.force.force if out.force is not None else _ZERO3
-        audio = out.audio
-        guidance = False
-        for a in out.arrows:
-            if a.kind == "guidance" and a.opacity > 0.05:
-                guidance = True
+        """What the operator perceives (for devices without ``step_floats``)."""
+        cues = self._cues
         return OperatorObservation(
-            t=self._t, dt=self.config.dt, tcp=self._tcp, goal=self._goal(),
-            goal_index=min(self._i, self._n - 1), force=force, ms_factors=out.ms_factors,
-            guidance=guidance,
-            audio_volume=0.0 if audio is None else audio.volume,
-            audio_pitch_hz=0.0 if audio is None else audio.pitch_hz,
-            zoom=1.0 if out.camera is None else out.camera.zoom,
+            t=self._t, dt=self.config.dt, tcp=np.array(self._x), goal=self._goal(),
+            goal_index=min(self._i, self._n - 1), force=np.array(cues[0:3]),
+            ms_factors=np.array(self._ms), guidance=cues[7] > _GUIDANCE_SEEN,
+            audio_volume=cues[6], audio_pitch_hz=cues[4], zoom=cues[3],
         )
 
     # -- the loop ------------------------------------------------------------------------
@@ -255,40 +278,51 @@ class TrialRunner:
         return self._frame
 
     def _tick(self) -> None:
-        """One control step (module docstring, steps 1-5)."""
+        """One control step (module docstring, steps 1-5).
+
+        The loop works on floats: x, the master and the velocity are tuples, and it calls
+        the float-level entry points of the operator (``step_floats``) and of the runtime
+        (``scale_motion_xyz``, ``render_xyz``). These do the same arithmetic in the same
+        order as the array API (bit-identical samples) but build no observation, TaskState,
+        effect objects or arrays per step (~1-5 µs each); ``_publish`` builds the frame.
+        """
         dt = self.config.dt
-        self._k += 1
-        self._t = (self._k + 1) * dt
-        dx_m = self.operator.step(self._observation())
-        if not (math.isfinite(dx_m[0]) and math.isfinite(dx_m[1]) and math.isfinite(dx_m[2])):
-            self.events.append((self._t, "nonfinite_input", f"dX_M={list(map(float, dx_m))!r}"))
-            dx_m = np.zeros(3)
-        else:
-            dx_m = np.asarray(dx_m, dtype=np.float64)
-        self._master = self._master + dx_m
-        dx_s = self.runtime.scale_motion(self._state(dx_m)).dx_slave
-        self._tcp = self._tcp + dx_s
-        self._vel = self._vel + self._alpha * (dx_s / dt - self._vel)
-        goal = self._points[self._i]
-        d0, d1, d2 = (self._tcp - goal).tolist()
-        self._err += abs(d0) + abs(d1) + abs(d2)
-        gi = self._i
-        if d0 * d0 + d1 * d1 + d2 * d2 <= self._r2:
-            self._reach_times.append(self._t)
-            self._i += 1
+        k = self._k = self._k + 1
+        t = self._t = (k + 1) * dt
+        x, i = self._x, self._i  # i < n: the trial is done once every point is reached
+        g = self._goal_xyz[i]
+        cues = self._cues  # the last render, as perceived now
+        op = self.operator
+        if type(op) is ScriptedOperator:
+            dx = op.step_floats(dt, x, g, i, cues[7] > _GUIDANCE_SEEN, cues[6], cues[3],
+                                self._ms, cues[0:3])
+        else:  # any other device: the OperatorObservation protocol
+            dx = np.asarray(op.step(self._observation()), dtype=np.float64).tolist()
+        d0, d1, d2 = dx
+        if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
+            self.events.append((t, "nonfinite_input", f"dX_M={list(map(float, dx))!r}"))
+            d0 = d1 = d2 = 0.0
+        m = self._m
+        self._m = (m[0] + d0, m[1] + d1, m[2] + d2)
+        dxm = (d0, d1, d2)
+        rt = self.runtime
+        state = self._state(dxm) if rt.needs_state else None
+        s0, s1, s2, f0, f1, f2 = rt.scale_motion_xyz(x, g, dxm, self._scale, state)
+        self._ms = (f0, f1, f2)
+        x = self._x = (x[0] + s0, x[1] + s1, x[2] + s2)
+        v, a = self._v, self._alpha
+        self._v = (v[0] + a * (s0 / dt - v[0]), v[1] + a * (s1 / dt - v[1]),
+                   v[2] + a * (s2 / dt - v[2]))
+        e0, e1, e2 = x[0] - g[0], x[1] - g[1], x[2] - g[2]
+        self._err += abs(e0) + abs(e1) + abs(e2)
+        if e0 * e0 + e1 * e1 + e2 * e2 <= self._r2:
+            self._reach_times.append(t)
+            self._i = i + 1
             self._err = 0.0
-        out = self.runtime.render(self._state(dx_m))
-        self._out = out
-        f = out.force.force if out.force is not None else _ZERO3
-        audio = out.audio
-        self.samples.append(
-            self._k, self._t, self._tcp, goal, gi, f, out.ms_factors,
-            1.0 if out.camera is None else out.camera.zoom,
-            0.0 if audio is None else audio.pitch_hz,
-            0.0 if audio is None else audio.period_s,
-            0.0 if audio is None else audio.volume, 0,
-        )
-        self.done = self._i >= self._n or self._t >= self.config.max_time - 1e-12
+        cues = self._cues = self._render(dxm)
+        self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4], cues[5],
+                            cues[6], 0)
+        self.done = self._i >= self._n or t >= self.config.max_time - 1e-12
 
     def _publish(self) -> None:
         rt = self._reach_times
@@ -296,10 +330,10 @@ class TrialRunner:
         if rt:
             last_latency = rt[-1] - (rt[-2] if len(rt) > 1 else 0.0)
         self._frame = TrialFrame(
-            k=self._k, t=self._t, tcp=self._tcp, master=self._master,
+            k=self._k, t=self._t, tcp=np.array(self._x), master=np.array(self._m),
             goal=self._points[min(self._i, self._n - 1)], goal_index=self._i,
-            n_points=self._n, done=self.done, outputs=self._out, last_latency=last_latency,
-            error_l1=self._err,
+            n_points=self._n, done=self.done, outputs=self.runtime.outputs(),
+            last_latency=last_latency, error_l1=self._err,
         )
 
     def result(self, wall_time: float = 0.0) -> TrialResult:
@@ -318,8 +352,8 @@ class TrialRunner:
                            events=list(self.events), wall_time=wall_time)
 
 
-_ZERO3 = np.zeros(3)
-_ZERO3.setflags(write=False)
+_GUIDANCE_SEEN = 0.05
+"""The operator notices the VG arrow when its opacity exceeds this."""
 
 
 def run_trial(config: TrialConfig, store: object | None = None, *,
