@@ -164,7 +164,7 @@ def test_sigkill_mid_trial_leaves_earlier_trials_intact(tmp_path: Path) -> None:
             time.sleep(0.05)
         else:
             pytest.fail("the child never started its trial")
-        time.sleep(0.5)
+        time.sleep(0.1)  # inside the trial loop (the 'running' row precedes the first step)
         os.kill(child.pid, signal.SIGKILL)
     finally:
         child.wait(timeout=30)
@@ -178,3 +178,84 @@ def test_sigkill_mid_trial_leaves_earlier_trials_intact(tmp_path: Path) -> None:
         assert len(killed) == 1
         assert trials.loc[killed[0], "status"] == "interrupted"
         assert len(store.samples(killed[0])) == 0
+
+
+def _distance_to_path(x: np.ndarray, task, goal_index: np.ndarray) -> np.ndarray:
+    """Distance of each sample to its current segment [p_(i-1), p_i] (start for i = 0)."""
+    starts = np.vstack([task.start, task.points[:-1]])
+    a, b = starts[goal_index], task.points[goal_index]
+    ab = b - a
+    u = np.clip(((x - a) * ab).sum(1) / (ab * ab).sum(1), 0.0, 1.0)
+    return np.linalg.norm(x - (a + u[:, None] * ab), axis=1)
+
+
+def test_fixtures_are_transparent_on_the_path() -> None:
+    # Decision in vasim/study/trial.py: trajectory fixtures act on the deviation from the
+    # path. AG's dead zone is 0.15 D = 4.5 mm (D = 3 cm), so every sample within 1 mm of the
+    # path is silent although the next POI is up to ~10 mm away.
+    r = TrialRunner(TrialConfig(schema="ag", seed=1, skill="expert", max_time=8.0))
+    r.advance(8.0)
+    v = r.samples.view()
+    dist = _distance_to_path(v["x"], r.task, v["goal_index"])
+    to_poi = np.linalg.norm(v["x"] - v["g"], axis=1)
+    # The cue of a row is rendered after the goal test: on the row where p_i is reached it
+    # already belongs to the next segment, so those rows are left out.
+    advancing = np.append(np.diff(v["goal_index"]) > 0, False)
+    near = (dist < 1e-3) & ~advancing
+    assert near.sum() > 100 and (to_poi[near] > 4.5e-3).any()
+    assert (v["audio_volume"][near] == 0.0).all()
+    assert (v["audio_volume"][(dist > 0.02) & ~advancing] > 0.0).all()
+
+
+def test_ff_force_grows_with_the_deviation_from_the_path() -> None:
+    r = TrialRunner(TrialConfig(schema="ff", seed=3, skill="novice", max_time=20.0))
+    r.advance(20.0)
+    v = r.samples.view()
+    dist = _distance_to_path(v["x"], r.task, v["goal_index"])
+    f = np.linalg.norm(v["force"], axis=1)
+    assert f[dist < 1e-3].max() < 0.01  # negligible on the path (< 10 mN)
+    assert np.corrcoef(dist, f)[0, 1] > 0.8
+
+
+def test_interrupted_trial_keeps_its_partial_samples(tmp_path: Path, monkeypatch) -> None:
+    from vasim.haptics.scripted import ScriptedOperator
+
+    calls = {"n": 0}
+    real = ScriptedOperator.step_floats
+
+    def flaky(self, *a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 1500:
+            raise KeyboardInterrupt
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(ScriptedOperator, "step_floats", flaky)
+    with TrialStore(tmp_path / "s.sqlite") as store:
+        with pytest.raises(KeyboardInterrupt):
+            run_trial(TrialConfig(schema="ff", seed=1), store)
+        tr = store.trials().iloc[0]
+        assert tr["status"] == "interrupted" and tr["n_samples"] == 1499
+        assert len(store.samples(int(tr["id"]))) == 1499
+        assert "KeyboardInterrupt" in " ".join(store.events(int(tr["id"]))["detail"])
+
+
+def test_stored_trial_carries_its_config_and_schema(tmp_path: Path) -> None:
+    from vasim.fixtures.schema import load_schema, parse_schema
+
+    with TrialStore(tmp_path / "s.sqlite") as store:
+        _, tid = run_trial(TrialConfig(schema="vg", seed=4, skill="expert", max_time=1.0),
+                           store)
+        tr = store.trial(tid)
+    assert tr["config"]["seed"] == 4 and tr["config"]["skill"] == "expert"
+    assert tr["config"]["profile"]["skill"] == pytest.approx(0.9)
+    assert parse_schema(tr["schema_toml"], source="stored") == load_schema("vg")
+
+
+@pytest.mark.parametrize(("kw", "field"), [
+    ({"task": "point", "variant": 3}, "variant"),
+    ({"seed": -1}, "seed"),
+    ({"subject": "Jane Doe"}, "Jane Doe"),
+])
+def test_more_bad_config_values_are_refused(kw: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field):
+        TrialConfig(**kw)

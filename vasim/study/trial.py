@@ -12,8 +12,22 @@ in the order of spec/fixtures.md §4:
    (spec/study.md §2 **decision**, ``r_reach`` = ``task.reach_radius``, default 5 mm), and the
    reach time ``t_p`` is stored;
 4. the parallel channels (FF + cone walls, AG, VG, Mag) are rendered from the updated state;
+   MS (step 2) and these channels act on the *fixture goal* g_f(k) defined below;
 5. the sample (k, t, x, g, goal index, force, MS factors, zoom, audio) is appended to a
    preallocated buffer (no allocation per sample).
+
+**decision** (spec/fixtures.md §2 names the goal "the POI, or the nearest/next point of the
+planned trajectory"; §2 also asks that AG be silent, FF negligible, MS small and VG faded
+*on the path*): in trajectory following the fixtures act on the deviation from the path.
+Their goal g_f(k) is the point of the current path segment [p_(i-1), p_i] nearest to x(k)
+(the segment from the tool's start point for i = 0). With the POIs ~1 cm apart, using p_i
+itself would make every fixture fire while the tool lies exactly on the path. In point
+targeting g_f(k) is the POI. The logged goal g(k), the reach test and the metrics e_i and
+l_i always use the POI p_i (spec/study.md eq. 6.5), and the operator aims at p_i.
+
+Samples: row k holds t = (k + 1) dt, x(k) after the step and the goal g(k) = p_i it was
+compared with (the goal advances after the row is logged); the start state (t = 0) is not
+a row. The buffer is preallocated for ``max_time`` so the loop never reallocates.
 
 The TCP velocity used by FF's damping term is the finite difference of x filtered by a
 first-order low-pass (``velocity_cutoff_hz``, default 30 Hz): raw 1 kHz differences of a
@@ -26,7 +40,7 @@ import math
 import os
 import socket
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Literal
 
 import numpy as np
@@ -34,7 +48,7 @@ import pandas as pd
 
 from vasim.errors import ConfigError
 from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
-from vasim.fixtures.schema import Schema, load_schema
+from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
 from vasim.study.metrics import evaluate_trial
@@ -79,6 +93,16 @@ class TrialConfig:
         if self.task not in ("trajectory", "point"):
             raise ConfigError(f"unknown task {self.task!r} (expected 'trajectory' or 'point')",
                               field="task")
+        if self.task == "point" and self.variant != 0:
+            raise ConfigError(f"the point task has no variants, got variant {self.variant!r}",
+                              field="variant")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not (
+                0 <= self.seed < 2**63):
+            raise ConfigError(f"seed must be an integer in [0, 2**63), got {self.seed!r}",
+                              field="seed")
+        from vasim.study.store import validate_subject_code
+
+        validate_subject_code(self.subject)
         if self.operator != "scripted":
             raise ConfigError(f"unknown operator {self.operator!r} (available: 'scripted')",
                               field="operator")
@@ -173,8 +197,11 @@ class TrialRunner:
         self.runtime = SchemaRuntime(self.schema)
         self.operator = ScriptedOperator(make_profile(config), self.task, seed=config.seed,
                                          practice=config.practice)
-        self.samples = SampleBuffer()
+        capacity = min(int(config.max_time / config.dt) + 2, _MAX_PREALLOCATED)
+        self.samples = SampleBuffer(capacity=capacity,
+                                    active_fixtures=",".join(self.schema.fixture_names))
         self.events: list[tuple[float, str, str]] = []
+        self._n_bad_input = 0
         self._points = np.asarray(self.task.points, dtype=np.float64)
         self._n = len(self._points)
         self._r2 = self.task.reach_radius ** 2
@@ -189,6 +216,17 @@ class TrialRunner:
                                for a in self._lookahead]
         self._normal_xyz = (None if self._normals is None
                             else [tuple(nv) for nv in self._normals.tolist()])
+        # Path segments [p_(i-1), p_i] for the fixture goal (module docstring, decision):
+        # start a, direction ab and 1/|ab|^2 per point; None for point targeting.
+        self._segments: list[tuple[tuple[float, ...], tuple[float, ...], float]] | None = None
+        if self.task.kind == "trajectory":
+            starts = [tuple(np.asarray(self.task.start, dtype=np.float64).tolist()),
+                      *self._goal_xyz[:-1]]
+            self._segments = []
+            for a, b in zip(starts, self._goal_xyz, strict=True):
+                ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+                n2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]
+                self._segments.append((a, ab, 1.0 / n2 if n2 > 0 else 0.0))
         # TCP x(k), master (hand) position and filtered TCP velocity, as tuples of floats
         start = np.array(self.task.start, dtype=np.float64)
         self._x: tuple[float, ...] = tuple(start.tolist())
@@ -207,11 +245,21 @@ class TrialRunner:
         zero = (0.0, 0.0, 0.0)
         state = self._state(zero) if self.runtime.needs_state else None
         self._ms: tuple[float, ...] = self.runtime.scale_motion_xyz(
-            self._x, self._goal_xyz[0], zero, self._scale, state)[3:]
+            self._x, self._fixture_goal(self._x, 0), zero, self._scale, state)[3:]
         self._cues = self._render(zero)
         self._publish()
 
     # -- helpers -----------------------------------------------------------------------
+    def _fixture_goal(self, x: tuple[float, ...], i: int) -> tuple[float, ...]:
+        """g_f(k): nearest point of segment i to x (trajectory), or the POI (point task)."""
+        segs = self._segments
+        if segs is None:
+            return self._goal_xyz[i]
+        a, ab, inv = segs[i]
+        u = ((x[0] - a[0]) * ab[0] + (x[1] - a[1]) * ab[1] + (x[2] - a[2]) * ab[2]) * inv
+        u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
+        return (a[0] + u * ab[0], a[1] + u * ab[1], a[2] + u * ab[2])
+
     def _goal(self) -> Vec3:
         return self._points[min(self._i, self._n - 1)]
 
@@ -220,7 +268,8 @@ class TrialRunner:
         i = min(self._i, self._n - 1)
         normals = self._normals
         return TaskState(
-            tcp=np.array(self._x), goal=self._points[i], tcp_velocity=np.array(self._v),
+            tcp=np.array(self._x), goal=np.array(self._fixture_goal(self._x, i)),
+            tcp_velocity=np.array(self._v),
             dx_master=np.array(dx_master), scale=self._scale, t=self._t,
             kind=self.task.kind, lookahead=self._lookahead[i],
             normal=None if normals is None else normals[i],
@@ -237,7 +286,7 @@ class TrialRunner:
         state = self._state(dx_master) if rt.needs_state else None
         # The goals are static (zero velocity): the error rate is the TCP velocity.
         return rt.render_xyz(
-            self._x, self._goal_xyz[i], self._v, self._t, self._scale, self.task.kind,
+            self._x, self._fixture_goal(self._x, i), self._v, self._t, self._scale, self.task.kind,
             self._lookahead_xyz[i], None if self._normal_xyz is None else self._normal_xyz[i],
             state)
 
@@ -300,14 +349,20 @@ class TrialRunner:
             dx = np.asarray(op.step(self._observation()), dtype=np.float64).tolist()
         d0, d1, d2 = dx
         if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
-            self.events.append((t, "nonfinite_input", f"dX_M={list(map(float, dx))!r}"))
+            # Dropped; the first few are logged, then one event per second of dropout.
+            self._n_bad_input += 1
+            if self._n_bad_input <= _BAD_INPUT_EVENTS or k % round(1.0 / dt) == 0:
+                self.events.append((t, "nonfinite_input",
+                                    f"dX_M={list(map(float, dx))!r} "
+                                    f"(dropped; {self._n_bad_input} so far)"))
             d0 = d1 = d2 = 0.0
         m = self._m
         self._m = (m[0] + d0, m[1] + d1, m[2] + d2)
         dxm = (d0, d1, d2)
         rt = self.runtime
         state = self._state(dxm) if rt.needs_state else None
-        s0, s1, s2, f0, f1, f2 = rt.scale_motion_xyz(x, g, dxm, self._scale, state)
+        s0, s1, s2, f0, f1, f2 = rt.scale_motion_xyz(x, self._fixture_goal(x, i), dxm,
+                                                     self._scale, state)
         self._ms = (f0, f1, f2)
         x = self._x = (x[0] + s0, x[1] + s1, x[2] + s2)
         v, a = self._v, self._alpha
@@ -339,13 +394,16 @@ class TrialRunner:
     def result(self, wall_time: float = 0.0) -> TrialResult:
         """The trial's samples, per-point metrics (spec/study.md §2) and summary."""
         view = self.samples.view()
+        # The reach times recorded by the loop are passed on, so the reach rule lives once.
         metrics, summary = evaluate_trial(
             view["t"], view["x"], view["g"], view["goal_index"], self._points,
             r_reach=self.task.reach_radius,
+            t_reached=self._reach_times + [math.nan] * (self._n - len(self._reach_times)),
         )
         summary.update({
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
             "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
+            "nonfinite_inputs": self._n_bad_input,
         })
         return TrialResult(config=self.config, schema=self.schema, task=self.task,
                            samples=self.samples, metrics=metrics, summary=summary,
@@ -354,6 +412,19 @@ class TrialRunner:
 
 _GUIDANCE_SEEN = 0.05
 """The operator notices the VG arrow when its opacity exceeds this."""
+
+_BAD_INPUT_EVENTS = 10
+"""Non-finite device increments logged one by one before logging once per second."""
+
+_MAX_PREALLOCATED = 1_000_000
+"""Sample rows preallocated at most (~170 MB); longer trials grow the buffer."""
+
+
+def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
+    """The trial configuration as plain JSON-able data (stored with the trial)."""
+    rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"}
+    rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
+    return rec
 
 
 def run_trial(config: TrialConfig, store: object | None = None, *,
@@ -372,12 +443,15 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
     runner = TrialRunner(config)
     trial_id: int | None = None
     if store is not None:
-        assert isinstance(store, TrialStore)
+        if not isinstance(store, TrialStore):
+            raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
         trial_id = store.begin_trial(TrialMeta(
             subject=config.subject, task=config.task, variant=config.variant,
             schema=runner.schema.name, operator=config.operator, seed=config.seed,
             dt=config.dt, active_fixtures=",".join(runner.schema.fixture_names),
             pid=os.getpid(), host=socket.gethostname(),
+            config=config_record(config, runner.operator.profile),
+            schema_toml=dumps_schema(runner.schema),
         ))
     t0 = time.perf_counter()
     try:
@@ -398,9 +472,13 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
         if store is not None and trial_id is not None:
             store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
                                events=result.events)
-    except BaseException:
+    except BaseException as exc:
         if store is not None and trial_id is not None:
-            store.mark_interrupted(trial_id)
+            # Keep what was recorded: the partial samples and metrics, marked interrupted.
+            partial = runner.result(wall_time=time.perf_counter() - t0)
+            store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
+                                   samples=partial.samples, point_metrics=partial.metrics,
+                                   summary=partial.summary, events=partial.events)
         raise
     return result, trial_id
 
