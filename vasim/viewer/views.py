@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import html
 import math
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -531,6 +532,8 @@ class CameraController:
         self._target: CameraPose = default
         self._mag = False
         self._sent: dict[int, CameraPose] = {}
+        # on_connect runs on viser's callback threads, update on the view thread.
+        self._lock = threading.Lock()
         self._last_push = -math.inf
         self.follow = True
         """False: Mag output is ignored and the user orbits freely."""
@@ -549,10 +552,11 @@ class CameraController:
 
     def on_connect(self, client: viser.ClientHandle) -> None:
         """Gives a newly connected client the current target pose."""
-        self._sent.pop(client.client_id, None)
-        client.camera.near = self.near
-        client.camera.far = self.far
-        self._write(client, self._target)
+        with self._lock:
+            self._sent.pop(client.client_id, None)
+            client.camera.near = self.near
+            client.camera.far = self.far
+            self._write(client, self._target)
 
     def update(self, view: CameraView | None, now: float | None = None) -> None:
         """Follows ``view`` (Mag output) or, for None, falls back to the default pose once."""
@@ -571,14 +575,15 @@ class CameraController:
         self._push_all()
 
     def _push_all(self, *, force: bool = False) -> None:
-        clients = self.server.get_clients()
-        for cid in list(self._sent):
-            if cid not in clients:
-                del self._sent[cid]
-        for client in clients.values():
-            last = self._sent.get(client.client_id)
-            if force or last is None or not self._target.close_to(last):
-                self._write(client, self._target)
+        with self._lock:
+            clients = self.server.get_clients()
+            for cid in list(self._sent):
+                if cid not in clients:
+                    del self._sent[cid]
+            for client in clients.values():
+                last = self._sent.get(client.client_id)
+                if force or last is None or not self._target.close_to(last):
+                    self._write(client, self._target)
 
     def _write(self, client: viser.ClientHandle, pose: CameraPose) -> None:
         with client.atomic():
