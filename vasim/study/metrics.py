@@ -50,8 +50,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-DEFAULT_REACH_RADIUS = 0.005
-"""r_reach [m] when none is given: 5 mm (spec/study.md §2)."""
+from vasim.tasks.base import DEFAULT_REACH_RADIUS as DEFAULT_REACH_RADIUS
 
 POINT_COLUMNS: tuple[str, ...] = (
     "point", "reached", "t_reached", "error_l1", "latency", "path_l1", "path_l2", "n_samples",
