@@ -1,0 +1,307 @@
+"""Validation of long-format study data: columns, numeric values, factors and balance.
+
+Every statistic in :mod:`vasim.study.stats` takes a *long-format* ``pandas.DataFrame``
+(one row per observation, pingouin style) and validates it here before computing anything,
+so that bad input ends in one :class:`vasim.errors.ConfigError` naming the file, the column
+and the offending values or cells, never in a traceback or in a silently wrong table.
+
+The file a frame came from is read from ``data.attrs["source"]`` (set by
+:func:`read_long_csv`); frames read that way also carry their CSV line numbers as index,
+so messages can point at ``line 7`` of the file.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Hashable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vasim.errors import ConfigError
+
+#: Maximum number of offending values or cells quoted in one error message.
+MAX_LISTED = 8
+
+
+class StatsWarning(UserWarning):
+    """A statistic is undefined or degenerate for this data (the value is NaN, see the note)."""
+
+
+def read_long_csv(path: str | Path) -> pd.DataFrame:
+    """Reads a long-format CSV file for the statistics functions.
+
+    Args:
+        path: CSV file with a header row.
+
+    Returns:
+        The table; ``attrs["source"]`` holds the path and the index holds the CSV line
+        number of each row (the header is line 1; exact when the file has no blank lines or
+        quoted line breaks), so validation errors can name both.
+
+    Raises:
+        ConfigError: the file is missing, is a directory, is empty or cannot be parsed.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError("CSV file not found", file=p)
+    if p.is_dir():
+        raise ConfigError("is a directory, expected a CSV file", file=p)
+    try:
+        df = pd.read_csv(p)
+    except pd.errors.EmptyDataError:
+        raise ConfigError("CSV file is empty (no header row)", file=p) from None
+    except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(f"cannot parse CSV: {first}", file=p) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read CSV: {exc.strerror or exc}", file=p) from None
+    if df.empty:
+        raise ConfigError("CSV file has a header but no data rows", file=p)
+    df.index = pd.RangeIndex(2, 2 + len(df))
+    df.attrs["source"] = str(p)
+    df.attrs["line_index"] = True
+    return df
+
+
+def source_of(data: pd.DataFrame) -> str | None:
+    """The file ``data`` was read from, if known (``data.attrs["source"]``)."""
+    src = data.attrs.get("source")
+    return None if src is None else str(src)
+
+
+def _where(data: pd.DataFrame, labels: Sequence[Hashable]) -> str:
+    """Describes row labels as CSV lines (frames from :func:`read_long_csv`) or index labels."""
+    shown = ", ".join(str(v) for v in list(labels)[:MAX_LISTED])
+    more = f" and {len(labels) - MAX_LISTED} more" if len(labels) > MAX_LISTED else ""
+    noun = "line" if data.attrs.get("line_index") else "row index"
+    plural = "s" if len(labels) > 1 and noun == "line" else ""
+    return f"{noun}{plural} {shown}{more}"
+
+
+def require_frame(data: Any) -> pd.DataFrame:
+    """Checks that ``data`` is a non-empty DataFrame.
+
+    Raises:
+        ConfigError: ``data`` is not a DataFrame or has no rows.
+    """
+    if not isinstance(data, pd.DataFrame):
+        raise ConfigError(f"expected a pandas DataFrame in long format, got {type(data).__name__}")
+    if data.empty:
+        raise ConfigError("the data table has no rows", file=source_of(data))
+    return data
+
+
+def require_columns(data: pd.DataFrame, columns: Sequence[str]) -> None:
+    """Checks that every column exists and that no column is used for two roles.
+
+    Raises:
+        ConfigError: naming the first missing column, the file and the available columns.
+    """
+    src = source_of(data)
+    seen: set[str] = set()
+    for col in columns:
+        if not isinstance(col, str) or not col:
+            raise ConfigError(f"column names must be non-empty strings, got {col!r}", file=src)
+        if col in seen:
+            raise ConfigError(f"column {col!r} is given for two different roles", file=src,
+                              field=col)
+        seen.add(col)
+        if col not in data.columns:
+            avail = ", ".join(repr(str(c)) for c in data.columns)
+            raise ConfigError(f"column {col!r} not found; available columns: {avail}",
+                              file=src, field=col)
+
+
+def numeric_column(data: pd.DataFrame, column: str, *, allow_missing: bool = False) -> pd.Series:
+    """Returns ``data[column]`` as float64 after checking every value is a finite number.
+
+    Args:
+        data: long-format table.
+        column: the dependent-variable column.
+        allow_missing: if True, empty cells (NaN) are kept as NaN instead of rejected;
+            non-numeric text and infinities are always rejected.
+
+    Raises:
+        ConfigError: naming the column, the offending rows and their values.
+    """
+    src = source_of(data)
+    raw = data[column]
+    if pd.api.types.is_bool_dtype(raw):
+        raise ConfigError(f"column {column!r} is boolean, expected numbers", file=src,
+                          field=column)
+    values = pd.to_numeric(raw, errors="coerce").astype("float64")
+    text_bad = values.isna() & raw.notna()
+    if text_bad.any():
+        labels = list(raw.index[text_bad])
+        vals = ", ".join(repr(v) for v in raw[text_bad].tolist()[:MAX_LISTED])
+        raise ConfigError(f"column {column!r} has non-numeric values at {_where(data, labels)}: "
+                          f"{vals}", file=src, field=column)
+    inf_bad = np.isinf(values.to_numpy())
+    if inf_bad.any():
+        labels = list(values.index[inf_bad])
+        vals = ", ".join(repr(v) for v in values[inf_bad].tolist()[:MAX_LISTED])
+        raise ConfigError(f"column {column!r} has non-finite values at {_where(data, labels)}: "
+                          f"{vals}", file=src, field=column)
+    if not allow_missing and values.isna().any():
+        labels = list(values.index[values.isna()])
+        raise ConfigError(f"column {column!r} has missing (NaN/empty) values at "
+                          f"{_where(data, labels)}", file=src, field=column)
+    return values
+
+
+def factor_column(data: pd.DataFrame, column: str) -> pd.Series:
+    """Returns a factor (or subject) column after checking it has no missing labels.
+
+    Raises:
+        ConfigError: naming the column and the rows with an empty label.
+    """
+    col = data[column]
+    missing = col.isna()
+    if missing.any():
+        labels = list(col.index[missing])
+        raise ConfigError(f"column {column!r} has missing labels at {_where(data, labels)}",
+                          file=source_of(data), field=column)
+    return col
+
+
+def levels_of(col: pd.Series) -> list[Any]:
+    """The levels of a factor column in a stable, documented order.
+
+    A categorical column keeps its category order (unobserved categories dropped); any
+    other column is sorted (numbers numerically, text alphabetically). Labels that cannot
+    be compared with each other keep their order of first appearance.
+    """
+    if isinstance(col.dtype, pd.CategoricalDtype):
+        present = set(col.dropna().unique().tolist())
+        return [_py(c) for c in col.cat.categories if c in present]
+    uniq = pd.unique(col.dropna())
+    try:
+        return [_py(v) for v in sorted(uniq.tolist())]
+    except TypeError:
+        return [_py(v) for v in uniq.tolist()]
+
+
+def _py(value: Any) -> Any:
+    """A numpy scalar as the equivalent Python scalar (for JSON and readable messages)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+@dataclass(frozen=True)
+class CellMeans:
+    """Subject-level cell means of a fully within-subject design.
+
+    Attributes:
+        values: (n_subjects, n_levels_1[, n_levels_2]) cell means of the dependent variable.
+        subjects: the n_subjects subject labels, in row order.
+        factors: the within-factor column names.
+        levels: per factor, its level labels in axis order.
+        n_obs: (same shape as ``values``) number of raw rows averaged into each cell.
+    """
+
+    values: np.ndarray
+    subjects: list[Any]
+    factors: list[str]
+    levels: list[list[Any]]
+    n_obs: np.ndarray
+
+
+def cell_means(data: pd.DataFrame, dv: str, subject: str, within: Sequence[str],
+               *, min_levels: int = 2) -> CellMeans:
+    """Validates a within-subject design and averages it to one value per subject x cell.
+
+    Several rows for the same subject and cell (e.g. repeated trials or per-sample rows)
+    are averaged first: the repeated-measures statistics work on cell means, one
+    observation per subject and cell.
+
+    Args:
+        data: long-format table.
+        dv: dependent-variable column (finite numbers).
+        subject: subject-identifier column.
+        within: one or two within-subject factor columns.
+        min_levels: minimum number of levels per factor.
+
+    Returns:
+        The balanced cell means.
+
+    Raises:
+        ConfigError: a column is missing, a value is not a finite number, a label is
+            missing, there are fewer than 2 subjects or fewer than ``min_levels`` levels, or
+            the design is unbalanced (the message lists the missing subject x cell pairs).
+    """
+    data = require_frame(data)
+    within = list(within)
+    require_columns(data, [dv, subject, *within])
+    src = source_of(data)
+    y = numeric_column(data, dv)
+    subj = factor_column(data, subject)
+    facs = [factor_column(data, w) for w in within]
+    subjects = levels_of(subj)
+    if len(subjects) < 2:
+        raise ConfigError(f"need at least 2 subjects in column {subject!r}, found "
+                          f"{len(subjects)}: {subjects!r}", file=src, field=subject)
+    levels = [levels_of(f) for f in facs]
+    for w, lev in zip(within, levels, strict=True):
+        if len(lev) < min_levels:
+            raise ConfigError(f"within factor {w!r} needs at least {min_levels} levels, found "
+                              f"{len(lev)}: {lev!r}", file=src, field=w)
+    frame = pd.DataFrame({"_s": subj.to_numpy(), "_y": y.to_numpy()})
+    for i, f in enumerate(facs):
+        frame[f"_f{i}"] = f.to_numpy()
+    keys = ["_s", *[f"_f{i}" for i in range(len(facs))]]
+    grouped = frame.groupby(keys, sort=False, dropna=False)["_y"]
+    means = grouped.mean()
+    counts = grouped.size()
+    full = pd.MultiIndex.from_product([subjects, *levels], names=keys)
+    means = means.reindex(full)
+    counts = counts.reindex(full).fillna(0)
+    missing = means.index[means.isna().to_numpy()]
+    if len(missing):
+        cells = [_cell_text(subject, within, key) for key in missing[:MAX_LISTED]]
+        more = f" and {len(missing) - MAX_LISTED} more" if len(missing) > MAX_LISTED else ""
+        raise ConfigError(
+            f"unbalanced design: every subject needs every cell of {', '.join(within)}; "
+            f"{len(missing)} subject x cell combination(s) have no data: "
+            f"{'; '.join(cells)}{more}", file=src, field=subject)
+    shape = (len(subjects), *[len(lev) for lev in levels])
+    return CellMeans(values=means.to_numpy(dtype=float).reshape(shape), subjects=subjects,
+                     factors=within, levels=levels,
+                     n_obs=counts.to_numpy(dtype=int).reshape(shape))
+
+
+def _cell_text(subject: str, within: Sequence[str], key: Any) -> str:
+    key = key if isinstance(key, tuple) else (key,)
+    cell = ", ".join(f"{w}={_py(v)!r}" for w, v in zip(within, key[1:], strict=True))
+    return f"{subject}={_py(key[0])!r} x {cell}"
+
+
+def finite_array(values: Any, name: str) -> np.ndarray:
+    """A 1-D float array of finite values with at least one element.
+
+    Raises:
+        ConfigError: empty, not numeric, or containing NaN/inf (positions named).
+    """
+    try:
+        arr = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ConfigError(f"{name} must be numbers, got {values!r}") from None
+    if arr.size == 0:
+        raise ConfigError(f"{name} is empty")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        shown = ", ".join(f"[{i}]={arr[i]!r}" for i in bad[:MAX_LISTED])
+        raise ConfigError(f"{name} has non-finite values at positions {shown}")
+    return arr
+
+
+def nan_to_none(value: Any) -> Any:
+    """JSON-ready scalar: NaN/NA become None, numpy scalars become Python scalars."""
+    if value is None or value is pd.NA:
+        return None
+    value = _py(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
