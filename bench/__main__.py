@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHES = ["bench.fixtures_pipeline", "bench.store"]
+BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate"]
 
 
 def main(argv: list[str]) -> int:

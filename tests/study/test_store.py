@@ -128,7 +128,9 @@ def test_new_store_has_schema_pragmas_and_tables(store: TrialStore, tmp_path: Pa
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
     assert {"schema_version", "subjects", "trials", "samples", "point_metrics",
             "events"} <= tables
-    assert con.execute("SELECT version FROM schema_version").fetchall() == [(SCHEMA_VERSION,)]
+    # a new store is built by the migration steps, each logged: 1, 2, ...
+    assert con.execute("SELECT version FROM schema_version").fetchall() == [
+        (v,) for v in range(1, SCHEMA_VERSION + 1)]
     store.close()
     with TrialStore(tmp_path / "study.db") as again:  # reopening changes nothing
         assert again.schema_version == SCHEMA_VERSION
@@ -465,3 +467,109 @@ def test_config_and_schema_are_stored_with_the_trial(store: TrialStore):
     tr = store.trial(tid)
     assert tr["config"] == {"schema": "ff", "seed": 3, "dt": 1e-3}
     assert tr["schema_toml"] == 'name = "ff"\n' and tr["vasim_version"]
+
+
+# --------------------------------------------------------------------- v1 -> v2 migration
+def _v1_store(path: Path) -> list[tuple]:
+    """A version-1 store built with the frozen v1 script, one trial with 3 samples; returns
+    the sample rows as stored."""
+    con = sqlite3.connect(path, isolation_level=None)
+    con.execute("PRAGMA journal_mode = WAL")
+    con.execute("BEGIN")
+    for stmt in store_mod._split_sql(store_mod._MIGRATIONS[1]):
+        con.execute(stmt)
+    con.execute("INSERT INTO schema_version VALUES (1, '2025-01-01T00:00:00+00:00')")
+    con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+    con.execute("PRAGMA user_version = 1")
+    con.execute("INSERT INTO subjects VALUES ('S01', '2025-01-01', NULL)")
+    con.execute("INSERT INTO trials (id, subject, task, status, started_at, n_samples) "
+                "VALUES (1, 'S01', 'trajectory', 'completed', '2025-01-01', 3)")
+    rows = [(1, k, 0.001 * (k + 1), 0.1 * k, 0.2, 0.3, 0.0, 0.0, 0.01, 0, 0.5, 0.0, 0.0,
+             1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, k % 2) for k in range(3)]
+    con.executemany(f"INSERT INTO samples VALUES ({', '.join('?' * 21)})", rows)
+    con.execute("COMMIT")
+    con.close()
+    return rows
+
+
+def test_v1_store_is_migrated_to_v2_in_place(tmp_path: Path):
+    p = tmp_path / "v1.db"
+    rows = _v1_store(p)
+    with pytest.raises(StoreError, match="open it writable once"):
+        TrialStore(p, readonly=True)
+    with TrialStore(p) as st:
+        assert st.schema_version == SCHEMA_VERSION == 2
+        assert [v for v, _ in st.con.execute("SELECT * FROM schema_version")] == [1, 2]
+        tables = {r[0] for r in st.con.execute("SELECT name FROM sqlite_master "
+                                               "WHERE type = 'table'")}
+        assert {"sessions", "scheduled_trials", "demographics", "answers",
+                "trial_metrics"} <= tables
+        s = st.samples(1)
+        assert list(s.columns) == list(FRAME_COLUMNS)
+        # the v1 values are untouched; the new columns read their "not measured" defaults
+        assert s["x_x"].tolist() == [r[3] for r in rows]
+        assert s["contact"].tolist() == [0, 1, 0]
+        assert (s[["fc_x", "fc_y", "fc_z", "tc_x", "tc_y", "tc_z"]] == 0.0).all().all()
+        assert (s["delicate"] == 0).all() and (s["clutch"] == 0).all()
+        assert (s["in_view"] == -1).all()
+        tr = st.trial(1)
+        assert tr["status"] == "completed" and tr["schedule_index"] is None
+        assert st.trial_metrics(1).empty and st.integrity_check() == "ok"
+        # and the migrated store takes v2 data
+        tid = st.begin_trial(meta())
+        st.finish_trial(tid, random_buffer(4), trial_metrics={"path_l1": 1.5})
+        assert st.trial_metrics(tid)["value"].tolist() == [1.5]
+    with TrialStore(p, readonly=True) as ro:  # reopening: nothing left to migrate
+        assert ro.schema_version == 2
+
+
+def test_a_failed_migration_leaves_the_v1_store_untouched(tmp_path: Path, monkeypatch):
+    p = tmp_path / "v1.db"
+    _v1_store(p)
+    broken = store_mod._MIGRATIONS[2] + "\nCREATE TABLE sessions (id INTEGER);\n"
+    monkeypatch.setitem(store_mod._MIGRATIONS, 2, broken)
+    with pytest.raises(StoreError, match="already exists"):
+        TrialStore(p)
+    con = sqlite3.connect(p)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 1
+    names = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
+    assert "sessions" not in names and "trial_metrics" not in names
+    cols = [r[1] for r in con.execute("PRAGMA table_info(samples)")]
+    assert "in_view" not in cols and len(cols) == 21  # trial_id + 20 v1 columns
+    con.close()
+
+
+def test_trial_metrics_are_stored_in_the_closing_transaction(store: TrialStore):
+    tid = store.begin_trial(meta())
+    store.finish_trial(tid, random_buffer(3), trial_metrics={"mean_jerk": 2.0,
+                                                             "out_of_view_time": math.nan})
+    wide = store.trial_metrics(wide=True)
+    assert wide.loc[tid, "mean_jerk"] == 2.0 and math.isnan(wide.loc[tid, "out_of_view_time"])
+    with pytest.raises(ConfigError, match="must be a number"):
+        tid2 = store.begin_trial(meta())
+        store.finish_trial(tid2, random_buffer(3), trial_metrics={"x": "big"})
+    assert store.trial(tid2)["status"] == "running"  # nothing of it was written
+    assert store.trial_metrics(tid2).empty and store.samples(tid2).empty
+
+
+def test_buffer_optional_columns_default_and_reset_on_clear():
+    buf = SampleBuffer(capacity=1)
+    buf.append(0, 0.001, (0, 0, 0), (0, 0, 0), 0, f_contact=(1.0, 2.0, 3.0),
+               tau_contact=(0.0, 0.1, 0.0), delicate=1, clutch=1, in_view=0)
+    buf.append(1, 0.002, (0, 0, 0), (0, 0, 0), 0)  # grows; defaults for the new row
+    v = buf.view()
+    assert v["f_contact"].tolist() == [[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]]
+    assert v["in_view"].tolist() == [0, -1] and v["delicate"].tolist() == [1, 0]
+    assert v["clutch"].tolist() == [1, 0] and v["tau_contact"][1].tolist() == [0, 0, 0]
+    buf.clear()  # a reused buffer must not leak the old rows' contact values
+    buf.append(0, 0.001, (0, 0, 0), (0, 0, 0), 0)
+    v = buf.view()
+    assert v["in_view"].tolist() == [-1] and v["f_contact"].tolist() == [[0.0, 0.0, 0.0]]
+    assert v["delicate"].tolist() == [0] and v["clutch"].tolist() == [0]
+    buf.set_column("in_view", 1)
+    assert buf.view()["in_view"].tolist() == [1]
+    with pytest.raises(ValueError, match="unknown sample column"):
+        buf.set_column("colour", 1)
+    # an older frame without the optional columns still builds a buffer
+    old = buf.to_frame().drop(columns=["fc_x", "fc_y", "fc_z", "in_view"])
+    assert SampleBuffer.from_columns(old).view()["in_view"].tolist() == [-1]

@@ -1,4 +1,16 @@
-"""``vasim trial``: run one logged trial headless and print its summary."""
+"""``vasim trial`` (one logged trial headless) and ``vasim study`` (sessions, cohorts, export).
+
+``vasim study`` subcommands:
+
+* ``run``: a subject's whole session of a protocol, headless, with the scripted operator;
+* ``resume``: continue a session at its first unfinished scheduled trial;
+* ``list``: sessions with their progress;
+* ``export``: tidy tables (CSV / Parquet) for analysis;
+* ``simulate``: a synthetic cohort (parallel workers, one writer, resumable);
+* ``schedule``: print the schedule a protocol and seed give (nothing is stored);
+* ``answer``: record a session's questionnaire answers from a TOML file;
+* ``abort``: close a session for good.
+"""
 
 from __future__ import annotations
 
@@ -38,6 +50,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="SQLite study database to store the trial in")
     p.add_argument("--points", action="store_true", help="print the per-point table")
     p.set_defaults(func=_cmd_trial)
+    _register_study(sub)
 
 
 def _cmd_trial(args: argparse.Namespace) -> int:
@@ -99,3 +112,266 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
     if not math.isfinite(float(s["sim_time"])):
         lines.append("warning: non-finite time")
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------ study
+def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "study", help="run, resume, list, export and simulate study sessions",
+        description=(
+            "Study sessions: a protocol (protocols/studies/*.toml) gives each subject a "
+            "schedule of trials, randomised from a seed that is stored with the session; "
+            "every completed trial is durable before the next starts, and an interrupted "
+            "session resumes at its first unfinished scheduled trial."))
+    ss = p.add_subparsers(dest="study_command", metavar="SUBCOMMAND", required=True)
+
+    r = ss.add_parser("run", help="run a subject's whole session headless")
+    r.add_argument("--protocol", required=True,
+                   help="protocol name (protocols/studies) or TOML path")
+    r.add_argument("--subject", required=True, help="subject code (never a name)")
+    r.add_argument("--db", type=Path, required=True, help="SQLite study database")
+    r.add_argument("--operator", default="scripted",
+                   help="input device: scripted (browser sessions run from `vasim serve`)")
+    r.add_argument("--seed", type=int, default=None,
+                   help="randomisation seed (default: a fresh random one, printed and stored)")
+    r.add_argument("--skill", choices=["novice", "intermediate", "expert"],
+                   default="intermediate", help="scripted operator preset")
+    r.add_argument("--max-time", type=float, default=None,
+                   help="trial time limit [s] (default: the protocol's)")
+    r.add_argument("--answers", type=Path, default=None,
+                   help="TOML file with [pre] and [post] questionnaire answers")
+    r.set_defaults(func=_cmd_run)
+
+    r = ss.add_parser("resume", help="continue a session at its first unfinished trial")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--subject", default=None, help="subject code of a running session")
+    r.add_argument("--session", type=int, default=None, help="session id")
+    r.add_argument("--protocol", default=None,
+                   help="protocol name, when the subject has several running sessions")
+    r.add_argument("--answers", type=Path, default=None,
+                   help="TOML file with [post] (and [pre]) answers to record")
+    r.set_defaults(func=_cmd_resume)
+
+    r = ss.add_parser("list", help="sessions with their progress")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--subject", default=None)
+    r.set_defaults(func=_cmd_list)
+
+    r = ss.add_parser("export", help="write tidy tables (CSV / Parquet)")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--out", type=Path, required=True, help="output folder")
+    r.add_argument("--format", default="csv", help="csv, parquet or csv,parquet")
+    r.add_argument("--tables", default=None,
+                   help="comma-separated subset of: samples, trials, trial_metrics, "
+                        "point_metrics, questionnaires, subjects, sessions, schedule")
+    r.set_defaults(func=_cmd_export)
+
+    r = ss.add_parser("simulate", help="simulate a cohort of scripted subjects")
+    r.add_argument("--protocol", required=True)
+    r.add_argument("--subjects", type=int, default=46, help="cohort size (default 46)")
+    r.add_argument("--surgeons", type=int, default=None,
+                   help="surgeons among them (default 31 of 46, scaled for other sizes)")
+    r.add_argument("--seed", type=int, default=7, help="cohort seed (default 7)")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: number of cores; 0: in this process)")
+    r.add_argument("--max-time", type=float, default=None,
+                   help="trial time limit [s] (default: the protocol's)")
+    r.set_defaults(func=_cmd_simulate)
+
+    r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
+    r.add_argument("--protocol", required=True)
+    r.add_argument("--seed", type=int, required=True)
+    r.set_defaults(func=_cmd_schedule)
+
+    r = ss.add_parser("answer", help="record questionnaire answers from a TOML file")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--session", type=int, required=True)
+    r.add_argument("--file", type=Path, required=True,
+                   help="TOML with a [pre] and/or [post] table of item = answer")
+    r.set_defaults(func=_cmd_answer)
+
+    r = ss.add_parser("abort", help="close a session for good (its trials are kept)")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--session", type=int, required=True)
+    r.add_argument("--reason", required=True)
+    r.set_defaults(func=_cmd_abort)
+
+
+def _existing_db(path: Path) -> Path:
+    if not path.exists():
+        raise ConfigError(f"no study database {path}", field="db")
+    if path.is_dir():
+        raise ConfigError(f"--db {path} is a directory, expected a database file", field="db")
+    return path
+
+
+def _new_db(path: Path) -> Path:
+    if path.exists() and path.is_dir():
+        raise ConfigError(f"--db {path} is a directory, expected a database file", field="db")
+    return path
+
+
+def _progress() -> bool:
+    return sys.stderr.isatty()
+
+
+def _record_file_answers(store: object, session_id: int, path: Path | None,
+                         which: tuple[str, ...]) -> list[str]:
+    """Records the [pre]/[post] tables of an answers file; returns what was recorded."""
+    if path is None:
+        return []
+    from vasim.study.session import load_answers_file, record_answers
+    from vasim.study.store import TrialStore
+
+    assert isinstance(store, TrialStore)
+    data = load_answers_file(path)
+    done = []
+    for q in which:
+        if q in data:
+            n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]
+            done.append(f"{q} ({n} answers)")
+    return done
+
+
+def _session_line(store: object, session_id: int) -> str:
+    from vasim.study.store import TrialStore
+
+    assert isinstance(store, TrialStore)
+    df = store.sessions()
+    row = df[df["id"] == session_id].iloc[0]
+    return (f"session {session_id}: subject {row['subject']}, protocol {row['protocol']}, "
+            f"seed {row['seed']}, {row['n_completed']}/{row['n_trials']} trials completed, "
+            f"status {row['status']}")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from vasim.study.protocol import load_protocol
+    from vasim.study.session import SessionSettings, run_session, start_session
+    from vasim.study.store import TrialStore, validate_subject_code
+
+    settings = SessionSettings(operator=args.operator, skill=args.skill,
+                               max_trial_time=args.max_time)
+    validate_subject_code(args.subject)
+    protocol = load_protocol(args.protocol)
+    protocol.check_runnable()
+    with TrialStore(_new_db(args.db)) as store:
+        sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings)
+        recorded = _record_file_answers(store, sid, args.answers, ("pre",))
+        print(f"session {sid} started: {protocol.n_trials} trials, seed "
+              f"{store.session(sid)['seed']}", file=sys.stderr)
+        run_session(store, sid, progress=_progress())
+        if store.session(sid)["status"] == "completed":
+            recorded += _record_file_answers(store, sid, args.answers, ("post",))
+        print(_session_line(store, sid))
+        if recorded:
+            print(f"questionnaires recorded: {', '.join(recorded)}")
+    return 0
+
+
+def _cmd_resume(args: argparse.Namespace) -> int:
+    from vasim.study.session import find_session, run_session
+    from vasim.study.store import TrialStore
+
+    with TrialStore(_existing_db(args.db)) as store:
+        sid = find_session(store, subject=args.subject, session_id=args.session,
+                           protocol=args.protocol)
+        if store.recovered:
+            print(f"marked interrupted (writer gone): trials {store.recovered}",
+                  file=sys.stderr)
+        n = run_session(store, sid, progress=_progress())
+        recorded = []
+        if store.session(sid)["status"] == "completed":
+            recorded = _record_file_answers(store, sid, args.answers, ("pre", "post"))
+        print(f"{n} trial(s) run")
+        print(_session_line(store, sid))
+        if recorded:
+            print(f"questionnaires recorded: {', '.join(recorded)}")
+    return 0
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from vasim.study.store import TrialStore
+
+    with TrialStore(_existing_db(args.db)) as store:
+        df = store.sessions(subject=args.subject)
+    if df.empty:
+        print(f"no sessions in {args.db}")
+        return 0
+    df = df.assign(progress=[f"{c}/{n}" for c, n in zip(df["n_completed"], df["n_trials"],
+                                                        strict=True)],
+                   next=[("-" if i < 0 else str(i)) for i in df["next_index"]],
+                   created=[str(c)[:19] for c in df["created_at"]])
+    cols = ["id", "subject", "protocol", "status", "progress", "n_interrupted", "next",
+            "seed", "operator", "created"]
+    print(df[cols].rename(columns={"n_interrupted": "interrupted"}).to_string(index=False))
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from vasim.study.export import EXPORT_TABLES, export_study
+
+    formats = [f.strip() for f in args.format.split(",") if f.strip()]
+    tables = EXPORT_TABLES if args.tables is None else tuple(
+        t.strip() for t in args.tables.split(",") if t.strip())
+    out = export_study(_existing_db(args.db), args.out, formats=formats, tables=tables,
+                       progress=_progress())
+    import json
+
+    manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
+    for name, info in manifest["tables"].items():
+        print(f"{name:<16} {info['rows']:>10} rows  {', '.join(info['files'].values())}")
+    print(f"written to {out}")
+    return 0
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from vasim.study.cohort import simulate_cohort
+    from vasim.study.protocol import load_protocol
+
+    protocol = load_protocol(args.protocol)
+    protocol.check_runnable()
+    surgeons = args.surgeons
+    if surgeons is None:
+        surgeons = round(args.subjects * 31 / 46)  # the VF study: 31 surgeons of 46
+    rep = simulate_cohort(_new_db(args.db), protocol, n_subjects=args.subjects,
+                          n_surgeons=surgeons, seed=args.seed, workers=args.workers,
+                          progress=_progress(), max_trial_time=args.max_time)
+    print(f"cohort of {rep.subjects} subjects ({surgeons} surgeons), seed {args.seed}: "
+          f"{rep.sessions_completed} sessions completed, {rep.trials_run} trials run now")
+    print(f"simulated {rep.sim_seconds:.1f} s in {rep.wall_seconds:.1f} s wall with "
+          f"{rep.workers} worker(s): {rep.realtime_ratio:.1f}x real time")
+    return 0
+
+
+def _cmd_schedule(args: argparse.Namespace) -> int:
+    from vasim.study.protocol import generate_schedule, load_protocol
+
+    protocol = load_protocol(args.protocol)
+    rows = generate_schedule(protocol, args.seed)
+    print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
+    print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
+    for t in rows:
+        probe = f"VF-free #{t.probe_index}" if t.probe else ""
+        print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}")
+    return 0
+
+
+def _cmd_answer(args: argparse.Namespace) -> int:
+    from vasim.study.store import TrialStore
+
+    with TrialStore(_existing_db(args.db)) as store:
+        store.session(args.session)
+        done = _record_file_answers(store, args.session, args.file, ("pre", "post"))
+    print(f"recorded: {', '.join(done) if done else 'nothing (no [pre] or [post] table)'}")
+    return 0
+
+
+def _cmd_abort(args: argparse.Namespace) -> int:
+    from vasim.study.session import abort_session
+    from vasim.study.store import TrialStore
+
+    with TrialStore(_existing_db(args.db)) as store:
+        abort_session(store, args.session, args.reason)
+        print(_session_line(store, args.session))
+    return 0

@@ -24,14 +24,27 @@ column          dtype     shape   meaning
 ``audio_period`` float64  (n,)    AG beep period [s] (0 if none)
 ``audio_volume`` float64  (n,)    AG volume in [0, 1] (0 if none)
 ``contact``     int8      (n,)    tissue-contact flag (0/1; 0 until contact exists)
+``f_contact``   float64   (n,3)   tissue contact force on the tool tip [N] (0 when no
+                                  tissue model fills it)
+``tau_contact`` float64   (n,3)   tissue contact torque on the tool [N m] (0 if none)
+``delicate``    int8      (n,)    contact with a delicate structure (0/1; 0 if none)
+``clutch``      int8      (n,)    clutch engaged: master decoupled from the tool (0/1)
+``in_view``     int8      (n,)    tool tip inside the endoscope camera's field of view:
+                                  1 yes, 0 no, -1 not determined (the default)
 ==============  ========  ======  ==================================================
+
+The last five columns came with schema version 2 of the store; their defaults (no contact
+force, no delicate contact, no clutch, ``in_view = -1``) let producers that do not know them
+(the abdomen physics fills the contact columns, the trial runner fills ``in_view``) keep
+working unchanged, and say honestly that nothing was measured.
 
 The active fixtures are a trial-level string (``active_fixtures``, e.g. ``"VG+FF"`` or
 ``""`` for a VF-free trial): they do not change within a trial.
 
 The flat (tabular) names used by ``to_frame`` and by the store's ``samples`` table are
 ``FRAME_COLUMNS``: ``x`` becomes ``x_x, x_y, x_z``, ``g`` becomes ``g_x, ...``, ``force``
-becomes ``f_x, f_y, f_z`` and ``ms`` becomes ``ms_x, ms_y, ms_z``.
+becomes ``f_x, f_y, f_z``, ``ms`` becomes ``ms_x, ms_y, ms_z``, ``f_contact`` becomes
+``fc_x, fc_y, fc_z`` and ``tau_contact`` becomes ``tc_x, tc_y, tc_z``.
 
 One writer only: the buffer is not thread-safe. Readers should take ``view()`` or
 ``to_frame()`` after the trial (or hand over a copy).
@@ -61,6 +74,11 @@ COLUMN_SPECS: tuple[tuple[str, type, tuple[str, ...]], ...] = (
     ("audio_period", np.float64, ("audio_period",)),
     ("audio_volume", np.float64, ("audio_volume",)),
     ("contact", np.int8, ("contact",)),
+    ("f_contact", np.float64, tuple(f"fc_{a}" for a in _AXES)),
+    ("tau_contact", np.float64, tuple(f"tc_{a}" for a in _AXES)),
+    ("delicate", np.int8, ("delicate",)),
+    ("clutch", np.int8, ("clutch",)),
+    ("in_view", np.int8, ("in_view",)),
 )
 """Every buffer column: name, numpy dtype, and its flat (frame / SQL) column names."""
 
@@ -75,8 +93,18 @@ FRAME_DTYPES: dict[str, type] = {
 }
 """numpy dtype of each flat column."""
 
+OPTIONAL_COLUMNS: tuple[str, ...] = ("f_contact", "tau_contact", "delicate", "clutch",
+                                     "in_view")
+"""Buffer columns added with store schema version 2; ``from_columns`` fills them with their
+defaults when a source (e.g. an older export) lacks them."""
+
+IN_VIEW_UNKNOWN = -1
+"""``in_view`` value of a sample whose visibility was not determined."""
+
 _DEFAULT_FILL = {"force": 0.0, "ms": 1.0, "zoom": 1.0, "audio_pitch": 0.0,
-                 "audio_period": 0.0, "audio_volume": 0.0, "contact": 0}
+                 "audio_period": 0.0, "audio_volume": 0.0, "contact": 0, "f_contact": 0.0,
+                 "tau_contact": 0.0, "delicate": 0, "clutch": 0, "in_view": IN_VIEW_UNKNOWN}
+"""The value of a column nobody wrote."""
 
 
 class SampleBuffer:
@@ -100,16 +128,21 @@ class SampleBuffer:
     __slots__ = (
         "_arrays",
         "_cap",
+        "_clutch",
         "_contact",
+        "_delicate",
         "_f",
+        "_fc",
         "_g",
         "_gi",
+        "_in_view",
         "_k",
         "_ms",
         "_n",
         "_period",
         "_pitch",
         "_t",
+        "_tc",
         "_volume",
         "_x",
         "_zoom",
@@ -131,7 +164,10 @@ class SampleBuffer:
         arrays: dict[str, NDArray[Any]] = {}
         for name, dtype, parts in COLUMN_SPECS:
             shape: tuple[int, ...] = (capacity,) if len(parts) == 1 else (capacity, len(parts))
-            a = np.empty(shape, dtype=dtype)
+            # Optional columns start at their defaults: ``append`` writes them only when a
+            # producer gives a value (the 1 kHz loop then pays nothing for them).
+            a = (np.full(shape, _DEFAULT_FILL[name], dtype=dtype) if name in OPTIONAL_COLUMNS
+                 else np.empty(shape, dtype=dtype))
             if copy_from is not None:
                 a[: self._n] = copy_from[name][: self._n]
             arrays[name] = a
@@ -150,6 +186,11 @@ class SampleBuffer:
         self._period = arrays["audio_period"]
         self._volume = arrays["audio_volume"]
         self._contact = arrays["contact"]
+        self._fc = arrays["f_contact"]
+        self._tc = arrays["tau_contact"]
+        self._delicate = arrays["delicate"]
+        self._clutch = arrays["clutch"]
+        self._in_view = arrays["in_view"]
 
     def reserve(self, capacity: int) -> None:
         """Grows the buffer to hold at least ``capacity`` rows (call before a trial)."""
@@ -173,6 +214,8 @@ class SampleBuffer:
     def clear(self) -> None:
         """Forgets every row (keeps the capacity); arrays from earlier ``view(copy=False)``
         calls may then be overwritten."""
+        for name in OPTIONAL_COLUMNS:  # back to the defaults append relies on
+            self._arrays[name][: self._n] = _DEFAULT_FILL[name]
         self._n = 0
 
     # ------------------------------------------------------------------ writing
@@ -190,6 +233,11 @@ class SampleBuffer:
         period: float = 0.0,
         volume: float = 0.0,
         contact: int = 0,
+        f_contact: Sequence[float] | NDArray[np.float64] | None = None,
+        tau_contact: Sequence[float] | NDArray[np.float64] | None = None,
+        delicate: int = 0,
+        clutch: int = 0,
+        in_view: int = IN_VIEW_UNKNOWN,
     ) -> None:
         """Appends one sample (the hot path of the logging loop; no per-call allocation).
 
@@ -200,6 +248,10 @@ class SampleBuffer:
             ms: (3,) motion-scaling factors, ``None`` = ones.
             zoom: Mag magnification. pitch, period [s], volume: AG audio outputs.
             contact: tissue-contact flag (0/1).
+            f_contact: (3,) tissue contact force [N], ``None`` = zeros.
+            tau_contact: (3,) tissue contact torque [N m], ``None`` = zeros.
+            delicate: contact with a delicate structure (0/1). clutch: clutch engaged (0/1).
+            in_view: tool tip in the camera's field of view (1/0; -1 = not determined).
         """
         i = self._n
         if i == self._cap:
@@ -216,6 +268,17 @@ class SampleBuffer:
         self._period[i] = period
         self._volume[i] = volume
         self._contact[i] = contact
+        # optional columns hold their defaults already (see _allocate and clear)
+        if f_contact is not None:
+            self._fc[i] = f_contact
+        if tau_contact is not None:
+            self._tc[i] = tau_contact
+        if delicate:
+            self._delicate[i] = delicate
+        if clutch:
+            self._clutch[i] = clutch
+        if in_view != IN_VIEW_UNKNOWN:
+            self._in_view[i] = in_view
         self._n = i + 1
 
     def extend(
@@ -232,12 +295,18 @@ class SampleBuffer:
         audio_period: ArrayLike | None = None,
         audio_volume: ArrayLike | None = None,
         contact: ArrayLike | None = None,
+        f_contact: ArrayLike | None = None,
+        tau_contact: ArrayLike | None = None,
+        delicate: ArrayLike | None = None,
+        clutch: ArrayLike | None = None,
+        in_view: ArrayLike | None = None,
     ) -> None:
         """Appends m samples at once (replays, simulated cohorts, tests).
 
         Args are the columns of ``append`` as arrays: scalars ``(m,)``, vectors ``(m, 3)``.
         A column left ``None`` takes its default (force 0, ms 1, zoom 1, audio 0,
-        contact 0). Scalars broadcast.
+        contact 0, contact force and torque 0, delicate 0, clutch 0, in_view -1). Scalars
+        broadcast.
 
         Raises:
             ValueError: if the columns do not share one length m or a vector is not (m, 3).
@@ -245,7 +314,8 @@ class SampleBuffer:
         given = {"k": k, "t": t, "x": x, "g": g, "goal_index": goal_index, "force": force,
                  "ms": ms, "zoom": zoom, "audio_pitch": audio_pitch,
                  "audio_period": audio_period, "audio_volume": audio_volume,
-                 "contact": contact}
+                 "contact": contact, "f_contact": f_contact, "tau_contact": tau_contact,
+                 "delicate": delicate, "clutch": clutch, "in_view": in_view}
         m = int(np.shape(k)[0]) if np.ndim(k) else 1
         cols: dict[str, NDArray[Any]] = {}
         for name, dtype, parts in COLUMN_SPECS:
@@ -269,6 +339,26 @@ class SampleBuffer:
             self._arrays[name][n0 : n0 + m] = a
         self._n = n0 + m
 
+    def set_column(self, name: str, values: ArrayLike) -> None:
+        """Overwrites one column of every filled row (a producer that computes a column after
+        the loop, e.g. the trial runner's ``in_view`` for a fixed camera).
+
+        Args:
+            name: a ``COLUMNS`` name. values: ``(n,)`` or ``(n, 3)`` like the column; scalars
+                broadcast.
+
+        Raises:
+            ValueError: unknown column or a shape that does not broadcast to the column.
+        """
+        if name not in self._arrays:
+            raise ValueError(f"unknown sample column {name!r} (known: {', '.join(COLUMNS)})")
+        target = self._arrays[name][: self._n]
+        try:
+            target[...] = np.broadcast_to(np.asarray(values, dtype=target.dtype), target.shape)
+        except ValueError:
+            raise ValueError(f"column {name!r} has shape {target.shape}, got values of shape "
+                             f"{np.shape(values)}") from None
+
     # ------------------------------------------------------------------ reading
     def view(self, copy: bool = False) -> dict[str, NDArray[Any]]:
         """Returns the filled part of every column, keyed by ``COLUMNS`` names.
@@ -281,7 +371,8 @@ class SampleBuffer:
         Returns:
             dict: ``k (n,)``, ``t (n,)``, ``x (n, 3)``, ``g (n, 3)``, ``goal_index (n,)``,
             ``force (n, 3)``, ``ms (n, 3)``, ``zoom``, ``audio_pitch``, ``audio_period``,
-            ``audio_volume`` ``(n,)``, ``contact (n,)``.
+            ``audio_volume`` ``(n,)``, ``contact (n,)``, ``f_contact (n, 3)``,
+            ``tau_contact (n, 3)``, ``delicate``, ``clutch``, ``in_view`` ``(n,)``.
         """
         n = self._n
         out: dict[str, NDArray[Any]] = {}
@@ -328,17 +419,22 @@ class SampleBuffer:
     ) -> SampleBuffer:
         """Builds a buffer from flat columns (``FRAME_COLUMNS`` keys), e.g. a DataFrame.
 
+        The ``OPTIONAL_COLUMNS`` may be absent (they take their defaults).
+
         Raises:
             ValueError: if a column is missing.
         """
-        missing = [c for c in FRAME_COLUMNS if c not in columns]
+        missing = [flat for name, _, parts in COLUMN_SPECS if name not in OPTIONAL_COLUMNS
+                   for flat in parts if flat not in columns]
         if missing:
             raise ValueError(f"missing sample columns: {missing}")
         n = len(np.asarray(columns["k"]))
         buf = cls(capacity=max(n, 1), active_fixtures=active_fixtures)
         vec: dict[str, Any] = {}
         for name, _, parts in COLUMN_SPECS:
-            if len(parts) == 1:
+            if any(p not in columns for p in parts):
+                vec[name] = None  # an optional column: its default
+            elif len(parts) == 1:
                 vec[name] = np.asarray(columns[parts[0]])
             else:
                 vec[name] = np.column_stack([np.asarray(columns[p]) for p in parts]) if n else (

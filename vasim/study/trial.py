@@ -29,6 +29,17 @@ Samples: row k holds t = (k + 1) dt, x(k) after the step and the goal g(k) = p_i
 compared with (the goal advances after the row is logged); the start state (t = 0) is not
 a row. The buffer is preallocated for ``max_time`` so the loop never reallocates.
 
+Camera view (``in_view`` sample column, **decision**): whether the tool tip lies inside the
+endoscope camera's field of view, taken as the cone of half-angle fov/2 around the optical
+axis (an endoscope's image is circular). With a Mag fixture active the camera is Mag's
+smoothed camera of that step. Otherwise it is the fixed ``DEFAULT_ENDOSCOPE``: lens at the
+camera trocar (``vasim.abdomen.anatomy.trocar_points()[0]``, near the umbilicus), optical
+axis toward the workspace centre (``vasim.tasks.WORKSPACE_CENTRE``), full field of view
+100 deg -- a wide-angle scope, chosen so that every POI and start point of the seven
+trajectory variants (at most 48 deg off axis) and of the point task (33 deg) is in view:
+out-of-view time then measures excursions away from the task, not the task's own layout.
+For the fixed camera the column is computed from x after the loop (vectorised).
+
 The TCP velocity used by FF's damping term is the finite difference of x filtered by a
 first-order low-pass (``velocity_cutoff_hz``, default 30 Hz): raw 1 kHz differences of a
 tremor-laden hand would make the damping force buzz.
@@ -41,7 +52,7 @@ import os
 import socket
 import time
 from dataclasses import dataclass, field, fields, replace
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 import pandas as pd
@@ -53,7 +64,11 @@ from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
 from vasim.study.metrics import evaluate_trial
 from vasim.study.samples import SampleBuffer
-from vasim.tasks import Task, point_task, trajectory_task
+from vasim.study.trial_metrics import MetricParams, trial_metrics
+from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
+
+if TYPE_CHECKING:
+    from vasim.study.store import TrialMeta
 
 TaskName = Literal["trajectory", "point"]
 SkillName = Literal["novice", "intermediate", "expert"]
@@ -74,6 +89,9 @@ class TrialConfig:
         dt: control step [s] (1 ms: the haptic rate).
         max_time: simulated time limit [s]; the trial ends there even if points remain.
         subject: subject code (never a name).
+        velocity_cutoff_hz: low-pass cutoff of the TCP velocity FF's damping uses [Hz].
+        reach_radius: r_reach [m] (a protocol parameter); None: the task's default (5 mm).
+        profile: the operator profile; None: the ``skill`` preset.
     """
 
     task: TaskName = "trajectory"
@@ -88,6 +106,7 @@ class TrialConfig:
     subject: str = "S00"
     velocity_cutoff_hz: float = 30.0
     profile: OperatorProfile | None = field(default=None, compare=False)
+    reach_radius: float | None = None
 
     def __post_init__(self) -> None:
         if self.task not in ("trajectory", "point"):
@@ -118,6 +137,13 @@ class TrialConfig:
         if not (math.isfinite(self.velocity_cutoff_hz) and self.velocity_cutoff_hz > 0):
             raise ConfigError(f"velocity_cutoff_hz must be > 0, got {self.velocity_cutoff_hz!r}",
                               field="velocity_cutoff_hz")
+        r = self.reach_radius
+        if r is not None and (isinstance(r, bool) or not isinstance(r, int | float)
+                              or not math.isfinite(r) or not r > 0):
+            raise ConfigError(f"reach_radius must be > 0 m, got {r!r}", field="reach_radius")
+        if self.profile is not None and not isinstance(self.profile, OperatorProfile):
+            raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
+                              field="profile")
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,10 +183,88 @@ class TrialResult:
     summary: dict[str, float | int | bool | str]
     events: list[tuple[float, str, str]]
     wall_time: float
+    trial_metrics: dict[str, float] = field(default_factory=dict)
+    """``vasim.study.trial_metrics.trial_metrics`` of the trial (see ``TRIAL_METRICS``)."""
+
+
+@dataclass(frozen=True)
+class EndoscopeView:
+    """A fixed endoscope camera: lens position, aim point, full field of view.
+
+    Attributes:
+        position: (3,) lens position [m], world frame. look_at: (3,) aim point [m].
+        fov_deg: full (cone) field of view [deg], in (0, 180).
+    """
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    fov_deg: float
+
+    def __post_init__(self) -> None:
+        d = np.subtract(self.look_at, self.position)
+        if not (np.all(np.isfinite(d)) and float(np.linalg.norm(d)) > 0):
+            raise ConfigError(f"look_at must differ from position, got {self.look_at!r}",
+                              field="look_at")
+        if not (0 < self.fov_deg < 180):
+            raise ConfigError(f"fov_deg must be in (0, 180), got {self.fov_deg!r}",
+                              field="fov_deg")
+
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """Whether each of the (n, 3) points [m] is inside the view cone; (n,) bool."""
+        return in_view_cone(points, self.position, self.look_at, math.radians(self.fov_deg))
+
+
+def in_view_cone(points: np.ndarray, position: object, look_at: object,
+                 fov: float) -> np.ndarray:
+    """Whether points lie inside a camera's circular field of view (a cone).
+
+    Args:
+        points: (n, 3) positions [m], world frame. position: (3,) lens [m].
+        look_at: (3,) aim point [m]. fov: full field of view [rad].
+
+    Returns:
+        (n,) bool: angle between the optical axis and the lens->point direction <= fov/2
+        (a point at the lens counts as inside).
+
+    Example:
+        >>> in_view_cone(np.array([[0, 0, 1.0], [1.0, 0, 1.0], [0, 0, -1.0]]),
+        ...              (0, 0, 0), (0, 0, 1), math.radians(100)).tolist()
+        [True, True, False]
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    c = np.asarray(position, dtype=np.float64)
+    f = np.asarray(look_at, dtype=np.float64) - c
+    f = f / np.linalg.norm(f)
+    d = p - c
+    dist = np.sqrt((d * d).sum(axis=1))
+    return (d @ f) >= math.cos(0.5 * fov) * dist - 1e-15
+
+
+def _default_endoscope() -> EndoscopeView:
+    from vasim.abdomen.anatomy import trocar_points
+
+    port = trocar_points()[0]
+    return EndoscopeView(position=(float(port[0]), float(port[1]), float(port[2])),
+                         look_at=(float(WORKSPACE_CENTRE[0]), float(WORKSPACE_CENTRE[1]),
+                                  float(WORKSPACE_CENTRE[2])),
+                         fov_deg=DEFAULT_ENDOSCOPE_FOV_DEG)
+
+
+DEFAULT_ENDOSCOPE_FOV_DEG = 100.0
+"""Full field of view of the fixed default endoscope [deg] (module docstring, decision)."""
+
+DEFAULT_ENDOSCOPE = _default_endoscope()
+"""The fixed camera of trials without Mag: lens at the camera trocar, aimed at the workspace
+centre, 100 deg field of view (module docstring)."""
 
 
 def make_task(config: TrialConfig) -> Task:
-    """Builds the task a config names."""
+    """Builds the task a config names (with its reach radius, if the config sets one)."""
+    if config.reach_radius is not None:
+        r = float(config.reach_radius)
+        if config.task == "trajectory":
+            return trajectory_task(config.variant, reach_radius=r)
+        return point_task(reach_radius=r)
     if config.task == "trajectory":
         return trajectory_task(config.variant)
     return point_task()
@@ -202,6 +306,8 @@ class TrialRunner:
                                     active_fixtures=",".join(self.schema.fixture_names))
         self.events: list[tuple[float, str, str]] = []
         self._n_bad_input = 0
+        # in_view: Mag's camera per step, else the fixed endoscope after the loop
+        self._mag_camera = self.schema.camera is not None
         self._points = np.asarray(self.task.points, dtype=np.float64)
         self._n = len(self._points)
         self._r2 = self.task.reach_radius ** 2
@@ -375,9 +481,33 @@ class TrialRunner:
             self._i = i + 1
             self._err = 0.0
         cues = self._cues = self._render(dxm)
-        self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4], cues[5],
-                            cues[6], 0)
+        if self._mag_camera:
+            view = self._tip_in_mag_view(x)
+            self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
+                                cues[5], cues[6], 0, None, None, 0, 0, view)
+        else:
+            self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
+                                cues[5], cues[6], 0)
         self.done = self._i >= self._n or t >= self.config.max_time - 1e-12
+
+    def _tip_in_mag_view(self, x: tuple[float, ...]) -> int:
+        """1 if the TCP is inside the smoothed Mag camera's view cone of this step, else 0.
+
+        Reads the runtime's smoothed camera as floats (position, look-at, fov, zoom): the
+        same numbers ``outputs().camera`` wraps in arrays, without building them per step
+        (that would double the cost of a Mag step). Same rule as ``in_view_cone``.
+        """
+        cam = self.runtime._cam  # [p0, p1, p2, l0, l1, l2, fov, zoom] after render_xyz
+        if cam is None:
+            return 0
+        f0, f1, f2 = cam[3] - cam[0], cam[4] - cam[1], cam[5] - cam[2]
+        d0, d1, d2 = x[0] - cam[0], x[1] - cam[1], x[2] - cam[2]
+        fn = math.sqrt(f0 * f0 + f1 * f1 + f2 * f2)
+        dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if fn == 0.0:
+            return 0
+        inside = (d0 * f0 + d1 * f1 + d2 * f2) >= math.cos(0.5 * cam[6]) * dn * fn - 1e-15
+        return 1 if inside else 0
 
     def _publish(self) -> None:
         rt = self._reach_times
@@ -391,8 +521,16 @@ class TrialRunner:
             last_latency=last_latency, error_l1=self._err,
         )
 
-    def result(self, wall_time: float = 0.0) -> TrialResult:
-        """The trial's samples, per-point metrics (spec/study.md §2) and summary."""
+    def result(self, wall_time: float = 0.0, *,
+               metric_params: MetricParams | None = None) -> TrialResult:
+        """The trial's samples, per-point metrics (spec/study.md §2), summary and trial
+        metrics (``vasim.study.trial_metrics``, with ``metric_params`` or the defaults).
+
+        Without Mag, the ``in_view`` column is filled here from the fixed endoscope.
+        """
+        if not self._mag_camera and len(self.samples):
+            self.samples.set_column(
+                "in_view", DEFAULT_ENDOSCOPE.contains(self.samples.view()["x"]).astype(np.int8))
         view = self.samples.view()
         # The reach times recorded by the loop are passed on, so the reach rule lives once.
         metrics, summary = evaluate_trial(
@@ -405,9 +543,11 @@ class TrialRunner:
             "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
             "nonfinite_inputs": self._n_bad_input,
         })
+        tm = trial_metrics(view, summary=summary,
+                           params=metric_params if metric_params is not None else MetricParams())
         return TrialResult(config=self.config, schema=self.schema, task=self.task,
                            samples=self.samples, metrics=metrics, summary=summary,
-                           events=list(self.events), wall_time=wall_time)
+                           events=list(self.events), wall_time=wall_time, trial_metrics=tm)
 
 
 _GUIDANCE_SEEN = 0.05
@@ -427,32 +567,59 @@ def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, ob
     return rec
 
 
+def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
+               session_id: int | None = None, schedule_index: int | None = None,
+               protocol: str | None = None) -> TrialMeta:
+    """The store's ``TrialMeta`` of a trial about to run in this process.
+
+    Args:
+        config: the trial. schema: its loaded schema. profile: the operator's profile.
+        session_id, schedule_index: the scheduled trial this is an attempt at, if any.
+        protocol: the protocol name, if any.
+    """
+    from vasim.study.store import TrialMeta
+
+    return TrialMeta(
+        subject=config.subject, task=config.task, variant=config.variant,
+        schema=schema.name, operator=config.operator, seed=config.seed,
+        dt=config.dt, active_fixtures=",".join(schema.fixture_names),
+        pid=os.getpid(), host=socket.gethostname(),
+        config=config_record(config, profile), schema_toml=dumps_schema(schema),
+        session_id=session_id, schedule_index=schedule_index, protocol=protocol,
+    )
+
+
 def run_trial(config: TrialConfig, store: object | None = None, *,
-              progress: bool = False) -> tuple[TrialResult, int | None]:
+              progress: bool = False, session_id: int | None = None,
+              schedule_index: int | None = None, protocol: str | None = None,
+              metric_params: MetricParams | None = None,
+              ) -> tuple[TrialResult, int | None]:
     """Runs a whole trial headless, as fast as the machine allows.
 
     With a ``TrialStore``, the trial row is created as 'running' before the first step and
-    made durable (samples + per-point metrics + status 'completed') in one transaction at the
-    end; any exception or Ctrl-C marks it 'interrupted' and re-raises.
+    made durable (samples + per-point metrics + trial metrics + status 'completed') in one
+    transaction at the end; any exception or Ctrl-C marks it 'interrupted' (keeping the
+    partial samples) and re-raises.
+
+    Args:
+        config: the trial. store: a ``TrialStore`` or None. progress: a tqdm bar over POIs.
+        session_id, schedule_index, protocol: the scheduled trial of a session this run is
+            an attempt at (see ``TrialStore.begin_trial``).
+        metric_params: constants of the trial metrics (default ``MetricParams()``).
 
     Returns:
         (result, trial_id) — trial_id is None without a store.
     """
-    from vasim.study.store import TrialMeta, TrialStore
+    from vasim.study.store import TrialStore
 
     runner = TrialRunner(config)
     trial_id: int | None = None
     if store is not None:
         if not isinstance(store, TrialStore):
             raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
-        trial_id = store.begin_trial(TrialMeta(
-            subject=config.subject, task=config.task, variant=config.variant,
-            schema=runner.schema.name, operator=config.operator, seed=config.seed,
-            dt=config.dt, active_fixtures=",".join(runner.schema.fixture_names),
-            pid=os.getpid(), host=socket.gethostname(),
-            config=config_record(config, runner.operator.profile),
-            schema_toml=dumps_schema(runner.schema),
-        ))
+        trial_id = store.begin_trial(trial_meta(
+            config, runner.schema, runner.operator.profile, session_id=session_id,
+            schedule_index=schedule_index, protocol=protocol))
     t0 = time.perf_counter()
     try:
         bar = None
@@ -468,22 +635,35 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
                 last_i = frame.goal_index
         if bar is not None:
             bar.close()
-        result = runner.result(wall_time=time.perf_counter() - t0)
+        result = runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
         if store is not None and trial_id is not None:
             store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
-                               events=result.events)
+                               events=result.events, trial_metrics=result.trial_metrics)
     except BaseException as exc:
         if store is not None and trial_id is not None:
             # Keep what was recorded: the partial samples and metrics, marked interrupted.
-            partial = runner.result(wall_time=time.perf_counter() - t0)
+            partial = runner.result(wall_time=time.perf_counter() - t0,
+                                    metric_params=metric_params)
             store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
                                    samples=partial.samples, point_metrics=partial.metrics,
-                                   summary=partial.summary, events=partial.events)
+                                   summary=partial.summary, events=partial.events,
+                                   trial_metrics=partial.trial_metrics)
         raise
     return result, trial_id
 
 
-__all__ = ["TrialConfig", "TrialFrame", "TrialResult", "TrialRunner", "make_task", "run_trial"]
+__all__ = [
+    "DEFAULT_ENDOSCOPE",
+    "EndoscopeView",
+    "TrialConfig",
+    "TrialFrame",
+    "TrialResult",
+    "TrialRunner",
+    "in_view_cone",
+    "make_task",
+    "run_trial",
+    "trial_meta",
+]
 
 
 def with_schema(config: TrialConfig, schema: str) -> TrialConfig:

@@ -1,0 +1,598 @@
+"""Simulated cohorts: synthetic subjects run a protocol through the real session code.
+
+``simulate_cohort`` creates, for subjects ``SIM001``, ``SIM002``, ... one session each
+(``vasim.study.session.start_session``: the same protocol text, seed, stored schedule and
+store as a real subject), records their pre-questionnaire, runs every scheduled trial with
+the scripted operator, and records their post-questionnaire once their session completes.
+Trials run in parallel worker processes (``spawn``); the parent process is the **one writer**
+of the SQLite file: it begins each trial row ('running') when it hands the trial to a worker
+and makes it durable (``finish_trial``, one transaction) when the result comes back, so
+SQLite never sees concurrent writers. Re-running the same command continues where it
+stopped: trials left 'running' by a killed run are marked 'interrupted' when the store opens
+and run again as new attempts (same trial seed: the same trial).
+
+Models (**decisions**, plausible choices, not fitted to data):
+
+* Subjects: ``n_surgeons`` surgeons and ``n_subjects - n_surgeons`` residents, assigned to
+  the codes by a seeded permutation (codes do not reveal the group). Subject j draws from
+  its own stream ``SeedSequence([seed, 5, j])``: the operator profile
+  (``OperatorProfile.sample(rng, group)``) and the demographics; its session seed is
+  ``SeedSequence([seed, 6, j])``, and its pre / post answers draw from
+  ``SeedSequence([session seed, 7])`` / ``[session seed, 8]``. Same command, same cohort.
+* Demographics (``DEMOGRAPHIC_MODEL``), categorical, per group (surgeon | resident):
+
+  - specialisation: general surgery .6, gynaecology .15, urology .15, other .1 (both);
+  - laparoscopy_experience: 11-50 .1, 51-200 .3, >200 .6 | none .2, 1-10 .4, 11-50 .3,
+    51-200 .1;
+  - simulator_experience: none .4, occasional .5, regular .1 | none .3, occasional .5,
+    regular .2;
+  - robotic_experience: none .6, observed .2, assisted .1, performed .1 | none .7,
+    observed .25, assisted .05.
+
+* Post-questionnaire answers from the subject's own measured benefit: for each assisted
+  condition c, ``b_c = ln(E_probe / E_c)`` with E the mean cumulative error
+  (``total_error_l1``) of the subject's completed trials of c and of its fixture-free probe
+  trials (b > 0: the fixture reduced the error). The perceived benefit is
+  ``p_c = b_c + N(0, 0.15^2)`` (``PERCEPTION_SD``). A 0-10 rating is
+  ``clip(round(5 + 10 p_c + N(0, 1)), min, max)`` (``RATING_CENTRE``, ``RATING_SLOPE``,
+  ``RATING_NOISE_SD``); "best" is the condition of largest p, "worst" of smallest p (an
+  unlabelled condition choice: uniform). Proposed schemas: 0, 1 or 2 proposals with
+  probabilities 0.2, 0.5, 0.3 (``PROPOSALS_P``, capped by ``max_entries``), proposal m
+  (1-based) = the ``min_size + m - 1`` conditions of largest p. Likert items:
+  ``clip(round(N(3.5, 1)), 1, 5)`` (no performance model); choice and integer items:
+  uniform; free text: left unanswered (empty if required).
+
+Performance: a worker runs the 1 kHz trial loop at ~20x real time per core; the parent's
+writes (one transaction per trial) overlap the workers' computing. ``bench/study_simulate``
+measures the cohort's real-time ratio.
+
+Example:
+    >>> import numpy as np
+    >>> d = draw_demographics(np.random.default_rng(0), "resident")
+    >>> d.group, d.laparoscopy_experience in ("none", "1-10", "11-50", "51-200")
+    ('resident', True)
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import sys
+import time
+from collections import Counter
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vasim.errors import ConfigError, StoreError
+from vasim.fixtures.schema import Schema, load_schema
+from vasim.haptics.scripted import OperatorProfile
+from vasim.study.metrics import POINT_COLUMNS
+from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
+from vasim.study.samples import SampleBuffer
+from vasim.study.session import (
+    Session,
+    SessionSettings,
+    load_session,
+    record_answers,
+    start_session,
+)
+from vasim.study.store import Demographics, TrialStore
+from vasim.study.trial import TrialConfig, TrialRunner, trial_meta
+from vasim.study.trial_metrics import MetricParams
+
+DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]]] = {
+    "surgeon": {
+        "specialisation": (("general_surgery", "gynaecology", "urology", "other"),
+                           (0.6, 0.15, 0.15, 0.1)),
+        "laparoscopy_experience": (("11-50", "51-200", ">200"), (0.1, 0.3, 0.6)),
+        "simulator_experience": (("none", "occasional", "regular"), (0.4, 0.5, 0.1)),
+        "robotic_experience": (("none", "observed", "assisted", "performed"),
+                               (0.6, 0.2, 0.1, 0.1)),
+    },
+    "resident": {
+        "specialisation": (("general_surgery", "gynaecology", "urology", "other"),
+                           (0.6, 0.15, 0.15, 0.1)),
+        "laparoscopy_experience": (("none", "1-10", "11-50", "51-200"), (0.2, 0.4, 0.3, 0.1)),
+        "simulator_experience": (("none", "occasional", "regular"), (0.3, 0.5, 0.2)),
+        "robotic_experience": (("none", "observed", "assisted"), (0.7, 0.25, 0.05)),
+    },
+}
+"""Group -> demographic field -> (values, probabilities) (module docstring)."""
+
+PERCEPTION_SD = 0.15
+"""Noise of the perceived benefit p_c around the measured log error ratio b_c."""
+RATING_CENTRE = 5.0
+"""Rating of a fixture perceived as neither helping nor hindering (p = 0)."""
+RATING_SLOPE = 10.0
+"""Rating points per unit of perceived log error ratio."""
+RATING_NOISE_SD = 1.0
+"""Noise of a rating [rating points]."""
+PROPOSALS_P = (0.2, 0.5, 0.3)
+"""Probabilities of proposing 0, 1, 2 schemas."""
+LIKERT_MEAN, LIKERT_SD = 3.5, 1.0
+"""Normal model of a Likert answer before rounding and clipping to 1..5."""
+
+SUBJECT_PREFIX = "SIM"
+
+
+@dataclass(frozen=True)
+class SimulatedSubject:
+    """One synthetic subject.
+
+    Attributes:
+        number: 1-based subject number j. code: subject code (``SIM001``...).
+        group: ``"surgeon"`` or ``"resident"``. profile: the scripted operator.
+        demographics: the pre-questionnaire's demographics. session_seed: schedule seed.
+    """
+
+    number: int
+    code: str
+    group: str
+    profile: OperatorProfile
+    demographics: Demographics
+    session_seed: int
+
+
+@dataclass(frozen=True)
+class CohortReport:
+    """What a ``simulate_cohort`` call did.
+
+    Attributes:
+        subjects: subjects in the cohort. sessions_completed: sessions now completed.
+        trials_run: trials completed by this call. sim_seconds: simulated time of those
+        trials [s]. wall_seconds: wall-clock time of the call [s]. workers: processes used
+        (0 = in-process).
+    """
+
+    subjects: int
+    sessions_completed: int
+    trials_run: int
+    sim_seconds: float
+    wall_seconds: float
+    workers: int
+
+    @property
+    def realtime_ratio(self) -> float:
+        """Simulated seconds per wall-clock second."""
+        return self.sim_seconds / self.wall_seconds if self.wall_seconds > 0 else math.nan
+
+
+def _stream(seed: int, *key: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *key]))
+
+
+def _seed63(seed: int, *key: int) -> int:
+    a, b = np.random.SeedSequence([int(seed), *key]).generate_state(2)
+    return ((int(a) << 32) | int(b)) & (2**63 - 1)
+
+
+def draw_demographics(rng: np.random.Generator, group: str) -> Demographics:
+    """Demographics of one simulated subject of ``group`` (``DEMOGRAPHIC_MODEL``).
+
+    Raises:
+        ConfigError: unknown group.
+    """
+    if group not in DEMOGRAPHIC_MODEL:
+        raise ConfigError(f"group must be one of {', '.join(DEMOGRAPHIC_MODEL)}, got "
+                          f"{group!r}", field="group")
+    values = {"group": group}
+    for name, (opts, probs) in DEMOGRAPHIC_MODEL[group].items():
+        values[name] = opts[int(rng.choice(len(opts), p=probs))]
+    return Demographics.from_mapping(values)
+
+
+def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
+                    prefix: str = SUBJECT_PREFIX) -> list[SimulatedSubject]:
+    """The cohort's subjects (a pure function of its arguments; module docstring).
+
+    Raises:
+        ConfigError: counts out of range.
+
+    Example:
+        >>> s = cohort_subjects(4, 3, seed=7)
+        >>> [x.code for x in s], sorted(x.group for x in s).count("surgeon")
+        (['SIM001', 'SIM002', 'SIM003', 'SIM004'], 3)
+    """
+    if isinstance(n_subjects, bool) or not isinstance(n_subjects, int) or n_subjects < 1:
+        raise ConfigError(f"subjects must be an integer >= 1, got {n_subjects!r}",
+                          field="subjects")
+    if isinstance(n_surgeons, bool) or not isinstance(n_surgeons, int) \
+            or not 0 <= n_surgeons <= n_subjects:
+        raise ConfigError(f"surgeons must be an integer in [0, {n_subjects}], got "
+                          f"{n_surgeons!r}", field="surgeons")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise ConfigError(f"seed must be an integer in [0, 2**63), got {seed!r}", field="seed")
+    groups = ["surgeon"] * n_surgeons + ["resident"] * (n_subjects - n_surgeons)
+    order = _stream(seed, 4).permutation(n_subjects).tolist()
+    width = max(3, len(str(n_subjects)))
+    out = []
+    for j in range(1, n_subjects + 1):
+        group = groups[order[j - 1]]
+        rng = _stream(seed, 5, j)
+        profile = OperatorProfile.sample(rng, group)  # type: ignore[arg-type]
+        out.append(SimulatedSubject(
+            number=j, code=f"{prefix}{j:0{width}d}", group=group, profile=profile,
+            demographics=draw_demographics(rng, group), session_seed=_seed63(seed, 6, j)))
+    return out
+
+
+# ------------------------------------------------------------------------ questionnaires
+def _item_answer(item: QuestionItem, rng: np.random.Generator,
+                 perceived: Mapping[str, float]) -> Any:
+    """A simulated answer to one item (module docstring); None = left unanswered."""
+    t = item.type
+    if t == "choice":
+        return item.options[int(rng.integers(len(item.options)))]
+    if t == "integer":
+        return int(rng.integers(item.min, item.max + 1))
+    if t == "likert":
+        return int(np.clip(round(rng.normal(LIKERT_MEAN, LIKERT_SD)), 1, 5))
+    if t == "text":
+        return "" if item.required else None
+    conds = list(item.conditions)
+    p = {c: perceived.get(c, 0.0) for c in conds}
+    ranked = sorted(conds, key=lambda c: -p[c])
+    if t == "condition_choice":
+        if item.select == "best":
+            return ranked[0]
+        if item.select == "worst":
+            return ranked[-1]
+        return conds[int(rng.integers(len(conds)))]
+    if t == "condition_rating":
+        return {c: int(np.clip(round(RATING_CENTRE + RATING_SLOPE * p[c]
+                                     + rng.normal(0.0, RATING_NOISE_SD)), item.min, item.max))
+                for c in conds}
+    # condition_sets
+    k = int(rng.choice(len(PROPOSALS_P), p=PROPOSALS_P))
+    out = []
+    for m in range(1, min(k, item.max_entries) + 1):
+        size = item.min_size + m - 1
+        if size > len(ranked):
+            break
+        out.append(ranked[:size])
+    return out if out or not item.required else [ranked[:item.min_size]]
+
+
+def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Generator, *,
+                      demographics: Demographics | None = None,
+                      perceived: Mapping[str, float] | None = None) -> dict[str, Any]:
+    """A simulated subject's answers to one questionnaire (module docstring's models).
+
+    Args:
+        protocol: the protocol. questionnaire: "pre" or "post". rng: the subject's stream.
+        demographics: the subject's demographics (asked in "pre").
+        perceived: perceived benefit p_c per condition (``perceived_benefits``).
+    """
+    q = getattr(protocol, questionnaire)
+    out: dict[str, Any] = {}
+    if q.demographics and demographics is not None:
+        d = demographics
+        out.update(group=d.group, specialisation=d.specialisation,
+                   laparoscopy_experience=d.laparoscopy_experience,
+                   simulator_experience=d.simulator_experience,
+                   robotic_experience=d.robotic_experience)
+    for item in q.items:
+        a = _item_answer(item, rng, perceived or {})
+        if a is not None:
+            out[item.id] = a
+    return out
+
+
+def measured_benefits(schedule: pd.DataFrame, errors: Mapping[int, float]) -> dict[str, float]:
+    """b_c = ln(E_probe / E_c) per assisted condition of one session.
+
+    Args:
+        schedule: the session's ``TrialStore.schedule`` frame. errors: trial id -> its
+            ``total_error_l1`` [m].
+
+    Returns:
+        condition -> b_c (0 where a mean is missing or not positive).
+
+    Example:
+        >>> sched = pd.DataFrame({"condition": ["none", "ff", "ff"], "probe": [True, False,
+        ...                       False], "trial_id": [1, 2, 3]})
+        >>> round(measured_benefits(sched, {1: 2.0, 2: 1.0, 3: 1.0})["ff"], 6)
+        0.693147
+    """
+    def mean_error(rows: pd.DataFrame) -> float:
+        vals = [errors[int(t)] for t in rows["trial_id"] if not pd.isna(t) and int(t) in errors]
+        vals = [v for v in vals if math.isfinite(v)]
+        return float(np.mean(vals)) if vals else math.nan
+
+    probe = mean_error(schedule[schedule["probe"].astype(bool)])
+    out = {}
+    assisted = schedule[~schedule["probe"].astype(bool)]
+    for cond, rows in assisted.groupby("condition", sort=False):
+        e = mean_error(rows)
+        ok = probe > 0 and e > 0 and math.isfinite(probe) and math.isfinite(e)
+        out[str(cond)] = math.log(probe / e) if ok else 0.0
+    return out
+
+
+def _record_post(store: TrialStore, session: Session, subject: SimulatedSubject) -> None:
+    """Draws and stores the post-questionnaire of a completed simulated session."""
+    if session.protocol.post.empty:
+        return
+    sched = store.schedule(session.id)
+    ids = [int(t) for t in sched["trial_id"].dropna()]
+    tm = store.trial_metrics()
+    tm = tm[(tm["metric"] == "total_error_l1") & tm["trial_id"].isin(ids)]
+    errors = dict(zip(tm["trial_id"].astype(int), tm["value"].astype(float), strict=True))
+    b = measured_benefits(sched, errors)
+    rng = _stream(subject.session_seed, 8)
+    perceived = {c: v + rng.normal(0.0, PERCEPTION_SD) for c, v in b.items()}
+    answers = simulated_answers(session.protocol, "post", rng, perceived=perceived)
+    record_answers(store, session.id, "post", answers, source=f"simulated {subject.code}")
+
+
+# ------------------------------------------------------------------------------ workers
+def simulate_trial(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
+    """Runs one trial without a store (a worker's job); returns what the writer stores.
+
+    Returns:
+        dict with ``columns`` (flat sample columns, copies), ``active_fixtures``,
+        ``metrics`` (per-point frame), ``summary``, ``events``, ``trial_metrics``,
+        ``wall_time`` [s], ``sim_time`` [s].
+    """
+    t0 = time.perf_counter()
+    runner = TrialRunner(config)
+    while not runner.done:
+        runner.advance(1.0)
+    result = runner.result(wall_time=time.perf_counter() - t0, metric_params=params)
+    cols = {k: np.array(v) for k, v in result.samples.columns().items()}
+    return {"columns": cols, "active_fixtures": result.samples.active_fixtures,
+            "metrics": result.metrics, "summary": result.summary, "events": result.events,
+            "trial_metrics": result.trial_metrics, "wall_time": result.wall_time,
+            "sim_time": float(result.summary["sim_time"])}
+
+
+def _store_outcome(store: TrialStore, trial_id: int, out: Mapping[str, Any]) -> None:
+    buf = SampleBuffer.from_columns(out["columns"], active_fixtures=out["active_fixtures"])
+    metrics = out["metrics"]
+    if list(metrics.columns) != list(POINT_COLUMNS):
+        raise StoreError(f"worker returned point metrics with columns {list(metrics.columns)}")
+    store.finish_trial(trial_id, buf, metrics, out["summary"], events=out["events"],
+                       trial_metrics=out["trial_metrics"])
+
+
+@dataclass(frozen=True)
+class _Job:
+    session: Session
+    subject: SimulatedSubject
+    scheduled: ScheduledTrial
+    config: TrialConfig
+
+
+# ------------------------------------------------------------------------------ cohort
+def prepare_sessions(store: TrialStore, protocol: Protocol,
+                     subjects: Sequence[SimulatedSubject], *, cohort_seed: int,
+                     max_trial_time: float | None = None) -> list[tuple[SimulatedSubject, int]]:
+    """Finds or creates each subject's session of ``protocol`` (with its pre answers).
+
+    An existing session must come from the same cohort (seed and subject number, stored
+    with it); an aborted one is left alone.
+
+    Raises:
+        ConfigError: a subject code already used by another cohort or a real subject.
+    """
+    out = []
+    for subj in subjects:
+        df = store.sessions(subject=subj.code, protocol=protocol.name)
+        live = df[df["status"] != "aborted"]
+        if not live.empty:
+            sid = int(live["id"].iloc[-1])
+            extra = (store.session(sid)["config"] or {}).get("extra", {})
+            cohort = extra.get("cohort", {})
+            if cohort.get("seed") != cohort_seed or cohort.get("subject") != subj.number:
+                raise ConfigError(
+                    f"subject {subj.code} of {store.path} already has session {sid} of "
+                    f"{protocol.name!r} from another cohort ({cohort or 'not simulated'}); "
+                    f"use another database or the cohort seed {cohort.get('seed')!r}",
+                    field="seed")
+            out.append((subj, sid))
+            continue
+        settings = SessionSettings(
+            operator="scripted", profile=subj.profile, max_trial_time=max_trial_time,
+            extra={"cohort": {"seed": cohort_seed, "subject": subj.number,
+                              "group": subj.group}})
+        sid = start_session(store, protocol, subj.code, seed=subj.session_seed,
+                            settings=settings)
+        if not protocol.pre.empty:
+            answers = simulated_answers(protocol, "pre", _stream(subj.session_seed, 7),
+                                        demographics=subj.demographics)
+            record_answers(store, sid, "pre", answers, source=f"simulated {subj.code}")
+        out.append((subj, sid))
+    return out
+
+
+def _jobs(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]]) -> list[_Job]:
+    jobs = []
+    for subj, sid in sessions:
+        session = load_session(store, sid)
+        if session.status != "running":
+            continue
+        for st in session.pending:
+            jobs.append(_Job(session, subj, st, session.trial_config(st)))
+    return jobs
+
+
+def _finish_sessions(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]],
+                     only: set[int] | None = None) -> int:
+    """Completes the sessions with no pending trial and records their post answers."""
+    n = 0
+    for subj, sid in sessions:
+        if only is not None and sid not in only:
+            continue
+        session = load_session(store, sid)
+        if session.status == "running" and not session.pending:
+            store.set_session_status(sid, "completed")
+            session = load_session(store, sid)
+        if session.status == "completed":
+            n += 1
+            if store.answers(sid).query("questionnaire == 'post'").empty:
+                _record_post(store, session, subj)
+    return n
+
+
+def simulate_cohort(
+    db: str | os.PathLike[str],
+    protocol: Protocol,
+    *,
+    n_subjects: int = 46,
+    n_surgeons: int = 31,
+    seed: int = 7,
+    workers: int | None = None,
+    progress: bool = True,
+    max_trial_time: float | None = None,
+    max_trials_per_subject: int | None = None,
+) -> CohortReport:
+    """Simulates (or continues simulating) a cohort into the study database ``db``.
+
+    Args:
+        db: the SQLite study store (created if missing).
+        protocol: the protocol every subject runs (``check_runnable``).
+        n_subjects, n_surgeons: cohort size and surgeons among it (the rest residents).
+        seed: cohort seed (subjects, profiles, schedules, answers).
+        workers: worker processes (None: ``os.cpu_count()``; 0: run in this process).
+        progress: a tqdm bar (stderr) over the cohort's trials.
+        max_trial_time: trial time limit [s] (None: the protocol's).
+        max_trials_per_subject: run at most this many (the first pending) trials of each
+            subject (None: all); for tests and benchmarks.
+
+    Returns:
+        A ``CohortReport``.
+
+    Raises:
+        ConfigError: bad counts, a protocol that cannot run, a clash with another cohort.
+        KeyboardInterrupt: after marking the trials in flight 'interrupted'.
+    """
+    protocol.check_runnable()
+    subjects = cohort_subjects(n_subjects, n_surgeons, seed)
+    n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n_workers < 0:
+        raise ConfigError(f"workers must be >= 0, got {workers!r}", field="workers")
+    t0 = time.perf_counter()
+    with TrialStore(db) as store:
+        sessions = prepare_sessions(store, protocol, subjects, cohort_seed=seed,
+                                    max_trial_time=max_trial_time)
+        _finish_sessions(store, sessions)
+        jobs = _jobs(store, sessions)
+        total = sum(len(load_session(store, sid).schedule) for _, sid in sessions)
+        initial = total - len(jobs)
+        if max_trials_per_subject is not None:
+            taken: Counter[int] = Counter()
+            kept = []
+            for job in jobs:
+                if taken[job.session.id] < max_trials_per_subject:
+                    taken[job.session.id] += 1
+                    kept.append(job)
+            jobs = kept
+        remaining = Counter(job.session.id for job in jobs)
+        from tqdm import tqdm
+
+        bar = tqdm(total=total, initial=initial, unit="trial", desc=f"cohort {protocol.name}",
+                   disable=not progress, file=sys.stderr, dynamic_ncols=True)
+        trials, sim = 0, 0.0
+        try:
+            runner = _run_in_process if n_workers == 0 else _run_in_pool
+            for job, out in runner(store, jobs, n_workers):
+                trials += 1
+                sim += out["sim_time"]
+                bar.update(1)
+                bar.set_postfix_str(f"{job.subject.code} trial {job.scheduled.index + 1} "
+                                    f"{job.scheduled.condition}")
+                remaining[job.session.id] -= 1
+                if remaining[job.session.id] == 0:  # this subject's last trial: answers
+                    _finish_sessions(store, sessions, only={job.session.id})
+            done = _finish_sessions(store, sessions)
+        finally:
+            bar.close()
+    return CohortReport(subjects=len(subjects), sessions_completed=done, trials_run=trials,
+                        sim_seconds=sim, wall_seconds=time.perf_counter() - t0,
+                        workers=n_workers)
+
+
+_SCHEMAS: dict[str, Schema] = {}
+
+
+def _begin(store: TrialStore, job: _Job) -> int:
+    cfg = job.config
+    schema = _SCHEMAS.get(cfg.schema)
+    if schema is None:
+        schema = _SCHEMAS[cfg.schema] = load_schema(cfg.schema)
+    assert cfg.profile is not None
+    return store.begin_trial(trial_meta(cfg, schema, cfg.profile, session_id=job.session.id,
+                                        schedule_index=job.scheduled.index,
+                                        protocol=job.session.protocol.name))
+
+
+def _run_in_process(store: TrialStore, jobs: Sequence[_Job],
+                    n_workers: int) -> Iterator[tuple[_Job, dict[str, Any]]]:
+    for job in jobs:
+        tid = _begin(store, job)
+        try:
+            out = simulate_trial(job.config, job.session.metric_params)
+            _store_outcome(store, tid, out)
+        except BaseException as exc:
+            store.mark_interrupted(tid, reason=f"{type(exc).__name__}: {exc}")
+            raise
+        yield job, out
+
+
+def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
+                 n_workers: int) -> Iterator[tuple[_Job, dict[str, Any]]]:
+    """Workers compute, this process writes; at most 2 trials in flight per worker."""
+    ctx = multiprocessing.get_context("spawn")
+    pending: dict[Future[dict[str, Any]], tuple[_Job, int]] = {}
+    queue = list(jobs)
+    window = 2 * n_workers
+    pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
+    try:
+        while queue or pending:
+            while queue and len(pending) < window:
+                job = queue.pop(0)
+                tid = _begin(store, job)
+                try:
+                    fut = pool.submit(simulate_trial, job.config, job.session.metric_params)
+                except BaseException as exc:
+                    store.mark_interrupted(tid, reason=f"{type(exc).__name__}: {exc}")
+                    raise
+                pending[fut] = (job, tid)
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            # store in submission order among the finished ones (deterministic ids per run)
+            for fut in [f for f in pending if f in done]:
+                job, tid = pending.pop(fut)
+                try:
+                    out = fut.result()
+                except BaseException as exc:
+                    store.mark_interrupted(tid, reason=f"worker failed: "
+                                                       f"{type(exc).__name__}: {exc}")
+                    raise
+                _store_outcome(store, tid, out)
+                yield job, out
+    except BaseException as exc:
+        for _, tid in pending.values():
+            store.mark_interrupted(tid, reason=f"cohort run stopped: {type(exc).__name__}")
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown(wait=True)
+
+
+__all__ = [
+    "DEMOGRAPHIC_MODEL",
+    "CohortReport",
+    "SimulatedSubject",
+    "cohort_subjects",
+    "draw_demographics",
+    "measured_benefits",
+    "prepare_sessions",
+    "simulate_cohort",
+    "simulate_trial",
+    "simulated_answers",
+]

@@ -1,0 +1,426 @@
+"""Study sessions: one subject running one protocol, durable trial by trial, resumable.
+
+A session is created with its seed and its realised schedule in one transaction
+(``start_session``); ``run_session`` then runs the scheduled trials that have no completed
+trial yet, in schedule order, each through ``run_trial`` (one transaction per trial: a
+completed trial is durable before the next one starts). A session killed mid-trial leaves
+that trial's row 'running'; the next open of the store marks it 'interrupted' (its writer is
+gone) and ``run_session`` re-runs the scheduled trial as a new trial row (``attempt`` + 1),
+linked to the same schedule index. Resuming reads everything from the store -- the protocol
+text as run, the seed, the schedule and the run settings -- and never the protocol file.
+
+**Decisions**:
+
+* Trial seeds: the operator seed of scheduled trial i is ``trial_seed(session seed, i)``,
+  independent of the attempt, so a re-run after a crash repeats the trial the crash
+  interrupted and a simulated session's data do not depend on its crash history.
+* Practice: the scripted operator's practice P of scheduled trial i is i, the number of
+  earlier trials of the session (its learning advances with the trial index).
+* Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
+  the operator profile resolved (not just the preset name), so a resumed session runs with
+  the same person even if the presets change.
+* A session is 'completed' once every scheduled trial has a completed trial; questionnaires
+  are recorded separately (``record_answers``) and do not gate completion.
+
+Example:
+    >>> import tempfile, pathlib
+    >>> from vasim.study.protocol import load_protocol
+    >>> from vasim.study.store import TrialStore
+    >>> with tempfile.TemporaryDirectory() as d, TrialStore(pathlib.Path(d) / "s.db") as st:
+    ...     sid = start_session(st, load_protocol("vf_learning_curve"), "S01", seed=7,
+    ...                         settings=SessionSettings(max_trial_time=0.01))
+    ...     n = run_session(st, sid, progress=False, max_trials=2)
+    ...     st.sessions()[["n_trials", "n_completed", "next_index", "status"]].values.tolist()
+    [[38, 2, 2, 'running']]
+"""
+
+from __future__ import annotations
+
+import math
+import secrets
+import sys
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from vasim.errors import ConfigError, StoreError
+from vasim.haptics.scripted import OperatorProfile
+from vasim.study.protocol import (
+    Protocol,
+    ScheduledTrial,
+    generate_schedule,
+    parse_protocol,
+    validate_answers,
+)
+from vasim.study.store import SessionMeta, TrialStore, validate_subject_code
+from vasim.study.trial import TrialConfig, make_profile, run_trial
+from vasim.study.trial_metrics import MetricParams
+
+OPERATORS: tuple[str, ...] = ("scripted",)
+"""Input devices a session can be run with from the command line."""
+
+BROWSER_HINT = ("browser sessions run from `vasim serve` (the viewer issue), where the "
+                "person at the browser is the operator; `vasim study run` drives the "
+                "scripted operator only")
+
+
+def new_seed() -> int:
+    """A fresh randomisation seed in [0, 2**63) from the OS's entropy."""
+    return secrets.randbelow(2**63)
+
+
+def trial_seed(session_seed: int, index: int) -> int:
+    """The operator seed of scheduled trial ``index`` (see the module's decisions).
+
+    Example:
+        >>> trial_seed(7, 0) == trial_seed(7, 0) != trial_seed(7, 1)
+        True
+    """
+    a, b = np.random.SeedSequence([int(session_seed), 3, int(index)]).generate_state(2)
+    return ((int(a) << 32) | int(b)) & (2**63 - 1)
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """How a session's trials are run (stored with the session).
+
+    Attributes:
+        operator: input device (``OPERATORS``).
+        skill: scripted operator preset, used when ``profile`` is None.
+        profile: the scripted operator (a simulated person), overrides ``skill``.
+        max_trial_time: trial time limit [s]; None: the protocol's ``max_trial_time_s``.
+        dt: control step [s].
+        extra: further JSON-able facts to keep with the session (e.g. cohort parameters).
+
+    Raises:
+        ConfigError: an unknown operator (``"browser"`` gets its own explanation) or a bad
+            value.
+    """
+
+    operator: str = "scripted"
+    skill: Literal["novice", "intermediate", "expert"] = "intermediate"
+    profile: OperatorProfile | None = None
+    max_trial_time: float | None = None
+    dt: float = 1e-3
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.operator == "browser":
+            raise ConfigError(BROWSER_HINT, field="operator")
+        if self.operator not in OPERATORS:
+            raise ConfigError(f"unknown operator {self.operator!r} (available: "
+                              f"{', '.join(OPERATORS)}, and browser sessions from `vasim "
+                              "serve`)", field="operator")
+        if self.skill not in ("novice", "intermediate", "expert"):
+            raise ConfigError(f"unknown skill {self.skill!r} (novice, intermediate, expert)",
+                              field="skill")
+        if self.profile is not None and not isinstance(self.profile, OperatorProfile):
+            raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
+                              field="profile")
+        m = self.max_trial_time
+        if m is not None and (isinstance(m, bool) or not isinstance(m, int | float)
+                              or not math.isfinite(m) or m <= 0):
+            raise ConfigError(f"max_trial_time must be > 0 s, got {m!r}",
+                              field="max_trial_time")
+        if not isinstance(self.extra, Mapping):
+            raise ConfigError(f"extra must be a mapping, got {self.extra!r}", field="extra")
+
+    def resolved_profile(self) -> OperatorProfile:
+        """The operator profile: ``profile``, or the ``skill`` preset."""
+        if self.profile is not None:
+            return self.profile
+        return make_profile(TrialConfig(skill=self.skill))
+
+    def to_record(self) -> dict[str, Any]:
+        """JSON-able record (the profile resolved to its fields)."""
+        p = self.resolved_profile()
+        return {"operator": self.operator, "skill": self.skill,
+                "profile": {f.name: getattr(p, f.name) for f in fields(p)},
+                "max_trial_time": self.max_trial_time, "dt": self.dt,
+                "extra": dict(self.extra)}
+
+    @classmethod
+    def from_record(cls, rec: Mapping[str, Any]) -> SessionSettings:
+        """Inverse of ``to_record``."""
+        prof = rec.get("profile")
+        return cls(operator=rec.get("operator", "scripted"),
+                   skill=rec.get("skill", "intermediate"),
+                   profile=None if prof is None else OperatorProfile(**prof),
+                   max_trial_time=rec.get("max_trial_time"), dt=rec.get("dt", 1e-3),
+                   extra=rec.get("extra") or {})
+
+
+@dataclass(frozen=True)
+class Session:
+    """A session as stored (what ``run_session`` replays).
+
+    Attributes:
+        id: session id. subject: subject code. protocol: the protocol parsed from the text
+        stored with the session. seed: randomisation seed. status: running | completed |
+        aborted. settings: how its trials run. schedule: the stored schedule.
+        completed: trial id of the completed trial of each scheduled index (None if none).
+    """
+
+    id: int
+    subject: str
+    protocol: Protocol
+    seed: int
+    status: str
+    settings: SessionSettings
+    schedule: tuple[ScheduledTrial, ...]
+    completed: tuple[int | None, ...]
+
+    @property
+    def pending(self) -> list[ScheduledTrial]:
+        """Scheduled trials without a completed trial, in schedule order."""
+        return [t for t, tid in zip(self.schedule, self.completed, strict=True) if tid is None]
+
+    def trial_config(self, scheduled: ScheduledTrial) -> TrialConfig:
+        """The trial configuration of one scheduled trial (see the module's decisions)."""
+        if scheduled.schema is None:
+            self.protocol.check_runnable()
+        s = self.settings
+        return TrialConfig(
+            task=scheduled.task,  # type: ignore[arg-type]
+            variant=scheduled.variant, schema=str(scheduled.schema), operator=s.operator,
+            skill=s.skill, seed=trial_seed(self.seed, scheduled.index),
+            practice=scheduled.index, dt=s.dt,
+            max_time=s.max_trial_time if s.max_trial_time is not None
+            else self.protocol.max_trial_time,
+            subject=self.subject, profile=s.resolved_profile(),
+            reach_radius=self.protocol.reach_radius,
+        )
+
+    @property
+    def metric_params(self) -> MetricParams:
+        """The trial-metric constants of the protocol."""
+        return MetricParams(excessive_force_n=self.protocol.excessive_force_n)
+
+
+# ------------------------------------------------------------------------ lifecycle
+def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
+                  seed: int | None = None, settings: SessionSettings | None = None) -> int:
+    """Creates a session: seed, protocol text and realised schedule, in one transaction.
+
+    Args:
+        store: the study store. protocol: the protocol (its ``text`` is stored).
+        subject: subject code. seed: randomisation seed (None: a fresh one, ``new_seed``).
+        settings: how the trials run (default ``SessionSettings()``).
+
+    Returns:
+        The session id.
+
+    Raises:
+        ConfigError: the protocol cannot run in this release (teleoperation modes), a bad
+            subject code or seed.
+        StoreError: the subject already has a running session of this protocol.
+    """
+    validate_subject_code(subject)
+    protocol.check_runnable()
+    settings = settings if settings is not None else SessionSettings()
+    seed = new_seed() if seed is None else seed
+    schedule = generate_schedule(protocol, seed)
+    text = protocol.text
+    if text is None:
+        raise ConfigError(f"protocol {protocol.name!r} has no source text to store; load it "
+                          "with load_protocol or parse_protocol")
+    return store.create_session(
+        SessionMeta(subject=subject, protocol=protocol.name, protocol_toml=text, seed=seed,
+                    operator=settings.operator, config=settings.to_record()),
+        [t.as_row() for t in schedule])
+
+
+def load_session(store: TrialStore, session_id: int) -> Session:
+    """Reads a session back from the store (protocol from its stored text).
+
+    Raises:
+        StoreError: unknown session.
+    """
+    row = store.session(session_id)
+    protocol = parse_protocol(row["protocol_toml"],
+                              source=f"{store.path} session {row['id']} (stored protocol)")
+    sched = store.schedule(session_id)
+    schedule = tuple(ScheduledTrial.from_row(r) for r in sched.to_dict("records"))
+    completed = tuple(None if pd.isna(v) else int(v) for v in sched["trial_id"])
+    return Session(id=int(row["id"]), subject=row["subject"], protocol=protocol,
+                   seed=int(row["seed"]), status=row["status"],
+                   settings=SessionSettings.from_record(row["config"] or {}),
+                   schedule=schedule, completed=completed)
+
+
+def find_session(store: TrialStore, *, subject: str | None = None,
+                 session_id: int | None = None, protocol: str | None = None) -> int:
+    """The id of the session to resume: ``session_id``, or the subject's running session
+    (of ``protocol``, when given).
+
+    Raises:
+        ConfigError: neither given, or the subject has no running session, or several.
+        StoreError: unknown session id.
+    """
+    if session_id is not None:
+        return int(store.session(session_id)["id"])
+    if subject is None:
+        raise ConfigError("give a subject code or a session id", field="subject")
+    validate_subject_code(subject)
+    df = store.sessions(subject=subject, protocol=protocol)
+    running = df[df["status"] == "running"]
+    if running.empty:
+        what = f" of protocol {protocol!r}" if protocol else ""
+        if df.empty:
+            raise ConfigError(f"no session{what} for subject {subject!r} in {store.path}",
+                              field="subject")
+        listed = ", ".join(f"{i} {s}" for i, s in zip(df["id"], df["status"], strict=True))
+        raise ConfigError(f"subject {subject!r} has no running session{what} in {store.path} "
+                          f"(sessions: {listed})", field="subject")
+    if len(running) > 1:
+        raise ConfigError(f"subject {subject!r} has {len(running)} running sessions "
+                          f"({', '.join(map(str, running['id']))}); name the protocol or the "
+                          "session", field="subject")
+    return int(running["id"].iloc[0])
+
+
+def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
+                max_trials: int | None = None) -> int:
+    """Runs a session's pending scheduled trials in order; completes it when none is left.
+
+    Args:
+        store: the study store (the only writer of this session).
+        session_id: the session. progress: a tqdm bar (stderr) over the session's trials.
+        max_trials: stop after this many trials (None: run to the end).
+
+    Returns:
+        The number of trials run (completed).
+
+    Raises:
+        StoreError: the session is not running, or one of its trials is being run by a
+            live process.
+        ConfigError: the protocol cannot run in this release.
+        KeyboardInterrupt: after marking the current trial interrupted.
+    """
+    session = load_session(store, session_id)
+    if session.status != "running":
+        raise StoreError(f"session {session_id} of subject {session.subject!r} is "
+                         f"{session.status!r}; nothing to run")
+    session.protocol.check_runnable()
+    busy = store.trials("running")
+    busy = busy[busy["session_id"] == session.id]
+    if not busy.empty:
+        raise StoreError(f"session {session.id} is being run: trial {int(busy['id'].iloc[0])} "
+                         f"is 'running' (process {busy['pid'].iloc[0]} on "
+                         f"{busy['host'].iloc[0]})")
+    pending = session.pending
+    if max_trials is not None:
+        pending = pending[:max_trials]
+    n_total = len(session.schedule)
+    from tqdm import tqdm
+
+    bar = tqdm(total=n_total, initial=n_total - len(session.pending), unit="trial",
+               desc=f"{session.subject} {session.protocol.name}", disable=not progress,
+               file=sys.stderr, dynamic_ncols=True)
+    done = 0
+    try:
+        for st in pending:
+            bar.set_postfix_str(f"trial {st.index + 1}/{n_total} {st.condition}"
+                                f"{' (VF-free)' if st.probe else ''} v{st.variant}")
+            run_trial(session.trial_config(st), store, session_id=session.id,
+                      schedule_index=st.index, protocol=session.protocol.name,
+                      metric_params=session.metric_params)
+            done += 1
+            bar.update(1)
+    finally:
+        bar.close()
+    if not load_session(store, session.id).pending:
+        store.set_session_status(session.id, "completed")
+    return done
+
+
+def abort_session(store: TrialStore, session_id: int, reason: str) -> None:
+    """Closes a running session for good ('aborted'), keeping its trials.
+
+    Raises:
+        StoreError: unknown session or not running. ConfigError: empty reason.
+    """
+    if not isinstance(reason, str) or not reason.strip():
+        raise ConfigError("give the reason for aborting the session", field="reason")
+    store.set_session_status(session_id, "aborted", notes=reason)
+
+
+# ---------------------------------------------------------------------- questionnaires
+def record_answers(store: TrialStore, session_id: int, questionnaire: Literal["pre", "post"],
+                   answers: Mapping[str, Any], *, source: str | None = None) -> int:
+    """Validates one questionnaire's answers against the session's protocol and stores
+    them (and, for ``pre``, the demographics) in one transaction.
+
+    Args:
+        store: the study store. session_id: the session. questionnaire: "pre" / "post".
+        answers: item id -> answer (see ``protocol.validate_answers``).
+        source: where the answers came from (named in errors).
+
+    Returns:
+        The number of answer rows stored.
+
+    Raises:
+        ConfigError: answers that do not fit the protocol. StoreError: already answered.
+    """
+    session = load_session(store, session_id)
+    rows, demo = validate_answers(session.protocol, questionnaire, answers, source=source)
+    return store.add_answers(session.id, questionnaire, rows, demographics=demo)
+
+
+def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
+    """Reads an answers file: TOML with a ``[pre]`` and/or ``[post]`` table of item ->
+    answer, e.g.::
+
+        [pre]
+        group = "resident"
+        specialisation = "general_surgery"
+        laparoscopy_experience = "11-50"
+        simulator_experience = "occasional"
+        robotic_experience = "none"
+
+        [post]
+        best_vf = "ff"
+        worst_vf = "ag"
+        rating = { vg = 6, ag = 3, ms = 7, mag = 5, ff = 9 }
+        proposed_schemas = [["ff", "mag"]]
+        comments = "FF felt natural."
+
+    Raises:
+        ConfigError: unreadable file, invalid TOML, or other top-level tables.
+    """
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError("answers file not found", file=p) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read answers file: {exc}", file=p) from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", file=p) from exc
+    for key, value in data.items():
+        if key not in ("pre", "post") or not isinstance(value, dict):
+            raise ConfigError(f"expected [pre] and [post] tables, got {key} = {value!r}",
+                              file=p, field=key)
+    return data
+
+
+__all__ = [
+    "BROWSER_HINT",
+    "OPERATORS",
+    "Session",
+    "SessionSettings",
+    "abort_session",
+    "find_session",
+    "load_answers_file",
+    "load_session",
+    "new_seed",
+    "record_answers",
+    "run_session",
+    "start_session",
+    "trial_seed",
+]
