@@ -5,7 +5,8 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate"]
+BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "bench.haptics",
+           "bench.report"]
 
 
 def main(argv: list[str]) -> int:
