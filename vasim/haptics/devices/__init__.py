@@ -83,7 +83,8 @@ def _probe_browser() -> Availability:
     if importlib.util.find_spec("viser") is None:
         return Availability(False, (Missing("package", "viser",
                                             "pip install vasim (viser is a dependency)"),))
-    return Availability(True, detail="drag the tool in the viewer (vasim serve)")
+    return Availability(True, detail="fed by the viewer's pointer side channel "
+                                     "(the viewer's drag input is not wired in yet)")
 
 
 def _probe_openhaptics() -> Availability:
