@@ -45,10 +45,11 @@ def test_trial_reaches_every_point_and_metrics_match_recomputation(ff_trial) -> 
     # Independent recomputation of eq. 6.5 with plain loops over the samples.
     e = np.zeros(len(pts))
     reach_t = np.full(len(pts), np.nan)
+    # The POIs ride on the breathing tissue: each row is compared with its logged goal g(j).
     for j in range(len(v["t"])):
         i = int(v["goal_index"][j])
-        e[i] += np.abs(v["x"][j] - pts[i]).sum()
-        if np.isnan(reach_t[i]) and np.linalg.norm(v["x"][j] - pts[i]) <= r.task.reach_radius:
+        e[i] += np.abs(v["x"][j] - v["g"][j]).sum()
+        if np.isnan(reach_t[i]) and np.linalg.norm(v["x"][j] - v["g"][j]) <= r.task.reach_radius:
             reach_t[i] = v["t"][j]
     lat = np.diff(np.concatenate([[0.0], reach_t]))
     np.testing.assert_allclose(r.metrics["error_l1"].to_numpy(), e, rtol=1e-12)
@@ -193,7 +194,9 @@ def test_fixtures_are_transparent_on_the_path() -> None:
     # Decision in vasim/study/trial.py: trajectory fixtures act on the deviation from the
     # path. AG's dead zone is 0.15 D = 4.5 mm (D = 3 cm), so every sample within 1 mm of the
     # path is silent although the next POI is up to ~10 mm away.
-    r = TrialRunner(TrialConfig(schema="ag", seed=1, skill="expert", max_time=8.0))
+    # A static task (no abdomen): the distance is measured to the task's fixed path.
+    r = TrialRunner(TrialConfig(schema="ag", seed=1, skill="expert", max_time=8.0,
+                                scene="none"))
     r.advance(8.0)
     v = r.samples.view()
     dist = _distance_to_path(v["x"], r.task, v["goal_index"])
@@ -208,7 +211,8 @@ def test_fixtures_are_transparent_on_the_path() -> None:
 
 
 def test_ff_force_grows_with_the_deviation_from_the_path() -> None:
-    r = TrialRunner(TrialConfig(schema="ff", seed=3, skill="novice", max_time=20.0))
+    r = TrialRunner(TrialConfig(schema="ff", seed=3, skill="novice", max_time=20.0,
+                                scene="none"))
     r.advance(20.0)
     v = r.samples.view()
     dist = _distance_to_path(v["x"], r.task, v["goal_index"])
@@ -259,3 +263,22 @@ def test_stored_trial_carries_its_config_and_schema(tmp_path: Path) -> None:
 def test_more_bad_config_values_are_refused(kw: dict, field: str) -> None:
     with pytest.raises(ConfigError, match=field):
         TrialConfig(**kw)
+
+
+def test_goals_ride_on_the_breathing_tissue() -> None:
+    # With the default abdomen the logged goal of one POI moves with breathing (0.25 Hz,
+    # ~1 cm cranio-caudal on the liver); with no scene it is fixed.
+    moving = TrialRunner(TrialConfig(schema="none", seed=2, skill="novice", max_time=6.0))
+    moving.advance(6.0)
+    g = moving.samples.view()["g"]
+    gi = moving.samples.view()["goal_index"]
+    rows = gi == gi[0]
+    assert rows.sum() > 500
+    span = np.ptp(g[rows], axis=0)
+    assert span[1] > 5e-4  # cranio-caudal motion within one goal's rows
+    assert span[1] >= span[0]
+    static = TrialRunner(TrialConfig(schema="none", seed=2, skill="novice", max_time=1.0,
+                                     scene="none"))
+    static.advance(1.0)
+    gs = static.samples.view()["g"]
+    assert np.ptp(gs[static.samples.view()["goal_index"] == 0], axis=0).max() == 0.0

@@ -352,13 +352,32 @@ def test_arrow_view_hides_faint_arrows(app: ViewerApp) -> None:
 
 
 def test_organ_view_deforms_in_place_only(app: ViewerApp) -> None:
-    view = app.organs[0]
-    v = view.organ.mesh.vertices + np.array([0.0, 0.0, 0.001])
-    view.update(v)
-    np.testing.assert_allclose(view.handle.vertices, v.astype(np.float32))
-    with pytest.raises(ValueError, match="shape"):
-        view.update(v[:-1])
-    view.update(view.organ.mesh.vertices)
+    # A view of its own: the app's organ views move with the breathing physics meanwhile.
+    from dataclasses import replace
+
+    from vasim.viewer.views import OrganView
+
+    view = OrganView(app.server, replace(app.organs[0].organ, name="test_organ"))
+    try:
+        v = view.organ.mesh.vertices + np.array([0.0, 0.0, 0.001])
+        view.update(v)
+        np.testing.assert_allclose(view.handle.vertices, v.astype(np.float32))
+        with pytest.raises(ValueError, match="shape"):
+            view.update(v[:-1])
+    finally:
+        view.handle.remove()
+
+
+def test_organs_breathe_in_the_viewer(app: ViewerApp) -> None:
+    # The trial's abdomen drives the organ views: the liver's vertices change over time.
+    liver = next(v for v in app.organs if v.organ.name == "liver")
+    first = np.array(liver.handle.vertices)
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline:
+        time.sleep(0.2)
+        if np.abs(np.array(liver.handle.vertices) - first).max() > 1e-4:
+            break
+    assert np.abs(np.array(liver.handle.vertices) - first).max() > 1e-4
 
 
 def test_default_camera_sees_the_workspace() -> None:

@@ -57,6 +57,8 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import pandas as pd
 
+from vasim.abdomen.anatomy import trocar_points
+from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
 from vasim.errors import ConfigError
 from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
 from vasim.fixtures.schema import Schema, dumps_schema, load_schema
@@ -66,11 +68,39 @@ from vasim.study.metrics import evaluate_trial
 from vasim.study.samples import SampleBuffer
 from vasim.study.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
+from vasim.tasks.base import polyline_lookahead
 
 if TYPE_CHECKING:
+    from vasim.abdomen.world import Abdomen, AbdomenSnapshot
     from vasim.study.store import TrialMeta
 
 TaskName = Literal["trajectory", "point"]
+
+def tool_trocar(task: str, start: np.ndarray) -> np.ndarray:
+    """(3,) the port the instrument enters through: the tool's fulcrum [m].
+
+    Trajectory following: the working port on the side the trajectory starts (the
+    patient's right port for x < 0). Point targeting: the instrument port whose shaft
+    points least toward the camera (Mag's view direction), so the shaft does not hide the
+    POI in the magnified view.
+    """
+    from vasim.abdomen.anatomy import TROCAR_NAMES
+    from vasim.fixtures.mag import MagParams
+
+    ports = trocar_points()
+    if task == "trajectory":
+        side = "working_right" if float(start[0]) < 0 else "working_left"
+        return ports[TROCAR_NAMES.index(side)]
+    w = np.asarray(MagParams().view_dir, dtype=np.float64)
+    best, score = ports[TROCAR_NAMES.index("working_right")], np.inf
+    for name, port in zip(TROCAR_NAMES, ports, strict=True):
+        if name == "camera":
+            continue
+        d = port - np.asarray(start, dtype=np.float64)
+        s = float(d @ w) / float(np.linalg.norm(d) * np.linalg.norm(w))
+        if s < score:
+            best, score = port, s
+    return best
 SkillName = Literal["novice", "intermediate", "expert"]
 
 
@@ -92,6 +122,9 @@ class TrialConfig:
         velocity_cutoff_hz: low-pass cutoff of the TCP velocity FF's damping uses [Hz].
         reach_radius: r_reach [m] (a protocol parameter); None: the task's default (5 mm).
         profile: the operator profile; None: the ``skill`` preset.
+        scene: the virtual abdomen the task lives in: a scene name
+            (``protocols/scenes/NAME.toml``) or TOML path, or ``"none"`` for a static task
+            with no tissue (no breathing, no contact).
     """
 
     task: TaskName = "trajectory"
@@ -107,6 +140,7 @@ class TrialConfig:
     velocity_cutoff_hz: float = 30.0
     profile: OperatorProfile | None = field(default=None, compare=False)
     reach_radius: float | None = None
+    scene: str = "default"
 
     def __post_init__(self) -> None:
         if self.task not in ("trajectory", "point"):
@@ -141,6 +175,9 @@ class TrialConfig:
         if r is not None and (isinstance(r, bool) or not isinstance(r, int | float)
                               or not math.isfinite(r) or not r > 0):
             raise ConfigError(f"reach_radius must be > 0 m, got {r!r}", field="reach_radius")
+        if not isinstance(self.scene, str) or not self.scene.strip():
+            raise ConfigError(f"scene must be a scene name, a TOML path or 'none', got "
+                              f"{self.scene!r}", field="scene")
         if self.profile is not None and not isinstance(self.profile, OperatorProfile):
             raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
                               field="profile")
@@ -156,6 +193,9 @@ class TrialFrame:
         (== n_points when all are reached). outputs: the fixture outputs of this step.
         last_latency: latency l_i of the last reached point [s] (None before the first).
         error_l1: cumulative Manhattan error accumulated for the current goal so far [m].
+        abdomen: the latest physics snapshot (deforming organs, moving targets, contact), or
+            None for a static task.
+        tissue_force: (3,) tissue contact force on the tool tip this step [N], or None.
     """
 
     k: int
@@ -169,6 +209,8 @@ class TrialFrame:
     outputs: FixtureOutputs
     last_latency: float | None = None
     error_l1: float = 0.0
+    abdomen: AbdomenSnapshot | None = None
+    tissue_force: Vec3 | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -312,27 +354,26 @@ class TrialRunner:
         self._n = len(self._points)
         self._r2 = self.task.reach_radius ** 2
         self._scale = self.task.scale
-        # The task geometry is static within a trial here: look-ahead points (Mag's aim) and
-        # normals are computed once per POI, not per step. The loop reads goals, look-aheads
-        # and normals as tuples of floats (see _tick); the arrays serve TaskState.
-        self._lookahead = [self.task.lookahead(i) for i in range(self._n)]
-        self._normals = None if self.task.normals is None else np.asarray(self.task.normals)
-        self._goal_xyz = [tuple(p) for p in self._points.tolist()]
-        self._lookahead_xyz = [tuple(np.asarray(a, dtype=np.float64).tolist())
-                               for a in self._lookahead]
-        self._normal_xyz = (None if self._normals is None
-                            else [tuple(nv) for nv in self._normals.tolist()])
-        # Path segments [p_(i-1), p_i] for the fixture goal (module docstring, decision):
-        # start a, direction ab and 1/|ab|^2 per point; None for point targeting.
-        self._segments: list[tuple[tuple[float, ...], tuple[float, ...], float]] | None = None
-        if self.task.kind == "trajectory":
-            starts = [tuple(np.asarray(self.task.start, dtype=np.float64).tolist()),
-                      *self._goal_xyz[:-1]]
-            self._segments = []
-            for a, b in zip(starts, self._goal_xyz, strict=True):
-                ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
-                n2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]
-                self._segments.append((a, ab, 1.0 / n2 if n2 > 0 else 0.0))
+        self._trajectory = self.task.kind == "trajectory"
+        self._start_xyz = tuple(np.asarray(self.task.start, dtype=np.float64).tolist())
+        self._set_geometry(self._points, self.task.normals)
+        # The virtual abdomen: the POIs ride on the tissue, the tool touches it.
+        self.abdomen: Abdomen | None = None
+        self._snap: AbdomenSnapshot | None = None
+        self._patch: ContactPatch | None = None
+        self._fulcrum = np.asarray(tool_trocar(self.task.kind, self.task.start),
+                                   dtype=np.float64)
+        self._fc: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._tc: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._contact = 0
+        self._delicate = 0
+        if config.scene != "none":
+            from vasim.abdomen.world import Abdomen
+
+            self.abdomen = Abdomen(config.scene)
+            self.abdomen.bind_targets(self._points)
+            self._phys_every = max(1, round(self.abdomen.dt / config.dt))
+            self._snap = self.abdomen.latest
         # TCP x(k), master (hand) position and filtered TCP velocity, as tuples of floats
         start = np.array(self.task.start, dtype=np.float64)
         self._x: tuple[float, ...] = tuple(start.tolist())
@@ -356,12 +397,58 @@ class TrialRunner:
         self._publish()
 
     # -- helpers -----------------------------------------------------------------------
+    def _set_geometry(self, points: np.ndarray, normals: np.ndarray | None) -> None:
+        """Sets the current POIs (they move with the tissue) and what derives from them.
+
+        Goals, path segments and normals are kept as tuples of floats for the loop;
+        look-ahead points (Mag's aim) are computed on first use per geometry update.
+        """
+        self._points = np.asarray(points, dtype=np.float64)
+        self._normals = None if normals is None else np.asarray(normals, dtype=np.float64)
+        self._goal_xyz = [tuple(p) for p in self._points.tolist()]
+        self._normal_xyz = (None if self._normals is None
+                            else [tuple(nv) for nv in self._normals.tolist()])
+        self._lookahead_xyz: dict[int, tuple[float, ...]] = {}
+        self._segment_cache: dict[int, tuple[tuple[float, ...], tuple[float, ...], float]] = {}
+
+    def _segment(self, i: int) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+        """Path segment [p_(i-1), p_i] (the tool's start for i = 0) for the fixture goal
+        (module docstring, decision): start a, direction ab and 1/|ab|^2, on the current
+        geometry (computed on first use after each geometry update)."""
+        seg = self._segment_cache.get(i)
+        if seg is None:
+            a = self._start_xyz if i == 0 else self._goal_xyz[i - 1]
+            b = self._goal_xyz[i]
+            ab = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+            n2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]
+            seg = self._segment_cache[i] = (a, ab, 1.0 / n2 if n2 > 0 else 0.0)
+        return seg
+
+    def _lookahead_at(self, i: int) -> tuple[float, ...]:
+        """Mag's aim point for goal i on the current geometry (``Task.lookahead``)."""
+        la = self._lookahead_xyz.get(i)
+        if la is None:
+            la = self._lookahead_xyz[i] = tuple(
+                polyline_lookahead(self._points, i).tolist())
+        return la
+
+    def _physics(self) -> None:
+        """One physics step with the tool where it is; the POIs follow the tissue."""
+        assert self.abdomen is not None
+        snap = self._snap = self.abdomen.step(ToolPose(self._fulcrum, np.array(self._x)))
+        self._set_geometry(snap.targets, snap.target_normals
+                           if self.task.normals is not None else None)
+        self._patch = snap.patch if snap.patch.size else None
+        self._tc = tuple(snap.torque.tolist())
+        self._delicate = 1 if snap.delicate_contact else 0
+        for kind, detail in snap.events:
+            self.events.append((snap.t, kind, detail))
+
     def _fixture_goal(self, x: tuple[float, ...], i: int) -> tuple[float, ...]:
         """g_f(k): nearest point of segment i to x (trajectory), or the POI (point task)."""
-        segs = self._segments
-        if segs is None:
+        if not self._trajectory:
             return self._goal_xyz[i]
-        a, ab, inv = segs[i]
+        a, ab, inv = self._segment(i)
         u = ((x[0] - a[0]) * ab[0] + (x[1] - a[1]) * ab[1] + (x[2] - a[2]) * ab[2]) * inv
         u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else u)
         return (a[0] + u * ab[0], a[1] + u * ab[1], a[2] + u * ab[2])
@@ -377,7 +464,7 @@ class TrialRunner:
             tcp=np.array(self._x), goal=np.array(self._fixture_goal(self._x, i)),
             tcp_velocity=np.array(self._v),
             dx_master=np.array(dx_master), scale=self._scale, t=self._t,
-            kind=self.task.kind, lookahead=self._lookahead[i],
+            kind=self.task.kind, lookahead=np.array(self._lookahead_at(i)),
             normal=None if normals is None else normals[i],
         )
 
@@ -393,7 +480,7 @@ class TrialRunner:
         # The goals are static (zero velocity): the error rate is the TCP velocity.
         return rt.render_xyz(
             self._x, self._fixture_goal(self._x, i), self._v, self._t, self._scale, self.task.kind,
-            self._lookahead_xyz[i], None if self._normal_xyz is None else self._normal_xyz[i],
+            self._lookahead_at(i), None if self._normal_xyz is None else self._normal_xyz[i],
             state)
 
     def _observation(self) -> OperatorObservation:
@@ -444,13 +531,16 @@ class TrialRunner:
         dt = self.config.dt
         k = self._k = self._k + 1
         t = self._t = (k + 1) * dt
+        if self.abdomen is not None and k % self._phys_every == 0:
+            self._physics()
         x, i = self._x, self._i  # i < n: the trial is done once every point is reached
         g = self._goal_xyz[i]
         cues = self._cues  # the last render, as perceived now
         op = self.operator
         if type(op) is ScriptedOperator:
+            fc = self._fc  # the hand feels the fixtures' force and the tissue's
             dx = op.step_floats(dt, x, g, i, cues[7] > _GUIDANCE_SEEN, cues[6], cues[3],
-                                self._ms, cues[0:3])
+                                self._ms, (cues[0] + fc[0], cues[1] + fc[1], cues[2] + fc[2]))
         else:  # any other device: the OperatorObservation protocol
             dx = np.asarray(op.step(self._observation()), dtype=np.float64).tolist()
         d0, d1, d2 = dx
@@ -481,10 +571,22 @@ class TrialRunner:
             self._i = i + 1
             self._err = 0.0
         cues = self._cues = self._render(dxm)
+        if self._patch is not None:
+            # 1 kHz tissue force against the contact planes of the last physics step
+            f, _ = patch_force(self._patch, ToolPose(self._fulcrum, np.array(x)))
+            fc = self._fc = tuple(f.tolist())
+            self._contact = 1 if (fc[0] or fc[1] or fc[2]) else 0
+        elif self._contact:
+            self._fc, self._contact = (0.0, 0.0, 0.0), 0
         if self._mag_camera:
             view = self._tip_in_mag_view(x)
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
-                                cues[5], cues[6], 0, None, None, 0, 0, view)
+                                cues[5], cues[6], self._contact, self._fc, self._tc,
+                                self._delicate, 0, view)
+        elif self._contact or self._delicate:
+            self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
+                                cues[5], cues[6], self._contact, self._fc, self._tc,
+                                self._delicate)
         else:
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
                                 cues[5], cues[6], 0)
@@ -518,7 +620,8 @@ class TrialRunner:
             k=self._k, t=self._t, tcp=np.array(self._x), master=np.array(self._m),
             goal=self._points[min(self._i, self._n - 1)], goal_index=self._i,
             n_points=self._n, done=self.done, outputs=self.runtime.outputs(),
-            last_latency=last_latency, error_l1=self._err,
+            last_latency=last_latency, error_l1=self._err, abdomen=self._snap,
+            tissue_force=np.array(self._fc) if self.abdomen is not None else None,
         )
 
     def result(self, wall_time: float = 0.0, *,
@@ -542,7 +645,11 @@ class TrialRunner:
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
             "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
             "nonfinite_inputs": self._n_bad_input,
+            "scene": self.config.scene,
         })
+        if self.abdomen is not None:
+            summary.update({f"tissue_{k}": v
+                            for k, v in self.abdomen.quality.as_dict().items()})
         tm = trial_metrics(view, summary=summary,
                            params=metric_params if metric_params is not None else MetricParams())
         return TrialResult(config=self.config, schema=self.schema, task=self.task,

@@ -150,6 +150,10 @@ TRIAL_METRICS: dict[str, tuple[str, str]] = {
     "out_of_view_count": ("1", "episodes out of the camera view (NaN if undetermined)"),
     "clutch_count": ("1", "clutch presses (rising edges of the clutch flag)"),
     "clutch_time": ("s", "time with the clutch engaged"),
+    "target_displacement_max": ("m", "largest displacement of a target by the tool (from the "
+                                     "abdomen physics; NaN without a scene)"),
+    "target_displacement_mean": ("m", "time mean of the largest target displacement (NaN "
+                                      "without a scene)"),
 }
 """Every metric ``trial_metrics`` returns: name -> (unit, meaning), in output order."""
 
@@ -469,6 +473,10 @@ def trial_metrics(
     for key in ("n_points", "points_reached", "completed", "completion_time",
                 "total_error_l1", "mean_latency"):
         out[key] = from_summary(key)
+    # Target displacement is measured by the abdomen physics (vasim.abdomen.quality), not
+    # from the samples: copied from the runner's summary.
+    out["target_displacement_max"] = from_summary("tissue_target_displacement_max")
+    out["target_displacement_mean"] = from_summary("tissue_target_displacement_mean")
     duration = float(tt[-1] - t_start) if n else 0.0
     out["duration"] = duration
     out.update(kinematic_metrics(tt, xx, params))

@@ -37,6 +37,32 @@ for _a in (WORKSPACE_MIN, WORKSPACE_MAX, WORKSPACE_CENTRE):
     _a.setflags(write=False)
 
 
+def polyline_lookahead(points: FloatArray, i: int, distance: float = 0.02) -> FloatArray:
+    """A point ``distance`` [m] further along the polyline ``points`` (n, 3) from p_i.
+
+    Walks p_i -> p_(i+1) -> ... by arc length; returns the last point when the path ends
+    first. ``i`` is clamped to [0, n - 1]. Pure: :meth:`Task.lookahead` on any points (e.g.
+    POIs that move with the tissue).
+
+    Raises:
+        ValueError: for a negative or non-finite distance.
+    """
+    if distance < 0 or not math.isfinite(distance):
+        raise ValueError(f"lookahead distance must be finite and >= 0, got {distance!r}")
+    p = np.asarray(points, dtype=np.float64)
+    n = len(p)
+    i = min(max(int(i), 0), n - 1)
+    remaining = float(distance)
+    while i < n - 1:
+        seg = p[i + 1] - p[i]
+        ln = float(np.linalg.norm(seg))
+        if ln >= remaining and ln > 0:
+            return p[i] + seg * (remaining / ln)
+        remaining -= ln
+        i += 1
+    return p[-1].copy()
+
+
 @dataclass(frozen=True, eq=False)
 class Task:
     """A task: POIs to visit in order (trajectory following) or one POI (point targeting).
@@ -152,19 +178,7 @@ class Task:
         Returns:
             (3,) new array [m], world frame.
         """
-        if distance < 0 or not math.isfinite(distance):
-            raise ValueError(f"lookahead distance must be finite and >= 0, got {distance!r}")
-        i = min(max(int(i), 0), self.n_points - 1)
-        p = self.points
-        remaining = float(distance)
-        while i < self.n_points - 1:
-            seg = p[i + 1] - p[i]
-            ln = float(np.linalg.norm(seg))
-            if ln >= remaining and ln > 0:
-                return p[i] + seg * (remaining / ln)
-            remaining -= ln
-            i += 1
-        return p[-1].copy()
+        return polyline_lookahead(self.points, i, distance)
 
     def segment_lengths(self) -> FloatArray:
         """(N-1,) distances between successive POIs [m]."""

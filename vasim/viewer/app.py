@@ -33,14 +33,15 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
+import trimesh
 import viser
 from numpy.typing import NDArray
 
-from vasim.abdomen.anatomy import TROCAR_NAMES, default_anatomy, trocar_points
+from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
 from vasim.errors import ConfigError, VasimError
 from vasim.fixtures.mag import MagParams
 from vasim.fixtures.schema import available_schemas, load_schema
-from vasim.study.trial import TrialConfig, TrialFrame, TrialRunner
+from vasim.study.trial import TrialConfig, TrialFrame, TrialRunner, tool_trocar
 from vasim.tasks import TRAJECTORY_VARIANTS
 from vasim.viewer.views import (
     ArrowView,
@@ -351,7 +352,8 @@ class ViewerApp:
         s = self.server
         assert s is not None
         s.scene.set_up_direction("+z")
-        self.organs = [OrganView(s, o) for o in default_anatomy()]
+        self.organs = [OrganView(s, o) for o in self._organs()]
+        self._shown_physics = -1
         self.trocars = trocar_points()
         # The instrument ports (the camera port is where the default view looks through).
         ports = self.trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
@@ -364,6 +366,34 @@ class ViewerApp:
         self.ghost = GhostView(s, trocar)
         self.camera = CameraController(s, endoscope_pose())
         self.camera.apply_initial()
+
+    def _organs(self) -> list[Organ]:
+        """The organs to draw: the abdomen's surfaces as the trial's physics has them (the
+        vertex order of each model is its mesh's), or the static anatomy without a scene."""
+        abdomen = self._runner.abdomen
+        if abdomen is None:
+            return default_anatomy()
+        snap = abdomen.latest
+        return [Organ(name=m.name,
+                      mesh=trimesh.Trimesh(np.array(snap.organ(m.name).surface), m.faces,
+                                           process=False),
+                      color=m.color, delicate=m.delicate, kind=m.kind)  # type: ignore[arg-type]
+                for m in abdomen.models]
+
+    def _show_physics(self, frame: TrialFrame) -> None:
+        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
+        snap = frame.abdomen
+        if snap is None or snap.seq == self._shown_physics:
+            return
+        self._shown_physics = snap.seq
+        for view in self.organs:
+            try:
+                view.update(snap.organ(view.organ.name).surface)
+            except KeyError:  # an organ the scene does not simulate stays where it is
+                continue
+        if len(snap.targets) == len(self.trajectory.points):
+            self.trajectory.move(snap.targets, snap.target_normals
+                                 if frame.n_points == 1 else None)
 
     def _build_gui(self) -> None:
         s = self.server
@@ -402,26 +432,8 @@ class ViewerApp:
         self.camera.on_connect(client)
 
     def _tool_trocar(self, info: TrialInfo) -> FloatArray:
-        """The port the instrument enters through.
-
-        Trajectory following: the working port on the side the trajectory starts (the
-        patient's right port for x < 0). Point targeting: the instrument port whose shaft
-        points least toward the camera (Mag's view direction), so the shaft does not hide
-        the POI in the magnified view.
-        """
-        if info.config.task == "trajectory":
-            side = "working_right" if float(info.start[0]) < 0 else "working_left"
-            return self.trocars[TROCAR_NAMES.index(side)]
-        w = np.asarray(MagParams().view_dir, dtype=np.float64)
-        best, score = self.trocars[TROCAR_NAMES.index("working_right")], np.inf
-        for name, port in zip(TROCAR_NAMES, self.trocars, strict=True):
-            if name == "camera":
-                continue
-            d = port - info.start
-            s = float(d @ w) / float(np.linalg.norm(d) * np.linalg.norm(w))
-            if s < score:
-                best, score = port, s
-        return best
+        """The port the instrument enters through (the trial's, see ``tool_trocar``)."""
+        return tool_trocar(info.config.task, info.start)
 
     # -- errors --------------------------------------------------------------------------
     def _report(self, message: str) -> None:
@@ -572,6 +584,7 @@ class ViewerApp:
         with server.atomic():
             if new_trial:
                 self._show_trial(info)
+            self._show_physics(frame)
             self.tool.update(frame.tcp)
             self.trajectory.update(frame.goal_index)
             self.arrows.update(out.arrows)

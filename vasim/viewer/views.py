@@ -304,6 +304,32 @@ class TrajectoryView:
             self.goal.visible = False
         self.cloud.colors = colors
 
+    def move(self, points: FloatArray, normals: FloatArray | None = None) -> None:
+        """Moves the POIs of the current task (they ride on the breathing tissue).
+
+        Args:
+            points: (N, 3) current POI positions [m], same N as the task.
+            normals: (N, 3) current unit normals (point targeting) or None.
+
+        Raises:
+            ValueError: for a different number of points.
+        """
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts.shape != self.points.shape:
+            raise ValueError(f"expected {len(self.points)} points, got {len(pts)}")
+        self.points = pts
+        p32 = pts.astype(np.float32)
+        if self.cloud is not None:
+            self.cloud.points = p32
+        if self.path is not None and self.path.visible:
+            self.path.points = p32
+        if normals is not None and self.normal is not None and self.normal.visible:
+            n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+            self.normal.points = np.stack([pts, pts + self.normal_length * n],
+                                          axis=1).astype(np.float32)
+        if 0 <= self._goal_index < len(pts):
+            self.goal.position = pts[self._goal_index]
+
     def node_names(self, *, visible_only: bool = True) -> list[str]:
         """Names of the nodes (by default only those currently shown)."""
         return [h.name for h in (self.cloud, self.path, self.normal, self.goal)

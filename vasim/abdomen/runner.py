@@ -1,0 +1,139 @@
+"""The abdomen physics at its own rate, in its own thread (real-time runs).
+
+A headless trial steps the abdomen inline, in simulated time, every ``dt_physics / dt``
+control steps (deterministic; :class:`vasim.study.trial.TrialRunner`). A real-time run (the
+viewer, the haptic servo loop) instead runs :class:`PhysicsThread`: it steps the
+:class:`~vasim.abdomen.world.Abdomen` every ``dt`` of wall-clock time with the latest tool
+pose it was given, and publishes each step's immutable snapshot by swapping one reference.
+Readers (the servo loop at 1 kHz, the viewer at 30 Hz) take ``latest`` and never see a
+half-updated mesh; writers only post the tool pose. This is the hand-off of the
+architecture guide: one direction, snapshots between loops.
+
+The mass-spring kernels release the interpreter lock (numba ``nogil``), so the solver runs
+beside the servo thread; the Python glue of a step does hold it for a fraction of a
+millisecond. A step that takes longer than ``dt`` delays the next one (the physics falls
+behind real time and the snapshot's ``t`` says so); no burst of catch-up steps is run.
+
+Example:
+    >>> import time
+    >>> from vasim.abdomen.world import Abdomen
+    >>> with PhysicsThread(Abdomen("default")) as physics:
+    ...     time.sleep(0.1)
+    ...     snap = physics.latest
+    >>> snap.seq > 0 and physics.stats()["steps"] > 0
+    True
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from vasim.abdomen.contact import ToolPose
+from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+
+log = logging.getLogger(__name__)
+
+
+class PhysicsThread:
+    """Steps an :class:`Abdomen` in real time in a daemon thread.
+
+    Args:
+        abdomen: the world to step (owned by the thread while it runs).
+        rate_hz: stepping rate; default ``1 / abdomen.dt`` (real time).
+    """
+
+    def __init__(self, abdomen: Abdomen, *, rate_hz: float | None = None) -> None:
+        self.abdomen = abdomen
+        self.period = 1.0 / rate_hz if rate_hz else abdomen.dt
+        self._tool: ToolPose | None = None
+        self._latest: AbdomenSnapshot = abdomen.latest
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._periods: list[float] = []
+        self._costs: list[float] = []
+        self.error: BaseException | None = None
+
+    # -- the hand-off ---------------------------------------------------------------------
+    def set_tool(self, pose: ToolPose | None) -> None:
+        """Posts the tool pose the next step uses (a reference swap; any thread)."""
+        if pose is not None and not (np.all(np.isfinite(pose.tip))
+                                     and np.all(np.isfinite(pose.fulcrum))):
+            return  # a non-finite pose never reaches the physics; the last good one stays
+        self._tool = pose
+
+    @property
+    def latest(self) -> AbdomenSnapshot:
+        """The newest complete snapshot (immutable)."""
+        return self._latest
+
+    # -- life cycle -----------------------------------------------------------------------
+    def start(self) -> PhysicsThread:
+        if self._thread is not None:
+            raise RuntimeError("the physics thread is already running")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="vasim-physics", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+            self._thread = None
+
+    def __enter__(self) -> PhysicsThread:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def _run(self) -> None:
+        period = self.period
+        next_t = time.perf_counter()
+        last = None
+        try:
+            while not self._stop.is_set():
+                now = time.perf_counter()
+                if last is not None:
+                    self._periods.append(now - last)
+                last = now
+                snap = self.abdomen.step(self._tool)
+                self._latest = snap
+                self._costs.append(time.perf_counter() - now)
+                next_t += period
+                delay = next_t - time.perf_counter()
+                if delay > 0:
+                    self._stop.wait(delay)
+                else:
+                    next_t = time.perf_counter()  # behind: no catch-up burst
+                if len(self._periods) > 100_000:  # keep memory bounded in long sessions
+                    del self._periods[:50_000]
+                    del self._costs[:50_000]
+        except BaseException as exc:  # the thread must not die silently
+            log.exception("abdomen physics thread failed")
+            self.error = exc
+
+    def stats(self) -> dict[str, Any]:
+        """Achieved rate and step cost so far (seconds; NaN before two steps)."""
+        p = np.asarray(self._periods[-10_000:])
+        c = np.asarray(self._costs[-10_000:])
+        return {
+            "steps": len(self._costs),
+            "rate_hz": float(1.0 / p.mean()) if len(p) else float("nan"),
+            "period_p50": float(np.median(p)) if len(p) else float("nan"),
+            "period_p99": float(np.percentile(p, 99)) if len(p) else float("nan"),
+            "cost_p50": float(np.median(c)) if len(c) else float("nan"),
+            "cost_max": float(c.max()) if len(c) else float("nan"),
+        }
+
+
+__all__ = ["PhysicsThread"]

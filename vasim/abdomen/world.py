@@ -1,0 +1,549 @@
+"""The virtual abdomen as one object: organs, tool contact, targets on tissue, snapshots.
+
+:class:`Abdomen` is the stateful shell a trial (or the viewer's physics thread) steps at the
+scene's physics rate. Each :meth:`Abdomen.step` takes the tool pose, advances every organ by
+``dt`` and returns an immutable :class:`AbdomenSnapshot`: the tool's contact force, torque,
+force derivative and contact patch (for the 1 kHz haptic side), the targets bound to the
+tissue, and each organ's surface. Readers (the servo loop, the viewer, the recorder) only
+ever see whole snapshots, never a half-updated mesh: a snapshot's arrays are copies, made
+read-only.
+
+Sleeping organs (**decision**, the standard "sleeping bodies" of physics engines, so that a
+trial headless runs many times faster than real time while staying exact where it matters).
+An organ the tool does not touch is, up to its small inertial lag, its gravity-settled shape
+carried by the physiological motion field: ``x = x_settled + u(x_settled, t)`` (breathing,
+heartbeat). Such an organ *sleeps*: its nodes are not integrated, its surface is computed
+from that expression when someone reads it. It wakes the moment the tool's bounding box
+comes within reach of its (motion-inflated) bounding box and a contact is found, starting
+from the sleeping shape with the frame's velocity; it falls asleep again after
+``sleep_after`` seconds without contact once it is within ``sleep_tolerance`` of the
+sleeping shape and moving with the frame (the snap is at most that tolerance). The settled
+shape is computed once per scene and process by integrating the organ at rest with fixed
+anchors until it is still (:func:`settled_positions`). ``always_awake=True`` integrates
+every organ at every step (the benchmark of the full cost, and a cross-check in the tests).
+
+Contact: the tool capsule against every non-wall organ (:mod:`vasim.abdomen.contact`); the
+reaction forces go to the organ's solver as external forces for the next step; a contact
+with a delicate organ (the vessel) counts as damage. The wall is kinematic: the trocars stay
+where the wall puts them and the shaft passes through it without contact.
+
+Example:
+    >>> import numpy as np
+    >>> from vasim.abdomen.contact import ToolPose
+    >>> world = Abdomen("default")
+    >>> snap = world.step(None)
+    >>> round(snap.t, 3), snap.in_contact
+    (0.004, False)
+    >>> sorted(world.names)[:2]
+    ['abdominal_wall', 'intestine_0']
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import threading
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vasim.abdomen.attach import SurfaceBinding, bind_points
+from vasim.abdomen.contact import (
+    ContactPatch,
+    ContactResult,
+    ToolPose,
+    ToolShape,
+    detect_contacts,
+)
+from vasim.abdomen.integrate import OrganSolver, StepReport
+from vasim.abdomen.model import OrganModel, OrganState
+from vasim.abdomen.motion import PhysioMotion, point_offsets, point_velocities
+from vasim.abdomen.quality import TissueQuality
+from vasim.abdomen.scene import Scene, dumps_scene, load_scene
+
+FloatArray = NDArray[np.float64]
+
+SLEEP_AFTER = 0.5
+"""Seconds without contact before an awake organ may sleep again [s]."""
+SLEEP_TOLERANCE = 5e-4
+"""Largest node distance from the sleeping shape at which an organ may sleep [m]."""
+SLEEP_VELOCITY = 0.01
+"""Largest node speed relative to the moving frame at which an organ may sleep [m/s]."""
+BROAD_CELL = 0.02
+"""Edge of the cubes the broad phase bins each organ's nodes into [m]."""
+SETTLE_TIME = 3.0
+"""Longest simulated time spent settling an organ under gravity [s]."""
+SETTLE_SPEED = 1e-4
+"""An organ counts as settled when no node moves faster than this [m/s]."""
+
+
+def _readonly(a: FloatArray) -> FloatArray:
+    a = np.array(a, dtype=np.float64)
+    a.setflags(write=False)
+    return a
+
+
+# ---------------------------------------------------------------------------------------
+# Settled (gravity-equilibrium) shapes, cached per scene text and process
+
+_SETTLED: dict[tuple[str, str], FloatArray] = {}
+_MODELS: dict[str, tuple[OrganModel, ...]] = {}
+_SETTLED_LOCK = threading.Lock()
+
+
+def _scene_key(scene: Scene) -> str:
+    return hashlib.sha256(dumps_scene(scene).encode()).hexdigest()
+
+
+def scene_models(scene: Scene) -> tuple[OrganModel, ...]:
+    """The scene's organ models, built once per scene text and process (they are immutable)."""
+    key = _scene_key(scene)
+    with _SETTLED_LOCK:
+        cached = _MODELS.get(key)
+    if cached is None:
+        cached = tuple(scene.build())
+        with _SETTLED_LOCK:
+            _MODELS[key] = cached
+    return cached
+
+
+def motion_phases(motion: PhysioMotion, t: float) -> tuple[float, float]:
+    """(breathing, heartbeat) sine factors at ``t``: ``u(X, t) = s_b A_b + s_h w(X) A_h``.
+
+    The same expression as :func:`vasim.abdomen.motion.point_offsets`, factored so that the
+    per-node heartbeat weights ``w(X)`` of a rest shape are computed once.
+    """
+    b, h = motion.breathing, motion.heartbeat
+    return (math.sin(2.0 * math.pi * b.frequency_hz * t + b.phase),
+            math.sin(2.0 * math.pi * h.frequency_hz * t + h.phase))
+
+
+def settled_positions(scene: Scene, model: OrganModel, solver: OrganSolver) -> FloatArray:
+    """(n, 3) positions of ``model`` at rest under gravity with its anchors at rest [m].
+
+    Integrates from the rest shape with fixed anchors until every node is slower than
+    ``SETTLE_SPEED`` (at most ``SETTLE_TIME`` of simulated time), then caches the result for
+    this scene text and organ (a process computes it once).
+    """
+    key = (_scene_key(scene), model.name)
+    with _SETTLED_LOCK:
+        cached = _SETTLED.get(key)
+    if cached is not None:
+        return cached
+    state = solver.initial_state()
+    targets = np.array(model.rest[model.anchors])
+    if len(model.anchors) < model.n_nodes:
+        for _ in range(math.ceil(SETTLE_TIME / solver.dt)):
+            solver.step(state, targets)
+            if float(np.abs(state.v).max()) < SETTLE_SPEED:
+                break
+    out = _readonly(state.x)
+    with _SETTLED_LOCK:
+        _SETTLED[key] = out
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# Snapshots
+
+
+@dataclass(frozen=True, eq=False)
+class OrganView:
+    """One organ's surface in a snapshot (computed on first read when the organ sleeps)."""
+
+    name: str
+    awake: bool
+    _x: FloatArray | None = field(repr=False, default=None)
+    _body: _Body | None = field(repr=False, default=None)
+    _t: float = 0.0
+
+    @cached_property
+    def surface(self) -> FloatArray:
+        """(n_surface, 3) surface node positions [m], read-only."""
+        if self._x is not None:
+            return self._x
+        assert self._body is not None
+        return _readonly(self._body.sleeping_x(self._t)[: self._body.model.n_surface])
+
+
+@dataclass(frozen=True, eq=False)
+class AbdomenSnapshot:
+    """The abdomen after one physics step (immutable: arrays are read-only copies).
+
+    Attributes:
+        t: simulated time [s].
+        seq: step counter (1 for the first step).
+        organs: (property) per organ, its surface (see :class:`OrganView`), scene order.
+        targets: (p, 3) bound target positions [m] (empty without bound targets).
+        target_normals: (p, 3) unit normals of the tissue under the targets.
+        target_displacement: (p,) distance of each target from where the physiological
+            motion alone would put it [m] (what the tool did to it).
+        force: (3,) total contact force on the tool [N].
+        force_tip: (3,) contact force felt at the tip [N].
+        torque: (3,) contact torque about the fulcrum [N·m].
+        stiffness_tip: (3, 3) dF_tip/dx [N/m].
+        patch: contact planes for the 1 kHz force model.
+        touching: names of the organs in contact.
+        delicate_contact: a delicate organ is touched.
+        events: (kind, detail) of what happened in this step (e.g. an organ reset).
+    """
+
+    t: float
+    seq: int
+    organ_sources: tuple[tuple[str, FloatArray | None, _Body], ...] = field(repr=False)
+    targets: FloatArray
+    target_normals: FloatArray
+    target_displacement: FloatArray
+    force: FloatArray
+    force_tip: FloatArray
+    torque: FloatArray
+    stiffness_tip: FloatArray
+    patch: ContactPatch
+    touching: tuple[str, ...]
+    delicate_contact: bool
+    events: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def in_contact(self) -> bool:
+        return bool(self.touching)
+
+    @cached_property
+    def organs(self) -> tuple[OrganView, ...]:
+        return tuple(OrganView(name, True, _x=x) if x is not None
+                     else OrganView(name, False, _body=body, _t=self.t)
+                     for name, x, body in self.organ_sources)
+
+    def organ(self, name: str) -> OrganView:
+        for o in self.organs:
+            if o.name == name:
+                return o
+        raise KeyError(f"no organ {name!r} in the snapshot")
+
+
+# ---------------------------------------------------------------------------------------
+# The world
+
+
+class _Body:
+    """One organ's model, solver, state and sleep bookkeeping (private)."""
+
+    def __init__(self, model: OrganModel, solver: OrganSolver, motion: PhysioMotion,
+                 settled: FloatArray) -> None:
+        self.model = model
+        self.solver = solver
+        self.motion = motion
+        self.settled = settled
+        self.kinematic = model.kind == "wall" or len(model.anchors) == model.n_nodes
+        self.state: OrganState = solver.initial_state()
+        self.awake = False
+        self.quiet_time = 0.0
+        self.anchor_rest = np.array(settled[model.anchors])
+        self.amp_b = np.asarray(motion.breathing.amplitude_m, dtype=np.float64)
+        self.amp_h = np.asarray(motion.heartbeat.amplitude_m, dtype=np.float64)
+        self.weight_h = motion.heartbeat.weight(settled)
+        self.max_edge = _max_edge(settled, model.faces)
+        # Bounding sphere of the settled shape, inflated by the largest motion and the
+        # longest edge: the broad phase of the tool test (floats: a few µs per organ).
+        centre = 0.5 * (settled.min(axis=0) + settled.max(axis=0))
+        reach = float(np.linalg.norm(self.amp_b) + np.linalg.norm(self.amp_h))
+        self.centre = tuple(float(c) for c in centre)
+        self.radius = (float(np.linalg.norm(settled - centre, axis=1).max()) + reach
+                       + self.max_edge)
+        self.f_ext = np.zeros((model.n_nodes, 3))
+        # Finer broad phase: the nodes binned in cubes of BROAD_CELL, one sphere per cube
+        # (centroid, farthest node + motion reach + longest edge).
+        cell = np.floor(settled / BROAD_CELL).astype(np.int64)
+        _, inverse = np.unique(cell, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        n_cells = int(inverse.max()) + 1
+        counts = np.bincount(inverse, minlength=n_cells)[:, None]
+        cc = np.stack([np.bincount(inverse, settled[:, a], n_cells) for a in range(3)],
+                      axis=1) / counts
+        dist = np.linalg.norm(settled - cc[inverse], axis=1)
+        rr = np.zeros(n_cells)
+        np.maximum.at(rr, inverse, dist)
+        self.cell_centres = cc
+        self.cell_radii = rr + reach + self.max_edge
+
+    def sleeping_x(self, t: float) -> FloatArray:
+        sb, sh = motion_phases(self.motion, t)
+        return self.settled + sb * self.amp_b + (sh * self.weight_h)[:, None] * self.amp_h
+
+    def wake(self, t: float) -> None:
+        self.state.x[...] = self.sleeping_x(t)
+        self.state.v[...] = point_velocities(self.motion, self.settled, t)
+        self.state.t = t
+        self.awake = True
+        self.quiet_time = 0.0
+
+    def positions(self, t: float) -> FloatArray:
+        return self.state.x if self.awake else self.sleeping_x(t)
+
+
+def _max_edge(x: FloatArray, faces: NDArray[np.int64]) -> float:
+    if len(faces) == 0:
+        return 0.0
+    e = x[faces[:, [1, 2, 0]]] - x[faces]
+    return float(np.sqrt((e * e).sum(-1).max()))
+
+
+class Abdomen:
+    """The deformable abdomen of one scene, stepped by its owner at ``dt`` (see module doc).
+
+    Args:
+        scene: a :class:`~vasim.abdomen.scene.Scene`, a scene name or a TOML path.
+        tool: the tool's shape and contact stiffness.
+        always_awake: integrate every organ every step (no sleeping).
+    """
+
+    def __init__(self, scene: Scene | str | Path = "default", *,
+                 tool: ToolShape | None = None, always_awake: bool = False) -> None:
+        self.scene = scene if isinstance(scene, Scene) else load_scene(scene)
+        self.tool = tool or ToolShape()
+        self.always_awake = always_awake
+        self.dt = self.scene.physics.dt
+        options = self.scene.solver_options()
+        self._bodies: list[_Body] = []
+        for model in scene_models(self.scene):
+            solver = OrganSolver(model, self.dt, **options)
+            motion = self.scene.organ(model.name).motion(self.scene.motion)
+            settled = settled_positions(self.scene, model, solver)
+            self._bodies.append(_Body(model, solver, motion, settled))
+        self.t = 0.0
+        self.seq = 0
+        self.quality = TissueQuality()
+        self.events: list[tuple[float, str, str]] = []
+        self._binding: SurfaceBinding | None = None
+        self._bound: list[_Body] = []
+        self._last_contacts: dict[int, ContactResult] = {}
+        self._empty_patch = ContactPatch.empty(self.tool.radius)
+        # Per-body tables for the vectorised broad phase and motion phases.
+        deformable = [i for i, b in enumerate(self._bodies) if not b.kinematic]
+        self._cell_body = np.concatenate(
+            [np.full(len(self._bodies[i].cell_radii), i) for i in deformable]) \
+            if deformable else np.zeros(0, dtype=np.int64)
+        self._cell_centres = np.concatenate(
+            [self._bodies[i].cell_centres for i in deformable]) if deformable \
+            else np.zeros((0, 3))
+        self._cell_r2 = (np.concatenate([self._bodies[i].cell_radii for i in deformable])
+                         + self.tool.radius) ** 2 if deformable else np.zeros(0)
+        mo = [b.motion for b in self._bodies]
+        self._w_b = np.array([2.0 * math.pi * m.breathing.frequency_hz for m in mo])
+        self._ph_b = np.array([m.breathing.phase for m in mo])
+        self._w_h = np.array([2.0 * math.pi * m.heartbeat.frequency_hz for m in mo])
+        self._ph_h = np.array([m.heartbeat.phase for m in mo])
+        for b in self._bodies:
+            if always_awake and not b.kinematic:
+                b.wake(0.0)
+        self._latest = self._snapshot(())
+
+    # -- queries --------------------------------------------------------------------------
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(b.model.name for b in self._bodies)
+
+    @property
+    def models(self) -> tuple[OrganModel, ...]:
+        return tuple(b.model for b in self._bodies)
+
+    @property
+    def n_nodes(self) -> int:
+        return sum(b.model.n_nodes for b in self._bodies)
+
+    @property
+    def latest(self) -> AbdomenSnapshot:
+        """The snapshot of the last step (or of the initial state)."""
+        return self._latest
+
+    def awake(self) -> dict[str, bool]:
+        return {b.model.name: b.awake for b in self._bodies}
+
+    def faces(self, name: str) -> NDArray[np.int64]:
+        """(f, 3) surface triangles of organ ``name``."""
+        for b in self._bodies:
+            if b.model.name == name:
+                return b.model.faces
+        raise KeyError(f"no organ {name!r}")
+
+    # -- targets --------------------------------------------------------------------------
+
+    def bind_targets(self, points: FloatArray, *, organs: Sequence[str] | None = None) -> None:
+        """Binds task points to the nearest tissue (the wall excluded) at the current time.
+
+        Args:
+            points: (p, 3) target positions [m] at the current time.
+            organs: restrict the binding to these organs (default: every non-wall organ).
+        """
+        bodies = [b for b in self._bodies if not b.kinematic
+                  and (organs is None or b.model.name in organs)]
+        if not bodies:
+            raise ValueError("no deformable organ to bind the targets to")
+        self._bound = bodies
+        surfaces = [(b.positions(self.t), b.model.faces) for b in bodies]
+        binding = bind_points(points, surfaces)
+        self._binding = binding
+        # Sleeping fast path: with the organ asleep, p = p_settled + s_b A_b + s_h c A_h,
+        # c = Σ w_i w_h(X_i) (the motion field is linear in its two phase factors).
+        settled = [b.settled for b in bodies]
+        self._t_settled = binding.positions(settled)
+        self._t_normals_settled = binding.normals(settled)
+        self._t_amp_b = np.array([bodies[k].amp_b for k in binding.organ])
+        self._t_amp_h = np.array([bodies[k].amp_h for k in binding.organ])
+        self._t_weight_h = np.array([
+            float(binding.weights[j] @ bodies[k].weight_h[binding.nodes[j]])
+            for j, k in enumerate(binding.organ)])
+        index = {id(b): i for i, b in enumerate(self._bodies)}
+        self._t_body = np.array([index[id(bodies[k])] for k in binding.organ], dtype=np.int64)
+        self._latest = self._snapshot(())
+
+    def _targets(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        binding = self._binding
+        if binding is None:
+            z = np.zeros((0, 3))
+            return z, z.copy(), np.zeros(0)
+        tb = self._t_body
+        sb = np.sin(self._w_b[tb] * self.t + self._ph_b[tb])
+        sh = np.sin(self._w_h[tb] * self.t + self._ph_h[tb])
+        free = (self._t_settled + sb[:, None] * self._t_amp_b
+                + (sh * self._t_weight_h)[:, None] * self._t_amp_h)
+        if not any(b.awake for b in self._bound):
+            return free, self._t_normals_settled, np.zeros(binding.size)
+        pos = [b.positions(self.t) for b in self._bound]
+        p = binding.positions(pos)
+        n = binding.normals(pos)
+        return p, n, np.linalg.norm(p - free, axis=1)
+
+    # -- stepping -------------------------------------------------------------------------
+
+    def _contacts(self, pose: ToolPose) -> dict[int, ContactResult]:
+        """Contacts of the tool with every deformable organ near its axis.
+
+        Broad phase, vectorised over every organ's cell spheres (see ``_Body``): the tool
+        axis (fulcrum → tip) passes within one of them, or the organ is awake (it deforms, so
+        its cells do not bound it).
+        """
+        ful = np.asarray(pose.fulcrum, dtype=np.float64)
+        d = np.asarray(pose.tip, dtype=np.float64) - ful
+        pc = self._cell_centres - ful
+        dd = float(d @ d)
+        u = np.clip(pc @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(pc))
+        e = pc - u[:, None] * d
+        near = set(self._cell_body[(e * e).sum(axis=1) <= self._cell_r2].tolist())
+        out: dict[int, ContactResult] = {}
+        for i, b in enumerate(self._bodies):
+            if b.kinematic or not (i in near or b.awake):
+                continue
+            c = detect_contacts(b.positions(self.t), b.model.faces, b.model.mass, pose,
+                                self.tool, dt=self.dt, max_edge=b.max_edge)
+            if c.in_contact:
+                out[i] = c
+        return out
+
+    def step(self, tool: ToolPose | None) -> AbdomenSnapshot:
+        """Advances the abdomen by ``dt`` with the tool at ``tool`` (None: no tool).
+
+        The contact forces found at the start of the step act on the tissue during it.
+
+        Returns:
+            The new snapshot (also :attr:`latest`).
+        """
+        contacts: dict[int, ContactResult] = {}
+        if tool is not None and math.isfinite(float(np.sum(tool.tip) + np.sum(tool.fulcrum))):
+            contacts = self._contacts(tool)
+        t1 = self.t + self.dt
+        step_events: list[tuple[str, str]] = []
+        for i, b in enumerate(self._bodies):
+            if b.kinematic:
+                continue
+            c = contacts.get(i)
+            if c is not None and not b.awake:
+                b.wake(self.t)
+            if not b.awake:
+                continue
+            f = None
+            if c is not None:
+                b.f_ext[...] = 0.0
+                np.add.at(b.f_ext, c.node_index, c.node_force)
+                f = b.f_ext
+            targets = b.anchor_rest + point_offsets(b.motion, b.anchor_rest, t1)
+            report: StepReport = b.solver.step(
+                b.state, targets, f, v_frame=point_velocities(b.motion, b.settled, t1))
+            b.state.t = t1
+            if report.reset:
+                detail = f"{b.model.name}: {report.reason}"
+                step_events.append(("organ_reset", detail))
+                self.events.append((t1, "organ_reset", detail))
+            self._maybe_sleep(b, c is not None, t1)
+        self.t = t1
+        self.seq += 1
+        self._last_contacts = contacts
+        snap = self._snapshot(tuple(step_events))
+        self.quality.add(self.dt, force=snap.force, torque=snap.torque,
+                         in_contact=snap.in_contact, delicate_contact=snap.delicate_contact,
+                         target_displacement=float(snap.target_displacement.max(initial=0.0)))
+        self._latest = snap
+        return snap
+
+    def _maybe_sleep(self, b: _Body, touched: bool, t: float) -> None:
+        if self.always_awake:
+            return
+        if touched:
+            b.quiet_time = 0.0
+            return
+        b.quiet_time += self.dt
+        if b.quiet_time < SLEEP_AFTER:
+            return
+        if float(np.abs(b.state.x - b.sleeping_x(t)).max()) > SLEEP_TOLERANCE:
+            return
+        v_ref = point_velocities(b.motion, b.settled, t)
+        if float(np.abs(b.state.v - v_ref).max()) > SLEEP_VELOCITY:
+            return
+        b.awake = False
+
+    def _snapshot(self, events: tuple[tuple[str, str], ...]) -> AbdomenSnapshot:
+        views = tuple((b.model.name, _readonly(b.state.x[: b.model.n_surface])
+                       if b.awake else None, b) for b in self._bodies)
+        contacts = self._last_contacts
+        if contacts:
+            cs = list(contacts.values())
+            force = _readonly(np.sum([c.force for c in cs], axis=0))
+            force_tip = _readonly(np.sum([c.force_tip for c in cs], axis=0))
+            torque = _readonly(np.sum([c.torque for c in cs], axis=0))
+            stiff = _readonly(np.sum([c.stiffness_tip for c in cs], axis=0))
+            patch = ContactPatch.merge([c.patch for c in cs], self.tool.radius)
+        else:
+            force = force_tip = torque = _ZERO3
+            stiff = _ZERO33
+            patch = self._empty_patch
+        touching = tuple(self._bodies[i].model.name for i in sorted(contacts))
+        delicate = any(self._bodies[i].model.delicate for i in contacts)
+        p, n, disp = self._targets()
+        return AbdomenSnapshot(
+            t=self.t, seq=self.seq, organ_sources=views, targets=_readonly(p),
+            target_normals=_readonly(n), target_displacement=_readonly(disp),
+            force=force, force_tip=force_tip, torque=torque, stiffness_tip=stiff, patch=patch,
+            touching=touching, delicate_contact=delicate, events=events)
+
+
+_ZERO3 = _readonly(np.zeros(3))
+_ZERO33 = _readonly(np.zeros((3, 3)))
+
+
+__all__ = [
+    "SETTLE_SPEED",
+    "SETTLE_TIME",
+    "SLEEP_AFTER",
+    "SLEEP_TOLERANCE",
+    "SLEEP_VELOCITY",
+    "Abdomen",
+    "AbdomenSnapshot",
+    "OrganView",
+    "motion_phases",
+    "scene_models",
+    "settled_positions",
+]
