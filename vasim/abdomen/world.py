@@ -43,9 +43,9 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -92,6 +92,9 @@ def _readonly(a: FloatArray) -> FloatArray:
 
 _SETTLED: dict[tuple[str, str], FloatArray] = {}
 _MODELS: dict[str, tuple[OrganModel, ...]] = {}
+_BINDINGS: dict[tuple[object, ...], SurfaceBinding] = {}
+"""Bindings of task points to the sleeping shapes, per scene, organs, time and points (a
+trial binds the same POIs to the same shapes as the previous trial on that variant)."""
 _SETTLED_LOCK = threading.Lock()
 
 
@@ -122,18 +125,22 @@ def motion_phases(motion: PhysioMotion, t: float) -> tuple[float, float]:
             math.sin(2.0 * math.pi * h.frequency_hz * t + h.phase))
 
 
-def settled_positions(scene: Scene, model: OrganModel, solver: OrganSolver) -> FloatArray:
+def settled_positions(scene: Scene, model: OrganModel,
+                      solver: OrganSolver | Callable[[], OrganSolver]) -> FloatArray:
     """(n, 3) positions of ``model`` at rest under gravity with its anchors at rest [m].
 
     Integrates from the rest shape with fixed anchors until every node is slower than
     ``SETTLE_SPEED`` (at most ``SETTLE_TIME`` of simulated time), then caches the result for
-    this scene text and organ (a process computes it once).
+    this scene text and organ (a process computes it once). ``solver`` may be a factory,
+    called only when the shape is not cached yet.
     """
     key = (_scene_key(scene), model.name)
     with _SETTLED_LOCK:
         cached = _SETTLED.get(key)
     if cached is not None:
         return cached
+    if not isinstance(solver, OrganSolver):
+        solver = solver()
     state = solver.initial_state()
     targets = np.array(model.rest[model.anchors])
     if len(model.anchors) < model.n_nodes:
@@ -231,14 +238,15 @@ class AbdomenSnapshot:
 class _Body:
     """One organ's model, solver, state and sleep bookkeeping (private)."""
 
-    def __init__(self, model: OrganModel, solver: OrganSolver, motion: PhysioMotion,
-                 settled: FloatArray) -> None:
+    def __init__(self, model: OrganModel, make_solver: Callable[[], OrganSolver],
+                 motion: PhysioMotion, settled: FloatArray) -> None:
         self.model = model
-        self.solver = solver
+        self._make_solver = make_solver
+        self._solver: OrganSolver | None = None
         self.motion = motion
         self.settled = settled
         self.kinematic = model.kind == "wall" or len(model.anchors) == model.n_nodes
-        self.state: OrganState = solver.initial_state()
+        self.state = OrganState(np.array(settled), np.zeros_like(settled), 0.0)
         self.awake = False
         self.quiet_time = 0.0
         self.anchor_rest = np.array(settled[model.anchors])
@@ -268,6 +276,14 @@ class _Body:
         np.maximum.at(rr, inverse, dist)
         self.cell_centres = cc
         self.cell_radii = rr + reach + self.max_edge
+
+    @property
+    def solver(self) -> OrganSolver:
+        """The organ's solver, built on first use: an organ the tool never touches (most of
+        them, in most trials) never pays for its set-up (e.g. a factorisation)."""
+        if self._solver is None:
+            self._solver = self._make_solver()
+        return self._solver
 
     def sleeping_x(self, t: float) -> FloatArray:
         sb, sh = motion_phases(self.motion, t)
@@ -306,13 +322,14 @@ class Abdomen:
         self.tool = tool or ToolShape()
         self.always_awake = always_awake
         self.dt = self.scene.physics.dt
+        self._key = _scene_key(self.scene)
         options = self.scene.solver_options()
         self._bodies: list[_Body] = []
         for model in scene_models(self.scene):
-            solver = OrganSolver(model, self.dt, **options)
+            make = partial(OrganSolver, model, self.dt, **options)
             motion = self.scene.organ(model.name).motion(self.scene.motion)
-            settled = settled_positions(self.scene, model, solver)
-            self._bodies.append(_Body(model, solver, motion, settled))
+            settled = settled_positions(self.scene, model, make)
+            self._bodies.append(_Body(model, make, motion, settled))
         self.t = 0.0
         self.seq = 0
         self.quality = TissueQuality()
@@ -321,6 +338,7 @@ class Abdomen:
         self._bound: list[_Body] = []
         self._last_contacts: dict[int, ContactResult] = {}
         self._empty_patch = ContactPatch.empty(self.tool.radius)
+        self._clear: tuple[FloatArray, FloatArray, float] | None = None
         # Per-body tables for the vectorised broad phase and motion phases.
         deformable = [i for i, b in enumerate(self._bodies) if not b.kinematic]
         self._cell_body = np.concatenate(
@@ -331,11 +349,6 @@ class Abdomen:
             else np.zeros((0, 3))
         self._cell_r2 = (np.concatenate([self._bodies[i].cell_radii for i in deformable])
                          + self.tool.radius) ** 2 if deformable else np.zeros(0)
-        mo = [b.motion for b in self._bodies]
-        self._w_b = np.array([2.0 * math.pi * m.breathing.frequency_hz for m in mo])
-        self._ph_b = np.array([m.breathing.phase for m in mo])
-        self._w_h = np.array([2.0 * math.pi * m.heartbeat.frequency_hz for m in mo])
-        self._ph_h = np.array([m.heartbeat.phase for m in mo])
         for b in self._bodies:
             if always_awake and not b.kinematic:
                 b.wake(0.0)
@@ -384,8 +397,17 @@ class Abdomen:
         if not bodies:
             raise ValueError("no deformable organ to bind the targets to")
         self._bound = bodies
-        surfaces = [(b.positions(self.t), b.model.faces) for b in bodies]
-        binding = bind_points(points, surfaces)
+        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        key = (self._key, tuple(b.model.name for b in bodies), self.t, pts.tobytes())
+        with _SETTLED_LOCK:
+            binding = _BINDINGS.get(key)
+        if binding is None or any(b.awake for b in bodies):
+            surfaces = [(b.positions(self.t), b.model.faces) for b in bodies]
+            binding = bind_points(pts, surfaces)
+            with _SETTLED_LOCK:
+                if len(_BINDINGS) > 256:
+                    _BINDINGS.clear()
+                _BINDINGS[key] = binding
         self._binding = binding
         # Sleeping fast path: with the organ asleep, p = p_settled + s_b A_b + s_h c A_h,
         # c = Σ w_i w_h(X_i) (the motion field is linear in its two phase factors).
@@ -397,8 +419,20 @@ class Abdomen:
         self._t_weight_h = np.array([
             float(binding.weights[j] @ bodies[k].weight_h[binding.nodes[j]])
             for j, k in enumerate(binding.organ)])
-        index = {id(b): i for i, b in enumerate(self._bodies)}
-        self._t_body = np.array([index[id(bodies[k])] for k in binding.organ], dtype=np.int64)
+        # Group the targets by motion phase (organs of a scene usually share one breathing
+        # and one heartbeat): free(t) = P0 + Σ_groups s_b(t) B_g + s_h(t) H_g.
+        groups: dict[tuple[float, float, float, float], list[int]] = {}
+        for j, k in enumerate(binding.organ):
+            m = bodies[k].motion
+            groups.setdefault((2.0 * math.pi * m.breathing.frequency_hz, m.breathing.phase,
+                               2.0 * math.pi * m.heartbeat.frequency_hz, m.heartbeat.phase),
+                              []).append(j)
+        self._t_groups = []
+        for (wb, pb, wh, ph), rows in groups.items():
+            mask = np.zeros((binding.size, 1))
+            mask[rows] = 1.0
+            self._t_groups.append((wb, pb, wh, ph, mask * self._t_amp_b,
+                                   mask * self._t_weight_h[:, None] * self._t_amp_h))
         self._latest = self._snapshot(())
 
     def _targets(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -406,11 +440,10 @@ class Abdomen:
         if binding is None:
             z = np.zeros((0, 3))
             return z, z.copy(), np.zeros(0)
-        tb = self._t_body
-        sb = np.sin(self._w_b[tb] * self.t + self._ph_b[tb])
-        sh = np.sin(self._w_h[tb] * self.t + self._ph_h[tb])
-        free = (self._t_settled + sb[:, None] * self._t_amp_b
-                + (sh * self._t_weight_h)[:, None] * self._t_amp_h)
+        t = self.t
+        free = self._t_settled
+        for wb, pb, wh, ph, amp_b, amp_h in self._t_groups:
+            free = free + math.sin(wb * t + pb) * amp_b + math.sin(wh * t + ph) * amp_h
         if not any(b.awake for b in self._bound):
             return free, self._t_normals_settled, np.zeros(binding.size)
         pos = [b.positions(self.t) for b in self._bound]
@@ -428,12 +461,28 @@ class Abdomen:
         its cells do not bound it).
         """
         ful = np.asarray(pose.fulcrum, dtype=np.float64)
-        d = np.asarray(pose.tip, dtype=np.float64) - ful
+        tip = np.asarray(pose.tip, dtype=np.float64)
+        # Clearance: the cells are inflated by the organs' whole motion, so while the fulcrum
+        # stays and the tip has moved less than the last clearance (no point of the shaft
+        # moves more than the tip), no sleeping organ can be reached: skip the broad phase.
+        last = self._clear
+        awake = any(b.awake for b in self._bodies)
+        if (last is not None and not awake and np.array_equal(last[0], ful)
+                and float(np.sum((tip - last[1]) ** 2)) < last[2] ** 2):
+            return {}
+        d = tip - ful
         pc = self._cell_centres - ful
         dd = float(d @ d)
         u = np.clip(pc @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(pc))
         e = pc - u[:, None] * d
-        near = set(self._cell_body[(e * e).sum(axis=1) <= self._cell_r2].tolist())
+        dist2 = (e * e).sum(axis=1)
+        hit = dist2 <= self._cell_r2
+        near = set(self._cell_body[hit].tolist())
+        if not near:
+            gap = float(np.min(np.sqrt(dist2) - np.sqrt(self._cell_r2))) if len(dist2) else 0.0
+            self._clear = (ful.copy(), tip.copy(), gap)
+        else:
+            self._clear = None
         out: dict[int, ContactResult] = {}
         for i, b in enumerate(self._bodies):
             if b.kinematic or not (i in near or b.awake):
@@ -453,7 +502,7 @@ class Abdomen:
             The new snapshot (also :attr:`latest`).
         """
         contacts: dict[int, ContactResult] = {}
-        if tool is not None and math.isfinite(float(np.sum(tool.tip) + np.sum(tool.fulcrum))):
+        if tool is not None and np.isfinite(tool.tip).all() and np.isfinite(tool.fulcrum).all():
             contacts = self._contacts(tool)
         t1 = self.t + self.dt
         step_events: list[tuple[str, str]] = []

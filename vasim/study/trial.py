@@ -477,11 +477,13 @@ class TrialRunner:
         i = min(self._i, self._n - 1)
         rt = self.runtime
         state = self._state(dx_master) if rt.needs_state else None
-        # The goals are static (zero velocity): the error rate is the TCP velocity.
+        # The error rate is the TCP velocity: the goals' own motion (breathing, at most a
+        # few mm/s) is left out of FF's damping term. Only Mag aims at the look-ahead point.
+        gf = self._fixture_goal(self._x, i)
         return rt.render_xyz(
-            self._x, self._fixture_goal(self._x, i), self._v, self._t, self._scale, self.task.kind,
-            self._lookahead_at(i), None if self._normal_xyz is None else self._normal_xyz[i],
-            state)
+            self._x, gf, self._v, self._t, self._scale, self.task.kind,
+            self._lookahead_at(i) if self._mag_camera else gf,
+            None if self._normal_xyz is None else self._normal_xyz[i], state)
 
     def _observation(self) -> OperatorObservation:
         """What the operator perceives (for devices without ``step_floats``)."""
