@@ -6,7 +6,7 @@ import importlib
 import sys
 
 BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "bench.haptics",
-           "bench.report", "bench.abdomen"]
+           "bench.report", "bench.abdomen", "bench.contact"]
 
 
 def main(argv: list[str]) -> int:

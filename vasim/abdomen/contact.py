@@ -253,23 +253,40 @@ def detect_contacts(
     if max_edge is None:
         e = x[faces[:, [1, 2, 0]]] - x[faces]
         max_edge = float(np.sqrt((e * e).sum(-1).max())) if len(faces) else 0.0
-    # Broad phase: nodes near the sampled part of the axis, then the faces touching them.
-    near = point_segment_distance(x, centres[-1], centres[0]) <= r + max_edge
+    # Broad phase: the spheres inside the organ's bounding box (grown by r + h), the nodes
+    # near the part of the axis they span, then the faces touching those nodes.
+    margin = r + max_edge
+    inbox = np.flatnonzero(((centres >= x.min(axis=0) - margin)
+                            & (centres <= x.max(axis=0) + margin)).all(axis=1))
+    if inbox.size == 0:
+        return ContactResult.none(r)
+    sub = np.arange(inbox[0], inbox[-1] + 1)
+    near = point_segment_distance(x, centres[sub[-1]], centres[sub[0]]) <= margin
     if not near.any():
         return ContactResult.none(r)
     cand_f = np.flatnonzero(near[faces].any(axis=1))
     if cand_f.size == 0:
         return ContactResult.none(r)
-    # Spheres near a candidate node: restricts the narrow phase to (sphere, face) pairs that
-    # can touch.
+    # Narrow-phase pairs: a sphere and a face with a vertex within r + h of the sphere's
+    # centre (a face farther than that cannot touch it).
     cand_nodes = np.flatnonzero(near)
-    d_sn = np.linalg.norm(centres[:, None, :] - x[None, cand_nodes, :], axis=2)
-    s_near = np.flatnonzero(d_sn.min(axis=1) <= r + max_edge)
-    if s_near.size == 0:
+    d_sn = np.linalg.norm(centres[sub, None, :] - x[None, cand_nodes, :], axis=2)
+    close = d_sn <= margin                                       # (spheres, near nodes)
+    rows = np.flatnonzero(close.any(axis=1))
+    if rows.size == 0:
         return ContactResult.none(r)
+    s_near = sub[rows]
+    local = np.full(len(x), -1, dtype=np.int64)
+    local[cand_nodes] = np.arange(cand_nodes.size)
+    fl = local[faces[cand_f]]                                    # (fc, 3), -1: not near
+    ok = fl >= 0
+    flc = np.where(ok, fl, 0)
+    pair = (close[rows][:, flc] & ok[None, :, :]).any(axis=2)    # (s_near, fc)
+    si_l, fi = np.nonzero(pair)
+    if si_l.size == 0:
+        return ContactResult.none(r)
+    si = s_near[si_l]
     tri = x[faces[cand_f]]                                       # (fc, 3, 3)
-    si, fi = np.meshgrid(s_near, np.arange(cand_f.size), indexing="ij")
-    si, fi = si.ravel(), fi.ravel()
     c = centres[si]
     q = tri_ops.closest_point(tri[fi], c)
     n_f = np.cross(tri[fi, 1] - tri[fi, 0], tri[fi, 2] - tri[fi, 0])

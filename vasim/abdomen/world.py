@@ -484,9 +484,16 @@ class Abdomen:
         else:
             self._clear = None
         out: dict[int, ContactResult] = {}
+        lo = np.minimum(ful, tip) - self.tool.radius
+        hi = np.maximum(ful, tip) + self.tool.radius
         for i, b in enumerate(self._bodies):
             if b.kinematic or not (i in near or b.awake):
                 continue
+            if b.awake and i not in near:  # deformed: test its current bounding box
+                x = b.state.x
+                m = b.max_edge
+                if np.any(x.min(axis=0) - m > hi) or np.any(x.max(axis=0) + m < lo):
+                    continue
             c = detect_contacts(b.positions(self.t), b.model.faces, b.model.mass, pose,
                                 self.tool, dt=self.dt, max_edge=b.max_edge)
             if c.in_contact:
