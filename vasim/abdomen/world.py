@@ -61,7 +61,7 @@ from vasim.abdomen.contact import (
 )
 from vasim.abdomen.integrate import OrganSolver, StepReport
 from vasim.abdomen.model import OrganModel, OrganState
-from vasim.abdomen.motion import PhysioMotion, point_offsets, point_velocities
+from vasim.abdomen.motion import PhysioMotion, PointMotion
 from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
 
@@ -250,6 +250,8 @@ class _Body:
         self.awake = False
         self.quiet_time = 0.0
         self.anchor_rest = np.array(settled[model.anchors])
+        self.anchor_motion = PointMotion(motion, self.anchor_rest)
+        self.node_motion = PointMotion(motion, settled)
         self.amp_b = np.asarray(motion.breathing.amplitude_m, dtype=np.float64)
         self.amp_h = np.asarray(motion.heartbeat.amplitude_m, dtype=np.float64)
         self.weight_h = motion.heartbeat.weight(settled)
@@ -291,7 +293,7 @@ class _Body:
 
     def wake(self, t: float) -> None:
         self.state.x[...] = self.sleeping_x(t)
-        self.state.v[...] = point_velocities(self.motion, self.settled, t)
+        self.state.v[...] = self.node_motion.velocities(t)
         self.state.t = t
         self.awake = True
         self.quiet_time = 0.0
@@ -526,9 +528,9 @@ class Abdomen:
                 b.f_ext[...] = 0.0
                 np.add.at(b.f_ext, c.node_index, c.node_force)
                 f = b.f_ext
-            targets = b.anchor_rest + point_offsets(b.motion, b.anchor_rest, t1)
+            targets = b.anchor_rest + b.anchor_motion.offsets(t1)
             report: StepReport = b.solver.step(
-                b.state, targets, f, v_frame=point_velocities(b.motion, b.settled, t1))
+                b.state, targets, f, v_frame=b.node_motion.velocities(t1))
             b.state.t = t1
             if report.reset:
                 detail = f"{b.model.name}: {report.reason}"
@@ -556,7 +558,7 @@ class Abdomen:
             return
         if float(np.abs(b.state.x - b.sleeping_x(t)).max()) > SLEEP_TOLERANCE:
             return
-        v_ref = point_velocities(b.motion, b.settled, t)
+        v_ref = b.node_motion.velocities(t)
         if float(np.abs(b.state.v - v_ref).max()) > SLEEP_VELOCITY:
             return
         b.awake = False

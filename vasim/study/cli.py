@@ -46,6 +46,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--subject", default="S00", help="subject code (not a name)")
     p.add_argument("--max-time", type=float, default=180.0, help="time limit [s]")
+    p.add_argument("--scene", default="default",
+                   help="abdomen scene (protocols/scenes/NAME.toml or a TOML path), or 'none' "
+                        "for a static task without tissue (default: default)")
     p.add_argument("--db", type=Path, default=None,
                    help="SQLite study database to store the trial in")
     p.add_argument("--points", action="store_true", help="print the per-point table")
@@ -60,7 +63,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
-        max_time=args.max_time,
+        max_time=args.max_time, scene=args.scene,
     )
     store = None
     if args.db is not None:
