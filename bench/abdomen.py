@@ -42,6 +42,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -158,6 +159,20 @@ def run_vasim(model: OrganModel, dt: float, steps: int, **options: object) -> di
 # -- pybullet ------------------------------------------------------------------------------
 
 
+def soft_body(p: Any, cid: int, path: Path, k: float, dt: float, *,
+              face_contact: bool = False) -> int:
+    """A deformable world with gravity and ``dt``, and the mesh at ``path`` as a mass-spring
+    soft body: the guide's configuration (bending 0.1 k, spring damping 0.05, 1 kg)."""
+    p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
+    p.setGravity(0.0, 0.0, -9.81, physicsClientId=cid)
+    p.setTimeStep(dt, physicsClientId=cid)
+    return p.loadSoftBody(
+        str(path), basePosition=[0, 0, 0], mass=1.0, useMassSpring=1,
+        useBendingSprings=1, springElasticStiffness=k,
+        springBendingStiffness=0.1 * k, springDampingStiffness=0.05,
+        useSelfCollision=0, useFaceContact=int(face_contact), physicsClientId=cid)
+
+
 def run_pybullet(mesh: trimesh.Trimesh, k: float, dt: float, steps: int) -> dict:
     """pybullet's deformable world mass-spring, configured as in the massspring guide."""
     with quiet_stdout():
@@ -168,14 +183,7 @@ def run_pybullet(mesh: trimesh.Trimesh, k: float, dt: float, steps: int) -> dict
             mesh.export(path)
             cid = p.connect(p.DIRECT)
             try:
-                p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
-                p.setGravity(0.0, 0.0, -9.81, physicsClientId=cid)
-                p.setTimeStep(dt, physicsClientId=cid)
-                body = p.loadSoftBody(
-                    str(path), basePosition=[0, 0, 0], mass=1.0, useMassSpring=1,
-                    useBendingSprings=1, springElasticStiffness=k,
-                    springBendingStiffness=0.1 * k, springDampingStiffness=0.05,
-                    useSelfCollision=0, useFaceContact=0, physicsClientId=cid)
+                body = soft_body(p, cid, path, k, dt)
                 n, verts = p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH,
                                          physicsClientId=cid)
                 x0 = np.asarray(verts)

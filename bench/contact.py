@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.abdomen import ellipsoid, quiet_stdout, top_anchors, vasim_model
+from bench.abdomen import ellipsoid, quiet_stdout, soft_body, top_anchors, vasim_model
 from vasim.abdomen.contact import ToolPose, ToolShape, detect_contacts, patch_force
 from vasim.abdomen.integrate import OrganSolver
 from vasim.abdomen.world import Abdomen
@@ -125,15 +125,7 @@ def run_pybullet_probe(steps: int) -> dict:
             mesh.export(path)
             cid = p.connect(p.DIRECT)
             try:
-                p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
-                p.setGravity(0.0, 0.0, -9.81, physicsClientId=cid)
-                p.setTimeStep(1e-3, physicsClientId=cid)
-                body = p.loadSoftBody(
-                    str(path), basePosition=[0, 0, 0], mass=1.0, useMassSpring=1,
-                    useBendingSprings=1, springElasticStiffness=100.0,
-                    springBendingStiffness=10.0, springDampingStiffness=0.05,
-                    useSelfCollision=0, useFaceContact=1, collisionMargin=0.001,
-                    frictionCoeff=0.5, physicsClientId=cid)
+                body = soft_body(p, cid, path, 100.0, 1e-3, face_contact=True)
                 for i in top_anchors(mesh):
                     p.createSoftBodyAnchor(body, int(i), -1, -1, physicsClientId=cid)
                 bottom = mesh.vertices[np.argmin(mesh.vertices[:, 2])]

@@ -29,12 +29,16 @@ tissue step.
 Haptic patch (the 1 kHz side). Each detection also returns a :class:`ContactPatch`: the
 active contact planes ``(q_j, n_j, k_j, ℓ_j)``. Between physics updates the tissue is taken as
 still and the force for a moved tool is re-evaluated against these planes
-(:func:`patch_force`): each sphere ``j`` moves with the tip by the lever factor
-``λ_j = 1 - ℓ_j / L`` (``L`` = fulcrum–tip distance: a pivoting tool moves a shaft point
-proportionally to its distance from the fulcrum), so
-``δ_j(x) = r - (c_j(x) - q_j)·n_j``, ``F(x) = Σ k_j max(δ_j, 0) n_j``, the force felt at the
-tip by virtual work is ``F_tip = Σ λ_j k_j max(δ_j, 0) n_j`` and its derivative
-``dF_tip/dx = -Σ_active λ_j² k_j n_j n_jᵀ`` (negative semi-definite: a spring pushing out).
+(:func:`patch_force`). Sphere ``j`` sits at ``c_j = x - ℓ_j u`` with ``u = (x - p_f) / L``
+(``L`` = fulcrum–tip distance), so when the tip moves by ``dx`` the sphere moves by
+``J_j dx`` with ``J_j = (1 - a_j) I + a_j u uᵀ``, ``a_j = ℓ_j / L``: across the shaft by the
+lever factor ``1 - a_j`` (the tool pivots about the trocar), along it by the full step (the
+tool slides through the trocar). With ``δ_j(x) = r - (c_j(x) - q_j)·n_j`` and the tip-side
+normal ``g_j = J_jᵀ n_j``, the force felt at the tip by virtual work is
+``F_tip = Σ k_j max(δ_j, 0) g_j``. Its derivative has the material term
+``-Σ_active k_j g_j g_jᵀ`` (negative semi-definite: springs pushing out) plus the geometric
+term of the turning shaft, ``Σ_active k_j δ_j (a_j / L) (t_j uᵀ + u t_jᵀ + (u·n_j) P)`` with
+``P = I - u uᵀ`` and ``t_j = P n_j`` (symmetric; of relative size ``δ a / L``, a few %).
 This is the force and force derivative the servo loop extrapolates with (as OpenSurgSim's
 coupler does).
 
@@ -213,6 +217,33 @@ def _axis(pose: ToolPose) -> tuple[FloatArray, FloatArray, float]:
     return tip, u, length
 
 
+def _tip_force(offsets: FloatArray, u: FloatArray, length: float, normals: FloatArray,
+               stiffness: FloatArray, delta: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Force at the tip and its derivative from active planes (module docstring).
+
+    Args:
+        offsets: (m,) ℓ_j [m]. u: (3,) shaft direction (fulcrum → tip). length: L [m].
+        normals: (m, 3) n_j. stiffness: (m,) k_j [N/m], 0 for an inactive plane.
+        delta: (m,) penetrations δ_j [m] (only active planes count).
+
+    Returns:
+        (F_tip (3,) [N], dF_tip/dx (3, 3) [N/m]).
+    """
+    a = np.clip(offsets / length, 0.0, 1.0) if length > 0 else np.zeros(len(offsets))
+    un = normals @ u
+    g = (1.0 - a)[:, None] * normals + (a * un)[:, None] * u[None, :]
+    kd = stiffness * delta
+    force = (kd[:, None] * g).sum(axis=0)
+    stiff = -np.einsum("j,ja,jb->ab", stiffness, g, g)
+    if length > 0 and np.any(a > 0):
+        w = kd * a / length
+        t = normals - un[:, None] * u[None, :]
+        tw = (w[:, None] * t).sum(axis=0)
+        proj = np.eye(3) - np.outer(u, u)
+        stiff += np.outer(tw, u) + np.outer(u, tw) + float(w @ un) * proj
+    return force, stiff
+
+
 def point_segment_distance(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     """(n,) distances of points (n, 3) to the segment a–b [m]."""
     ab = b - a
@@ -316,12 +347,10 @@ def detect_contacts(
     k = np.minimum(shape.contact_stiffness, STABILITY_FRACTION * m_eff / (dt * dt))
     f_j = (k * delta)[:, None] * normal                          # on the tool
     ell = offsets[si[pick]]
-    lam = np.clip(1.0 - ell / length, 0.0, 1.0) if length > 0 else np.ones_like(ell)
     force = f_j.sum(axis=0)
-    force_tip = (lam[:, None] * f_j).sum(axis=0)
+    force_tip, stiff = _tip_force(ell, u, length, normal, k, delta)
     arm = centres[si[pick]] - np.asarray(pose.fulcrum, dtype=np.float64)
     torque = np.cross(arm, f_j).sum(axis=0)
-    stiff = -np.einsum("j,ja,jb->ab", lam * lam * k, normal, normal)
     node_index = face_nodes.ravel()
     node_force = -(bary[:, :, None] * f_j[:, None, :]).reshape(-1, 3)
     patch = ContactPatch(q[pick].copy(), normal, k, ell, r)
@@ -354,11 +383,8 @@ def patch_force(patch: ContactPatch, pose: ToolPose) -> tuple[FloatArray, FloatA
     c = tip[None, :] - patch.offsets[:, None] * u[None, :]
     delta = patch.radius - ((c - patch.points) * patch.normals).sum(axis=1)
     on = delta > 0.0
-    lam = np.clip(1.0 - patch.offsets / length, 0.0, 1.0) if length > 0 else np.ones(patch.size)
-    w = np.where(on, patch.stiffness * lam, 0.0)
-    force = ((w * delta)[:, None] * patch.normals).sum(axis=0)
-    stiff = -np.einsum("j,ja,jb->ab", w * lam, patch.normals, patch.normals)
-    return force, stiff
+    return _tip_force(patch.offsets, u, length, patch.normals,
+                      np.where(on, patch.stiffness, 0.0), np.where(on, delta, 0.0))
 
 
 __all__ = [
