@@ -160,7 +160,7 @@ def run_vasim(model: OrganModel, dt: float, steps: int, **options: object) -> di
 
 
 def soft_body(p: Any, cid: int, path: Path, k: float, dt: float, *,
-              face_contact: bool = False) -> int:
+              face_contact: bool = False, **extra: Any) -> int:
     """A deformable world with gravity and ``dt``, and the mesh at ``path`` as a mass-spring
     soft body: the guide's configuration (bending 0.1 k, spring damping 0.05, 1 kg)."""
     p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=cid)
@@ -170,7 +170,7 @@ def soft_body(p: Any, cid: int, path: Path, k: float, dt: float, *,
         str(path), basePosition=[0, 0, 0], mass=1.0, useMassSpring=1,
         useBendingSprings=1, springElasticStiffness=k,
         springBendingStiffness=0.1 * k, springDampingStiffness=0.05,
-        useSelfCollision=0, useFaceContact=int(face_contact), physicsClientId=cid)
+        useSelfCollision=0, useFaceContact=int(face_contact), physicsClientId=cid, **extra)
 
 
 def run_pybullet(mesh: trimesh.Trimesh, k: float, dt: float, steps: int) -> dict:
