@@ -161,7 +161,7 @@ def main() -> None:
     for name, public_us, core_us in per_fixture:
         label = f"  {name}: pure fixture call / float-level core"
         print(f"{label:<{w}} {public_us:8.2f} / {core_us:.2f} µs")
-    print(f"{'full control step (operator+fixtures+task+log)':<{w}} {step_us:8.1f} µs/step")
+    print(f"{'full control step (operator+fixtures+task+abdomen+log)':<{w}} {step_us:8.1f} µs/step")
     print(f"{'  ratio full step / float-level pipeline':<{w}} "
           f"{step_us / max(all_xyz_us, 1e-9):8.1f} x")
     print(f"{'trial throughput (simulated s per wall s)':<{w}} {ratio:8.1f} x real time")
