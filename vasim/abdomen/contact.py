@@ -64,8 +64,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from trimesh import triangles as tri_ops
 
+from vasim.abdomen._contact_kernels import nearest_faces
 from vasim.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -278,6 +278,9 @@ def detect_contacts(
         The contact forces on the tool and on the tissue nodes, and the haptic patch.
     """
     r = shape.radius
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
+    mass = np.asarray(mass, dtype=np.float64)
     tip, u, length = _axis(pose)
     offsets = sphere_offsets(pose, shape)
     centres = tip[None, :] - offsets[:, None] * u[None, :]
@@ -316,40 +319,28 @@ def detect_contacts(
     si_l, fi = np.nonzero(pair)
     if si_l.size == 0:
         return ContactResult.none(r)
-    si = s_near[si_l]
-    tri = x[faces[cand_f]]                                       # (fc, 3, 3)
-    c = centres[si]
-    q = tri_ops.closest_point(tri[fi], c)
-    n_f = np.cross(tri[fi, 1] - tri[fi, 0], tri[fi, 2] - tri[fi, 0])
-    n_f /= np.maximum(np.linalg.norm(n_f, axis=1, keepdims=True), 1e-300)
-    cq = c - q
-    dist = np.linalg.norm(cq, axis=1)
-    front = (cq * n_f).sum(axis=1) >= 0.0
+    rows_c = np.ascontiguousarray(centres[s_near])
+    face_l, q, bary, n_f, dist, front = nearest_faces(
+        x, faces, rows_c, si_l.astype(np.int64), cand_f[fi].astype(np.int64), s_near.size)
     signed = np.where(front, dist, -dist)
-    # Nearest triangle per sphere: sort by (sphere, |signed distance|) and keep the first.
-    order = np.lexsort((np.abs(signed), si))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = si[order][1:] != si[order][:-1]
-    pick = order[first]
-    delta = r - signed[pick]
-    active = delta > 0.0
-    if not active.any():
+    delta = np.where(face_l >= 0, r - signed, -1.0)
+    pick = np.flatnonzero(delta > 0.0)                           # rows (spheres) in contact
+    if pick.size == 0:
         return ContactResult.none(r)
-    pick = pick[active]
-    delta = delta[active]
+    delta = delta[pick]
+    cq = rows_c[pick] - q[pick]
     normal = np.where((front[pick] & (dist[pick] > 1e-9))[:, None],
-                      cq[pick] / np.maximum(dist[pick], 1e-300)[:, None], n_f[pick])
-    face_nodes = faces[cand_f[fi[pick]]]                         # (m, 3)
-    bary = tri_ops.points_to_barycentric(tri[fi[pick]], q[pick])
-    bary = np.clip(bary, 0.0, 1.0)
+                      cq / np.maximum(dist[pick], 1e-300)[:, None], n_f[pick])
+    face_nodes = faces[face_l[pick]]                             # (m, 3)
+    bary = np.clip(bary[pick], 0.0, 1.0)
     bary /= bary.sum(axis=1, keepdims=True)
     m_eff = (bary * mass[face_nodes]).sum(axis=1)
     k = np.minimum(shape.contact_stiffness, STABILITY_FRACTION * m_eff / (dt * dt))
     f_j = (k * delta)[:, None] * normal                          # on the tool
-    ell = offsets[si[pick]]
+    ell = offsets[s_near[pick]]
     force = f_j.sum(axis=0)
     force_tip, stiff = _tip_force(ell, u, length, normal, k, delta)
-    arm = centres[si[pick]] - np.asarray(pose.fulcrum, dtype=np.float64)
+    arm = rows_c[pick] - np.asarray(pose.fulcrum, dtype=np.float64)
     torque = np.cross(arm, f_j).sum(axis=0)
     node_index = face_nodes.ravel()
     node_force = -(bary[:, :, None] * f_j[:, None, :]).reshape(-1, 3)
