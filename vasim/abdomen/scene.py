@@ -96,7 +96,7 @@ from vasim.abdomen.motion import (
     PointMotion,
 )
 from vasim.errors import ConfigError
-from vasim.paths import protocols_dir
+from vasim.paths import read_data_file, scenes_dir
 
 MAX_DT = 0.02
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""
@@ -110,11 +110,6 @@ _PARAM_FIELDS = tuple(f.name for f in fields(OrganParams) if f.name != "anchors"
 _ORGAN_FIELDS = ("mesh", "units", "kind", "color", "delicate", *_PARAM_FIELDS, "breathing_m",
                  "heartbeat_m", "anchors")
 _ANCHOR_FIELDS = ("to", "point", "normal", "within", "fraction")
-
-
-def scenes_dir() -> Path:
-    """The folder of the shipped scenes (``protocols/scenes``)."""
-    return protocols_dir() / "scenes"
 
 
 @cache
@@ -380,13 +375,7 @@ def load_scene(name_or_path: str | Path = "default") -> Scene:
             (an unknown organ, a negative stiffness, a zero mass, a missing mesh file, ...).
     """
     path = scene_path(name_or_path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("scene file not found", file=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read the scene file: {exc}", file=path) from exc
-    return parse_scene(text, source=str(path))
+    return parse_scene(read_data_file(path, "scene"), source=str(path))
 
 
 def parse_scene(text: str, *, source: str = "<string>") -> Scene:

@@ -103,7 +103,7 @@ import numpy as np
 import pandas as pd
 
 from vasim.errors import ConfigError
-from vasim.paths import studies_dir
+from vasim.paths import available_files, data_file, read_data_file, studies_dir
 from vasim.study.store import DEMOGRAPHIC_FIELDS, Demographics
 
 TaskKind = Literal["trajectory", "point"]
@@ -538,7 +538,7 @@ _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", 
 
 def available_protocols() -> tuple[str, ...]:
     """Names of the protocol files shipped in ``protocols/studies/``, sorted."""
-    return tuple(sorted(p.stem for p in studies_dir().glob("*.toml")))
+    return available_files(studies_dir())
 
 
 def protocol_path(ref: str | Path) -> Path:
@@ -547,13 +547,7 @@ def protocol_path(ref: str | Path) -> Path:
     Raises:
         ConfigError: if a bare name matches no shipped protocol.
     """
-    if isinstance(ref, Path) or "/" in ref or "\\" in ref or ref.endswith(".toml"):
-        return Path(ref)
-    path = studies_dir() / f"{ref}.toml"
-    if not path.is_file():
-        raise ConfigError(f"unknown protocol {ref!r} (available: "
-                          f"{', '.join(available_protocols()) or 'none'})", field="protocol")
-    return path
+    return data_file(ref, studies_dir(), "protocol")
 
 
 def load_protocol(ref: str | Path) -> Protocol:
@@ -563,13 +557,7 @@ def load_protocol(ref: str | Path) -> Protocol:
         ConfigError: naming the file, the field and the value of the first problem.
     """
     path = protocol_path(ref)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("protocol file not found", file=path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read protocol file: {exc}", file=path) from exc
-    return parse_protocol(text, source=str(path))
+    return parse_protocol(read_data_file(path, "protocol"), source=str(path))
 
 
 def parse_protocol(text: str, *, source: str = "<string>") -> Protocol:
