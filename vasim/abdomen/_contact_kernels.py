@@ -54,48 +54,99 @@ def _closest(p, a, b, c):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, fastmath=False)
-def nearest_faces(x, faces, centres, pair_row, pair_face, n_rows):  # pragma: no cover
-    """Per row (sphere) the nearest candidate face.
+def sphere_contacts(x, faces, centres, margin):  # pragma: no cover - compiled
+    """Broad and narrow phase in one pass: per sphere, its nearest face within reach.
+
+    Broad phase: the spheres inside the organ's bounding box grown by ``margin`` (r + the
+    longest edge), the nodes within ``margin`` of the axis segment those spheres span, and
+    the faces with such a node. Narrow phase: for each of those spheres, the faces with a
+    node within ``margin`` of its centre (a farther face cannot touch it), nearest first
+    (the first one on ties).
 
     Args:
-        x: (n, 3) node positions. faces: (f, 3) triangles. centres: (n_rows, 3) sphere centres.
-        pair_row: (m,) row of each pair, non-decreasing. pair_face: (m,) face of each pair.
-        n_rows: number of rows.
+        x: (n, 3) node positions. faces: (f, 3). centres: (m, 3) sphere centres, tip first.
+        margin: r + longest edge [m].
 
     Returns:
-        face (n_rows,) int64 (-1 when a row has no pair), q (n_rows, 3) closest points,
-        bary (n_rows, 3), normal (n_rows, 3) unit face normals, dist (n_rows,) |c - q|,
-        front (n_rows,) bool (centre on the normal's side).
+        face (m,) int64 (-1: no face in reach), q (m, 3) closest points, bary (m, 3) their
+        barycentric weights, normal (m, 3) unit face normals, dist (m,) |c - q|, front (m,)
+        bool (the centre on the normal's side).
     """
-    face = np.full(n_rows, -1, dtype=np.int64)
-    q = np.zeros((n_rows, 3))
-    bary = np.zeros((n_rows, 3))
-    normal = np.zeros((n_rows, 3))
-    dist = np.zeros(n_rows)
-    front = np.zeros(n_rows, dtype=np.bool_)
-    best = np.full(n_rows, np.inf)
-    for k in range(pair_row.shape[0]):
-        r = pair_row[k]
-        f = pair_face[k]
-        a = x[faces[f, 0]]
-        b = x[faces[f, 1]]
-        c = x[faces[f, 2]]
-        p = centres[r]
-        qq, u, v, w = _closest(p, a, b, c)
-        d = p - qq
-        dd = np.sqrt(d @ d)
-        if dd < best[r]:
-            n = np.cross(b - a, c - a)
-            nn = np.sqrt(n @ n)
-            if nn > 0.0:
-                n = n / nn
-            best[r] = dd
-            face[r] = f
-            q[r] = qq
-            bary[r, 0] = u
-            bary[r, 1] = v
-            bary[r, 2] = w
-            normal[r] = n
-            dist[r] = dd
-            front[r] = (d @ n) >= 0.0
+    m = centres.shape[0]
+    n = x.shape[0]
+    face = np.full(m, -1, dtype=np.int64)
+    q = np.zeros((m, 3))
+    bary = np.zeros((m, 3))
+    normal = np.zeros((m, 3))
+    dist = np.zeros(m)
+    front = np.zeros(m, dtype=np.bool_)
+    if n == 0 or m == 0:
+        return face, q, bary, normal, dist, front
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        lo[a] = x[:, a].min() - margin
+        hi[a] = x[:, a].max() + margin
+    first = -1
+    last = -1
+    for s in range(m):
+        c = centres[s]
+        if (lo[0] <= c[0] <= hi[0]) and (lo[1] <= c[1] <= hi[1]) and (lo[2] <= c[2] <= hi[2]):
+            if first < 0:
+                first = s
+            last = s
+    if first < 0:
+        return face, q, bary, normal, dist, front
+    a0 = centres[last]
+    ab = centres[first] - a0
+    denom = ab @ ab
+    m2 = margin * margin
+    near = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        ap = x[i] - a0
+        t = (ap @ ab) / denom if denom > 0.0 else 0.0
+        t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+        e = ap - t * ab
+        near[i] = (e @ e) <= m2
+    cand = np.empty(faces.shape[0], dtype=np.int64)
+    nc = 0
+    for f in range(faces.shape[0]):
+        if near[faces[f, 0]] or near[faces[f, 1]] or near[faces[f, 2]]:
+            cand[nc] = f
+            nc += 1
+    best = np.full(m, np.inf)
+    for s in range(first, last + 1):
+        p = centres[s]
+        for k in range(nc):
+            f = cand[k]
+            reach = False
+            for j in range(3):
+                v = faces[f, j]
+                if near[v]:
+                    d = x[v] - p
+                    if (d @ d) <= m2:
+                        reach = True
+                        break
+            if not reach:
+                continue
+            a = x[faces[f, 0]]
+            b = x[faces[f, 1]]
+            c = x[faces[f, 2]]
+            qq, u, vv, w = _closest(p, a, b, c)
+            d = p - qq
+            dd = np.sqrt(d @ d)
+            if dd < best[s]:
+                nrm = np.cross(b - a, c - a)
+                nn = np.sqrt(nrm @ nrm)
+                if nn > 0.0:
+                    nrm = nrm / nn
+                best[s] = dd
+                face[s] = f
+                q[s] = qq
+                bary[s, 0] = u
+                bary[s, 1] = vv
+                bary[s, 2] = w
+                normal[s] = nrm
+                dist[s] = dd
+                front[s] = (d @ nrm) >= 0.0
     return face, q, bary, normal, dist, front

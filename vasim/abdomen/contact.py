@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.abdomen._contact_kernels import nearest_faces
+from vasim.abdomen._contact_kernels import sphere_contacts
 from vasim.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -287,41 +287,13 @@ def detect_contacts(
     if max_edge is None:
         e = x[faces[:, [1, 2, 0]]] - x[faces]
         max_edge = float(np.sqrt((e * e).sum(-1).max())) if len(faces) else 0.0
-    # Broad phase: the spheres inside the organ's bounding box (grown by r + h), the nodes
-    # near the part of the axis they span, then the faces touching those nodes.
+    # Broad and narrow phase in one compiled pass (vasim.abdomen._contact_kernels): the
+    # spheres inside the organ's box grown by r + h, the nodes near the axis they span, and
+    # per sphere the nearest face with a node within r + h of its centre.
     margin = r + max_edge
-    inbox = np.flatnonzero(((centres >= x.min(axis=0) - margin)
-                            & (centres <= x.max(axis=0) + margin)).all(axis=1))
-    if inbox.size == 0:
-        return ContactResult.none(r)
-    sub = np.arange(inbox[0], inbox[-1] + 1)
-    near = point_segment_distance(x, centres[sub[-1]], centres[sub[0]]) <= margin
-    if not near.any():
-        return ContactResult.none(r)
-    cand_f = np.flatnonzero(near[faces].any(axis=1))
-    if cand_f.size == 0:
-        return ContactResult.none(r)
-    # Narrow-phase pairs: a sphere and a face with a vertex within r + h of the sphere's
-    # centre (a face farther than that cannot touch it).
-    cand_nodes = np.flatnonzero(near)
-    d_sn = np.linalg.norm(centres[sub, None, :] - x[None, cand_nodes, :], axis=2)
-    close = d_sn <= margin                                       # (spheres, near nodes)
-    rows = np.flatnonzero(close.any(axis=1))
-    if rows.size == 0:
-        return ContactResult.none(r)
-    s_near = sub[rows]
-    local = np.full(len(x), -1, dtype=np.int64)
-    local[cand_nodes] = np.arange(cand_nodes.size)
-    fl = local[faces[cand_f]]                                    # (fc, 3), -1: not near
-    ok = fl >= 0
-    flc = np.where(ok, fl, 0)
-    pair = (close[rows][:, flc] & ok[None, :, :]).any(axis=2)    # (s_near, fc)
-    si_l, fi = np.nonzero(pair)
-    if si_l.size == 0:
-        return ContactResult.none(r)
-    rows_c = np.ascontiguousarray(centres[s_near])
-    face_l, q, bary, n_f, dist, front = nearest_faces(
-        x, faces, rows_c, si_l.astype(np.int64), cand_f[fi].astype(np.int64), s_near.size)
+    rows_c = np.ascontiguousarray(centres)
+    s_near = np.arange(len(centres))
+    face_l, q, bary, n_f, dist, front = sphere_contacts(x, faces, rows_c, margin)
     signed = np.where(front, dist, -dist)
     delta = np.where(face_l >= 0, r - signed, -1.0)
     pick = np.flatnonzero(delta > 0.0)                           # rows (spheres) in contact
