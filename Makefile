@@ -20,6 +20,7 @@ run: install
 	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080
 
 test: install
+	.ci/ensure-chromium
 	$(VENV)/bin/ruff check vasim tests bench
 	$(PY) -m pytest
 
