@@ -65,7 +65,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.abdomen._contact_kernels import sphere_contacts
+from vasim.abdomen._contact_kernels import patch_tip_force, tool_contacts
 from vasim.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -209,41 +209,6 @@ def sphere_offsets(pose: ToolPose, shape: ToolShape) -> FloatArray:
     return np.arange(m, dtype=np.float64) * shape.spacing
 
 
-def _axis(pose: ToolPose) -> tuple[FloatArray, FloatArray, float]:
-    tip = np.asarray(pose.tip, dtype=np.float64)
-    d = tip - np.asarray(pose.fulcrum, dtype=np.float64)
-    length = float(np.linalg.norm(d))
-    u = d / length if length > 1e-12 else np.array([0.0, 0.0, -1.0])
-    return tip, u, length
-
-
-def _tip_force(offsets: FloatArray, u: FloatArray, length: float, normals: FloatArray,
-               stiffness: FloatArray, delta: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Force at the tip and its derivative from active planes (module docstring).
-
-    Args:
-        offsets: (m,) ℓ_j [m]. u: (3,) shaft direction (fulcrum → tip). length: L [m].
-        normals: (m, 3) n_j. stiffness: (m,) k_j [N/m], 0 for an inactive plane.
-        delta: (m,) penetrations δ_j [m] (only active planes count).
-
-    Returns:
-        (F_tip (3,) [N], dF_tip/dx (3, 3) [N/m]).
-    """
-    a = np.clip(offsets / length, 0.0, 1.0) if length > 0 else np.zeros(len(offsets))
-    un = normals @ u
-    g = (1.0 - a)[:, None] * normals + (a * un)[:, None] * u[None, :]
-    kd = stiffness * delta
-    force = (kd[:, None] * g).sum(axis=0)
-    stiff = -np.einsum("j,ja,jb->ab", stiffness, g, g)
-    if length > 0 and np.any(a > 0):
-        w = kd * a / length
-        t = normals - un[:, None] * u[None, :]
-        tw = (w[:, None] * t).sum(axis=0)
-        proj = np.eye(3) - np.outer(u, u)
-        stiff += np.outer(tw, u) + np.outer(u, tw) + float(w @ un) * proj
-    return force, stiff
-
-
 def point_segment_distance(points: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
     """(n,) distances of points (n, 3) to the segment a–b [m]."""
     ab = b - a
@@ -278,47 +243,35 @@ def detect_contacts(
         The contact forces on the tool and on the tissue nodes, and the haptic patch.
     """
     r = shape.radius
-    x = np.ascontiguousarray(x, dtype=np.float64)
-    faces = np.ascontiguousarray(faces, dtype=np.int64)
-    mass = np.asarray(mass, dtype=np.float64)
-    tip, u, length = _axis(pose)
-    offsets = sphere_offsets(pose, shape)
-    centres = tip[None, :] - offsets[:, None] * u[None, :]
-    if max_edge is None:
-        e = x[faces[:, [1, 2, 0]]] - x[faces]
-        max_edge = float(np.sqrt((e * e).sum(-1).max())) if len(faces) else 0.0
-    # Broad and narrow phase in one compiled pass (vasim.abdomen._contact_kernels): the
-    # spheres inside the organ's box grown by r + h, the nodes near the axis they span, and
-    # per sphere the nearest face with a node within r + h of its centre.
-    margin = r + max_edge
-    rows_c = np.ascontiguousarray(centres)
-    s_near = np.arange(len(centres))
-    face_l, q, bary, n_f, dist, front = sphere_contacts(x, faces, rows_c, margin)
-    signed = np.where(front, dist, -dist)
-    delta = np.where(face_l >= 0, r - signed, -1.0)
-    pick = np.flatnonzero(delta > 0.0)                           # rows (spheres) in contact
-    if pick.size == 0:
+    # The whole detection runs in one compiled pass (vasim.abdomen._contact_kernels): the
+    # spheres inside the organ's box grown by r + h, the nodes near the axis they span, per
+    # sphere the nearest face with a node within r + h of its centre, then the forces.
+    (count, max_pen, force, force_tip, torque, stiff, node_index, node_force, points,
+     normals, k, ell) = tool_contacts(
+        _f64(x), _i64(faces), _f64(mass), _f64(pose.tip), _f64(pose.fulcrum), float(r),
+        float(shape.spacing), int(shape.max_spheres), float(shape.contact_stiffness),
+        STABILITY_FRACTION, float(dt), -1.0 if max_edge is None else float(max_edge))
+    if count <= 0:
+        if count < 0:
+            raise ValueError(f"the tool pose must be finite, got tip {pose.tip!r} and fulcrum "
+                             f"{pose.fulcrum!r}")
         return ContactResult.none(r)
-    delta = delta[pick]
-    cq = rows_c[pick] - q[pick]
-    normal = np.where((front[pick] & (dist[pick] > 1e-9))[:, None],
-                      cq / np.maximum(dist[pick], 1e-300)[:, None], n_f[pick])
-    face_nodes = faces[face_l[pick]]                             # (m, 3)
-    bary = np.clip(bary[pick], 0.0, 1.0)
-    bary /= bary.sum(axis=1, keepdims=True)
-    m_eff = (bary * mass[face_nodes]).sum(axis=1)
-    k = np.minimum(shape.contact_stiffness, STABILITY_FRACTION * m_eff / (dt * dt))
-    f_j = (k * delta)[:, None] * normal                          # on the tool
-    ell = offsets[s_near[pick]]
-    force = f_j.sum(axis=0)
-    force_tip, stiff = _tip_force(ell, u, length, normal, k, delta)
-    arm = rows_c[pick] - np.asarray(pose.fulcrum, dtype=np.float64)
-    torque = np.cross(arm, f_j).sum(axis=0)
-    node_index = face_nodes.ravel()
-    node_force = -(bary[:, :, None] * f_j[:, None, :]).reshape(-1, 3)
-    patch = ContactPatch(q[pick].copy(), normal, k, ell, r)
-    return ContactResult(force, force_tip, torque, stiff, node_index, node_force,
-                         int(pick.size), float(delta.max()), patch)
+    patch = ContactPatch(points, normals, k, ell, r)
+    return ContactResult(force, force_tip, torque, stiff, node_index, node_force, int(count),
+                         float(max_pen), patch)
+
+
+def _f64(a: FloatArray) -> FloatArray:
+    """``a`` as a C-contiguous float64 array (no copy when it already is one)."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _i64(a: IntArray) -> IntArray:
+    if type(a) is np.ndarray and a.dtype == np.int64 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.int64)
 
 
 def patch_force(patch: ContactPatch, pose: ToolPose) -> tuple[FloatArray, FloatArray]:
@@ -340,14 +293,40 @@ def patch_force(patch: ContactPatch, pose: ToolPose) -> tuple[FloatArray, FloatA
         >>> round(float(f[2]), 6), float(k[2, 2])
         (0.2, -200.0)
     """
-    if patch.size == 0:
-        return np.zeros(3), np.zeros((3, 3))
-    tip, u, length = _axis(pose)
-    c = tip[None, :] - patch.offsets[:, None] * u[None, :]
-    delta = patch.radius - ((c - patch.points) * patch.normals).sum(axis=1)
-    on = delta > 0.0
-    return _tip_force(patch.offsets, u, length, patch.normals,
-                      np.where(on, patch.stiffness, 0.0), np.where(on, delta, 0.0))
+    force = np.empty(3)
+    stiff = np.empty((3, 3))
+    patch_force_into(patch, pose.fulcrum, pose.tip, force, stiff)
+    return force, stiff
+
+
+def patch_force_into(patch: ContactPatch, fulcrum: FloatArray, tip: FloatArray,
+                     force: FloatArray, stiff: FloatArray) -> int:
+    """:func:`patch_force` into caller-owned arrays: the 1 kHz loop's path (no allocation).
+
+    One compiled call (``vasim.abdomen._contact_kernels.patch_tip_force``), scalar code over
+    the planes.
+
+    Args:
+        patch: contact planes from the last physics update.
+        fulcrum, tip: (3,) tool pose [m] (float64 arrays; others are converted).
+        force: (3,) float64 output, F_tip [N].
+        stiff: (3, 3) float64 output, dF_tip/dx [N/m].
+
+    Returns:
+        The number of planes pushing on the tool.
+
+    Example:
+        >>> import numpy as np
+        >>> p = ContactPatch(np.zeros((1, 3)), np.array([[0., 0, 1]]), np.array([200.]),
+        ...                  np.zeros(1), 0.0025)
+        >>> f, k = np.empty(3), np.empty((3, 3))
+        >>> patch_force_into(p, np.array([0, 0, .1]), np.array([0, 0, .0015]), f, k)
+        1
+        >>> round(float(f[2]), 6)
+        0.2
+    """
+    return int(patch_tip_force(patch.points, patch.normals, patch.stiffness, patch.offsets,
+                               float(patch.radius), _f64(tip), _f64(fulcrum), force, stiff))
 
 
 __all__ = [
@@ -358,6 +337,7 @@ __all__ = [
     "ToolShape",
     "detect_contacts",
     "patch_force",
+    "patch_force_into",
     "point_segment_distance",
     "sphere_offsets",
 ]
