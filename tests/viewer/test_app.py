@@ -113,10 +113,10 @@ def test_schema_change_through_the_queue_takes_effect(app: ViewerApp) -> None:
     use_schema(app, "vg")
     assert app.snapshot.info.number == n + 1
     assert app.snapshot.info.fixtures == ("vg",)
-    assert app.schema_menu.value == "vg"
+    assert app.panel_view.schema.value == "vg"
     assert wait_for(lambda: not app.ghost.handle.visible and "force" not in app.arrows.kinds)
     # The GUI path: the dropdown's callback only queues a command.
-    app.schema_menu.value = "ff"
+    app.panel_view.schema.value = "ff"
     assert wait_for(lambda: app.snapshot.info.schema == "ff")
     assert wait_for(lambda: "guidance" not in app.arrows.kinds)
 
@@ -125,7 +125,7 @@ def test_point_schema_switches_the_task_and_back(app: ViewerApp) -> None:
     use_schema(app, "point_targeting")
     info = app.snapshot.info
     assert info.config.task == "point" and len(info.points) == 1
-    assert wait_for(lambda: app.task_menu.value == "point")
+    assert wait_for(lambda: app.panel_view.task.value == "point")
     assert "/trajectory/normal" in app.scene_nodes()
     assert "/trajectory/path" not in app.scene_nodes()
     app.request_task("trajectory")  # point_targeting does not fit: falls back

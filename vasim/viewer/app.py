@@ -1,21 +1,30 @@
-"""The demo training viewer: a scripted trial runs in real time and the browser shows it.
+"""The training viewer: ``vasim serve`` starts :class:`ViewerApp` (issue 6).
 
 Threads and hand-offs (guides/architecture.md):
 
-* The **simulation thread** owns the ``TrialRunner``. Each iteration (``sim_hz``, 60 Hz) it
-  drains the command queue (schema, task, restart), then advances the 1 kHz control loop by
-  the wall-clock time elapsed since the previous iteration — capped at ``max_catch_up_s``
-  (50 ms) so a stall slows the trial down instead of fast-forwarding it; the sub-step
-  remainder is carried over, so simulated time tracks wall time exactly. It then publishes a
-  :class:`Snapshot` (the static :class:`TrialInfo` of the trial plus the runner's latest
-  immutable ``TrialFrame``) by swapping one reference. When a trial ends it holds the final
-  frame for ``pause_s`` and starts the next one (next trajectory variant, next seed).
-* The **view thread** (``view_hz``, 30 Hz) reads the latest snapshot and, if it is new,
-  updates every view inside one ``server.atomic()`` block; the HUD and the camera are
-  rate-limited further inside their views. Views never touch the runner.
-* **GUI callbacks** (viser's thread pool) only put a :class:`Command` on the queue. Every
-  callback is wrapped: an exception is logged and shown as a notification, never raised
-  into viser (which would print and swallow it).
+* The **controller thread** (``control_hz``, 50 Hz) owns the :class:`TrainingController`
+  (modes, sessions, the study store, the live trial): it drains the command queue and
+  polls the controller (storing a finished trial, looping the demo, auto-advancing a
+  protocol). The live trial runs on its own thread (the 1 kHz servo loop of
+  ``vasim.haptics.realtime`` when present, else the viewer's ``SimThreadTrial``): the viewer
+  never slows the physics or the haptic loop, it only reads their latest frame.
+* The **view thread** (``view_hz``, 30 Hz) reads ``controller.current()`` (the trial's
+  immutable info and latest frame) and, if new, updates every view inside one
+  ``server.atomic()`` block, streams the AG cue to the pages' synths (:mod:`audio`) and
+  redraws the experimenter panel when its ``PanelState`` version changed.
+* **GUI callbacks** (viser's thread pool, any browser tab) only put a ``Command`` on the
+  queue — except the tool-tip gizmo, which feeds its samples straight into the
+  ``BrowserDevice`` of a browser-driven trial (the device is thread-safe and interpolates
+  between the ~20 Hz browser samples for the 1 kHz loop). Every callback is wrapped: an
+  exception is logged and shown as a notification, never raised into viser (which would
+  print and swallow it), so a failing callback never kills the server.
+
+A page reload or a second tab is just another client: it gets the scene, the panel and
+its own audio synth; the trial and the store are untouched (one owner, the controller).
+
+The MRCP panel (the robots, which one holds the task, NTT, texec/tus per robot) belongs to
+scenes with a slave station; none of the shipped scenes has robots, so no panel is built:
+:meth:`ViewerApp._build_mrcp_panel` is the hook where it goes.
 """
 
 from __future__ import annotations
@@ -29,7 +38,7 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -40,9 +49,19 @@ from numpy.typing import NDArray
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
 from vasim.errors import ConfigError, VasimError
 from vasim.fixtures.mag import MagParams
-from vasim.fixtures.schema import available_schemas, load_schema
-from vasim.study.trial import TrialConfig, TrialFrame, TrialRunner, tool_trocar
-from vasim.tasks import TRAJECTORY_VARIANTS
+from vasim.fixtures.schema import load_schema
+from vasim.haptics.device import BUTTON_2
+from vasim.study.protocol import available_protocols
+from vasim.study.trial import TrialFrame, tool_trocar
+from vasim.viewer.audio import AudioStream
+from vasim.viewer.controller import (
+    DEFAULT_SCHEMA_FOR_TASK,
+    Command,
+    TrainingController,
+    TrialInfo,
+    schema_choices,
+)
+from vasim.viewer.panel import ExperimenterPanel
 from vasim.viewer.views import (
     ArrowView,
     CameraController,
@@ -59,12 +78,6 @@ log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 TaskName = Literal["trajectory", "point"]
-
-DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
-    "trajectory": "trajectory_following",
-    "point": "point_targeting",
-}
-"""Schema switched to when the chosen task does not fit the current task-specific schema."""
 
 
 def check_bind_address(host: str, port: int) -> None:
@@ -113,54 +126,75 @@ def endoscope_pose(look_at: tuple[float, float, float] = (0.0, 0.02, 0.085),
                       up=np.array([0.0, 0.0, 1.0]), fov=float(np.radians(mag.fov_deg)))
 
 
-@dataclass(frozen=True)
-class Command:
-    """A request from the GUI (or an API caller) to the simulation thread.
-
-    Attributes:
-        kind: ``"schema"`` (value: schema name; restarts the trial with it), ``"task"``
-            (value: ``"trajectory"`` | ``"point"``) or ``"restart"``.
-        value: the argument.
-    """
-
-    kind: Literal["schema", "task", "restart"]
-    value: str = ""
-
-
-@dataclass(frozen=True, eq=False)
-class TrialInfo:
-    """What does not change during one trial (built once per trial by the sim thread).
-
-    Attributes:
-        number: trial counter since the app started (1, 2, ...).
-        config: the trial's configuration.
-        schema: schema name. fixtures: its fixture names, in order.
-        task_name: e.g. ``"trajectory/v3"``.
-        points: (N, 3) POIs [m]. normals: (N, 3) or None. reach_radius: [m].
-        start: (3,) tool start [m].
-    """
-
-    number: int
-    config: TrialConfig
-    schema: str
-    fixtures: tuple[str, ...]
-    task_name: str
-    points: FloatArray
-    normals: FloatArray | None
-    reach_radius: float
-    start: FloatArray
-
-
 @dataclass(frozen=True, eq=False)
 class Snapshot:
-    """The hand-off between the threads: one trial's info and its latest frame."""
+    """One trial's info and a frame of it (what the views were last fed)."""
 
     info: TrialInfo
     frame: TrialFrame
 
 
+class DragInput:
+    """The tool-tip gizmo (``/input/tip``): browser input for browser-driven trials.
+
+    Dragging pushes ``(t, position)`` samples into the running trial's ``BrowserDevice``
+    (the device interpolates them for the 1 kHz loop and the trial moves the tool by the
+    master's increments). On release the gizmo snaps back onto the tool tip: two clutched
+    samples (``BUTTON_2``, the servo loop's clutch) — one where the hand let go, one at the
+    tip — re-index the master, so the snap never moves the tool (**decision**).
+
+    Args:
+        server: the viser server.
+        device: returns the current trial's ``BrowserDevice`` (or None).
+        guard: wraps the callback.
+    """
+
+    def __init__(self, server: viser.ViserServer, device: Callable[[], Any],
+                 guard: Callable[[Callable[..., Any]], Callable[..., Any]]):
+        self.handle = server.scene.add_transform_controls(
+            "/input/tip", scale=0.03, disable_rotations=True, depth_test=False,
+            visible=False)
+        self._device = device
+        self._dragging = False
+        self.samples = 0
+        self._last_tip: FloatArray | None = None
+        self.handle.on_update(guard(self._on_update))
+
+    def _on_update(self, event: Any) -> None:
+        dev = self._device()
+        if dev is None:
+            return
+        phase = getattr(event, "phase", "update")
+        p = np.asarray(self.handle.position, dtype=np.float64)
+        t = time.perf_counter()
+        if phase == "end":
+            dev.push(t, p)
+            self.samples += 1
+            self._dragging = False
+            tip = self._last_tip
+            if tip is not None:
+                dev.push(t + 1e-4, p, BUTTON_2)
+                dev.push(t + 2e-4, tip, BUTTON_2)
+                self.handle.position = tuple(float(v) for v in tip)
+            return
+        self._dragging = True
+        dev.push(t, p)
+        self.samples += 1
+
+    def update(self, tip: FloatArray, active: bool) -> None:
+        """Shows the gizmo for a browser-driven trial; parks it on the tip when not held."""
+        self._last_tip = np.asarray(tip, dtype=np.float64)
+        if self.handle.visible != active:
+            self.handle.visible = active
+            if active:
+                self.handle.position = tuple(float(v) for v in tip)
+                dev = self._device()
+                if dev is not None:  # the first sample: where the gizmo starts
+                    dev.push(time.perf_counter(), self._last_tip)
+
+
 class ViewerApp:
-    """The viser server, its views, and the simulation and view threads.
+    """The viser server, its views and panels, and the controller and view threads.
 
     Args:
         host: interface to bind; ``127.0.0.1`` (default) admits only this machine.
@@ -169,17 +203,20 @@ class ViewerApp:
         schema: fixture schema of the demo trials (a name in ``protocols/schemas``).
         seed: operator seed of the first trial (incremented per trial).
         task: ``"trajectory"`` or ``"point"``.
+        scene: the abdomen scene of every trial (``"none"``: a static task).
+        db: the study store (SQLite path) trials are stored in; None: demo only.
         skill: scripted operator preset.
         variant: trajectory variant of the first trial.
-        max_time: simulated time limit per trial [s].
-        pause_s: wall time the final frame is held before the next trial starts [s].
+        max_time: simulated time limit per demo/free trial [s].
+        pause_s: wall time a finished trial is shown before the next one starts [s].
         speed: simulated seconds per wall second (1 = real time).
-        sim_hz, view_hz: loop rates of the simulation and view threads [Hz].
-        max_catch_up_s: most simulated time one sim iteration may advance [s].
+        control_hz, view_hz: rates of the controller and view threads [Hz].
+        audio_hz: rate of the AG parameter stream [Hz].
+        trial_factory: builds live trials (default ``make_live_trial``).
 
     Raises:
-        ConfigError: for an unknown schema, task or skill, or a schema that does not fit
-            the task (before any socket is opened).
+        ConfigError: for an unknown schema, task, skill or scene, or a schema that does not
+            fit the task (before any socket is opened).
 
     Example:
         >>> app = ViewerApp(port=0).start()         # doctest: +SKIP
@@ -196,35 +233,36 @@ class ViewerApp:
         seed: int = 0,
         task: TaskName = "trajectory",
         *,
+        scene: str = "default",
+        db: str | None = None,
         skill: Literal["novice", "intermediate", "expert"] = "intermediate",
         variant: int = 0,
         max_time: float = 180.0,
         pause_s: float = 1.5,
         speed: float = 1.0,
-        sim_hz: float = 60.0,
+        control_hz: float = 50.0,
         view_hz: float = 30.0,
-        max_catch_up_s: float = 0.05,
+        audio_hz: float = 20.0,
+        trial_factory: Callable[..., Any] | None = None,
     ):
-        for name, v in (("pause_s", pause_s), ("speed", speed), ("sim_hz", sim_hz),
-                        ("view_hz", view_hz), ("max_catch_up_s", max_catch_up_s)):
+        for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
+                        ("view_hz", view_hz), ("audio_hz", audio_hz)):
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
                 raise ConfigError(f"{name} must be a finite number >= 0, got {v!r}", field=name)
-        if speed <= 0 or sim_hz <= 0 or view_hz <= 0 or max_catch_up_s <= 0:
-            raise ConfigError("speed, sim_hz, view_hz and max_catch_up_s must be > 0, got "
-                              f"{(speed, sim_hz, view_hz, max_catch_up_s)!r}")
+        if speed <= 0 or control_hz <= 0 or view_hz <= 0 or audio_hz <= 0:
+            raise ConfigError("speed, control_hz, view_hz and audio_hz must be > 0, got "
+                              f"{(speed, control_hz, view_hz, audio_hz)!r}")
         self.host = host
         self.requested_port = int(port)
-        self.pause_s = float(pause_s)
-        self.speed = float(speed)
-        self.sim_period = 1.0 / sim_hz
+        self.control_period = 1.0 / control_hz
         self.view_period = 1.0 / view_hz
-        self.max_catch_up_s = float(max_catch_up_s)
-        config = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,
-                             skill=skill, max_time=max_time)
-        # Built here so that a bad schema/task fails before a socket is opened.
-        self._runner = TrialRunner(config)
-        self._trial_number = 0
-        self._snapshot = self._publish_new_trial()
+        self.audio_hz = float(audio_hz)
+        # Built here so that a bad schema/task/scene fails before a socket is opened.
+        self.controller = TrainingController(
+            scene=scene, db=db, schema=schema, task=task, skill=skill, seed=seed,
+            variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
+            trial_factory=trial_factory)
+        self.scene_name = scene
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.errors: list[str] = []
         """Messages of errors caught in callbacks and threads (newest last)."""
@@ -232,13 +270,14 @@ class ViewerApp:
         self._threads: list[threading.Thread] = []
         self._view_costs: collections.deque[float] = collections.deque(maxlen=600)
         self._view_updates = 0
-        self._sim_cost = 0.0
-        self._sim_time = 0.0
-        self._sim_wall = 0.0
-        self._local = threading.local()
+        self._t_started = 0.0
         self._shown: TrialInfo | None = None
         self._shown_frame: TrialFrame | None = None
+        self._shown_physics = -1
+        self._snapshot = Snapshot(*self.controller.current())
         self.server: viser.ViserServer | None = None
+        self.mrcp_panel: Any = None
+        """The MRCP panel (None: the scene has no slave station)."""
         self._stopped = False
 
     # -- lifecycle -----------------------------------------------------------------------
@@ -246,14 +285,17 @@ class ViewerApp:
         """Binds the server, builds the scene and GUI, starts both threads; returns self."""
         if self.server is not None:
             raise RuntimeError("ViewerApp.start() was already called")
-        check_bind_address(self.host, self.requested_port)
-        self.server = viser.ViserServer(host=self.host, port=self.requested_port,
-                                        verbose=False)
         try:
+            check_bind_address(self.host, self.requested_port)
+            self.server = viser.ViserServer(host=self.host, port=self.requested_port,
+                                            verbose=False)
+            self.server.gui.configure_theme(control_width="large")
             self._build_scene()
             self._build_gui()
+            self.mrcp_panel = self._build_mrcp_panel()
             self.server.on_client_connect(self._guard(self._on_connect))
-            for target, name in ((self._sim_loop, "vasim-viewer-sim"),
+            self._t_started = time.perf_counter()
+            for target, name in ((self._control_loop, "vasim-viewer-control"),
                                  (self._view_loop, "vasim-viewer-view")):
                 t = threading.Thread(target=target, name=name, daemon=True)
                 t.start()
@@ -264,7 +306,8 @@ class ViewerApp:
         return self
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stops both threads (joined) and the server. Idempotent."""
+        """Stops both threads (joined), the trial (a stored one is marked interrupted), the
+        store and the server. Idempotent."""
         if self._stopped:
             return
         self._stopped = True
@@ -273,6 +316,8 @@ class ViewerApp:
             t.join(timeout=timeout)
             if t.is_alive():
                 log.error("viewer thread %s did not stop within %.1f s", t.name, timeout)
+        if not self._threads:  # never started: close here (the store was never opened)
+            self.controller.close()
         if self.server is not None:
             self.server.stop()
 
@@ -310,20 +355,33 @@ class ViewerApp:
     # -- API for callers (and tests): all go through the command queue -------------------
     @property
     def snapshot(self) -> Snapshot:
-        """The latest published snapshot (immutable)."""
-        return self._snapshot
+        """The current trial's info and latest frame."""
+        return Snapshot(*self.controller.current())
+
+    @property
+    def panel(self) -> Any:
+        """The experimenter panel's state (``controller.PanelState``)."""
+        return self.controller.panel
+
+    def submit(self, command: Command) -> None:
+        """Queues a command for the controller thread."""
+        self.commands.put(command)
+
+    def request(self, kind: str, value: Any = None) -> None:
+        """Queues ``Command(kind, value)`` (see ``controller.Command``)."""
+        self.submit(Command(kind, value))
 
     def request_schema(self, name: str) -> None:
-        """Asks the sim thread to restart the trial with schema ``name``."""
-        self.commands.put(Command("schema", str(name)))
+        """Asks for schema ``name`` (the demo restarts with it)."""
+        self.request("schema", str(name))
 
     def request_task(self, task: str) -> None:
-        """Asks the sim thread to switch to task ``task`` (restarts the trial)."""
-        self.commands.put(Command("task", str(task)))
+        """Asks for task ``task`` (the demo restarts with it)."""
+        self.request("task", str(task))
 
     def request_restart(self) -> None:
-        """Asks the sim thread to restart the current trial."""
-        self.commands.put(Command("restart"))
+        """Asks to restart the demo trial."""
+        self.request("restart")
 
     def scene_nodes(self) -> list[str]:
         """Names of the scene nodes the views own (sorted)."""
@@ -333,19 +391,27 @@ class ViewerApp:
         return sorted(names)
 
     def stats(self) -> dict[str, float]:
-        """Timing of both loops: CPU cost of one view update [ms] (mean, p95, max over the
-        last 600 updates; thread CPU time, so preemption by other processes is not
-        counted), number of view updates, simulated/wall time ratio, and the sim thread's
-        CPU share (CPU seconds spent in ``advance`` per wall second)."""
+        """Timing: CPU cost of one view update [ms] (mean, p95, max over the last 600;
+        thread CPU time, so preemption is not counted), view updates and their rate per
+        wall second, AG parameter updates sent, and the live trial's loop figures
+        (``control_hz``, ``realtime_factor``, ... as its ``timing()`` reports them)."""
         costs = np.array(self._view_costs) * 1e3
-        return {
+        wall = time.perf_counter() - self._t_started if self._t_started else 0.0
+        out = {
             "view_updates": float(self._view_updates),
+            "view_rate_hz": self._view_updates / wall if wall > 0 else 0.0,
             "view_ms_mean": float(costs.mean()) if len(costs) else float("nan"),
             "view_ms_p95": float(np.percentile(costs, 95)) if len(costs) else float("nan"),
             "view_ms_max": float(costs.max()) if len(costs) else float("nan"),
-            "sim_realtime_factor": self._sim_time / self._sim_wall if self._sim_wall else 0.0,
-            "sim_load": self._sim_cost / self._sim_wall if self._sim_wall else 0.0,
+            "audio_updates": float(self.audio.sent) if self.server is not None else 0.0,
         }
+        trial = self.controller.trial
+        timing = trial.timing() if trial is not None else None
+        d = timing.to_dict() if hasattr(timing, "to_dict") else {}
+        for k, v in d.items():
+            if isinstance(v, int | float):
+                out[f"trial_{k}"] = float(v)
+        return out
 
     # -- scene and GUI -------------------------------------------------------------------
     def _build_scene(self) -> None:
@@ -353,87 +419,93 @@ class ViewerApp:
         assert s is not None
         s.scene.set_up_direction("+z")
         self.organs = [OrganView(s, o) for o in self._organs()]
-        self._shown_physics = -1
         self.trocars = trocar_points()
         # The instrument ports (the camera port is where the default view looks through).
         ports = self.trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
         s.scene.add_point_cloud("/trocars", ports.astype(np.float32), (40, 40, 40),
                                 point_size=0.004, point_shape="circle", precision="float32")
-        trocar = self._tool_trocar(self._snapshot.info)
+        info = self._snapshot.info
+        trocar = tool_trocar(info.config.task, info.start)
         self.tool = ToolView(s, trocar)
         self.trajectory = TrajectoryView(s)
         self.arrows = ArrowView(s)
         self.ghost = GhostView(s, trocar)
         self.camera = CameraController(s, endoscope_pose())
         self.camera.apply_initial()
+        self.drag = DragInput(s, lambda: self.controller.browser, self._guard)
+        self.audio = AudioStream(s, rate_hz=self.audio_hz)
 
     def _organs(self) -> list[Organ]:
-        """The organs to draw: the abdomen's surfaces as the trial's physics has them (the
+        """The organs to draw: the scene's surfaces as the trial's physics has them (the
         vertex order of each model is its mesh's), or the static anatomy without a scene."""
-        abdomen = self._runner.abdomen
-        if abdomen is None:
+        frame = self._snapshot.frame
+        snap = frame.abdomen
+        if snap is None:
             return default_anatomy()
-        snap = abdomen.latest
+        runner = getattr(self.controller.trial, "runner", None)
+        abdomen = getattr(runner, "abdomen", None)
+        if abdomen is not None:
+            models = list(abdomen.models)
+        else:
+            from vasim.abdomen.scene import load_scene
+
+            models = list(load_scene(self.scene_name).build())
         return [Organ(name=m.name,
                       mesh=trimesh.Trimesh(np.array(snap.organ(m.name).surface), m.faces,
                                            process=False),
                       color=m.color, delicate=m.delicate, kind=m.kind)  # type: ignore[arg-type]
-                for m in abdomen.models]
-
-    def _show_physics(self, frame: TrialFrame) -> None:
-        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
-        snap = frame.abdomen
-        if snap is None or snap.seq == self._shown_physics:
-            return
-        self._shown_physics = snap.seq
-        for view in self.organs:
-            try:
-                view.update(snap.organ(view.organ.name).surface)
-            except KeyError:  # an organ the scene does not simulate stays where it is
-                continue
-        if len(snap.targets) == len(self.trajectory.points):
-            self.trajectory.move(snap.targets, snap.target_normals
-                                 if frame.n_points == 1 else None)
+                for m in models]
 
     def _build_gui(self) -> None:
         s = self.server
         assert s is not None
         gui = s.gui
-        info = self._snapshot.info
-        with gui.add_folder("Demo trial"):
-            names = available_schemas()
-            if info.schema not in names:  # a schema given as a file path
-                names = (*names, info.schema)
-            self.schema_menu = gui.add_dropdown("Fixture schema", names,
-                                                initial_value=info.schema)
-            self.task_menu = gui.add_dropdown("Task", ("trajectory", "point"),
-                                              initial_value=info.config.task)
-            self.restart_button = gui.add_button("Restart trial")
+        p = self.controller.panel
+        tabs = gui.add_tab_group()
+        with tabs.add_tab("Trainee"):
+            self.hud = HudView(s)
             self.follow_camera = gui.add_checkbox(
                 "Mag drives the camera", initial_value=True,
                 hint="Off: orbit freely even when the schema has Mag")
-        self.hud = HudView(s)
-
-        self.schema_menu.on_update(self._guard(self._on_schema_menu))
-        self.task_menu.on_update(self._guard(self._on_task_menu))
-        self.restart_button.on_click(self._guard(lambda ev: self.request_restart()))
+            gui.add_markdown("*Input “browser”: drag the gizmo on the tool tip.*")
+        with tabs.add_tab("Experimenter"):
+            self.panel_view = ExperimenterPanel(
+                s, self.submit, self._guard, p, schema_choices(p.schema),
+                available_protocols())
         self.follow_camera.on_update(self._guard(
             lambda ev: setattr(self.camera, "follow", bool(ev.target.value))))
 
-    def _on_schema_menu(self, event: viser.GuiEvent) -> None:
-        if not getattr(self._local, "syncing_menus", False):
-            self.request_schema(event.target.value)
+    def _build_mrcp_panel(self) -> Any:
+        """The MRCP panel for a scene with a slave station, else None.
 
-    def _on_task_menu(self, event: viser.GuiEvent) -> None:
-        if not getattr(self._local, "syncing_menus", False):
-            self.request_task(event.target.value)
+        Hook: when scenes gain robots, build the panel here (the robots as scene nodes,
+        which one holds the task, NTT and texec/tus per robot as uPlot plots) and feed it in
+        :meth:`render` from the frame's MRCP state. No shipped scene has robots, so no
+        panel (and no placeholder) is built.
+        """
+        from vasim.abdomen.scene import load_scene
+
+        if self.scene_name == "none":
+            return None
+        robots = getattr(load_scene(self.scene_name), "robots", ())
+        if robots:
+            raise ConfigError(f"scene {self.scene_name!r} has robots, but the viewer has no "
+                              "MRCP panel yet", field="scene")
+        return None
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
         self.camera.on_connect(client)
+        self.audio.install(client)
+        enabled = [False]
+        button = client.gui.add_button("Enable audio", icon=viser.Icon.VOLUME,
+                                       hint="browsers play sound only after a click")
 
-    def _tool_trocar(self, info: TrialInfo) -> FloatArray:
-        """The port the instrument enters through (the trial's, see ``tool_trocar``)."""
-        return tool_trocar(info.config.task, info.start)
+        def toggle(event: Any) -> None:
+            enabled[0] = not enabled[0]
+            self.audio.enable(client, enabled[0])
+            button.label = "Mute audio" if enabled[0] else "Enable audio"
+
+        button.on_click(self._guard(toggle))
 
     # -- errors --------------------------------------------------------------------------
     def _report(self, message: str) -> None:
@@ -466,98 +538,31 @@ class ViewerApp:
 
         return wrapped
 
-    # -- simulation thread ---------------------------------------------------------------
-    def _publish_new_trial(self) -> Snapshot:
-        runner = self._runner
-        self._trial_number += 1
-        task = runner.task
-        info = TrialInfo(
-            number=self._trial_number, config=runner.config, schema=runner.schema.name,
-            fixtures=tuple(runner.schema.fixture_names), task_name=task.name,
-            points=np.array(task.points, dtype=np.float64),
-            normals=None if task.normals is None else np.array(task.normals),
-            reach_radius=float(task.reach_radius), start=np.array(task.start),
-        )
-        snap = Snapshot(info, runner.frame)
-        self._snapshot = snap
-        return snap
-
-    def _start_trial(self, config: TrialConfig) -> None:
-        self._runner = TrialRunner(config)  # raises ConfigError: the old trial goes on
-        self._publish_new_trial()
-
-    def _handle(self, cmd: Command) -> None:
-        cfg = self._runner.config
-        if cmd.kind == "restart":
-            self._start_trial(cfg)
-        elif cmd.kind == "schema":
-            if cmd.value == cfg.schema:
-                return
-            schema = load_schema(cmd.value)
-            task = cfg.task if schema.task in ("any", cfg.task) else schema.task
-            variant = cfg.variant if task == cfg.task else 0
-            self._start_trial(replace(cfg, schema=cmd.value, task=task, variant=variant))
-        elif cmd.kind == "task":
-            if cmd.value == cfg.task:
-                return
-            if cmd.value not in DEFAULT_SCHEMA_FOR_TASK:
-                raise ConfigError(f"unknown task {cmd.value!r} (trajectory, point)",
-                                  field="task")
-            schema = cfg.schema
-            if self._runner.schema.task not in ("any", cmd.value):
-                schema = DEFAULT_SCHEMA_FOR_TASK[cmd.value]
-            self._start_trial(replace(cfg, task=cmd.value, schema=schema, variant=0))  # type: ignore[arg-type]
-        else:
-            raise ConfigError(f"unknown command {cmd.kind!r}")
-
-    def _next_trial(self) -> None:
-        cfg = self._runner.config
-        variant = (cfg.variant + 1) % TRAJECTORY_VARIANTS if cfg.task == "trajectory" else 0
-        self._start_trial(replace(cfg, variant=variant, seed=cfg.seed + 1))
-
-    def _sim_loop(self) -> None:
-        guarded_handle = self._guard(self._handle)
-        last = time.perf_counter()
-        debt = 0.0  # simulated time owed to the runner [s], < one control step
-        done_since: float | None = None
-        while not self._stop.is_set():
-            tick = time.perf_counter()
+    # -- controller thread ---------------------------------------------------------------
+    def _control_loop(self) -> None:
+        ctl = self.controller
+        handle = self._guard(ctl.handle)
+        try:
+            while not self._stop.is_set():
+                tick = time.perf_counter()
+                try:
+                    while True:
+                        try:
+                            cmd = self.commands.get_nowait()
+                        except queue.Empty:
+                            break
+                        handle(cmd)
+                    ctl.poll()
+                except Exception as exc:  # never let the thread die silently
+                    log.exception("viewer controller step failed")
+                    self._report(f"controller error: {type(exc).__name__}: {exc}")
+                    self._stop.wait(0.5)
+                self._stop.wait(max(0.0, self.control_period - (time.perf_counter() - tick)))
+        finally:
             try:
-                trial_before = self._snapshot.info
-                while True:
-                    try:
-                        cmd = self.commands.get_nowait()
-                    except queue.Empty:
-                        break
-                    guarded_handle(cmd)
-                if self._snapshot.info is not trial_before:
-                    debt, done_since = 0.0, None
-                now = time.perf_counter()
-                cpu0 = time.thread_time()
-                elapsed = min(now - last, self.max_catch_up_s)
-                last = now
-                runner = self._runner
-                if not runner.done:
-                    dt = runner.config.dt
-                    debt += elapsed * self.speed
-                    n = int(debt / dt + 1e-9)
-                    if n > 0:
-                        debt -= n * dt
-                        frame = runner.advance(n * dt)
-                        self._snapshot = Snapshot(self._snapshot.info, frame)
-                        self._sim_time += n * dt
-                    self._sim_cost += time.thread_time() - cpu0
-                    self._sim_wall += elapsed
-                elif done_since is None:
-                    done_since = now
-                elif now - done_since >= self.pause_s:
-                    self._next_trial()
-                    debt, done_since = 0.0, None
-            except Exception as exc:  # never let the thread die silently
-                log.exception("viewer simulation step failed")
-                self._report(f"simulation error: {type(exc).__name__}: {exc}")
-                self._stop.wait(0.5)
-            self._stop.wait(max(0.0, self.sim_period - (time.perf_counter() - tick)))
+                ctl.close()  # on this thread: the store belongs to it
+            except Exception:
+                log.exception("closing the training controller failed")
 
     # -- view thread ---------------------------------------------------------------------
     def _view_loop(self) -> None:
@@ -572,25 +577,31 @@ class ViewerApp:
             self._stop.wait(max(0.0, self.view_period - (time.perf_counter() - tick)))
 
     def render(self) -> bool:
-        """Updates every view from the latest snapshot; returns False if nothing was new."""
+        """Updates every view from the current frame; returns False if nothing was new."""
         server = self.server
-        snap = self._snapshot
-        if server is None or (snap.info is self._shown and snap.frame is self._shown_frame):
+        if server is None:
+            return False
+        self.panel_view.show(self.controller.panel)
+        info, frame = self.controller.current()
+        if info is self._shown and frame is self._shown_frame:
             return False
         t0 = time.thread_time()  # CPU time of this thread: robust to preemption
-        info, frame = snap.info, snap.frame
         out = frame.outputs
         new_trial = info is not self._shown
+        self._snapshot = Snapshot(info, frame)
         with server.atomic():
             if new_trial:
                 self._show_trial(info)
-            self._show_physics(frame)
+            self._show_physics(info, frame)
             self.tool.update(frame.tcp)
             self.trajectory.update(frame.goal_index)
             self.arrows.update(out.arrows)
             self.ghost.update(out.ghost)
             self.hud.update(self._hud_info(info, frame), force=new_trial or frame.done)
+            self.panel_view.show_live(info, frame, force=new_trial or frame.done)
+            self.drag.update(frame.tcp, info.input == "browser" and not frame.done)
         self.camera.update(out.camera)
+        self.audio.update(out.audio)
         self._shown, self._shown_frame = info, frame
         self._view_costs.append(time.thread_time() - t0)
         self._view_updates += 1
@@ -598,21 +609,24 @@ class ViewerApp:
 
     def _show_trial(self, info: TrialInfo) -> None:
         self.trajectory.set_task(info.points, info.reach_radius, info.normals)
-        trocar = self._tool_trocar(info)
+        trocar = tool_trocar(info.config.task, info.start)
         self.tool.set_trocar(trocar)
         self.ghost.trocar = trocar
-        # Keep the menus in step with what runs (e.g. a point schema switched the task).
-        # Assigning a value runs the menu's callbacks synchronously in this thread: the
-        # thread-local flag keeps them from queueing a command, which could otherwise land
-        # after (and undo) a choice the user made a moment ago.
-        self._local.syncing_menus = True
-        try:
-            if self.schema_menu.value != info.schema:
-                self.schema_menu.value = info.schema
-            if self.task_menu.value != info.config.task:
-                self.task_menu.value = info.config.task
-        finally:
-            self._local.syncing_menus = False
+
+    def _show_physics(self, info: TrialInfo, frame: TrialFrame) -> None:
+        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
+        snap = frame.abdomen
+        if snap is None or snap.seq == self._shown_physics:
+            return
+        self._shown_physics = snap.seq
+        for view in self.organs:
+            try:
+                view.update(snap.organ(view.organ.name).surface)
+            except (KeyError, ValueError):  # an organ this scene does not simulate
+                continue
+        if len(snap.targets) == len(info.points):
+            self.trajectory.move(snap.targets, snap.target_normals
+                                 if frame.n_points == 1 else None)
 
     @staticmethod
     def _hud_info(info: TrialInfo, frame: TrialFrame) -> HudInfo:
@@ -631,12 +645,23 @@ class ViewerApp:
         )
 
 
+def default_schema(task: str) -> str:
+    """The schema ``vasim serve`` starts with for ``task``."""
+    if task not in DEFAULT_SCHEMA_FOR_TASK:
+        raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
+    load_schema(DEFAULT_SCHEMA_FOR_TASK[task])
+    return DEFAULT_SCHEMA_FOR_TASK[task]
+
+
 __all__ = [
     "DEFAULT_SCHEMA_FOR_TASK",
     "Command",
+    "DragInput",
     "Snapshot",
     "TrialInfo",
     "ViewerApp",
+    "check_bind_address",
+    "default_schema",
     "endoscope_pose",
     "is_loopback",
 ]

@@ -1,8 +1,9 @@
-"""``vasim serve``: the browser training viewer on the demo scene.
+"""``vasim serve``: the browser training viewer.
 
-A scripted operator runs trials in real time (looping over the trajectory variants) and the
-browser shows the abdomen, the task, the tool and the fixture overlays; the page lets the
-user switch the fixture schema and the task and restart the trial.
+It starts in demo mode (a scripted operator plays trials in real time); the page's
+Experimenter tab switches to free training or a protocol session (stored in ``--db``), picks
+the schema and edits its f5PL curves, and shows progress, live metrics and the learning
+curve; the Trainee tab shows the abdomen, the tool, the task and the fixture overlays.
 """
 
 from __future__ import annotations
@@ -19,11 +20,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``vasim serve`` to the ``vasim`` command line."""
     p = sub.add_parser(
         "serve",
-        help="start the browser viewer (demo scene with a running scripted trial)",
+        help="start the browser training viewer (trainee view and experimenter panel)",
         description=(
-            "Serve the training viewer: the virtual abdomen, the task, the tool and the "
-            "fixture overlays of a scripted trial running in real time. Open the printed URL "
-            "in a browser; Ctrl-C stops the server."
+            "Serve the training viewer: the trainee's view (the deforming abdomen, the tool, "
+            "the task and the fixture overlays, AG audible in the page) and the "
+            "experimenter's panel (subject, protocol, progress, start/stop, schema with live "
+            "f5PL editing, metrics, learning curve). Open the printed URL in a browser; "
+            "Ctrl-C stops the server."
         ),
     )
     p.add_argument("--host", default="127.0.0.1",
@@ -32,6 +35,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--port", type=int, default=8080,
                    help="TCP port (default 8080; if busy, the next free port is used and "
                         "printed; 0 picks any free port)")
+    p.add_argument("--scene", default="default",
+                   help="abdomen scene of every trial, a name in protocols/scenes or a file "
+                        "(default: default; none: a static task without physics)")
+    p.add_argument("--db", default=None, metavar="FILE",
+                   help="study database (SQLite) that trials run from the viewer are stored "
+                        "in, like headless ones (default: none: demo mode only)")
     p.add_argument("--schema", default=None,
                    help="fixture schema of the demo trials, a name in protocols/schemas "
                         "(default: trajectory_following, or point_targeting with --task point)")
@@ -69,14 +78,17 @@ def serve(args: argparse.Namespace) -> int:
     if warning:
         print(warning, file=sys.stderr, flush=True)
     schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
-    app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill)
+    app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
+                    scene=getattr(args, "scene", "default"), db=getattr(args, "db", None))
     app.start()
     previous = _stop_on_sigterm()
     try:
         if app.port != args.port and args.port != 0:
             print(f"port {args.port} is busy; using {app.port}", file=sys.stderr)
-        print(f"vasim viewer: {app.url}  (schema {schema}, task {args.task}; Ctrl-C stops)",
-              flush=True)
+        db = getattr(args, "db", None)
+        stored = f"trials stored in {db}" if db else "demo only: no --db"
+        print(f"vasim viewer: {app.url}  (schema {schema}, task {args.task}, scene "
+              f"{getattr(args, 'scene', 'default')}, {stored}; Ctrl-C stops)", flush=True)
         t_end = None if args.duration is None else time.monotonic() + args.duration
         while t_end is None or time.monotonic() < t_end:
             time.sleep(0.2)

@@ -1,0 +1,725 @@
+"""The viewer's server-side training state: modes, sessions, the live trial, the store.
+
+One :class:`TrainingController` per server; **only the controller thread calls it** (the
+app's loop: ``handle`` for each queued :class:`Command`, then ``poll``), so the SQLite store
+(which belongs to the thread that opened it) and the running trial have one owner. GUI
+callbacks, from any browser tab, only queue commands; what the pages show is rebuilt from
+the immutable :class:`TrialInfo` / :class:`PanelState` the controller publishes. A reload or
+a second tab is just another reader: it cannot start a second trial or write one twice.
+
+Modes (**decisions**):
+
+* ``demo`` — the scripted operator plays trials by itself, looping over the trajectory
+  variants (what ``vasim serve`` shows at start). Demo trials are not stored: they are an
+  attract loop, not a subject's data.
+* ``free`` — free training: the experimenter picks the schema (and edits its f5PL
+  parameters), the trainee (or the scripted operator) runs one trial per "Start". Stored
+  like a headless ``vasim trial`` (no session, protocol None).
+* ``protocol`` — a study session: subject code + protocol; "Start" resumes the subject's
+  running session of that protocol or creates one (``vasim.study.session``), then runs the
+  first pending scheduled trial with the session's ``trial_config`` and stores it linked to
+  its schedule index (``TrialStore.begin_trial`` refuses a second running attempt, so a
+  double start from two tabs cannot duplicate a trial). The session completes when no
+  scheduled trial is pending.
+
+Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
+on completion the samples, per-point metrics, summary, events and trial metrics are
+written in one transaction; a stopped trial (Stop, a mode/schema change, the server
+shutting down) is marked 'interrupted' with what it recorded and the reason, and a
+scheduled trial stays pending.
+
+The scene of every trial is the server's ``--scene`` (also for protocol trials, whose
+``trial_config`` leaves the scene at its default); it is stored in the trial's config.
+Browser- or device-driven trials store ``operator = "browser"`` / the device name in the
+trial row and config (``TrialConfig.operator`` only admits ``"scripted"`` in this release:
+the config is run with it and the stored record is corrected).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vasim.errors import ConfigError, StoreError, VasimError
+from vasim.fixtures.logistic import Logistic5
+from vasim.fixtures.schema import Schema, available_schemas, load_schema
+from vasim.haptics.device import Device
+from vasim.haptics.devices.browser import BrowserDevice
+from vasim.study.trial import TrialConfig, TrialFrame, make_profile, make_task, trial_meta
+from vasim.tasks import TRAJECTORY_VARIANTS
+from vasim.viewer.live import LiveTrial, make_live_trial
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+Mode = Literal["demo", "free", "protocol"]
+InputKind = Literal["scripted", "browser"]
+MODES: tuple[str, ...] = ("demo", "free", "protocol")
+INPUTS: tuple[str, ...] = ("scripted", "browser")
+
+DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
+    "trajectory": "trajectory_following",
+    "point": "point_targeting",
+}
+"""Schema switched to when the chosen task does not fit the current task-specific schema."""
+
+CURVE_METRICS: tuple[str, ...] = ("completion_time", "mean_latency")
+"""Per-trial metrics of the learning curve (seconds both: one axis)."""
+
+
+@dataclass(frozen=True)
+class Command:
+    """A request to the controller thread.
+
+    Attributes:
+        kind: ``mode`` (value: a ``MODES`` name), ``schema``, ``task``, ``input``
+            (``INPUTS``), ``subject`` (a subject code), ``protocol`` (a protocol name),
+            ``start``, ``stop``, ``restart``, ``f5pl`` (value: (fixture instance,
+            ``Logistic5``)), ``auto_advance`` (value: bool).
+        value: the argument.
+    """
+
+    kind: str
+    value: Any = None
+
+
+@dataclass(frozen=True, eq=False)
+class TrialInfo:
+    """What does not change during one trial (built once per trial).
+
+    Attributes:
+        number: trial counter since the server started (1, 2, ...).
+        config: the trial's configuration. schema: schema name. fixtures: its fixture
+        names. task_name: e.g. ``"trajectory/v3"``. points: (N, 3) POIs [m]. normals:
+        (N, 3) or None. reach_radius: [m]. start: (3,) tool start [m]. mode: the mode it
+        runs in. input: ``INPUTS``. trial_id: store id (None when not stored).
+        schedule_index: 0-based scheduled trial (protocol mode). condition: the protocol's
+        condition label (protocol mode).
+    """
+
+    number: int
+    config: TrialConfig
+    schema: str
+    fixtures: tuple[str, ...]
+    task_name: str
+    points: FloatArray
+    normals: FloatArray | None
+    reach_radius: float
+    start: FloatArray
+    mode: str = "demo"
+    input: str = "scripted"
+    trial_id: int | None = None
+    schedule_index: int | None = None
+    condition: str | None = None
+
+
+@dataclass(frozen=True)
+class PanelState:
+    """What the experimenter panel shows (published by the controller, immutable).
+
+    Attributes:
+        mode, input: current choices. schema, task: free-training / demo choices.
+        subject, protocol: chosen subject code and protocol (or None). session_id: the
+        session of the last protocol trial. position: 1-based scheduled trial running or
+        next. total: scheduled trials. completed: completed scheduled trials.
+        condition: condition of that trial. running: a trial runs. status: one line.
+        summary: last finished trial's summary (plain values) or None.
+        curve: learning curve so far of the subject, ``(n, completion_time, mean_latency)``
+        per completed stored trial (protocol trials of the session, or the subject's free
+        trials). auto_advance: start the next scheduled trial by itself.
+        f5pl: editable f5PL curves of the current schema: fixture instance -> params.
+        version: increments with every change.
+    """
+
+    mode: str = "demo"
+    input: str = "scripted"
+    schema: str = "trajectory_following"
+    task: str = "trajectory"
+    subject: str | None = None
+    protocol: str | None = None
+    session_id: int | None = None
+    position: int | None = None
+    total: int | None = None
+    completed: int | None = None
+    condition: str | None = None
+    running: bool = False
+    status: str = ""
+    summary: dict[str, Any] | None = None
+    curve: tuple[tuple[int, float, float], ...] = ()
+    auto_advance: bool = False
+    f5pl: tuple[tuple[str, Logistic5], ...] = ()
+    version: int = 0
+
+
+def f5pl_fields(schema: Schema) -> tuple[tuple[str, Logistic5], ...]:
+    """The f5PL parameter sets of a schema's fixtures, by instance name (MS has none)."""
+    out = []
+    for fx in schema.fixtures:
+        p = getattr(fx.params, "f5pl", None)
+        if isinstance(p, Logistic5):
+            out.append((fx.name, p))
+    return tuple(out)
+
+
+def with_f5pl(schema: Schema, instance: str, params: Logistic5) -> Schema:
+    """A copy of ``schema`` whose fixture ``instance`` has the f5PL ``params``.
+
+    Raises:
+        ConfigError: no such fixture, or it has no f5PL.
+    """
+    fixtures = []
+    found = False
+    for fx in schema.fixtures:
+        if fx.name == instance:
+            if not isinstance(getattr(fx.params, "f5pl", None), Logistic5):
+                raise ConfigError(f"fixture {instance!r} has no f5PL to edit",
+                                  field=f"fixtures.{instance}.f5pl")
+            fx = replace(fx, params=replace(fx.params, f5pl=params))
+            found = True
+        fixtures.append(fx)
+    if not found:
+        raise ConfigError(f"schema {schema.name!r} has no fixture {instance!r} (has "
+                          f"{', '.join(schema.fixture_names) or 'none'})", field="fixtures")
+    return replace(schema, fixtures=tuple(fixtures))
+
+
+def plain(v: Any) -> Any:
+    """A summary value as plain JSON-able Python (NaN -> None)."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    return v
+
+
+class TrainingController:
+    """Server-side state of the viewer (module docstring). Not thread-safe by design: one
+    controller thread calls ``handle``/``poll``/``close``; other threads read the published
+    ``info``, ``frame()`` and ``panel``.
+
+    Args:
+        scene: the abdomen scene of every trial (``"none"``: a static task).
+        db: the study store's path (opened on first use), or None (nothing is stored;
+            free training and protocols are then refused).
+        schema, task, skill, seed, variant: the first demo trial.
+        max_time: time limit of demo and free trials [s].
+        pause_s: wall time a finished trial is shown before the next starts (demo,
+            auto-advance) [s].
+        speed: simulated seconds per wall second (1 = real time).
+        trial_factory: builds the live trial (default ``make_live_trial``).
+
+    Raises:
+        ConfigError: for a bad first trial (before anything runs).
+    """
+
+    def __init__(self, *, scene: str = "default", db: str | Path | None = None,
+                 schema: str = "trajectory_following", task: str = "trajectory",
+                 skill: str = "intermediate", seed: int = 0, variant: int = 0,
+                 max_time: float = 180.0, pause_s: float = 1.5, speed: float = 1.0,
+                 trial_factory: Callable[..., LiveTrial] | None = None):
+        self.scene = scene
+        self.db = None if db is None else Path(db)
+        self.pause_s = float(pause_s)
+        self.speed = float(speed)
+        self.max_time = float(max_time)
+        self._factory = trial_factory or make_live_trial
+        self._store: Any = None
+        self._number = 0
+        self._trial: LiveTrial | None = None
+        self._schema_obj: Schema | None = None  # an edited schema (f5PL editor), if any
+        self._done_since: float | None = None
+        self._stored_done = False
+        self._closed = True
+        self.browser: BrowserDevice | None = None
+        """The device the page's drag input feeds (replaced per browser-driven trial)."""
+        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
+                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]
+        self.panel = PanelState(schema=schema, task=task,
+                                f5pl=f5pl_fields(load_schema(schema)))
+        self.info: TrialInfo = self._launch(self._base, mode="demo")
+        self._publish(status="demo: the scripted operator plays trials by itself")
+
+    # -- reading (any thread) -------------------------------------------------------------
+    def frame(self) -> TrialFrame:
+        """The running trial's latest frame."""
+        return self._pair[1].frame()
+
+    def current(self) -> tuple[TrialInfo, TrialFrame]:
+        """The current trial's info and latest frame, consistent with each other (one
+        reference is swapped when a trial starts: safe to call from any thread)."""
+        info, trial = self._pair
+        return info, trial.frame()
+
+    @property
+    def trial(self) -> LiveTrial | None:
+        return self._trial
+
+    def active(self) -> bool:
+        """True while a trial runs (started, not stopped, not finished)."""
+        return self._trial is not None and not self._closed and not self._trial.done
+
+    # -- publishing ---------------------------------------------------------------------
+    def _publish(self, **changes: Any) -> None:
+        p = self.panel
+        self.panel = replace(p, version=p.version + 1, **changes)
+
+    # -- the store ---------------------------------------------------------------------
+    def store(self) -> Any:
+        """The study store (opened on first use, on the controller thread).
+
+        Raises:
+            ConfigError: the server runs without ``--db``.
+        """
+        if self._store is None:
+            if self.db is None:
+                raise ConfigError("this server runs without a study database (start it with "
+                                  "--db FILE to store trials)", field="db")
+            from vasim.study.store import TrialStore
+
+            self._store = TrialStore(self.db)
+        return self._store
+
+    # -- trials ------------------------------------------------------------------------
+    def _launch(self, config: TrialConfig, *, mode: str, schema: Schema | None = None,
+                input_kind: str = "scripted", session: Any = None,
+                scheduled: Any = None) -> TrialInfo:
+        """Builds, registers (stored modes) and starts a trial; returns its info.
+
+        The old trial must already be closed. On failure nothing runs and the error is
+        raised (the caller reports it).
+        """
+        device: Device | None = None
+        if input_kind == "browser":
+            device = BrowserDevice()
+        trial = self._factory(config, device, schema=schema, speed=self.speed)
+        sch = schema if schema is not None else load_schema(config.schema)
+        task = make_task(config)
+        trial_id = None
+        if mode != "demo":
+            meta = trial_meta(config, sch, make_profile(config),
+                              session_id=None if session is None else session.id,
+                              schedule_index=None if scheduled is None else scheduled.index,
+                              protocol=None if session is None else session.protocol.name)
+            if input_kind != "scripted":
+                cfg = dict(meta.config or {})
+                cfg["operator"] = input_kind
+                cfg.pop("profile", None)  # no simulated person behind a device
+                meta = replace(meta, operator=input_kind, config=cfg)
+            trial_id = self.store().begin_trial(meta)
+        self._number += 1
+        self.info = TrialInfo(
+            number=self._number, config=config, schema=sch.name,
+            fixtures=tuple(sch.fixture_names), task_name=task.name,
+            points=np.array(task.points, dtype=np.float64),
+            normals=None if task.normals is None else np.array(task.normals),
+            reach_radius=float(task.reach_radius), start=np.array(task.start), mode=mode,
+            input=input_kind, trial_id=trial_id,
+            schedule_index=None if scheduled is None else scheduled.index,
+            condition=None if scheduled is None else scheduled.condition,
+        )
+        self.browser = device if isinstance(device, BrowserDevice) else None
+        self._trial = trial
+        self._done_since = None
+        self._stored_done = False
+        self._closed = False
+        trial.start()
+        self._pair = (self.info, trial)
+        return self.info
+
+    def _close_trial(self, reason: str) -> None:
+        """Stops the running trial; a stored one that is not done is marked interrupted."""
+        trial, info = self._trial, self.info
+        if trial is None or self._closed:
+            return
+        trial.stop()
+        self._closed = True
+        if info.trial_id is not None and not self._stored_done:
+            if trial.done:
+                self._store_result()
+            else:
+                res = trial.result()
+                self.store().mark_interrupted(
+                    info.trial_id, reason=reason, samples=res.samples,
+                    point_metrics=res.metrics, summary=_plain_dict(res.summary),
+                    events=res.events, trial_metrics=res.trial_metrics)
+                self._stored_done = True
+                self._publish(running=False, status=f"trial {info.trial_id} stopped "
+                              f"({reason}); it stays pending" if info.schedule_index
+                              is not None else f"trial {info.trial_id} stopped ({reason})")
+        self.browser = None
+
+    def _store_result(self) -> None:
+        """Stores the finished trial (one transaction) and publishes its summary."""
+        trial, info = self._trial, self.info
+        assert trial is not None
+        kw: dict[str, Any] = {}
+        if info.schedule_index is not None and self.panel.session_id is not None:
+            from vasim.study.session import load_session
+
+            kw["metric_params"] = load_session(self.store(), self.panel.session_id
+                                               ).metric_params
+        res = trial.result(**kw)
+        summary = _plain_dict(res.summary)
+        if info.trial_id is not None:
+            timing = trial.timing()
+            self.store().finish_trial(
+                info.trial_id, res.samples, res.metrics, res.summary, events=res.events,
+                timing=timing.to_dict() if hasattr(timing, "to_dict") else None,
+                trial_metrics=res.trial_metrics)
+        self._stored_done = True
+        changes: dict[str, Any] = {"running": False, "summary": summary}
+        if info.trial_id is not None:
+            changes["curve"] = self._curve()
+            changes["status"] = (f"trial {info.trial_id} stored "
+                                 f"({summary.get('points_reached')}/{summary.get('n_points')}"
+                                 f" points, {summary.get('duration', 0.0):.1f} s)")
+        if info.schedule_index is not None:
+            changes.update(self._progress())
+        self._publish(**changes)
+
+    def _curve(self) -> tuple[tuple[int, float, float], ...]:
+        """The learning curve so far: the session's completed trials in schedule order
+        (protocol), or the subject's completed free trials (free training)."""
+        st = self.store()
+        p = self.panel
+        if p.mode == "protocol" and p.session_id is not None:
+            ids = [int(i) for i in st.schedule(p.session_id)["trial_id"].dropna()]
+        else:
+            df = st.trials("completed", subject=p.subject or self._base.subject)
+            ids = [int(i) for i in df[df["session_id"].isna()]["id"]]
+        if not ids:
+            return ()
+        wide = st.trial_metrics(wide=True)
+        out = []
+        for n, tid in enumerate(ids, start=1):
+            if tid not in wide.index:
+                continue
+            row = wide.loc[tid]
+            out.append((n, *(float(row.get(m, math.nan)) for m in CURVE_METRICS)))
+        return tuple(out)  # type: ignore[arg-type]
+
+    # -- protocol sessions ---------------------------------------------------------------
+    def _session(self) -> Any:
+        """The subject's running session of the chosen protocol, created if none."""
+        from vasim.study.protocol import load_protocol
+        from vasim.study.session import SessionSettings, load_session, start_session
+
+        p = self.panel
+        if p.subject is None:
+            raise ConfigError("enter a subject code first", field="subject")
+        if p.protocol is None:
+            raise ConfigError("pick a protocol first", field="protocol")
+        st = self.store()
+        df = st.sessions(subject=p.subject, protocol=p.protocol)
+        running = df[df["status"] == "running"]
+        if len(running):
+            sid = int(running["id"].iloc[-1])
+        else:
+            settings = SessionSettings(extra={"ui": "vasim serve", "input": p.input,
+                                              "scene": self.scene})
+            sid = start_session(st, load_protocol(p.protocol), p.subject, settings=settings)
+        return load_session(st, sid)
+
+    def _progress(self) -> dict[str, Any]:
+        """Progress fields of the panel for the chosen subject and protocol."""
+        from vasim.study.session import load_session
+
+        p = self.panel
+        if p.session_id is None:
+            return {}
+        s = load_session(self.store(), p.session_id)
+        pending = s.pending
+        running = self.active() and self.info.schedule_index is not None
+        cur = self.info.schedule_index if running else (pending[0].index if pending else None)
+        return {"total": len(s.schedule), "completed": len(s.schedule) - len(pending),
+                "position": None if cur is None else cur + 1,
+                "condition": None if cur is None else s.schedule[cur].condition}
+
+    def _start_protocol_trial(self) -> None:
+        session = self._session()
+        self._publish(session_id=session.id)
+        pending = session.pending
+        if not pending:
+            from vasim.study.store import TrialStore
+
+            st: TrialStore = self.store()
+            if session.status == "running":
+                st.set_session_status(session.id, "completed")
+            self._publish(status=f"session {session.id} is complete", **self._progress())
+            return
+        nxt = pending[0]
+        cfg = replace(session.trial_config(nxt), scene=self.scene)
+        self._launch(cfg, mode="protocol", input_kind=self.panel.input, session=session,
+                     scheduled=nxt)
+        self._publish(running=True, summary=None, status=f"trial {nxt.index + 1} of "
+                      f"{len(session.schedule)} running ({nxt.condition})", **self._progress())
+
+    def _free_config(self) -> TrialConfig:
+        p = self.panel
+        base = self._base
+        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]
+                       variant=base.variant if p.task == "trajectory" else 0,
+                       subject=p.subject or base.subject, seed=base.seed + self._number)
+
+    # -- commands ---------------------------------------------------------------------
+    def handle(self, cmd: Command) -> None:
+        """Applies one command (controller thread). Raises ``VasimError`` for a bad one
+        (the caller reports it); the running trial is unaffected then."""
+        kind, value = cmd.kind, cmd.value
+        p = self.panel
+        if kind == "mode":
+            if value not in MODES:
+                raise ConfigError(f"unknown mode {value!r} ({', '.join(MODES)})", field="mode")
+            if value == p.mode:
+                return
+            if value != "demo":
+                self.store()  # refuse early without a database
+            self._close_trial(f"switched to {value} mode")
+            self._publish(mode=value, summary=None, running=False,
+                          status={"demo": "demo: the scripted operator plays trials by itself",
+                                  "free": "free training: pick a schema, then Start",
+                                  "protocol": "protocol: enter the subject code and pick a "
+                                              "protocol, then Start"}[value])
+            if value == "demo":
+                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]
+            elif value == "protocol" and p.subject and p.protocol:
+                self._publish(curve=(), **self._select_session())
+        elif kind == "schema":
+            self._set_schema(str(value))
+        elif kind == "task":
+            self._set_task(str(value))
+        elif kind == "input":
+            if value not in INPUTS:
+                raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
+                                  field="input")
+            self._publish(input=value)
+        elif kind == "subject":
+            from vasim.study.store import validate_subject_code
+
+            code = validate_subject_code(str(value).strip())
+            if self._running_stored():
+                raise ConfigError("stop the running trial before changing the subject",
+                                  field="subject")
+            self._publish(subject=code, session_id=None, position=None, total=None,
+                          completed=None, condition=None, curve=())
+            if p.mode == "protocol" and p.protocol:
+                self._publish(**self._select_session())
+        elif kind == "protocol":
+            from vasim.study.protocol import available_protocols
+
+            if value not in available_protocols():
+                raise ConfigError(f"unknown protocol {value!r} (available: "
+                                  f"{', '.join(available_protocols())})", field="protocol")
+            if self._running_stored():
+                raise ConfigError("stop the running trial before changing the protocol",
+                                  field="protocol")
+            self._publish(protocol=value, session_id=None, position=None, total=None,
+                          completed=None, condition=None, curve=())
+            if p.subject:
+                self._publish(**self._select_session())
+        elif kind == "start":
+            self._start()
+        elif kind == "stop":
+            if not self.active():
+                raise ConfigError("no trial is running", field="stop")
+            self._close_trial("stopped by the experimenter")
+            if self.info.trial_id is None:
+                self._publish(running=False, status="demo trial stopped")
+            elif self.info.schedule_index is not None:
+                self._publish(**self._progress())
+        elif kind == "restart":
+            if p.mode == "demo":
+                self._close_trial("restarted")
+                self._start_demo(self.info.config)
+            else:
+                raise ConfigError("use Stop, then Start (a stored trial is not restarted)",
+                                  field="restart")
+        elif kind == "f5pl":
+            instance, params = value
+            self._apply_f5pl(str(instance), params)
+        elif kind == "auto_advance":
+            self._publish(auto_advance=bool(value))
+        else:
+            raise ConfigError(f"unknown command {kind!r}")
+
+    def _running_stored(self) -> bool:
+        return self.active() and self.info.trial_id is not None
+
+    def _select_session(self) -> dict[str, Any]:
+        """Progress of the subject's running session of the chosen protocol (if any)."""
+        p = self.panel
+        st = self.store()
+        df = st.sessions(subject=p.subject, protocol=p.protocol)
+        running = df[df["status"] == "running"]
+        if not len(running):
+            from vasim.study.protocol import load_protocol
+
+            n = load_protocol(str(p.protocol)).n_trials
+            return {"session_id": None, "position": 1, "total": n, "completed": 0,
+                    "condition": None, "status": f"new session of {p.protocol} for "
+                    f"{p.subject}: Start runs trial 1 of {n}"}
+        self.panel = replace(p, session_id=int(running["id"].iloc[-1]))
+        prog = self._progress()
+        return {"session_id": self.panel.session_id, **prog,
+                "curve": self._curve(),
+                "status": f"session {self.panel.session_id} of {p.subject}: "
+                          f"{prog['completed']} of {prog['total']} done"}
+
+    def _start(self) -> None:
+        p = self.panel
+        if self.active() and p.mode != "demo":
+            raise ConfigError("a trial is already running (Stop it first)", field="start")
+        if p.mode == "demo":
+            self._close_trial("restarted")
+            self._start_demo(self.info.config)
+        elif p.mode == "free":
+            self._close_trial("replaced")
+            self._launch(self._free_config(), mode="free", schema=self._schema_obj,
+                         input_kind=p.input)
+            self._publish(running=True, summary=None,
+                          status=f"free training trial running ({self.info.schema})")
+        else:
+            self._close_trial("replaced")
+            self._start_protocol_trial()
+
+    def _start_demo(self, config: TrialConfig) -> None:
+        self._launch(replace(config, subject=self._base.subject), mode="demo",
+                     schema=self._schema_obj)
+        self._publish(running=True)
+
+    def _set_schema(self, name: str) -> None:
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol sets the schema; switch to free training to "
+                              "choose one", field="schema")
+        if name == p.schema and self._schema_obj is None:
+            return
+        schema = load_schema(name)
+        task = p.task if schema.task in ("any", p.task) else schema.task
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the schema",
+                              field="schema")
+        self._schema_obj = None
+        self._publish(schema=name, task=task, f5pl=f5pl_fields(schema))
+        if p.mode == "demo":
+            self._close_trial("schema changed")
+            variant = self.info.config.variant if task == self.info.config.task else 0
+            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]
+
+    def _set_task(self, task: str) -> None:
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol sets the task", field="task")
+        if task not in DEFAULT_SCHEMA_FOR_TASK:
+            raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
+        if task == p.task:
+            return
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the task", field="task")
+        schema = p.schema
+        if load_schema(schema).task not in ("any", task):
+            schema = DEFAULT_SCHEMA_FOR_TASK[task]
+        if schema != p.schema:
+            self._schema_obj = None
+        self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
+        if p.mode == "demo":
+            self._close_trial("task changed")
+            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]
+
+    def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
+        """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes
+        effect by starting the trial afresh with the edited schema, so every stored trial
+        ran with exactly the schema stored with it (a mid-trial change would not be)."""
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol's schemas are fixed; edit f5PL parameters in "
+                              "free training", field="f5pl")
+        if not isinstance(params, Logistic5):
+            raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
+        base = self._schema_obj if self._schema_obj is not None else load_schema(p.schema)
+        edited = with_f5pl(base, instance, params)
+        self._schema_obj = edited
+        self._publish(f5pl=f5pl_fields(edited),
+                      status=f"{instance}: f5PL a={params.a:g} b={params.b:g} c={params.c:g} "
+                             f"d={params.d:g} g={params.g:g}")
+        if p.mode == "demo":
+            self._close_trial("f5PL edited")
+            self._start_demo(self.info.config)
+        elif self._running_stored():
+            self._close_trial("f5PL edited")
+            self._launch(self._free_config(), mode="free", schema=edited, input_kind=p.input)
+            self._publish(running=True, summary=None)
+
+    # -- the loop ------------------------------------------------------------------------
+    def poll(self, now: float | None = None) -> None:
+        """Stores a finished trial; loops the demo; auto-advances a protocol."""
+        now = time.monotonic() if now is None else now
+        trial = self._trial
+        if trial is None or not trial.done or (self._closed and self._stored_done):
+            return
+        if not self._stored_done:
+            trial.stop()
+            if self.info.mode == "demo":
+                self._stored_done = True
+            else:
+                self._store_result()
+        if self._done_since is None:
+            self._done_since = now
+            return
+        if now - self._done_since < self.pause_s:
+            return
+        p = self.panel
+        if p.mode == "demo" and self.info.mode == "demo":
+            cfg = self.info.config
+            variant = (cfg.variant + 1) % TRAJECTORY_VARIANTS if cfg.task == "trajectory" else 0
+            self._start_demo(replace(cfg, variant=variant, seed=cfg.seed + 1))
+        elif (p.mode == "protocol" and p.auto_advance and self.info.schedule_index is not None
+              and p.position is not None):
+            self._start_protocol_trial()
+        else:
+            self._done_since = math.inf  # hold the final frame until the next command
+
+    def close(self) -> None:
+        """Stops the trial (a stored one is marked interrupted) and closes the store."""
+        try:
+            self._close_trial("viewer stopped")
+        except (VasimError, StoreError):
+            log.exception("closing the running trial failed")
+        finally:
+            if self._store is not None:
+                self._store.close()
+                self._store = None
+
+
+def _plain_dict(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: plain(v) for k, v in d.items()}
+
+
+def schema_choices(current: str) -> tuple[str, ...]:
+    """The schema menu: the shipped schemas (plus ``current`` if it is a file path)."""
+    names = available_schemas()
+    return names if current in names else (*names, current)
+
+
+__all__ = [
+    "CURVE_METRICS",
+    "DEFAULT_SCHEMA_FOR_TASK",
+    "INPUTS",
+    "MODES",
+    "Command",
+    "PanelState",
+    "TrainingController",
+    "TrialInfo",
+    "f5pl_fields",
+    "plain",
+    "schema_choices",
+    "with_f5pl",
+]

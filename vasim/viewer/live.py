@@ -1,0 +1,267 @@
+"""A trial running in real time for the viewer, with the shape of ``RealtimeTrial``.
+
+The haptics layer is adding ``vasim.haptics.realtime.RealtimeTrial`` (the servo loop driving
+a trial at 1 kHz on its own thread). The viewer codes against that interface::
+
+    RealtimeTrial(config, device=None, *, schema=None, physics=..., rate_hz=1000.0)
+    .start(); .stop(); .done; .frame() -> TrialFrame; .timing(); .result(**kw)
+
+:class:`SimThreadTrial` is the viewer's own implementation of that shape: one thread
+advances a ``TrialRunner`` by the wall-clock time elapsed since its previous iteration
+(``loop_hz``, 120 Hz), capped at ``max_catch_up_s`` so a stall slows the trial down
+instead of fast-forwarding it; the sub-step remainder is carried over, so simulated time
+tracks wall time (times ``speed``). :func:`make_live_trial` picks ``RealtimeTrial`` when the
+module exists and ``speed`` is 1, else this class: swapping is that one function.
+
+Input devices: a ``TrialRunner`` asks its operator for the master increment dX_M each step
+(``step(observation)``). :class:`DeviceOperator` turns any ``vasim.haptics`` ``Device``
+(the browser's dragged tool tip, a haptic device) into such an operator: dX_M is the
+difference of two successive readings; an invalid reading or a held clutch button
+(``BUTTON_2``, the servo loop's clutch) moves nothing, and the first reading after either
+is the new reference (indexing, as the servo loop's clutch does).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from vasim.errors import ConfigError
+from vasim.fixtures.schema import Schema
+from vasim.haptics.device import BUTTON_2, Device
+from vasim.haptics.scripted import OperatorObservation
+from vasim.study.trial import TrialConfig, TrialFrame, TrialResult, TrialRunner
+
+log = logging.getLogger(__name__)
+
+
+class LiveTrial(Protocol):
+    """What the viewer needs from a trial running in real time (``RealtimeTrial``'s shape)."""
+
+    @property
+    def done(self) -> bool: ...
+
+    def start(self) -> Any: ...
+
+    def stop(self) -> None: ...
+
+    def frame(self) -> TrialFrame: ...
+
+    def timing(self) -> Any: ...
+
+    def result(self, **kw: Any) -> TrialResult: ...
+
+
+class DeviceOperator:
+    """A ``Device`` as a ``TrialRunner`` operator (module docstring).
+
+    Args:
+        device: a started device.
+        clutch_button: button bitmask that decouples the master while held.
+
+    Attributes:
+        steps, moved: steps answered and steps with a non-zero increment.
+    """
+
+    def __init__(self, device: Device, *, clutch_button: int = BUTTON_2):
+        self.device = device
+        self.clutch_button = int(clutch_button)
+        self._ref: tuple[float, float, float] | None = None
+        self.steps = 0
+        self.moved = 0
+
+    @property
+    def profile(self) -> None:
+        """No simulated person behind a device (``trial_meta`` reads this attribute)."""
+        return None
+
+    def reset(self, start: np.ndarray) -> None:
+        self._ref = None
+
+    def step(self, obs: OperatorObservation) -> tuple[float, float, float]:
+        """The master increment dX_M [m] since the previous step."""
+        self.steps += 1
+        self.device.write_force(np.asarray(obs.force, dtype=np.float64))
+        s = self.device.read()
+        if not s.valid or (s.buttons & self.clutch_button):
+            self._ref = None
+            return (0.0, 0.0, 0.0)
+        p = (float(s.position[0]), float(s.position[1]), float(s.position[2]))
+        ref, self._ref = self._ref, p
+        if ref is None:
+            return (0.0, 0.0, 0.0)
+        d = (p[0] - ref[0], p[1] - ref[1], p[2] - ref[2])
+        if d != (0.0, 0.0, 0.0):
+            self.moved += 1
+        return d
+
+
+@dataclass(frozen=True)
+class LoopStats:
+    """Timing of a :class:`SimThreadTrial` so far.
+
+    Attributes:
+        iterations: loop iterations. wall_s: wall time the trial has run [s].
+        sim_s: simulated time [s]. control_hz: control steps per wall second (the rate the
+        1 kHz loop actually achieved, in bursts of ~1000 / ``loop_hz`` steps).
+        realtime_factor: sim_s / wall_s. load: CPU seconds in the loop per wall second.
+    """
+
+    iterations: int
+    wall_s: float
+    sim_s: float
+    control_hz: float
+    realtime_factor: float
+    load: float
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        d: dict[str, float | int | str] = {k: getattr(self, k) for k in self.__annotations__}
+        d["mode"] = "viewer-sim-thread"
+        return d
+
+
+class SimThreadTrial:
+    """A ``TrialRunner`` advanced in real time on its own thread (module docstring).
+
+    Args:
+        config: the trial. device: input device (None: the scripted operator of ``config``).
+        schema: a loaded schema overriding ``config.schema`` (the f5PL editor's).
+        physics: accepted for interface compatibility; the physics runs inside the
+            runner's steps on this thread.
+        rate_hz: the control rate [Hz]; must equal 1 / ``config.dt``.
+        speed: simulated seconds per wall second (1 = real time; demos and tests go faster).
+        loop_hz: iterations per second of the thread.
+        max_catch_up_s: most simulated time one iteration may advance [s].
+
+    Raises:
+        ConfigError: a bad schema/task (from ``TrialRunner``), rate or speed.
+    """
+
+    def __init__(self, config: TrialConfig, device: Device | None = None, *,
+                 schema: Schema | None = None, physics: str = "thread",
+                 rate_hz: float = 1000.0, speed: float = 1.0, loop_hz: float = 120.0,
+                 max_catch_up_s: float = 0.05):
+        if not (math.isfinite(speed) and speed > 0):
+            raise ConfigError(f"speed must be > 0, got {speed!r}", field="speed")
+        if abs(rate_hz * config.dt - 1.0) > 1e-9:
+            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
+                              f"{config.dt!r}", field="rate_hz")
+        self.config = config
+        self.runner = TrialRunner(config, schema)
+        self.device = device
+        if device is not None:
+            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]
+        self.speed = float(speed)
+        self.period = 1.0 / float(loop_hz)
+        self.max_catch_up_s = float(max_catch_up_s)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()  # result() vs the loop
+        self._iterations = 0
+        self._wall = 0.0
+        self._cpu = 0.0
+        self._t0_wall: float | None = None
+        self.error: BaseException | None = None
+        """An exception that stopped the loop (the trial is then done)."""
+
+    @property
+    def done(self) -> bool:
+        return bool(self.runner.done) or self.error is not None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> SimThreadTrial:
+        if self._thread is not None:
+            raise RuntimeError("SimThreadTrial.start() was already called")
+        if self.device is not None:
+            self.device.start()
+        self._t0_wall = time.perf_counter()
+        self._thread = threading.Thread(target=self._loop, name="vasim-viewer-trial",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stops the loop (joined); the trial keeps what it recorded. Idempotent."""
+        self._stop.set()
+        t = self._thread
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout)
+        if self.device is not None:
+            try:
+                self.device.stop()
+            except Exception:  # a device that fails to stop must not block the viewer
+                log.exception("device %s failed to stop", getattr(self.device, "name", "?"))
+
+    def frame(self) -> TrialFrame:
+        return self.runner.frame
+
+    def timing(self) -> LoopStats:
+        wall = self._wall
+        sim = self.runner.frame.t if self.runner.frame.k >= 0 else 0.0
+        steps = self.runner.frame.k + 1
+        return LoopStats(iterations=self._iterations, wall_s=wall, sim_s=sim,
+                         control_hz=steps / wall if wall > 0 else 0.0,
+                         realtime_factor=sim / wall if wall > 0 else 0.0,
+                         load=self._cpu / wall if wall > 0 else 0.0)
+
+    def result(self, **kw: Any) -> TrialResult:
+        """The runner's result (call after ``stop()`` or once ``done``)."""
+        with self._lock:
+            return self.runner.result(**kw)
+
+    def _loop(self) -> None:
+        runner = self.runner
+        dt = runner.config.dt
+        last = time.perf_counter()
+        debt = 0.0
+        while not self._stop.is_set() and not runner.done:
+            tick = time.perf_counter()
+            elapsed = min(tick - last, self.max_catch_up_s)
+            last = tick
+            cpu0 = time.thread_time()
+            debt += elapsed * self.speed
+            n = int(debt / dt + 1e-9)
+            try:
+                if n > 0:
+                    debt -= n * dt
+                    with self._lock:
+                        runner.advance(n * dt)
+            except Exception as exc:
+                log.exception("live trial step failed")
+                self.error = exc
+                return
+            self._cpu += time.thread_time() - cpu0
+            self._wall += elapsed
+            self._iterations += 1
+            self._stop.wait(max(0.0, self.period - (time.perf_counter() - tick)))
+
+
+def realtime_available() -> bool:
+    """True when ``vasim.haptics.realtime`` (the 1 kHz servo-loop trial) is installed."""
+    return importlib.util.find_spec("vasim.haptics.realtime") is not None
+
+
+def make_live_trial(config: TrialConfig, device: Device | None = None, *,
+                    schema: Schema | None = None, speed: float = 1.0) -> LiveTrial:
+    """The trial the viewer runs: ``RealtimeTrial`` in real time when it exists (not
+    started), else :class:`SimThreadTrial` (also for ``speed`` != 1, which the servo loop
+    does not offer)."""
+    if speed == 1.0 and realtime_available():
+        from vasim.haptics.realtime import RealtimeTrial  # type: ignore[import-not-found]
+
+        return RealtimeTrial(config, device, schema=schema)  # type: ignore[no-any-return]
+    return SimThreadTrial(config, device, schema=schema, speed=speed)
+
+
+__all__ = ["DeviceOperator", "LiveTrial", "LoopStats", "SimThreadTrial", "make_live_trial",
+           "realtime_available"]

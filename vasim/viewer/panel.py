@@ -1,0 +1,301 @@
+"""The experimenter's panel: mode, subject, protocol, progress, trial control, the fixture
+schema with live f5PL editing, live metrics, the end-of-trial summary and learning curve.
+
+The panel only reads and queues: every control's callback turns into a controller
+``Command`` passed to ``submit`` (the app queues it for the controller thread), and
+:meth:`ExperimenterPanel.show` redraws the panel from the controller's immutable
+``PanelState`` when its version changes. Writing a control's value from the server runs
+that control's callbacks in the writing thread; a thread-local flag keeps those from
+queueing commands (they would echo the state back).
+
+Subject-entered text (the subject code) and every other string reaches markdown through
+:func:`md_escape`: viser does not sanitise markdown or HTML.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import re
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import viser
+from numpy.typing import NDArray
+
+from vasim.fixtures.logistic import Logistic5
+from vasim.study.trial import TrialFrame
+from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
+
+FloatArray = NDArray[np.float64]
+
+NO_PROTOCOL = "(choose)"
+"""The protocol menu's entry before a protocol is picked."""
+
+F5PL_FIELDS: tuple[str, ...] = ("a", "b", "c", "d", "g")
+
+_MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+\-.!|~>])")
+
+
+def md_escape(text: object) -> str:
+    """``text`` safe inside viser markdown: HTML-escaped, markdown punctuation backslashed.
+
+    >>> md_escape("<img src=x onerror=alert(1)>*S01*")
+    '&lt;img src=x onerror=alert\\\\(1\\\\)&gt;\\\\*S01\\\\*'
+    """
+    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=True))
+
+
+def f5pl_curve(p: Logistic5, n: int = 80) -> tuple[FloatArray, FloatArray]:
+    """The modulation curve to plot: x in [0, 3c] (the transition is centred on c), y = f5PL.
+
+    >>> x, y = f5pl_curve(Logistic5(a=0.0, b=4.0, c=0.02, d=1.0))
+    >>> round(float(x[-1]), 3), float(y[0]), round(float(y[-1]), 2)
+    (0.06, 0.0, 0.99)
+    """
+    x = np.linspace(0.0, 3.0 * p.c, n)
+    return x, np.asarray(p(x), dtype=np.float64)
+
+
+def progress_text(p: PanelState) -> str:
+    """The progress line: ``trial k of N`` and the current condition (markdown, escaped)."""
+    who = f"subject **{md_escape(p.subject)}**" if p.subject else "no subject yet"
+    if p.mode != "protocol":
+        return f"**{md_escape(p.mode)}** mode, {who}"
+    proto = md_escape(p.protocol) if p.protocol else "no protocol yet"
+    if p.total is None:
+        return f"protocol {proto}, {who}"
+    pos = "—" if p.position is None else str(p.position)
+    cond = f", condition **{md_escape(p.condition)}**" if p.condition else ""
+    return (f"protocol {proto}, {who}: trial **{pos} of {p.total}**{cond} "
+            f"({p.completed or 0} completed)")
+
+
+def summary_text(summary: dict[str, Any] | None) -> str:
+    """The end-of-trial summary as a markdown table (escaped), or a placeholder."""
+    if not summary:
+        return "*no finished trial yet*"
+    rows = []
+    for k, v in summary.items():
+        if isinstance(v, float):
+            v = "—" if not math.isfinite(v) else f"{v:.4g}"
+        elif v is None:
+            v = "—"
+        rows.append(f"| {md_escape(k)} | {md_escape(v)} |")
+    return "| metric | value |\n|---|---|\n" + "\n".join(rows)
+
+
+def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float]) -> str:
+    """Live metrics: current error, latency per reached point, time in trial (markdown)."""
+    err = float(np.linalg.norm(np.asarray(frame.tcp) - np.asarray(frame.goal))) * 1e3
+    lat = ", ".join(f"{x:.2f}" for x in latencies[-8:]) or "—"
+    more = f" (last 8 of {len(latencies)})" if len(latencies) > 8 else ""
+    state = "done" if frame.done else "running"
+    stored = "not stored" if info.trial_id is None else f"stored as trial {info.trial_id}"
+    return (f"| | |\n|---|---|\n"
+            f"| Trial | {info.number} ({md_escape(info.mode)}, {state}, {stored}) |\n"
+            f"| Time | {frame.t:.2f} s |\n"
+            f"| Current error | {err:.1f} mm |\n"
+            f"| Points | {min(frame.goal_index, frame.n_points)} / {frame.n_points} |\n"
+            f"| Latency per point [s] | {lat}{more} |")
+
+
+class ExperimenterPanel:
+    """The experimenter's controls (module docstring); build inside a tab or folder.
+
+    Args:
+        server: the viser server.
+        submit: queues a controller command.
+        guard: wraps a callback so that an exception is logged and notified.
+        panel: the first state to show.
+        schemas: schema menu entries. protocols: protocol menu entries.
+        metrics_hz: maximum rewrites per second of the live metrics.
+    """
+
+    def __init__(self, server: viser.ViserServer, submit: Callable[[Command], None],
+                 guard: Callable[[Callable[..., Any]], Callable[..., Any]],
+                 panel: PanelState, schemas: Sequence[str], protocols: Sequence[str], *,
+                 metrics_hz: float = 5.0):
+        gui = server.gui
+        self.submit = submit
+        self._local = threading.local()
+        self.min_interval = 1.0 / metrics_hz
+        self._last_metrics = -math.inf
+        self.shown_version = -1
+        self.f5pl: dict[str, Logistic5] = {}
+        self.metrics_md = ""
+        self.latencies: list[float] = []
+        self._lat_trial: int | None = None
+        self._lat_goal = 0
+
+        def on(handle: Any, fn: Callable[[Any], None]) -> None:
+            def cb(event: Any) -> None:
+                if not getattr(self._local, "syncing", False):
+                    fn(event)
+            handle.on_update(guard(cb))
+
+        self.status = gui.add_markdown("")
+        self.progress = gui.add_markdown(progress_text(panel))
+        self.progress_bar = gui.add_progress_bar(0.0, visible=False)
+        self.mode = gui.add_dropdown("Mode", MODES, initial_value=panel.mode,
+                                     hint="demo: the scripted operator plays by itself; "
+                                          "free: free training; protocol: a study session")
+        self.input = gui.add_dropdown("Input", INPUTS, initial_value=panel.input,
+                                      hint="scripted operator, or drag the tool tip's gizmo")
+        self.subject = gui.add_text("Subject code", panel.subject or "",
+                                    hint="a pseudonymous code (letters, digits, _ or -)")
+        self.set_subject = gui.add_button("Set subject")
+        self.protocol = gui.add_dropdown("Protocol", (NO_PROTOCOL, *protocols),
+                                         initial_value=panel.protocol or NO_PROTOCOL)
+        self.start = gui.add_button("Start trial", color="green")
+        self.stop = gui.add_button("Stop trial", color="red")
+        self.advance = gui.add_button("Next trial",
+                                      hint="start the next scheduled trial (protocol)")
+        self.auto_advance = gui.add_checkbox("Auto-advance", panel.auto_advance,
+                                             hint="start the next scheduled trial by itself")
+        with gui.add_folder("Fixture schema (free training)"):
+            self.schema = gui.add_dropdown("Schema", tuple(schemas), initial_value=panel.schema)
+            self.task = gui.add_dropdown("Task", ("trajectory", "point"),
+                                         initial_value=panel.task)
+            self.restart = gui.add_button("Restart demo trial")
+            self.fixture = gui.add_dropdown("f5PL of", ("—",), initial_value="—")
+            self.numbers = {k: gui.add_number(f"f5PL {k}", 1.0, step=1e-4) for k in F5PL_FIELDS}
+            self.apply = gui.add_button("Apply f5PL", hint="restarts the trial with the edit")
+            x, y = np.array([0.0, 1.0]), np.array([0.0, 0.0])
+            self.curve = gui.add_uplot(
+                (x, y), (viser.uplot.Series(label="x"),
+                         viser.uplot.Series(label="f5PL", stroke="#d9480f", width=2)),
+                title="modulation curve", scales={"x": {"time": False}}, aspect=1.6)
+        with gui.add_folder("Live metrics"):
+            self.metrics = gui.add_markdown("*no trial yet*")
+        with gui.add_folder("Last trial and learning curve"):
+            self.summary = gui.add_markdown(summary_text(None))
+            self.learning = gui.add_uplot(
+                (np.array([1.0]), np.array([math.nan]), np.array([math.nan])),
+                (viser.uplot.Series(label="trial"),
+                 viser.uplot.Series(label="completion time [s]", stroke="#1971c2", width=2),
+                 viser.uplot.Series(label="mean latency [s]", stroke="#2f9e44", width=2)),
+                title="learning curve", scales={"x": {"time": False}}, aspect=1.6)
+
+        on(self.mode, lambda e: submit(Command("mode", e.target.value)))
+        on(self.input, lambda e: submit(Command("input", e.target.value)))
+        self.set_subject.on_click(guard(
+            lambda e: submit(Command("subject", self.subject.value.strip()))))
+        on(self.protocol, lambda e: e.target.value != NO_PROTOCOL
+           and submit(Command("protocol", e.target.value)))
+        self.start.on_click(guard(lambda e: submit(Command("start"))))
+        self.stop.on_click(guard(lambda e: submit(Command("stop"))))
+        self.advance.on_click(guard(lambda e: submit(Command("start"))))
+        on(self.auto_advance, lambda e: submit(Command("auto_advance", bool(e.target.value))))
+        on(self.schema, lambda e: submit(Command("schema", e.target.value)))
+        on(self.task, lambda e: submit(Command("task", e.target.value)))
+        self.restart.on_click(guard(lambda e: submit(Command("restart"))))
+        on(self.fixture, lambda e: self._show_f5pl(e.target.value))
+        for h in self.numbers.values():
+            on(h, lambda e: self._preview())
+        self.apply.on_click(guard(lambda e: self._apply()))
+        self.show(panel)
+
+    # -- f5PL editor --------------------------------------------------------------------
+    def edited_params(self) -> Logistic5:
+        """The f5PL parameters in the number fields (ConfigError if invalid)."""
+        return Logistic5(**{k: float(self.numbers[k].value) for k in F5PL_FIELDS})
+
+    def _apply(self) -> None:
+        inst = self.fixture.value
+        if inst not in self.f5pl:
+            return
+        self.submit(Command("f5pl", (inst, self.edited_params())))
+
+    def _preview(self) -> None:
+        try:
+            p = self.edited_params()
+        except ValueError:
+            return  # an invalid value is refused on Apply, with its message
+        x, y = f5pl_curve(p)
+        self.curve.data = (x, y)
+
+    def _show_f5pl(self, instance: str) -> None:
+        p = self.f5pl.get(instance)
+        if p is None:
+            return
+        self._local.syncing = True
+        try:
+            for k in F5PL_FIELDS:
+                self.numbers[k].value = float(getattr(p, k))
+        finally:
+            self._local.syncing = False
+        x, y = f5pl_curve(p)
+        self.curve.data = (x, y)
+
+    # -- redraw ---------------------------------------------------------------------------
+    def show(self, p: PanelState) -> None:
+        """Redraws the panel from ``p`` (skipped when its version was shown already)."""
+        if p.version == self.shown_version:
+            return
+        self.shown_version = p.version
+        self._local.syncing = True
+        try:
+            self.status.content = md_escape(p.status) if p.status else ""
+            self.progress.content = progress_text(p)
+            if p.total:
+                self.progress_bar.value = 100.0 * (p.completed or 0) / p.total
+                self.progress_bar.visible = True
+            else:
+                self.progress_bar.visible = False
+            for handle, value in ((self.mode, p.mode), (self.input, p.input),
+                                  (self.schema, p.schema), (self.task, p.task),
+                                  (self.protocol, p.protocol or NO_PROTOCOL),
+                                  (self.auto_advance, p.auto_advance)):
+                if handle.value != value:
+                    if isinstance(handle, viser.GuiDropdownHandle) and \
+                            value not in handle.options:
+                        handle.options = (*handle.options, value)
+                    handle.value = value
+            free = p.mode != "protocol"
+            for h in (self.schema, self.task, self.fixture, self.apply,
+                      *self.numbers.values()):
+                h.disabled = not free
+            self.restart.visible = p.mode == "demo"
+            self.advance.visible = self.auto_advance.visible = p.mode == "protocol"
+            self.start.disabled = p.running and p.mode != "demo"
+            self.stop.disabled = not p.running
+            self.f5pl = dict(p.f5pl)
+            names = tuple(self.f5pl) or ("—",)
+            keep = self.fixture.value if self.fixture.value in names else names[0]
+            if tuple(self.fixture.options) != names:
+                self.fixture.options = names
+            if self.fixture.value != keep:
+                self.fixture.value = keep
+            self.summary.content = summary_text(p.summary)
+            if p.curve:
+                c = np.array(p.curve, dtype=np.float64)
+                self.learning.data = (c[:, 0], c[:, 1], c[:, 2])
+        finally:
+            self._local.syncing = False
+        self._show_f5pl(self.fixture.value)
+
+    def show_live(self, info: TrialInfo, frame: TrialFrame, now: float | None = None,
+                  *, force: bool = False) -> None:
+        """Collects the per-point latencies and rewrites the live metrics (rate-limited)."""
+        if self._lat_trial != info.number:
+            self._lat_trial, self._lat_goal, self.latencies = info.number, 0, []
+        if frame.goal_index > self._lat_goal:
+            if frame.last_latency is not None:
+                self.latencies.append(float(frame.last_latency))
+            self._lat_goal = frame.goal_index
+        now = time.perf_counter() if now is None else now
+        if not force and now - self._last_metrics < self.min_interval:
+            return
+        self._last_metrics = now
+        text = metrics_text(info, frame, self.latencies)
+        if text != self.metrics_md:
+            self.metrics_md = text
+            self.metrics.content = text
+
+
+__all__ = ["F5PL_FIELDS", "NO_PROTOCOL", "ExperimenterPanel", "f5pl_curve", "md_escape",
+           "metrics_text", "progress_text", "summary_text"]
