@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import sys
 import threading
 import time
@@ -388,6 +389,10 @@ class ServoLoop:
         spin_s: the part of each wait spent spinning instead of sleeping [s].
         switch_interval_s: ``sys.setswitchinterval`` while running in real time [s]
             (module docstring; None: leave it alone).
+        rt_priority: ask the OS to run the servo thread under real-time scheduling
+            (``SCHED_FIFO`` at this priority, 1-99) while it runs on its own thread; None
+            (default): normal scheduling. Refused (no privilege, another OS) -> a logged
+            ``priority`` event and normal scheduling; ``priority_granted`` tells which.
         record: keep every raw device reading (``recording``: a ``StreamRecorder`` for
             replay) and the per-tick outputs (``trace``).
 
@@ -403,7 +408,8 @@ class ServoLoop:
     def __init__(self, device: Device, plant: Plant, *, rate_hz: float = 1000.0,
                  home: ArrayLike | None = None, clutch_button: int = BUTTON_2,
                  workspace_margin_m: float = 0.01, spin_s: float = 2e-4,
-                 switch_interval_s: float | None = 5e-4, record: bool = False):
+                 switch_interval_s: float | None = 5e-4, record: bool = False,
+                 rt_priority: int | None = None):
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"rate_hz must be > 0, got {rate_hz!r}")
         if not (math.isfinite(spin_s) and spin_s >= 0):
@@ -412,6 +418,13 @@ class ServoLoop:
             raise ValueError(f"workspace_margin_m must be >= 0, got {workspace_margin_m!r}")
         if switch_interval_s is not None and not (switch_interval_s > 0):
             raise ValueError(f"switch_interval_s must be > 0 s, got {switch_interval_s!r}")
+        if rt_priority is not None and (isinstance(rt_priority, bool)
+                                        or not isinstance(rt_priority, int)
+                                        or not 1 <= rt_priority <= 99):
+            raise ValueError(f"rt_priority must be an integer in 1..99 or None, got "
+                             f"{rt_priority!r}")
+        self.rt_priority = rt_priority
+        self.priority_granted: bool | None = None
         self.device = device
         self.plant = plant
         self.rate_hz = float(rate_hz)
@@ -579,7 +592,25 @@ class ServoLoop:
                                  mode=self._mode or "simulated")
 
     # -- real time ------------------------------------------------------------------------
+    def _raise_priority(self) -> None:
+        """Real-time scheduling for the calling (servo) thread, if the OS grants it."""
+        prio = self.rt_priority
+        if prio is None:
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+        except (AttributeError, OSError) as exc:  # no privilege, or not Linux
+            self.priority_granted = False
+            msg = f"real-time priority {prio} refused ({type(exc).__name__}: {exc}); " \
+                  "normal scheduling"
+            self.events.append(ServoEvent("priority", self._k, msg))
+            log.info("%s", msg)
+            return
+        self.priority_granted = True
+        self.events.append(ServoEvent("priority", self._k, f"SCHED_FIFO priority {prio}"))
+
     def _run_realtime(self) -> None:
+        self._raise_priority()
         period = round(1e9 / self.rate_hz)
         spin = round(self.spin_s * 1e9)
         clock = time.perf_counter_ns

@@ -52,6 +52,21 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--db", type=Path, default=None,
                    help="SQLite study database to store the trial in")
     p.add_argument("--points", action="store_true", help="print the per-point table")
+    rt = p.add_argument_group(
+        "real time", "run the trial in real time through the 1 kHz haptic servo loop "
+        "(vasim.haptics.realtime), or replay a recorded real-time trial exactly")
+    rt.add_argument("--realtime", action="store_true",
+                    help="run in real time (servo loop, physics thread); prints the loop's "
+                         "timing; with --db the timing and the device recording are stored")
+    rt.add_argument("--device", choices=["scripted", "emulator", "openhaptics"],
+                    default="scripted",
+                    help="input device of a --realtime trial (default: the scripted "
+                         "operator; emulator: an emulated Omni held still)")
+    rt.add_argument("--physics", choices=["thread", "off"], default="thread",
+                    help="abdomen physics of a --realtime trial (default: its own thread)")
+    rt.add_argument("--replay", type=int, default=None, metavar="TRIAL_ID",
+                    help="re-run a stored real-time trial from its recording (needs --db) "
+                         "and compare it with the stored samples and metrics")
     p.set_defaults(func=_cmd_trial)
     _register_study(sub)
 
@@ -59,6 +74,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 def _cmd_trial(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
     from vasim.study.trial import TrialConfig, run_trial
+
+    if getattr(args, "replay", None) is not None:
+        return _cmd_replay(args)
+    if getattr(args, "realtime", False):
+        return _cmd_realtime(args)
 
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
@@ -79,6 +99,99 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     if args.points:
         print(result.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     return 0
+
+
+def _realtime_device(kind: str) -> object | None:
+    """The input device ``--device`` names (None: the scripted operator)."""
+    if kind == "scripted":
+        return None
+    if kind == "emulator":
+        import numpy as np
+
+        from vasim.haptics.devices.emulator import EmulatorDevice
+
+        return EmulatorDevice(hand=np.zeros(3))
+    from vasim.haptics.devices.openhaptics import OpenHapticsDevice
+
+    return OpenHapticsDevice()
+
+
+def _cmd_realtime(args: argparse.Namespace) -> int:
+    from vasim.haptics.realtime import run_realtime_trial
+    from vasim.study.store import TrialStore
+    from vasim.study.trial import TrialConfig
+
+    config = TrialConfig(
+        task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
+        skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
+        max_time=args.max_time, scene=args.scene,
+    )
+    device = _realtime_device(args.device)
+    store = None
+    if args.db is not None:
+        if args.db.exists() and args.db.is_dir():
+            raise ConfigError(f"--db {args.db} is a directory, expected a database file")
+        store = TrialStore(args.db)
+    try:
+        result, trial_id, timing = run_realtime_trial(
+            config, store, device, physics=args.physics)  # type: ignore[arg-type]
+    finally:
+        if store is not None:
+            store.close()
+    print(format_summary(result, trial_id, args.db))
+    print(format_timing(timing))
+    if args.points:
+        print(result.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    return 0
+
+
+def format_timing(timing: object) -> str:
+    """The servo loop's (and the physics thread's) timing of a real-time trial."""
+    from vasim.haptics.realtime import RealtimeTiming
+
+    assert isinstance(timing, RealtimeTiming)
+    s = timing.servo
+    rows = [
+        ("servo rate", f"{s.achieved_hz:.1f} Hz achieved (nominal {s.nominal_hz:g} Hz), "
+                       f"{s.n_ticks} ticks"),
+        ("servo period", f"p50 {s.period_p50_ms:.3f} / p99 {s.period_p99_ms:.3f} / max "
+                         f"{s.period_max_ms:.2f} ms, jitter {s.jitter_rms_ms:.3f} ms"),
+        ("overruns", f"{s.overruns} (period > {1.5:g} x nominal), {s.missed_deadlines} "
+                     "missed slots"),
+        ("tick cost", f"p50 {s.tick_cost_p50_ms:.3f} / p99 {s.tick_cost_p99_ms:.3f} ms"),
+        ("scheduling", {True: "real-time (SCHED_FIFO)", False: "normal (real-time priority "
+                        "refused)", None: "normal"}[timing.priority_granted]),
+    ]
+    p = timing.physics
+    if p is not None and p.get("steps"):
+        rows.append(("physics", f"{p['steps']} steps, {p['rate_hz']:.1f} Hz, step cost p50 "
+                                f"{1e3 * p['cost_p50']:.2f} ms"))
+    else:
+        rows.append(("physics", timing.physics_mode))
+    w = max(len(k) for k, _ in rows)
+    return "\n".join(f"{k:<{w}}  {v}" for k, v in rows)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from vasim.haptics.realtime import replay_trial
+    from vasim.study.store import TrialStore
+
+    if args.db is None:
+        raise ConfigError("--replay needs --db (the database the trial is stored in)",
+                          field="db")
+    if not args.db.is_file():
+        raise ConfigError(f"--db {args.db} does not exist", field="db")
+    store = TrialStore(args.db, readonly=True)
+    try:
+        report = replay_trial(store, args.replay)
+    finally:
+        store.close()
+    print(format_summary(report.result, args.replay, args.db))
+    same = report.samples_equal and report.metrics_equal
+    print(f"replay: {report.ticks} servo ticks from the recording; "
+          + ("samples and metrics identical to the stored trial" if same else
+             "DIFFERS from the stored trial: " + ", ".join(report.differences)))
+    return 0 if same else 1
 
 
 def format_summary(result: object, trial_id: int | None, db: Path | None) -> str:

@@ -51,6 +51,7 @@ import math
 import os
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import TYPE_CHECKING, Literal
 
@@ -322,6 +323,44 @@ def make_profile(config: TrialConfig) -> OperatorProfile:
     return OperatorProfile.intermediate()
 
 
+PhysicsFeed = Callable[[int, ToolPose], "AbdomenSnapshot | None"]
+"""``feed(k, pose) -> snapshot or None``: the physics of a trial run outside its steps
+(``TrialRunner.set_physics_feed``): k the control step, pose the tool before the step."""
+
+
+class MasterIncrement:
+    """An operator whose master increment dX_M is set from outside before each step.
+
+    The real-time trial's servo loop reads the device, applies guard and clutch, and hands
+    the increment of the master position to the runner through this object
+    (``set(dx)`` then ``TrialRunner.step()``); each increment is used once (``take``
+    returns zero motion when none was set). ``profile`` is None: no simulated person.
+    """
+
+    profile = None
+
+    def __init__(self) -> None:
+        self._dx: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def reset(self, start: object) -> None:
+        del start
+        self._dx = (0.0, 0.0, 0.0)
+
+    def set(self, dx: tuple[float, float, float]) -> None:
+        """The increment [m] the next step uses."""
+        self._dx = dx
+
+    def take(self) -> tuple[float, float, float]:
+        """The pending increment (then zero)."""
+        dx, self._dx = self._dx, (0.0, 0.0, 0.0)
+        return dx
+
+    def step(self, obs: OperatorObservation) -> tuple[float, float, float]:
+        """The operator protocol (``OperatorObservation`` ignored): ``take()``."""
+        del obs
+        return self.take()
+
+
 class TrialRunner:
     """Runs one trial step by step (a thin stateful shell around the pure fixtures).
 
@@ -367,6 +406,8 @@ class TrialRunner:
         self._tc: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._contact = 0
         self._delicate = 0
+        self._kt: tuple[float, ...] | None = None  # dF/dx of the tissue force, row-major
+        self._physics_feed: PhysicsFeed | None = None
         if config.scene != "none":
             from vasim.abdomen.world import Abdomen
 
@@ -432,10 +473,36 @@ class TrialRunner:
                 polyline_lookahead(self._points, i).tolist())
         return la
 
+    def set_physics_feed(self, feed: PhysicsFeed | None) -> None:
+        """Lets ``feed`` supply the physics instead of stepping the abdomen inline.
+
+        With a feed, every control step calls ``feed(k, pose)`` with the tool pose before
+        the step's motion (the pose the inline step would use); a returned snapshot is
+        applied as an inline step's would be (POIs, contact planes, torque, events), None
+        keeps the current one. The real-time trial (``vasim.haptics.realtime``) feeds the
+        latest snapshot of a physics thread this way, and a replay feeds the recorded ones
+        at the recorded steps. None restores inline stepping every ``abdomen.dt``.
+        """
+        if self.abdomen is None:
+            raise ConfigError("this trial has no abdomen (scene 'none'): nothing to feed",
+                              field="scene")
+        self._physics_feed = feed
+        self._phys_every = 1 if feed is not None else max(
+            1, round(self.abdomen.dt / self.config.dt))
+
     def _physics(self) -> None:
         """One physics step with the tool where it is; the POIs follow the tissue."""
         assert self.abdomen is not None
-        snap = self._snap = self.abdomen.step(ToolPose(self._fulcrum, np.array(self._x)))
+        if self._physics_feed is not None:
+            fed = self._physics_feed(self._k, ToolPose(self._fulcrum, np.array(self._x)))
+            if fed is not None:
+                self._apply_snapshot(fed)
+            return
+        self._apply_snapshot(self.abdomen.step(ToolPose(self._fulcrum, np.array(self._x))))
+
+    def _apply_snapshot(self, snap: AbdomenSnapshot) -> None:
+        """Takes a physics snapshot: the POIs follow the tissue, the contact planes renew."""
+        self._snap = snap
         self._set_geometry(snap.targets, snap.target_normals
                            if self.task.normals is not None else None)
         self._patch = snap.patch if snap.patch.size else None
@@ -543,6 +610,8 @@ class TrialRunner:
             fc = self._fc  # the hand feels the fixtures' force and the tissue's
             dx = op.step_floats(dt, x, g, i, cues[7] > _GUIDANCE_SEEN, cues[6], cues[3],
                                 self._ms, (cues[0] + fc[0], cues[1] + fc[1], cues[2] + fc[2]))
+        elif type(op) is MasterIncrement:  # the servo loop's master (real-time trials)
+            dx = op.take()
         else:  # any other device: the OperatorObservation protocol
             dx = np.asarray(op.step(self._observation()), dtype=np.float64).tolist()
         d0, d1, d2 = dx
@@ -575,11 +644,13 @@ class TrialRunner:
         cues = self._cues = self._render(dxm)
         if self._patch is not None:
             # 1 kHz tissue force against the contact planes of the last physics step
-            f, _ = patch_force(self._patch, ToolPose(self._fulcrum, np.array(x)))
+            f, kt = patch_force(self._patch, ToolPose(self._fulcrum, np.array(x)))
             fc = self._fc = tuple(f.tolist())
+            self._kt = tuple(kt.reshape(9).tolist())
             self._contact = 1 if (fc[0] or fc[1] or fc[2]) else 0
         elif self._contact:
             self._fc, self._contact = (0.0, 0.0, 0.0), 0
+            self._kt = None
         if self._mag_camera:
             view = self._tip_in_mag_view(x)
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
@@ -764,6 +835,8 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
 __all__ = [
     "DEFAULT_ENDOSCOPE",
     "EndoscopeView",
+    "MasterIncrement",
+    "PhysicsFeed",
     "TrialConfig",
     "TrialFrame",
     "TrialResult",
