@@ -6,7 +6,8 @@ import importlib
 import sys
 
 BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "bench.haptics",
-           "bench.report", "bench.abdomen", "bench.contact"]
+           "bench.report", "bench.abdomen", "bench.contact",
+           "bench.mrcp_rpq"]
 
 
 def main(argv: list[str]) -> int:

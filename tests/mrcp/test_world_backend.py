@@ -1,0 +1,224 @@
+"""The pybullet backend: the same kinematics as the DH tables, IK that returns None when it
+must, and distances that agree with an independent computation on the trimesh hulls."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pybullet as pb
+import pytest
+import trimesh
+
+from vasim.mrcp import dh
+from vasim.mrcp.backend import HULL_MARGIN, PybulletArm, PybulletWorld, pose_matrix, rotation_error
+from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
+from vasim.mrcp.urdf import link_hulls, write_urdf
+
+RX = dh.load_robot("rx60b")
+BASE = pose_matrix([0.3, -0.2, 0.5], dh.rot_z(1.0) @ dh.rot_x(0.3))
+
+
+@pytest.fixture(scope="module")
+def arm() -> PybulletArm:
+    return PybulletArm(RX, BASE, kinematics="pybullet")
+
+
+def _samples(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(RX.lower, RX.upper, size=(n, 6))
+
+
+def test_arm_and_world_implement_the_seams(arm: PybulletArm) -> None:
+    assert isinstance(arm, ArmKinematics)
+    assert isinstance(PybulletWorld(), ProximityWorld)
+
+
+def test_pybullet_jacobian_equals_the_dh_jacobian(arm: PybulletArm) -> None:
+    # calculateJacobian works in double precision: the two agree to round-off
+    for q in _samples(40):
+        np.testing.assert_allclose(arm.pybullet_jacobian(q), dh.jacobian(RX, q, BASE),
+                                   atol=1e-9, rtol=0)
+
+
+def test_pybullet_link_frames_equal_the_batched_dh_frames(arm: PybulletArm) -> None:
+    # getLinkState reports single-precision floats: positions within a few float32 ulps
+    # (|x| < 2 m -> ulp 1.2e-7), rotations within 1e-6
+    qs = _samples(40, seed=1)
+    frames = dh.link_frames(RX, qs, BASE)
+    for i, q in enumerate(qs):
+        arm._set(q)
+        for k in range(RX.n_joints + 1):      # joint frames 1..n and the TCP
+            st = pb.getLinkState(arm._body, k, computeForwardKinematics=1,
+                                 physicsClientId=arm._cid)
+            np.testing.assert_allclose(st[4], frames[i, k + 1, :3, 3], atol=2e-7, rtol=0)
+        _, rot = arm.pybullet_tcp_pose(q)
+        np.testing.assert_allclose(rot, frames[i, -1, :3, :3], atol=1e-6, rtol=0)
+
+
+def test_default_arm_answers_from_the_dh_chain() -> None:
+    fast = PybulletArm(RX, BASE)
+    q = _samples(1, seed=2)[0]
+    pos, _ = fast.tcp_pose(q)
+    np.testing.assert_array_equal(pos, dh.fk(RX, q, BASE)[0])
+    np.testing.assert_array_equal(fast.jacobian(q), dh.jacobian(RX, q, BASE))
+    p_b, _ = fast.tcp_pose_batch(q[None])
+    np.testing.assert_allclose(p_b[0], pos, atol=1e-14)
+
+
+def test_ik_round_trip_lands_on_the_pose_within_limits(arm: PybulletArm) -> None:
+    rng = np.random.default_rng(4)
+    solved = 0
+    for q in _samples(30, seed=5):
+        pos, rot = dh.fk(RX, q, BASE)
+        seed = np.clip(q + rng.normal(0.0, 0.3, 6), RX.lower, RX.upper)
+        sol = arm.ik(pos, rot, q_seed=seed)
+        assert sol is not None
+        solved += 1
+        assert RX.within_limits(sol)
+        p2, r2 = dh.fk(RX, sol, BASE)
+        assert np.linalg.norm(p2 - pos) < 1e-6
+        assert np.linalg.norm(rotation_error(r2, rot)) < 1e-6
+    assert solved == 30
+
+
+def test_ik_from_home_finds_arbitrary_reachable_poses(arm: PybulletArm) -> None:
+    # poses of random in-limit configurations: reachable by construction, far from home
+    for q in _samples(40, seed=9):
+        pos, rot = dh.fk(RX, q, BASE)
+        sol = arm.ik(pos, rot)
+        assert sol is not None
+        assert RX.within_limits(sol)
+        assert np.linalg.norm(dh.fk(RX, sol, BASE)[0] - pos) < 1e-6
+
+
+def test_ik_from_a_nearby_seed_returns_the_nearby_branch(arm: PybulletArm) -> None:
+    q = RX.home + np.array([0.2, 0.1, -0.2, 0.3, -0.2, 0.1])
+    pos, rot = dh.fk(RX, q, BASE)
+    sol = arm.ik(pos, rot, q_seed=q + 0.01)
+    assert sol is not None
+    np.testing.assert_allclose(sol, q, atol=1e-6)
+
+
+def test_position_only_ik(arm: PybulletArm) -> None:
+    pos, _ = dh.fk(RX, RX.home, BASE)
+    target = pos + np.array([0.03, -0.02, 0.05])
+    sol = arm.ik(target, q_seed=RX.home)
+    assert sol is not None
+    np.testing.assert_allclose(dh.fk(RX, sol, BASE)[0], target, atol=1e-6)
+
+
+def test_ik_of_an_unreachable_pose_is_none(arm: PybulletArm) -> None:
+    # the reach is sqrt((a2 + d4)^2 + d3^2) + tcp = 0.667 m from the shoulder
+    far = BASE[:3, 3] + np.array([0.0, 0.0, 0.70])
+    assert arm.ik(far) is None
+    assert arm.ik(far, np.eye(3)) is None
+
+
+def test_rotation_error_is_the_axis_angle_between_rotations() -> None:
+    for angle in (1e-9, 0.3, 2.0, 3.1):
+        axis = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5])
+        r0 = dh.rot_x(0.4) @ dh.rot_z(-1.1)
+        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        rot = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+        np.testing.assert_allclose(rotation_error(r0, rot @ r0), angle * axis, atol=1e-9)
+
+
+def test_hulls_contain_every_swept_sphere() -> None:
+    for k, hull in enumerate(link_hulls(RX)):
+        assert hull.is_convex
+        radius = RX.links[k].radius
+        offsets = hull.face_normals @ hull.vertices[hull.faces[:, 0]].T   # plane offsets
+        plane_d = np.diag(offsets)
+        for c in RX.link_key_points(k):
+            assert np.all(hull.face_normals @ c + radius <= plane_d + 1e-12)
+
+
+def test_urdf_is_written_once_per_content(tmp_path) -> None:
+    p1 = write_urdf(RX)
+    assert write_urdf(RX) == p1
+    changed = dh.RobotModel(RX.name, RX.joints, tcp=np.array([0.0, 0.0, 0.1]), home=RX.home,
+                            links=RX.links)
+    assert write_urdf(changed) != p1
+
+
+def _world_hull_distance(world: PybulletWorld, robot: str, point: np.ndarray) -> float:
+    """Independent: distance from a point to the robot's hulls, posed by the DH frames."""
+    model = world.robot_model(robot)
+    frames = dh.link_frames(model, world.configuration(robot), world.robot_base(robot))
+    best = math.inf
+    for k, hull in enumerate(link_hulls(model)):
+        posed = hull.copy()
+        posed.apply_transform(frames[k])
+        _, dist, _ = trimesh.proximity.closest_point(posed, point[None])
+        inside = posed.contains(point[None])[0]
+        best = min(best, -dist[0] if inside else dist[0])
+    return best
+
+
+def test_min_distance_to_a_sphere_matches_the_hull_geometry() -> None:
+    world = PybulletWorld()
+    world.add_robot("r1", RX)
+    q = RX.home + np.array([0.4, -0.3, 0.2, 0.5, -0.4, 0.3])
+    world.set_configuration("r1", q)
+    for centre in ([0.5, 0.3, 0.2], [0.2, -0.3, 0.6], [-0.3, 0.1, 0.1]):
+        c = np.array(centre)
+        world.add_sphere(f"s{centre}", 0.05, c)
+        prox = world.min_distance("r1", f"s{centre}", max_distance=2.0)
+        expect = _world_hull_distance(world, "r1", c) - 0.05
+        # pybullet pads every convex hull with its collision margin (the hull grown by a
+        # 1 mm ball): the distance is the bare hull's minus the margin, to GJK's accuracy
+        assert prox.distance == pytest.approx(expect - HULL_MARGIN, abs=5e-5)
+        assert np.linalg.norm(prox.point_a - prox.point_b) == pytest.approx(
+            abs(prox.distance), abs=1e-6)
+
+
+def test_far_bodies_report_max_distance_and_nan_witnesses() -> None:
+    world = PybulletWorld()
+    world.add_robot("r1", RX)
+    world.add_box("box", [0.1, 0.1, 0.1], [3.0, 0.0, 0.0])
+    prox = world.min_distance("r1", "box", max_distance=0.5)
+    assert prox.distance == 0.5
+    assert np.all(np.isnan(prox.point_a))
+
+
+def test_two_rx60b_facing_collide_close_and_not_far() -> None:
+    # at home each TCP reaches d4 = 0.31 m forward: at 0.5 m the forearms overlap,
+    # at 1.5 m the closest points are the two TCPs/wrists, 1.5 - 2 * 0.31 - radii apart
+    for distance, colliding in ((0.5, True), (1.5, False)):
+        world = PybulletWorld()
+        world.add_robot("a", RX, pose_matrix([-distance / 2, 0, 0]))
+        world.add_robot("b", RX, pose_matrix([distance / 2, 0, 0], dh.rot_z(math.pi)))
+        assert world.in_collision("a") is colliding
+        assert world.in_collision("b") is colliding
+        prox = world.min_distance("a", "b", max_distance=2.0)
+        assert (prox.distance <= 0) is colliding
+
+
+def test_self_collision_and_obstacles() -> None:
+    world = PybulletWorld()
+    world.add_robot("r1", RX)
+    assert not world.in_collision("r1")
+    pos, _ = dh.fk(RX, RX.home)
+    world.add_sphere("ball", 0.02, pos)
+    assert world.in_collision("r1")
+    world.set_obstacle_pose("ball", pos + np.array([0.0, 0.0, -0.2]))
+    assert not world.in_collision("r1")
+    # adjacent links always touch and are never reported; the pairs checked are not adjacent
+    assert all(b - a >= 2 for a, b in world.self_collision_pairs("r1"))
+
+
+def test_configuration_round_trip_and_unknown_names() -> None:
+    world = PybulletWorld()
+    body = world.add_robot("r1", RX)
+    for q in (RX.home, RX.home + 0.1):       # pybullet's joints follow, from the first pose
+        if q is not RX.home:
+            world.set_configuration("r1", q)
+        np.testing.assert_array_equal(world.configuration("r1"), q)
+        joints = [pb.getJointState(body, j, physicsClientId=world.client_id)[0]
+                  for j in range(6)]
+        np.testing.assert_array_equal(joints, q)
+    assert world.robot_names() == ["r1"]
+    with pytest.raises(KeyError, match="r1"):
+        world.configuration("r2")
+    with pytest.raises(ValueError, match="already exists"):
+        world.add_sphere("r1", 0.1, [0, 0, 0])

@@ -1,0 +1,629 @@
+"""The robot world over pybullet: arms (:class:`PybulletArm`) and stations
+(:class:`PybulletWorld`), implementing the seams of ``vasim.mrcp.interfaces``.
+
+This is the only MRCP module that imports pybullet. Every arm and every world owns a private
+DIRECT client (never the GUI), so kinematic queries at sampled configurations never disturb
+the poses of the station the proximity queries see, and two worlds never share state.
+
+**Decision** (per-query cost; the kernel calls FK and the Jacobian thousands of times per
+18 ms cycle): :class:`PybulletArm` answers ``tcp_pose`` / ``jacobian`` from the compiled DH
+chain of ``vasim.mrcp.dh`` by default (``kinematics="dh"``, about 3 µs a call), and from
+pybullet with ``kinematics="pybullet"`` (``getLinkState`` / ``calculateJacobian``, 30-100 µs
+a call). The tests hold the two to the same model: Jacobians agree to 1e-12 (pybullet
+computes them in double precision), link frames to pybullet's reporting precision
+(``getLinkState`` returns single-precision floats: about 3e-8 m measured). IK starts from
+pybullet's ``calculateInverseKinematics``. :meth:`PybulletArm.tcp_pose_batch` /
+:meth:`PybulletArm.jacobian_batch` evaluate many sampled configurations at once (numpy).
+Joint states are written to pybullet only when ``q`` changes.
+
+Example:
+    >>> from vasim.mrcp.dh import load_robot
+    >>> arm = PybulletArm(load_robot("rx60b"))
+    >>> pos, rot = arm.tcp_pose(arm.home)
+    >>> [round(float(v), 3) for v in pos]
+    [0.31, 0.049, 0.225]
+    >>> q = arm.ik(pos, rot, q_seed=arm.home)
+    >>> bool(np.allclose(q, arm.home, atol=1e-6))
+    True
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import pybullet as pb
+import trimesh
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+from scipy.stats import qmc
+
+from vasim.errors import ConfigError
+from vasim.mrcp import dh
+from vasim.mrcp.dh import RobotModel
+from vasim.mrcp.interfaces import FloatArray, Proximity
+from vasim.mrcp.urdf import link_hulls, model_key, write_urdf
+
+_NAN3 = np.full(3, np.nan)
+
+#: pybullet grows every convex-hull collision shape by this margin [m] (a Minkowski sum with
+#: a ball): distances to robot links are the bare hulls' minus this (measured 0.97-1.0 mm;
+#: ``changeDynamics(collisionMargin=...)`` does not change it). Conservative for safety.
+HULL_MARGIN = 0.001
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silences C-level writes to stdout (pybullet prints its build time on connect)."""
+    try:
+        fd = sys.stdout.fileno()
+    except (OSError, ValueError, AttributeError):   # captured stdout (pytest, notebooks)
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    with open(os.devnull, "w") as null:
+        os.dup2(null.fileno(), fd)
+        try:
+            yield
+        finally:
+            sys.stdout.flush()
+            os.dup2(saved, fd)
+            os.close(saved)
+
+
+class _Client:
+    """One private pybullet DIRECT client, disconnected when closed or collected."""
+
+    def __init__(self) -> None:
+        with _quiet_stdout():
+            self.id = pb.connect(pb.DIRECT)
+        if self.id < 0:
+            raise RuntimeError("pybullet could not open a DIRECT client")
+
+    def close(self) -> None:
+        if self.id >= 0:
+            with contextlib.suppress(pb.error):
+                pb.disconnect(physicsClientId=self.id)
+            self.id = -1
+
+    def __del__(self) -> None:
+        self.close()
+
+
+def pose_matrix(position: FloatArray | None = None, rotation: FloatArray | None = None
+                ) -> FloatArray:
+    """``(4, 4)`` homogeneous transform from a position ``(3,)`` and rotation ``(3, 3)``."""
+    t = np.eye(4)
+    if rotation is not None:
+        t[:3, :3] = np.asarray(rotation, dtype=float)
+    if position is not None:
+        t[:3, 3] = np.asarray(position, dtype=float)
+    return t
+
+
+def _quat(rotation: FloatArray) -> list[float]:
+    return [float(v) for v in Rotation.from_matrix(rotation).as_quat()]   # x, y, z, w
+
+
+def _rot(quat: Sequence[float]) -> FloatArray:
+    return Rotation.from_quat(quat).as_matrix()
+
+
+def _load_robot(client: int, robot: RobotModel, base: FloatArray) -> int:
+    path = write_urdf(robot)
+    with _quiet_stdout():
+        body = pb.loadURDF(str(path), basePosition=[float(v) for v in base[:3, 3]],
+                           baseOrientation=_quat(base[:3, :3]), useFixedBase=True,
+                           flags=pb.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
+    if pb.getNumJoints(body, physicsClientId=client) != robot.n_joints + 1:
+        raise RuntimeError(f"URDF of {robot.name} loaded with an unexpected joint count")
+    return body
+
+
+def rotation_error(current: FloatArray, target: FloatArray) -> FloatArray:
+    """Axis-angle vector ``(3,)`` [rad], world frame, turning ``current`` into ``target``."""
+    r = target @ current.T
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    s = 0.5 * float(np.linalg.norm(w))
+    c = 0.5 * (float(np.trace(r)) - 1.0)
+    if c > -0.99:
+        angle = math.atan2(s, c)
+        return w * (0.5 if s < 1e-12 else angle / (2.0 * s))
+    return Rotation.from_matrix(r).as_rotvec()   # near pi: the robust (slower) route
+
+
+class PybulletArm:
+    """One serial arm (an :class:`~vasim.mrcp.interfaces.ArmKinematics`) on its own client.
+
+    Args:
+        robot: the DH model.
+        base: ``(4, 4)`` world-from-base transform (default identity).
+        name: the arm's name (default: the model's).
+        kinematics: ``"dh"`` (compiled DH chain, default) or ``"pybullet"`` for
+            ``tcp_pose`` and ``jacobian`` (see the module docstring).
+    """
+
+    def __init__(self, robot: RobotModel, base: FloatArray | None = None,
+                 name: str | None = None, kinematics: Literal["dh", "pybullet"] = "dh"
+                 ) -> None:
+        if kinematics not in ("dh", "pybullet"):
+            raise ConfigError(f"kinematics must be 'dh' or 'pybullet', got {kinematics!r}",
+                              field="kinematics")
+        self.kinematics = kinematics
+        self.robot = robot
+        self.name = name or robot.name
+        self.base = pose_matrix() if base is None else np.array(base, dtype=float)
+        self._client = _Client()
+        self._cid = self._client.id
+        self._body = _load_robot(self._cid, robot, self.base)
+        self._n = robot.n_joints
+        self._tcp_link = self._n
+        self._q: FloatArray | None = None
+        self._zeros = [0.0] * self._n
+        self._lower = [float(v) for v in robot.lower]
+        self._upper = [float(v) for v in robot.upper]
+        self._ranges = [u - lo for lo, u in zip(self._lower, self._upper, strict=True)]
+        # IK: reach bound from the shoulder (frame 1's origin, fixed) and spread restarts
+        self._shoulder = (self.base @ dh.joint_origin(robot.joints[0]))[:3, 3]
+        self._reach = sum(float(np.linalg.norm(dh.joint_origin(j)[:3, 3]))
+                          for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
+        unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
+        self._spread = robot.lower + unit * (robot.upper - robot.lower)
+
+    # -- ArmKinematics -----------------------------------------------------------------
+    @property
+    def n_joints(self) -> int:
+        return self._n
+
+    @property
+    def joint_lower(self) -> FloatArray:
+        return self.robot.lower
+
+    @property
+    def joint_upper(self) -> FloatArray:
+        return self.robot.upper
+
+    @property
+    def max_velocity(self) -> FloatArray:
+        return self.robot.max_velocity
+
+    @property
+    def max_acceleration(self) -> FloatArray:
+        return self.robot.max_acceleration
+
+    @property
+    def home(self) -> FloatArray:
+        return self.robot.home
+
+    def _set(self, q: FloatArray) -> None:
+        q = np.asarray(q, dtype=float)
+        if q.shape != (self._n,):
+            raise ValueError(f"{self.name}: q must have shape ({self._n},), got {q.shape}")
+        if self._q is not None and np.array_equal(q, self._q):
+            return
+        for j in range(self._n):
+            pb.resetJointState(self._body, j, float(q[j]), physicsClientId=self._cid)
+        self._q = q.copy()
+
+    def tcp_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """TCP position ``(3,)`` [m] and rotation ``(3, 3)`` (world frame)."""
+        if self.kinematics == "dh":
+            return dh.fk(self.robot, q, self.base)
+        return self.pybullet_tcp_pose(q)
+
+    def jacobian(self, q: FloatArray) -> FloatArray:
+        """``(6, n)`` geometric TCP Jacobian (world frame, linear rows first)."""
+        if self.kinematics == "dh":
+            return dh.jacobian(self.robot, q, self.base)
+        return self.pybullet_jacobian(q)
+
+    def pybullet_tcp_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """TCP pose by pybullet's ``getLinkState`` (single-precision output)."""
+        self._set(q)
+        st = pb.getLinkState(self._body, self._tcp_link, computeForwardKinematics=1,
+                             physicsClientId=self._cid)
+        return np.array(st[4]), _rot(st[5])
+
+    def pybullet_jacobian(self, q: FloatArray) -> FloatArray:
+        """TCP Jacobian by pybullet's ``calculateJacobian`` (which expresses it in the base
+        frame: rotated here to the world)."""
+        self._set(q)
+        lin, ang = pb.calculateJacobian(self._body, self._tcp_link, [0.0, 0.0, 0.0],
+                                        [float(v) for v in q], self._zeros, self._zeros,
+                                        physicsClientId=self._cid)
+        r = self.base[:3, :3]
+        return np.vstack([r @ np.array(lin), r @ np.array(ang)])
+
+    def tcp_pose_batch(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """TCP positions ``(m, 3)`` and rotations ``(m, 3, 3)`` for ``(m, n)`` samples
+        (numpy DH kinematics, identical to :meth:`tcp_pose` to 1e-9)."""
+        return dh.fk_batch(self.robot, q, self.base)
+
+    def jacobian_batch(self, q: FloatArray) -> FloatArray:
+        """``(m, 6, n)`` TCP Jacobians for ``(m, n)`` samples (numpy DH kinematics)."""
+        return dh.jacobian_batch(self.robot, np.atleast_2d(q), self.base)
+
+    def link_frames(self, q: FloatArray) -> FloatArray:
+        """``(..., n + 2, 4, 4)`` world frames of base, joints and TCP (numpy)."""
+        return dh.link_frames(self.robot, q, self.base)
+
+    def ik(self, position: FloatArray, rotation: FloatArray | None = None,
+           q_seed: FloatArray | None = None, *, tol_position: float = 1e-6,
+           tol_rotation: float = 1e-6, restarts: int = 16) -> FloatArray | None:
+        """A configuration within the joint limits reaching the pose, or None.
+
+        Damped least squares on the compiled DH chain, projected into the joint limits at
+        every step (joints wrapped by 2π, then clamped), started from ``q_seed`` (the
+        nearest branch when the target moved a little: the kernel's tracking case); if that
+        fails, from pybullet's ``calculateInverseKinematics`` (joint limits, rest pose = the
+        seed), from the home configuration, then from ``restarts`` fixed configurations
+        spread over the joint space (scrambled Halton). A start is abandoned when its error
+        stops shrinking. Targets beyond the chain's reach return None at once.
+
+        Costs (RX60B, one core): tracking ~0.1 ms; an arbitrary reachable pose from home
+        ~1.5 ms (no failure in 200 random in-limit poses); an unreachable orientation within
+        reach ~10 ms with the default ``restarts`` (lower it to trade robustness for time).
+
+        Args:
+            position: ``(3,)`` TCP target [m], world frame.
+            rotation: ``(3, 3)`` TCP target orientation (world frame), or None for a
+                position-only solve (the minimum-norm steps keep the orientation near the
+                seed's).
+            q_seed: ``(n,)`` start / preferred configuration (default: home).
+            restarts: how many spread configurations to try after the first three starts.
+        """
+        target = np.asarray(position, dtype=float)
+        if target.shape != (3,) or not np.all(np.isfinite(target)):
+            raise ValueError(f"{self.name}: position must be 3 finite numbers, got {position!r}")
+        if np.linalg.norm(target - self._shoulder) > self._reach:
+            return None
+        rot = None if rotation is None else np.asarray(rotation, dtype=float)
+        seed = self.robot.home if q_seed is None else np.asarray(q_seed, dtype=float)
+        seed = np.clip(seed, self.robot.lower, self.robot.upper)
+        q = self._refine(seed, target, rot, tol_position, tol_rotation)
+        if q is not None:
+            return q
+        starts = [self._pybullet_guess(target, rot, seed), self.robot.home,
+                  *self._spread[:max(0, restarts)]]
+        for start in starts:
+            q = self._refine(start, target, rot, tol_position, tol_rotation)
+            if q is not None:
+                return q
+        return None
+
+    def _pybullet_guess(self, target: FloatArray, rot: FloatArray | None,
+                        seed: FloatArray) -> FloatArray:
+        self._set(np.clip(seed, self.robot.lower, self.robot.upper))
+        kwargs = {"lowerLimits": self._lower, "upperLimits": self._upper,
+                  "jointRanges": self._ranges, "restPoses": [float(v) for v in seed],
+                  "maxNumIterations": 50, "residualThreshold": 1e-8,
+                  "physicsClientId": self._cid}
+        if rot is not None:
+            kwargs["targetOrientation"] = _quat(rot)
+        q = pb.calculateInverseKinematics(self._body, self._tcp_link,
+                                          [float(v) for v in target], **kwargs)
+        return np.array(q[:self._n], dtype=float)
+
+    def _refine(self, q0: FloatArray, target: FloatArray, rot: FloatArray | None,
+                tol_p: float, tol_r: float, iterations: int = 60) -> FloatArray | None:
+        lower, upper = self.robot.lower, self.robot.upper
+        q = np.clip(np.array(q0, dtype=float), lower, upper)
+        damping = 1e-6
+        history: list[float] = []
+        for it in range(iterations):
+            pos, cur, jac = dh.fk_and_jacobian(self.robot, q, self.base)
+            ep = target - pos
+            err = ep if rot is None else np.concatenate([ep, rotation_error(cur, rot)])
+            if np.linalg.norm(ep) <= tol_p and (rot is None or np.linalg.norm(err[3:]) <= tol_r):
+                return q
+            norm = float(np.linalg.norm(err))
+            history.append(norm)
+            if it >= 8 and norm > 0.7 * history[-6]:     # stagnating: give this start up
+                return None
+            j = jac[:3] if rot is None else jac
+            dq = j.T @ np.linalg.solve(j @ j.T + damping * np.eye(j.shape[0]), err)
+            step = float(np.max(np.abs(dq)))
+            if step > 0.5:
+                dq *= 0.5 / step
+            q = np.clip(self._wrap_into_limits(q + dq), lower, upper)
+        return None
+
+    def _wrap_into_limits(self, q: FloatArray) -> FloatArray:
+        out = q.copy()
+        lo, up = self.robot.lower, self.robot.upper
+        for i in range(self._n):
+            for k in (-1, 1, -2, 2):
+                if lo[i] <= out[i] <= up[i]:
+                    break
+                cand = q[i] + k * 2.0 * math.pi
+                if lo[i] <= cand <= up[i]:
+                    out[i] = cand
+                    break
+        return out
+
+    def close(self) -> None:
+        self._client.close()
+
+
+# ----------------------------------------------------------------------------- world
+
+_SELF_PAIRS: dict[str, tuple[tuple[int, int], ...]] = {}   # per model content
+_THRESHOLDS = (0.01, 0.04, 0.16, 0.48)    # [m] the growing searches of _closest
+_SPHERES: dict[str, tuple[FloatArray, FloatArray]] = {}
+
+
+def _link_spheres(model: RobotModel) -> tuple[FloatArray, FloatArray]:
+    """Per link (0..n), a sphere bounding its hull grown by the margin: centres ``(L, 3)``
+    in the link frames (the hull's bounding-box centre) and radii ``(L,)``."""
+    key = model_key(model)
+    if key not in _SPHERES:
+        centres, radii = [], []
+        for hull in link_hulls(model):
+            v = np.asarray(hull.vertices)
+            c = (v.min(axis=0) + v.max(axis=0)) / 2
+            centres.append(c)
+            radii.append(float(np.max(np.linalg.norm(v - c, axis=1))) + HULL_MARGIN + 1e-6)
+        _SPHERES[key] = (np.array(centres), np.array(radii))
+    return _SPHERES[key]
+
+
+@dataclass
+class _Robot:
+    model: RobotModel
+    body: int
+    base: FloatArray
+    q: FloatArray
+    self_pairs: tuple[tuple[int, int], ...]
+
+
+class PybulletWorld:
+    """A station: named robots and obstacles in one private pybullet client; implements
+    :class:`~vasim.mrcp.interfaces.ProximityWorld`.
+
+    Link indices in :class:`Proximity` are pybullet's: ``-1`` the base (DH link 0), ``k - 1``
+    DH link ``k``; the TCP link (index ``n``) has no geometry.
+
+    Self-collision checks skip adjacent links and the pairs that touch in every one of 200
+    sampled configurations (the "always in collision" rule of MoveIt's set-up assistant:
+    e.g. the wrist housings, which overlap by construction).
+    """
+
+    def __init__(self) -> None:
+        self._client = _Client()
+        self._cid = self._client.id
+        self._robots: dict[str, _Robot] = {}
+        self._obstacles: dict[str, int] = {}
+
+    # -- building ----------------------------------------------------------------------
+    def _check_new(self, name: str) -> None:
+        if name in self._robots or name in self._obstacles:
+            raise ConfigError(f"a body named {name!r} already exists", field="name")
+
+    def add_robot(self, name: str, robot: RobotModel, base: FloatArray | None = None,
+                  q: FloatArray | None = None) -> int:
+        """Adds an arm at ``base`` (``(4, 4)`` world-from-base) posed at ``q`` (default home)."""
+        self._check_new(name)
+        base = pose_matrix() if base is None else np.array(base, dtype=float)
+        body = _load_robot(self._cid, robot, base)
+        entry = _Robot(robot, body, base, np.zeros(robot.n_joints), ())   # as loaded
+        self._robots[name] = entry
+        entry.self_pairs = self._self_pairs(name)
+        self.set_configuration(name, robot.home if q is None else q)
+        return body
+
+    def _self_pairs(self, name: str, samples: int = 200) -> tuple[tuple[int, int], ...]:
+        r = self._robots[name]
+        key = model_key(r.model)
+        if key in _SELF_PAIRS:
+            return _SELF_PAIRS[key]
+        n = r.model.n_joints
+        cand = [(a, b) for a in range(-1, n) for b in range(a + 2, n)]
+        rng = np.random.default_rng(0)
+        qs = rng.uniform(r.model.lower, r.model.upper, size=(samples, n))
+        always = dict.fromkeys(cand, True)
+        for q in qs:
+            self.set_configuration(name, q)
+            for pair in cand:
+                if always[pair] and not self._links_touch(r.body, pair[0], r.body, pair[1]):
+                    always[pair] = False
+        _SELF_PAIRS[key] = tuple(p for p in cand if not always[p])
+        return _SELF_PAIRS[key]
+
+    def add_box(self, name: str, half_extents: FloatArray, position: FloatArray,
+                rotation: FloatArray | None = None) -> int:
+        """Adds a static box obstacle (half extents ``(3,)`` [m])."""
+        shape = pb.createCollisionShape(pb.GEOM_BOX, halfExtents=[float(v) for v in
+                                                                   half_extents],
+                                        physicsClientId=self._cid)
+        return self._add_obstacle(name, shape, position, rotation)
+
+    def add_sphere(self, name: str, radius: float, position: FloatArray) -> int:
+        """Adds a static sphere obstacle."""
+        shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(radius),
+                                        physicsClientId=self._cid)
+        return self._add_obstacle(name, shape, position, None)
+
+    def add_convex(self, name: str, vertices: FloatArray, position: FloatArray | None = None,
+                   rotation: FloatArray | None = None) -> int:
+        """Adds a static obstacle: the convex hull (trimesh) of ``vertices`` ``(m, 3)``, body
+        frame [m]."""
+        hull = trimesh.convex.convex_hull(np.asarray(vertices, dtype=float))
+        shape = pb.createCollisionShape(pb.GEOM_MESH,
+                                        vertices=[list(map(float, v)) for v in hull.vertices],
+                                        physicsClientId=self._cid)
+        return self._add_obstacle(name, shape, np.zeros(3) if position is None else position,
+                                  rotation)
+
+    def _add_obstacle(self, name: str, shape: int, position: FloatArray,
+                      rotation: FloatArray | None) -> int:
+        self._check_new(name)
+        body = pb.createMultiBody(baseMass=0.0, baseCollisionShapeIndex=shape,
+                                  basePosition=[float(v) for v in position],
+                                  baseOrientation=_quat(np.eye(3) if rotation is None
+                                                        else np.asarray(rotation)),
+                                  physicsClientId=self._cid)
+        self._obstacles[name] = body
+        return body
+
+    def set_obstacle_pose(self, name: str, position: FloatArray,
+                          rotation: FloatArray | None = None) -> None:
+        """Moves an obstacle (e.g. the seed's moving obstacle with a hole)."""
+        body = self._obstacles[self._known(name, obstacle=True)]
+        pb.resetBasePositionAndOrientation(
+            body, [float(v) for v in position],
+            _quat(np.eye(3) if rotation is None else np.asarray(rotation)),
+            physicsClientId=self._cid)
+
+    # -- ProximityWorld ----------------------------------------------------------------
+    def robot_names(self) -> list[str]:
+        return list(self._robots)
+
+    def obstacle_names(self) -> list[str]:
+        return list(self._obstacles)
+
+    def robot_model(self, name: str) -> RobotModel:
+        return self._robots[self._known(name, robot=True)].model
+
+    def robot_base(self, name: str) -> FloatArray:
+        return self._robots[self._known(name, robot=True)].base.copy()
+
+    def body_id(self, name: str) -> int:
+        """The pybullet body of a named robot or obstacle (for backend-level tools)."""
+        if name in self._robots:
+            return self._robots[name].body
+        return self._obstacles[self._known(name)]
+
+    @property
+    def client_id(self) -> int:
+        return self._cid
+
+    def _known(self, name: str, robot: bool = False, obstacle: bool = False) -> str:
+        names = (list(self._robots) if robot or not obstacle else []) + \
+                (list(self._obstacles) if obstacle or not robot else [])
+        if name not in names:
+            raise KeyError(f"unknown body {name!r} (known: {', '.join(names) or 'none'})")
+        return name
+
+    def set_configuration(self, robot: str, q: FloatArray) -> None:
+        r = self._robots[self._known(robot, robot=True)]
+        q = np.asarray(q, dtype=float)
+        if q.shape != (r.model.n_joints,):
+            raise ValueError(f"{robot}: q must have shape ({r.model.n_joints},), got {q.shape}")
+        changed = np.flatnonzero(q != r.q)
+        for j in changed:
+            pb.resetJointState(r.body, int(j), float(q[j]), physicsClientId=self._cid)
+        r.q = q.copy()
+
+    def configuration(self, robot: str) -> FloatArray:
+        return self._robots[self._known(robot, robot=True)].q.copy()
+
+    def min_distance(self, a: str, b: str, max_distance: float = 1.0) -> Proximity:
+        """Closest approach between two named bodies (signed, < 0 = penetration), or
+        ``distance = max_distance`` with NaN witnesses when farther than ``max_distance``.
+
+        Branch and bound over link pairs: each link's bounding sphere gives a lower bound of
+        the pair's distance; pairs are queried in pybullet in increasing bound order, with
+        the best distance so far as the threshold, until the next bound exceeds it. Exact
+        (the same minimum as one whole-body query) at a fraction of the cost.
+        """
+        spheres_a, spheres_b = self._spheres(a), self._spheres(b)
+        body_a, body_b = self.body_id(a), self.body_id(b)
+        ca, ra, la = spheres_a
+        cb, rb, lb = spheres_b
+        bound = (np.linalg.norm(ca[:, None, :] - cb[None, :, :], axis=2)
+                 - ra[:, None] - rb[None, :])
+        order = np.argsort(bound, axis=None)
+        best = Proximity(float(max_distance), _NAN3.copy(), _NAN3.copy())
+        flat = bound.ravel()
+        for idx in order:
+            if flat[idx] >= best.distance:
+                break
+            i, j = divmod(int(idx), len(lb))
+            pts = pb.getClosestPoints(body_a, body_b, best.distance, linkIndexA=int(la[i]),
+                                      linkIndexB=int(lb[j]), physicsClientId=self._cid)
+            if pts:
+                p = min(pts, key=lambda x: x[8])
+                if p[8] < best.distance:
+                    best = Proximity(float(p[8]), np.array(p[5]), np.array(p[6]), int(p[3]),
+                                     int(p[4]))
+        return best
+
+    def _spheres(self, name: str) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
+        """World centres ``(L, 3)``, radii ``(L,)`` and pybullet link indices of spheres
+        bounding each link of a body (hull + pybullet's margin)."""
+        if name in self._robots:
+            r = self._robots[name]
+            centres, radii = _link_spheres(r.model)
+            frames = dh.frames_one(r.model, r.q, r.base)[:-1]
+            world = np.einsum("kij,kj->ki", frames[:, :3, :3], centres) + frames[:, :3, 3]
+            return world, radii, np.arange(-1, r.model.n_joints)
+        body = self.body_id(name)
+        lo, hi = (np.array(v) for v in pb.getAABB(body, physicsClientId=self._cid))
+        return (((lo + hi) / 2)[None], np.array([np.linalg.norm(hi - lo) / 2 + 1e-9]),
+                np.array([-1]))
+
+    def min_distance_links(self, robot: str, other: str, max_distance: float = 1.0
+                           ) -> list[Proximity]:
+        """One :class:`Proximity` per link of ``robot`` (base first) to the body ``other``
+        (e.g. for the per-link impact times of the CR index)."""
+        r = self._robots[self._known(robot, robot=True)]
+        body_b = self.body_id(other)
+        return [self._closest(r.body, body_b, max_distance, link_a=k)
+                for k in range(-1, r.model.n_joints)]
+
+    def _closest(self, body_a: int, body_b: int, max_distance: float,
+                 link_a: int | None = None, link_b: int | None = None) -> Proximity:
+        """The closest pair within ``max_distance``, searched with growing thresholds
+        (pybullet's cost grows with the number of pairs within the threshold; every pair
+        within a threshold is returned, so the first non-empty answer holds the minimum)."""
+        kwargs: dict[str, int] = {"physicsClientId": self._cid}
+        if link_a is not None:
+            kwargs["linkIndexA"] = link_a
+        if link_b is not None:
+            kwargs["linkIndexB"] = link_b
+        max_distance = float(max_distance)
+        pts: tuple = ()
+        for threshold in (*(t for t in _THRESHOLDS if t < max_distance), max_distance):
+            pts = pb.getClosestPoints(body_a, body_b, threshold, **kwargs)
+            if pts:
+                break
+        if not pts:
+            return Proximity(max_distance, _NAN3.copy(), _NAN3.copy())
+        best = min(pts, key=lambda p: p[8])
+        return Proximity(float(best[8]), np.array(best[5]), np.array(best[6]),
+                         int(best[3]), int(best[4]))
+
+    def _links_touch(self, body_a: int, link_a: int, body_b: int, link_b: int) -> bool:
+        pts = pb.getClosestPoints(body_a, body_b, 0.0, linkIndexA=link_a, linkIndexB=link_b,
+                                  physicsClientId=self._cid)
+        return any(p[8] <= 0.0 for p in pts)
+
+    def links_in_collision(self, body_a: int, link_a: int, body_b: int, link_b: int) -> bool:
+        """True if two links (pybullet indices) touch or overlap (signed distance <= 0)."""
+        return self._links_touch(body_a, link_a, body_b, link_b)
+
+    def in_collision(self, robot: str) -> bool:
+        """True if the robot touches another body, or itself beyond adjacent links."""
+        r = self._robots[self._known(robot, robot=True)]
+        for name in [*self._robots, *self._obstacles]:
+            if name == robot:
+                continue
+            pts = pb.getClosestPoints(r.body, self.body_id(name), 0.0,
+                                      physicsClientId=self._cid)
+            if any(p[8] <= 0.0 for p in pts):
+                return True
+        return any(self._links_touch(r.body, a, r.body, b) for a, b in r.self_pairs)
+
+    def self_collision_pairs(self, robot: str) -> tuple[tuple[int, int], ...]:
+        """The link pairs (pybullet indices) checked for self-collision."""
+        return self._robots[self._known(robot, robot=True)].self_pairs
+
+    def close(self) -> None:
+        self._client.close()

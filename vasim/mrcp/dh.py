@@ -1,0 +1,502 @@
+"""Serial arms as data: modified Denavit-Hartenberg tables from ``protocols/robots/*.toml``.
+
+A robot file is parsed once into a frozen, validated :class:`RobotModel`; errors name the
+file, the dotted field and the bad value. The pure functions here (:func:`link_frames`,
+:func:`fk`, :func:`fk_batch`, :func:`jacobian_batch`) are the batched numpy kinematics used
+where many configurations are sampled (indices, proximity tests); ``vasim.mrcp.backend``
+checks them against pybullet.
+
+Convention (Craig's modified DH): joint ``i`` (1-based) is ``(alpha_{i-1}, a_{i-1}, d_i)`` and
+``theta_i = q_i + theta_offset_i``::
+
+    T_{i-1,i} = RotX(alpha_{i-1}) TransX(a_{i-1}) RotZ(theta_i) TransZ(d_i)
+
+Frame 0 is the robot base frame; the TCP is ``tcp`` (a point in the last joint frame, the
+axes of that frame). Units: metres, radians (``*_deg`` fields in the file are degrees).
+
+**Decision** (spec §2: "verify the imposed limits against your convention"): the RX60B ships
+``theta_offset = 180°`` on joint 3. With it, the seed's imposed joint-3 range
+``[1.66, 3.92]`` rad begins 5° past the straight-arm singularity (links 2–3 aligned at
+``q3 = π/2``) and allows up to 135° of elbow flexion, as on the real arm; with no offset the
+same numbers would fold the forearm back onto the upper arm. The limits are shipped as data
+unchanged and a test checks that the documented home configuration lies inside them.
+
+TOML layout::
+
+    name = "rx60b"
+    tcp = [0.0, 0.0, 0.065]           # TCP in the last joint frame [m]  [0, 0, 0]
+    home = [...]                      # (n,) rad, inside the limits (required)
+    [[joints]]                        # one table per joint, base to tip
+    alpha_deg = -90.0                 # alpha_{i-1} [deg]
+    a = 0.0                           # a_{i-1} [m]
+    d = 0.0                           # d_i [m]
+    theta_offset_deg = 0.0            # [deg]  [0]
+    lower = -3.80                     # joint limits [rad], lower < upper
+    upper = 1.65
+    max_velocity = 5.0                # [rad/s] > 0
+    max_acceleration = 20.0           # [rad/s^2] > 0
+    [[links]]                         # n + 1 tables: base (link 0) .. last link (optional)
+    radius = 0.07                     # swept-sphere radius of the link's hull [m] > 0
+    points = [[0, 0, -0.3]]           # extra key points, link frame [m]  [none]
+    chain = true                      # include the DH key points  [true]
+
+Example:
+    >>> robot = load_robot("rx60b")
+    >>> robot.n_joints, robot.joints[2].a
+    (6, 0.29)
+    >>> bool(np.all((robot.home >= robot.lower) & (robot.home <= robot.upper)))
+    True
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from vasim.errors import ConfigError
+from vasim.paths import data_file, protocols_dir, read_data_file
+
+FloatArray = NDArray[np.float64]
+
+
+def robots_dir() -> Path:
+    """The folder of shipped robot files (``protocols/robots``)."""
+    return protocols_dir() / "robots"
+
+
+@dataclass(frozen=True)
+class DHJoint:
+    """One revolute joint, modified DH (Craig). Angles in radians, lengths in metres."""
+
+    alpha: float              # alpha_{i-1}
+    a: float                  # a_{i-1}
+    d: float                  # d_i
+    theta_offset: float       # theta_i = q_i + theta_offset
+    lower: float              # joint limits [rad]
+    upper: float
+    max_velocity: float       # [rad/s]
+    max_acceleration: float   # [rad/s^2]
+
+    def __post_init__(self) -> None:
+        for name in ("alpha", "a", "d", "theta_offset", "lower", "upper", "max_velocity",
+                     "max_acceleration"):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f"{name} must be finite, got {getattr(self, name)!r}",
+                                  field=name)
+        if not self.lower < self.upper:
+            raise ConfigError(f"lower ({self.lower!r}) must be below upper ({self.upper!r})",
+                              field="lower")
+        if self.max_velocity <= 0:
+            raise ConfigError(f"max_velocity must be > 0, got {self.max_velocity!r}",
+                              field="max_velocity")
+        if self.max_acceleration <= 0:
+            raise ConfigError(f"max_acceleration must be > 0, got {self.max_acceleration!r}",
+                              field="max_acceleration")
+
+
+@dataclass(frozen=True)
+class LinkGeometry:
+    """Collision geometry of one link: the convex hull of spheres at key points."""
+
+    radius: float                                 # [m]
+    points: tuple[tuple[float, float, float], ...] = ()   # extra key points, link frame [m]
+    chain: bool = True                            # include the DH key points
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.radius) and self.radius > 0):
+            raise ConfigError(f"radius must be > 0, got {self.radius!r}", field="radius")
+
+
+@dataclass(frozen=True, eq=False)
+class RobotModel:
+    """A serial arm: its DH joints, TCP, home configuration and link geometry (constants)."""
+
+    name: str
+    joints: tuple[DHJoint, ...]
+    tcp: FloatArray = field(default_factory=lambda: np.zeros(3))
+    home: FloatArray = field(default_factory=lambda: np.zeros(0))
+    links: tuple[LinkGeometry, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.joints)
+        if n == 0:
+            raise ConfigError("a robot needs at least one joint", field="joints")
+        tcp = np.asarray(self.tcp, dtype=float)
+        if tcp.shape != (3,) or not np.all(np.isfinite(tcp)):
+            raise ConfigError(f"tcp must be 3 finite numbers, got {self.tcp!r}", field="tcp")
+        home = np.asarray(self.home, dtype=float)
+        if home.shape != (n,) or not np.all(np.isfinite(home)):
+            raise ConfigError(f"home must be {n} finite angles, got {self.home!r}", field="home")
+        outside = np.flatnonzero((home < self.lower) | (home > self.upper))
+        if outside.size:
+            i = int(outside[0])
+            raise ConfigError(f"home[{i}] = {home[i]!r} is outside the joint limits "
+                              f"[{self.lower[i]!r}, {self.upper[i]!r}]", field=f"home[{i}]")
+        if self.links and len(self.links) != n + 1:
+            raise ConfigError(f"links must list {n + 1} tables (base + one per joint), got "
+                              f"{len(self.links)}", field="links")
+        tcp.setflags(write=False)
+        home.setflags(write=False)
+        object.__setattr__(self, "tcp", tcp)
+        object.__setattr__(self, "home", home)
+        # (4, n) alpha, a, d, theta_offset: the kernels' input, computed once
+        table = np.array([[j.alpha, j.a, j.d, j.theta_offset] for j in self.joints]).T.copy()
+        table.setflags(write=False)
+        object.__setattr__(self, "table", table)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, RobotModel):
+            return NotImplemented
+        return (self.name == other.name and self.joints == other.joints
+                and self.links == other.links and np.array_equal(self.tcp, other.tcp)
+                and np.array_equal(self.home, other.home))
+
+    __hash__ = None  # type: ignore[assignment]
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    def _column(self, name: str) -> FloatArray:
+        out = np.array([getattr(j, name) for j in self.joints], dtype=float)
+        out.setflags(write=False)
+        return out
+
+    @property
+    def lower(self) -> FloatArray:
+        return self._column("lower")
+
+    @property
+    def upper(self) -> FloatArray:
+        return self._column("upper")
+
+    @property
+    def max_velocity(self) -> FloatArray:
+        return self._column("max_velocity")
+
+    @property
+    def max_acceleration(self) -> FloatArray:
+        return self._column("max_acceleration")
+
+    def within_limits(self, q: FloatArray, tol: float = 0.0) -> bool:
+        """True if every joint of ``q`` lies within its limits (widened by ``tol``)."""
+        q = np.asarray(q, dtype=float)
+        return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
+
+    def link_key_points(self, k: int) -> FloatArray:
+        """``(m, 3)`` key points of link ``k`` (0 = base) in its own frame [m]: the frame
+        origin, the point ``a_k`` along ``x_k``, the origin of frame ``k + 1`` (the TCP for
+        the last link), plus the file's extra points."""
+        geom = self.links[k] if self.links else LinkGeometry(radius=0.01)
+        pts: list[FloatArray] = []
+        if geom.chain:
+            pts.append(np.zeros(3))
+            if k < self.n_joints:
+                nxt = self.joints[k]
+                pts.append(np.array([nxt.a, 0.0, 0.0]))
+                pts.append(joint_origin(nxt)[:3, 3])
+            else:
+                pts.append(np.array(self.tcp, dtype=float))
+        pts.extend(np.array(p, dtype=float) for p in geom.points)
+        return np.array(pts, dtype=float).reshape(-1, 3)
+
+
+def rot_x(angle: float) -> FloatArray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_z(angle: float) -> FloatArray:
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def joint_origin(joint: DHJoint) -> FloatArray:
+    """``(4, 4)`` fixed part of ``T_{i-1,i}`` at ``q_i = 0``: RotX(alpha) TransX(a)
+    RotZ(theta_offset) TransZ(d) (the joint then turns about the resulting z axis)."""
+    t = np.eye(4)
+    rx = rot_x(joint.alpha)
+    t[:3, :3] = rx @ rot_z(joint.theta_offset)
+    t[:3, 3] = rx @ np.array([joint.a, 0.0, joint.d])
+    return t
+
+
+def _dh_arrays(robot: RobotModel) -> tuple[FloatArray, ...]:
+    t = robot.table   # type: ignore[attr-defined]
+    return t[0], t[1], t[2], t[3]
+
+
+def link_frames(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+                ) -> FloatArray:
+    """Frames of every link and the TCP, batched.
+
+    Args:
+        robot: the arm.
+        q: ``(n,)`` or ``(m, n)`` joint angles [rad].
+        base: ``(4, 4)`` world-from-base transform (default identity).
+
+    Returns:
+        ``(..., n + 2, 4, 4)`` world-from-frame transforms: index 0 the base (frame 0),
+        index ``i`` joint frame ``i`` (1..n), index ``n + 1`` the TCP (axes of frame n).
+    """
+    q = np.asarray(q, dtype=float)
+    lead = q.shape[:-1]
+    n = robot.n_joints
+    if q.shape[-1] != n:
+        raise ValueError(f"q must have {n} joints in its last axis, got shape {q.shape}")
+    alpha, a, d, off = _dh_arrays(robot)
+    theta = q + off                                   # (..., n)
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(alpha), np.sin(alpha)
+    # Craig: [[ct, -st, 0, a], [st ca, ct ca, -sa, -sa d], [st sa, ct sa, ca, ca d]]
+    t = np.zeros((*lead, n, 4, 4))
+    t[..., 0, 0] = ct
+    t[..., 0, 1] = -st
+    t[..., 0, 3] = a
+    t[..., 1, 0] = st * ca
+    t[..., 1, 1] = ct * ca
+    t[..., 1, 2] = -sa
+    t[..., 1, 3] = -sa * d
+    t[..., 2, 0] = st * sa
+    t[..., 2, 1] = ct * sa
+    t[..., 2, 2] = ca
+    t[..., 2, 3] = ca * d
+    t[..., 3, 3] = 1.0
+    frames = np.empty((*lead, n + 2, 4, 4))
+    frames[..., 0, :, :] = np.eye(4) if base is None else np.asarray(base, dtype=float)
+    for i in range(n):
+        frames[..., i + 1, :, :] = frames[..., i, :, :] @ t[..., i, :, :]
+    tcp = np.eye(4)
+    tcp[:3, 3] = robot.tcp
+    frames[..., n + 1, :, :] = frames[..., n, :, :] @ tcp
+    return frames
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _chain_kernel(table: FloatArray, tcp: FloatArray, base: FloatArray, q: FloatArray,
+                  frames: FloatArray) -> None:  # pragma: no cover - compiled
+    """Fills ``frames`` ``(n + 2, 4, 4)`` for one configuration (same maths as
+    :func:`link_frames`)."""
+    n = q.shape[0]
+    frames[0] = base
+    t = np.zeros((4, 4))
+    t[3, 3] = 1.0
+    for i in range(n):
+        al, a, d = table[0, i], table[1, i], table[2, i]
+        th = q[i] + table[3, i]
+        ct, st, ca, sa = np.cos(th), np.sin(th), np.cos(al), np.sin(al)
+        t[0, 0] = ct
+        t[0, 1] = -st
+        t[0, 2] = 0.0
+        t[0, 3] = a
+        t[1, 0] = st * ca
+        t[1, 1] = ct * ca
+        t[1, 2] = -sa
+        t[1, 3] = -sa * d
+        t[2, 0] = st * sa
+        t[2, 1] = ct * sa
+        t[2, 2] = ca
+        t[2, 3] = ca * d
+        frames[i + 1] = frames[i] @ t
+    frames[n + 1] = frames[n]
+    for r in range(3):
+        frames[n + 1, r, 3] = (frames[n, r, 0] * tcp[0] + frames[n, r, 1] * tcp[1]
+                               + frames[n, r, 2] * tcp[2] + frames[n, r, 3])
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _jacobian_kernel(frames: FloatArray, jac: FloatArray) -> None:  # pragma: no cover
+    """Fills ``jac`` ``(6, n)`` from the frames of :func:`_chain_kernel`."""
+    n = jac.shape[1]
+    tip = frames[n + 1, :3, 3]
+    for i in range(n):
+        z = frames[i + 1, :3, 2]
+        r = tip - frames[i + 1, :3, 3]
+        jac[0, i] = z[1] * r[2] - z[2] * r[1]
+        jac[1, i] = z[2] * r[0] - z[0] * r[2]
+        jac[2, i] = z[0] * r[1] - z[1] * r[0]
+        jac[3, i] = z[0]
+        jac[4, i] = z[1]
+        jac[5, i] = z[2]
+
+
+_EYE4 = np.eye(4)
+
+
+def frames_one(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+               ) -> FloatArray:
+    """``(n + 2, 4, 4)`` frames of one configuration ``(n,)`` (compiled; a few µs)."""
+    q = np.ascontiguousarray(q, dtype=float)
+    if q.shape != (robot.n_joints,):
+        raise ValueError(f"q must have shape ({robot.n_joints},), got {q.shape}")
+    frames = np.empty((robot.n_joints + 2, 4, 4))
+    _chain_kernel(robot.table, robot.tcp, _EYE4 if base is None  # type: ignore[attr-defined]
+                  else np.ascontiguousarray(base, dtype=float), q, frames)
+    return frames
+
+
+def fk(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+       ) -> tuple[FloatArray, FloatArray]:
+    """TCP position ``(3,)`` and rotation ``(3, 3)`` (world frame) at ``q`` ``(n,)``."""
+    f = frames_one(robot, q, base)[-1]
+    return f[:3, 3].copy(), f[:3, :3].copy()
+
+
+def jacobian(robot: RobotModel, q: FloatArray, base: FloatArray | None = None) -> FloatArray:
+    """``(6, n)`` geometric TCP Jacobian (world frame, linear rows first) at ``q`` ``(n,)``."""
+    frames = frames_one(robot, q, base)
+    jac = np.empty((6, robot.n_joints))
+    _jacobian_kernel(frames, jac)
+    return jac
+
+
+def fk_and_jacobian(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """TCP position, rotation and Jacobian from one pass over the chain."""
+    frames = frames_one(robot, q, base)
+    jac = np.empty((6, robot.n_joints))
+    _jacobian_kernel(frames, jac)
+    return frames[-1, :3, 3].copy(), frames[-1, :3, :3].copy(), jac
+
+
+def fk_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+             ) -> tuple[FloatArray, FloatArray]:
+    """TCP positions ``(m, 3)`` and rotations ``(m, 3, 3)`` for configurations ``(m, n)``."""
+    f = link_frames(robot, np.atleast_2d(q), base)[..., -1, :, :]
+    return f[..., :3, 3].copy(), f[..., :3, :3].copy()
+
+
+def jacobian_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+                   ) -> FloatArray:
+    """Geometric TCP Jacobians ``(..., 6, n)`` (world frame, linear rows first).
+
+    Column ``i`` of a revolute joint is ``[z_i x (p_tcp - p_i); z_i]`` with ``z_i``, ``p_i``
+    the axis and origin of joint frame ``i``.
+    """
+    frames = link_frames(robot, q, base)
+    n = robot.n_joints
+    z = frames[..., 1:n + 1, :3, 2]                   # (..., n, 3)
+    p = frames[..., 1:n + 1, :3, 3]
+    tip = frames[..., n + 1, None, :3, 3]
+    lin = np.cross(z, tip - p)
+    return np.concatenate([np.swapaxes(lin, -1, -2), np.swapaxes(z, -1, -2)], axis=-2)
+
+
+# ---------------------------------------------------------------------------- loading
+
+def _num(value: Any, path: str, file: str | Path | None) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(f"expected a number, got {value!r}", file=file, field=path)
+    if not math.isfinite(float(value)):
+        raise ConfigError(f"expected a finite number, got {value!r}", file=file, field=path)
+    return float(value)
+
+
+def _vec(value: Any, n: int, path: str, file: str | Path | None) -> FloatArray:
+    if not isinstance(value, list) or len(value) != n:
+        raise ConfigError(f"expected a list of {n} numbers, got {value!r}", file=file,
+                          field=path)
+    return np.array([_num(v, f"{path}[{i}]", file) for i, v in enumerate(value)])
+
+
+def _check_keys(table: dict[str, Any], allowed: set[str], path: str,
+                file: str | Path | None) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        where = f"{path}.{unknown[0]}" if path else unknown[0]
+        raise ConfigError(f"unknown field (allowed: {', '.join(sorted(allowed))})",
+                          file=file, field=where)
+
+
+_JOINT_KEYS = {"alpha_deg", "a", "d", "theta_offset_deg", "lower", "upper", "max_velocity",
+               "max_acceleration"}
+_REQUIRED_JOINT_KEYS = _JOINT_KEYS - {"theta_offset_deg"}
+
+
+def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
+    """Parses a robot TOML document (see the module docstring) into a :class:`RobotModel`.
+
+    Raises:
+        ConfigError: naming the file, the dotted field and the bad value.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", file=file) from exc
+    _check_keys(data, {"name", "tcp", "home", "joints", "links"}, "", file)
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        raise ConfigError(f"name must be a non-empty string, got {name!r}", file=file,
+                          field="name")
+    raw_joints = data.get("joints")
+    if not isinstance(raw_joints, list) or not raw_joints:
+        raise ConfigError("at least one [[joints]] table is required", file=file,
+                          field="joints")
+    joints = []
+    for i, jt in enumerate(raw_joints):
+        path = f"joints[{i}]"
+        if not isinstance(jt, dict):
+            raise ConfigError(f"expected a table, got {jt!r}", file=file, field=path)
+        _check_keys(jt, _JOINT_KEYS, path, file)
+        missing = sorted(_REQUIRED_JOINT_KEYS - set(jt))
+        if missing:
+            raise ConfigError("missing field", file=file, field=f"{path}.{missing[0]}")
+        vals = {k: _num(jt[k], f"{path}.{k}", file) for k in jt}
+        try:
+            joints.append(DHJoint(
+                alpha=math.radians(vals["alpha_deg"]), a=vals["a"], d=vals["d"],
+                theta_offset=math.radians(vals.get("theta_offset_deg", 0.0)),
+                lower=vals["lower"], upper=vals["upper"], max_velocity=vals["max_velocity"],
+                max_acceleration=vals["max_acceleration"]))
+        except ConfigError as exc:
+            raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
+    n = len(joints)
+    tcp = _vec(data.get("tcp", [0.0, 0.0, 0.0]), 3, "tcp", file)
+    if "home" not in data:
+        raise ConfigError("missing field", file=file, field="home")
+    home = _vec(data["home"], n, "home", file)
+    links = []
+    for k, lt in enumerate(data.get("links", [])):
+        path = f"links[{k}]"
+        if not isinstance(lt, dict):
+            raise ConfigError(f"expected a table, got {lt!r}", file=file, field=path)
+        _check_keys(lt, {"radius", "points", "chain"}, path, file)
+        if "radius" not in lt:
+            raise ConfigError("missing field", file=file, field=f"{path}.radius")
+        pts_raw = lt.get("points", [])
+        if not isinstance(pts_raw, list):
+            raise ConfigError(f"expected a list of points, got {pts_raw!r}", file=file,
+                              field=f"{path}.points")
+        pts = tuple(tuple(float(x) for x in _vec(p, 3, f"{path}.points[{j}]", file))
+                    for j, p in enumerate(pts_raw))
+        chain = lt.get("chain", True)
+        if not isinstance(chain, bool):
+            raise ConfigError(f"expected true or false, got {chain!r}", file=file,
+                              field=f"{path}.chain")
+        if not chain and not pts:
+            raise ConfigError("a link with chain = false needs points", file=file,
+                              field=f"{path}.points")
+        try:
+            links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file),
+                                      points=pts,  # type: ignore[arg-type]
+                                      chain=chain))
+        except ConfigError as exc:
+            raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
+    try:
+        return RobotModel(name=name, joints=tuple(joints), tcp=tcp, home=home,
+                          links=tuple(links))
+    except ConfigError as exc:
+        raise ConfigError(exc.reason, file=file, field=exc.field) from None
+
+
+def load_robot(ref: str | Path) -> RobotModel:
+    """Loads a robot by shipped name (``"rx60b"``) or path to a TOML file."""
+    path = data_file(ref, robots_dir(), "robot")
+    return parse_robot(read_data_file(path, "robot"), file=path)

@@ -1,0 +1,127 @@
+"""URDF generated from a DH table, with convex-hull collision shapes built by trimesh.
+
+Each link ``k`` (0 = base .. n) gets the convex hull of spheres (radius from the robot file)
+at its key points (:meth:`RobotModel.link_key_points`), in the link's own frame: a smooth
+hull of the kind the seed wraps its CAD links in (seed Fig. 3.13, "RS"). A fixed ``tcp`` link
+carries the TCP. The files go to a cache folder keyed by the model's content (nothing is
+downloaded; the same robot is written once per machine).
+
+Example:
+    >>> from vasim.mrcp.dh import load_robot
+    >>> path = write_urdf(load_robot("rx60b"))
+    >>> path.name, path.is_file()
+    ('rx60b.urdf', True)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from vasim.mrcp.dh import RobotModel, joint_origin
+
+_SPHERE = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+
+
+def cache_dir() -> Path:
+    """Where generated URDFs live: ``$VASIM_CACHE/urdf`` or ``<tmp>/vasim-cache/urdf``."""
+    root = os.environ.get("VASIM_CACHE") or os.path.join(tempfile.gettempdir(), "vasim-cache")
+    return Path(root) / "urdf"
+
+
+def link_hull(robot: RobotModel, k: int) -> trimesh.Trimesh:
+    """Convex hull (link ``k`` frame, metres) of spheres at the link's key points.
+
+    The sphere is an icosphere scaled so that its faces lie *outside* the true sphere
+    (circumscribed), so the hull contains every swept sphere.
+    """
+    radius = robot.links[k].radius if robot.links else 0.01
+    # the inscribed radius of a subdivided icosphere: the smallest face-plane distance
+    normals = _SPHERE.face_normals
+    centroids = _SPHERE.triangles_center
+    inradius = float(np.min(np.einsum("ij,ij->i", normals, centroids)))
+    sphere = _SPHERE.vertices * (radius / inradius)
+    pts = robot.link_key_points(k)
+    cloud = (pts[:, None, :] + sphere[None, :, :]).reshape(-1, 3)
+    return trimesh.convex.convex_hull(cloud)
+
+
+_HULLS: dict[str, tuple[trimesh.Trimesh, ...]] = {}
+
+
+def link_hulls(robot: RobotModel) -> tuple[trimesh.Trimesh, ...]:
+    """Hulls of links ``0..n`` (cached per robot content; do not modify them)."""
+    key = model_key(robot)
+    if key not in _HULLS:
+        _HULLS[key] = tuple(link_hull(robot, k) for k in range(robot.n_joints + 1))
+    return _HULLS[key]
+
+
+def model_key(robot: RobotModel) -> str:
+    """A short content hash of the model (DH table, TCP, link geometry)."""
+    h = hashlib.sha256()
+    h.update(repr((robot.name, robot.joints, robot.links, tuple(robot.tcp))).encode())
+    return h.hexdigest()[:16]
+
+
+def _origin_xml(t: np.ndarray) -> str:
+    rpy = Rotation.from_matrix(t[:3, :3]).as_euler("xyz")
+    xyz = " ".join(repr(float(v)) for v in t[:3, 3])
+    return f'<origin xyz="{xyz}" rpy="{" ".join(repr(float(v)) for v in rpy)}"/>'
+
+
+def _link_xml(name: str, mesh: str | None) -> str:
+    inertial = ('<inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="1.0"/>'
+                '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/>'
+                '</inertial>')
+    if mesh is None:
+        return f'  <link name="{name}">{inertial}</link>\n'
+    geom = f'<geometry><mesh filename="{mesh}"/></geometry>'
+    return (f'  <link name="{name}">{inertial}\n'
+            f'    <visual><origin xyz="0 0 0" rpy="0 0 0"/>{geom}</visual>\n'
+            f'    <collision><origin xyz="0 0 0" rpy="0 0 0"/>{geom}</collision>\n'
+            f'  </link>\n')
+
+
+def urdf_text(robot: RobotModel) -> str:
+    """The URDF document (mesh files named ``link{k}.obj`` beside it)."""
+    n = robot.n_joints
+    parts = [f'<?xml version="1.0"?>\n<robot name="{robot.name}">\n',
+             _link_xml("link0", "link0.obj")]
+    for i, joint in enumerate(robot.joints, start=1):
+        parts.append(_link_xml(f"link{i}", f"link{i}.obj"))
+        parts.append(
+            f'  <joint name="joint{i}" type="revolute"><parent link="link{i - 1}"/>'
+            f'<child link="link{i}"/>{_origin_xml(joint_origin(joint))}<axis xyz="0 0 1"/>'
+            f'<limit lower="{joint.lower!r}" upper="{joint.upper!r}" effort="100" '
+            f'velocity="{joint.max_velocity!r}"/></joint>\n')
+    tcp = np.eye(4)
+    tcp[:3, 3] = robot.tcp
+    parts.append(_link_xml("tcp", None))
+    parts.append(f'  <joint name="tcp_joint" type="fixed"><parent link="link{n}"/>'
+                 f'<child link="tcp"/>{_origin_xml(tcp)}</joint>\n</robot>\n')
+    return "".join(parts)
+
+
+def write_urdf(robot: RobotModel, folder: Path | None = None) -> Path:
+    """Writes the URDF and its link hulls (once per content) and returns the URDF path."""
+    folder = folder or cache_dir() / f"{robot.name}-{model_key(robot)}"
+    path = folder / f"{robot.name}.urdf"
+    if path.is_file():
+        return path
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, hull in enumerate(link_hulls(robot)):
+        mesh_path = folder / f"link{k}.obj"
+        tmp = folder / f".link{k}.obj.{os.getpid()}"
+        hull.export(tmp, file_type="obj")
+        os.replace(tmp, mesh_path)
+    tmp = folder / f".{robot.name}.urdf.{os.getpid()}"
+    tmp.write_text(urdf_text(robot), encoding="utf-8")
+    os.replace(tmp, path)
+    return path
