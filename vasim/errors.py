@@ -41,3 +41,7 @@ class StoreError(VasimError):
 
 class DeviceError(VasimError):
     """A haptic/input device failed or delivered unusable data."""
+
+
+class TransitionError(VasimError):
+    """An illegal transition of a state machine (MRCP kernel states, teleoperation modes)."""

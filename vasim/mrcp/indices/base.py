@@ -1,0 +1,203 @@
+"""The one interface of every suitability index, its evaluation context and the registry.
+
+An index maps one robot at one task point, along the predicted trajectory, to a value in
+``[0, 1]`` (or ``>= 0``) where ``0`` means "cannot continue the task" (spec/mrcp.md §4).
+The kernel builds one :class:`EvalContext` per (robot, task point) and calls every index on
+it; indices never see devices or the kernel's state machine. Adding an index means
+registering a factory with ``@INDICES.add("name")``: no control code changes (requisite 7).
+
+An index whose value depends on all robots at once (the collision risk ``CR_r = timp_r /
+max timp``) also implements :class:`GroupIndex`: the kernel evaluates it per (robot, point)
+and then calls ``combine`` once with every raw value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, TypeVar, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Key = tuple[str, int]
+
+
+@dataclass(frozen=True)
+class Wrench:
+    """A force-torque sensor reading at the grasped task point (world frame).
+
+    Attributes:
+        force: ``(3,)`` force [N].
+        torque: ``(3,)`` torque about ``point`` [N m].
+        point: ``(3,)`` where the torque is measured [m].
+    """
+
+    force: FloatArray
+    torque: FloatArray
+    point: FloatArray
+
+    def moved_to(self, point: FloatArray) -> Wrench:
+        """The same load expressed at another point: ``τ' = τ + (p - p') x F``."""
+        p = np.asarray(point, dtype=np.float64)
+        return Wrench(self.force, self.torque + np.cross(self.point - p, self.force), p)
+
+
+@dataclass(frozen=True)
+class EvalContext:
+    """Everything an index may read to evaluate one robot at one task point.
+
+    Point ``k = 0`` of every trajectory array is *now*; ``k = 1..K`` are predicted.
+
+    Attributes:
+        robot: robot name.
+        arm: its kinematics.
+        point: task-point index ``q``.
+        selected: True for RSel evaluated at CuTP (it holds the task), False for a
+            candidate evaluated as if it held the task at ``point``.
+        times: ``(K+1,)`` absolute times of the trajectory points [s].
+        positions: ``(K+1, 3)`` task-point positions [m] (world frame); ``[0]`` observed.
+        std: ``(K+1, 3)`` standard deviation of each predicted position [m] (``[0] = 0``).
+        rotations: ``(K+1, 3, 3)`` task-point orientations, or None for a position-only task.
+        configs: ``(K+1, n)`` joint configurations reaching each point (IK, seeded along the
+            trajectory); rows where ``reachable`` is False are NaN. For RSel, ``configs[0]``
+            is the measured configuration.
+        reachable: ``(K+1,)`` whether IK found a configuration within the joint limits.
+        joint_velocity: ``(K+1, n)`` joint velocities along the trajectory [rad/s] (for RSel
+            ``[0]`` is measured; otherwise finite differences of ``configs``).
+        past_configs: configurations this robot was predicted to have at this point in
+            earlier cycles: ``past_configs[j]`` is the ``(K+1, n)`` prediction made ``j + 1``
+            prediction steps ago (most recent first), for the RJ range shrinking.
+        world: the proximity world, posed at the measured configurations (an index that
+            poses a robot must restore it).
+        wrench: the force-torque reading of the task, if the station has a sensor.
+        extras: scenario data for task-oriented indices (e.g. the camera pose).
+    """
+
+    robot: str
+    arm: ArmKinematics
+    point: int
+    selected: bool
+    times: FloatArray
+    positions: FloatArray
+    std: FloatArray
+    rotations: FloatArray | None
+    configs: FloatArray
+    reachable: BoolArray
+    joint_velocity: FloatArray
+    past_configs: Sequence[FloatArray]
+    world: ProximityWorld
+    wrench: Wrench | None = None
+    extras: Mapping[str, Any] = field(default_factory=dict)
+    _memo: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def horizon(self) -> int:
+        """``K``: the number of predicted points after *now*."""
+        return int(self.times.shape[0]) - 1
+
+    def body_distances(self, max_distance: float) -> tuple[list[str], FloatArray]:
+        """Minimum distance from this robot, posed at each trajectory point, to every other
+        body of the world (robots at their measured configurations, obstacles).
+
+        Queried once per context and shared by the indices that need it (CR, visibility):
+        uses the world's batched ``min_distances(robot, configs, bodies, max_distance)``
+        when it has one, else poses the robot and calls ``min_distance`` per body (the
+        pose is restored).
+
+        Returns:
+            The body names and a ``(K+1, B)`` array [m], NaN rows at unreachable points,
+            values capped at ``max_distance``.
+        """
+        cached = self._memo.get("distances")
+        if cached is not None and cached[0] >= max_distance:
+            names, dist = cached[1], np.minimum(cached[2], max_distance)
+            return names, np.where(np.isnan(cached[2]), np.nan, dist)
+        world = self.world
+        names = [b for b in (*world.robot_names(), *world.obstacle_names()) if b != self.robot]
+        out = np.full((self.configs.shape[0], len(names)), np.nan)
+        idx = np.flatnonzero(self.reachable)
+        batched = getattr(world, "min_distances", None)
+        if names and idx.size:
+            if batched is not None:
+                out[idx] = np.asarray(batched(self.robot, self.configs[idx], names,
+                                              max_distance), dtype=np.float64)
+            else:
+                saved = world.configuration(self.robot)
+                try:
+                    for k in idx:
+                        world.set_configuration(self.robot, self.configs[k])
+                        out[k] = [world.min_distance(self.robot, b, max_distance).distance
+                                  for b in names]
+                finally:
+                    world.set_configuration(self.robot, saved)
+        out = np.where(np.isnan(out), np.nan, np.minimum(out, max_distance))
+        self._memo["distances"] = (max_distance, names, out)
+        return names, out
+
+
+def prediction_weights(count: int) -> FloatArray:
+    """``w_k = 1/(k+1)`` for ``k = 0..count-1`` (seed eq. 3.19)."""
+    return 1.0 / (np.arange(count, dtype=np.float64) + 1.0)
+
+
+@runtime_checkable
+class Index(Protocol):
+    """A suitability index: ``evaluate(ctx) -> value`` (0 = cannot continue)."""
+
+    name: str
+
+    def evaluate(self, ctx: EvalContext) -> float: ...
+
+
+@runtime_checkable
+class GroupIndex(Index, Protocol):
+    """An index normalised across all evaluated (robot, point) pairs of a cycle."""
+
+    def combine(self, raw: Mapping[Key, float]) -> dict[Key, float]: ...
+
+
+F = TypeVar("F", bound=Callable[..., Index])
+
+
+class IndexRegistry:
+    """Name -> index factory. A duplicate name raises ``ValueError``."""
+
+    def __init__(self) -> None:
+        self._factories: dict[str, Callable[..., Index]] = {}
+
+    def add(self, name: str) -> Callable[[F], F]:
+        """Decorator registering a factory (usually the index class) under ``name``."""
+
+        def deco(factory: F) -> F:
+            if name in self._factories:
+                raise ValueError(f"index {name!r} is already registered")
+            self._factories[name] = factory
+            return factory
+
+        return deco
+
+    def names(self) -> list[str]:
+        return sorted(self._factories)
+
+    def create(self, name: str, **params: Any) -> Index:
+        """Instantiate the index ``name`` with keyword parameters.
+
+        Raises:
+            ValueError: for an unknown name (the known names are listed).
+        """
+        try:
+            factory = self._factories[name]
+        except KeyError:
+            raise ValueError(f"unknown index {name!r}; known: {self.names()}") from None
+        return factory(**params)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._factories
+
+
+INDICES = IndexRegistry()

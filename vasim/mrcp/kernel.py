@@ -1,0 +1,574 @@
+"""One MRCP control cycle: evaluate, decide, act (spec/mrcp.md §§3-8, seed chapter 4).
+
+The kernel sees robots only through :class:`~vasim.mrcp.interfaces.ArmKinematics` and the
+station through :class:`~vasim.mrcp.interfaces.ProximityWorld`; it never sees a device
+protocol. Each call of :meth:`MRCPKernel.step` is one evaluation period (18 ms default):
+
+1. **Observe**: measured configurations are read from the world (the workspace sensors);
+   the *increment* of the operator's task pose since the last cycle is applied in TOp and
+   discarded in TT (the master is decoupled while the task is held, as with a clutch).
+2. **Predict** (§3): the world positions of every task point are extrapolated ``K`` points
+   ahead (one fit for all points), the task orientation likewise.
+3. **Evaluate** (§4): RSel at CuTP and every candidate at every other task point, with
+   every configured index, on an :class:`~vasim.mrcp.indices.EvalContext` built once per
+   (robot, point); group indices (CR) are normalised across the cycle.
+4. **Time** (§5-6): ``texec`` per index and its minimum, ``ttransf*`` of the candidates,
+   ``tus``; RCnt by Algorithm 1; NTT against the threshold.
+5. **Act** (§7, Algorithm 2): RSel follows the task (never into a collision: that is the
+   ``RSEL_COLLISION`` safety stop); the candidates, in order of decreasing ``tus``, move
+   toward the pre-grasp pose of their best point with the guidance displacement, each
+   one's new pose an obstacle for the next. In TT, RCnt approaches, grasps, then RSel
+   releases and the roles swap (:mod:`vasim.mrcp.modes`).
+
+The kernel poses its world at the commanded configurations (its model of the station);
+a robot driver sends :attr:`CycleRecord.commands` to the controllers.
+
+**Decisions**:
+
+* A candidate is evaluated as if it held the task at the point: ``configs[0]`` is IK of the
+  point's current pose; an unreachable current pose scores 0 on every index.
+* Predicted points are ``stride`` cycles apart so the RJ error ``e_k`` compares a
+  prediction with the measurement it predicted.
+* RSel does not follow a task increment it cannot perform (IK fails, joint speed above its
+  limit, or a collision): the task is held where it is (the achieved task pose, not the
+  commanded one, feeds the predictor); a collision also raises the safety stop.
+* A transfer that has not completed within ``tt_timeout`` is aborted (back to TOp, roles
+  unchanged); RCnt's final approach to the grasp ignores repulsion (collision checks stay)
+  and, once within ``grasp_tolerance``, closing the gripper centres it on the grasp pose.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
+from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
+from vasim.mrcp.modes import KernelEvent, KernelState, next_state
+from vasim.mrcp.planner import ObstacleMemory, PlannerParams, move_candidate
+from vasim.mrcp.predict import PolynomialPredictor, Predictor, predict_rotations
+from vasim.mrcp.select import Assignment, candidate_hierarchy
+from vasim.mrcp.timefx import Continuity, continuity_robot, estimate_transfer, texec_many
+
+FloatArray = NDArray[np.float64]
+Key = tuple[str, int]
+
+
+@dataclass(frozen=True)
+class TaskPoint:
+    """A grasp point of the task (object, needle, tool), in the task frame.
+
+    Attributes:
+        position: ``(3,)`` [m] in the task frame.
+        rotation: ``(3, 3)`` gripper orientation in the task frame, or None (position-only:
+            IK is asked for the position alone).
+        approach: ``(3,)`` pre-grasp offset [m] in the task frame (grasp + approach).
+    """
+
+    position: FloatArray
+    rotation: FloatArray | None = None
+    approach: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class IndexSpec:
+    """An index of the registry by name, with its keyword parameters."""
+
+    name: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class KernelConfig:
+    """Parameters of the control kernel (SI units).
+
+    Attributes:
+        dt: evaluation period [s] (the seed's hardware: 18 ms).
+        horizon: ``K`` predicted points.
+        stride: cycles between predicted points.
+        window: samples of the task trajectory used by the predictor.
+        texec_window: samples of each index used to fit ``texec``.
+        texec_degree: polynomial degree of that fit.
+        texec_min_samples: a series shorter than this gives ``t_max`` (**decision**: a fit
+            through a handful of samples extrapolates noise over the whole window).
+        t_max: the confidence window of ``texec`` [s].
+        ntt_threshold: start a transfer when ``NTT >= ntt_threshold``.
+        max_tcp_speed: robot name -> maximum TCP speed [m/s] (``default_tcp_speed`` else).
+        ttc_samples: IK samples along a transfer line for TTC.
+        planner: action planner parameters.
+        indices: the indices evaluated each cycle.
+        grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
+        grasp_cycles: cycles both robots hold the task before RSel releases.
+        tt_timeout: a transfer not done within it is aborted [s].
+        seed: seed of the planner's random force.
+    """
+
+    dt: float = 0.018
+    horizon: int = 3
+    stride: int = 3
+    window: int = 12
+    predictor_degree: int = 2
+    texec_window: int = 15
+    texec_degree: int = 1
+    texec_min_samples: int = 5
+    t_max: float = 5.0
+    ntt_threshold: float = 0.9
+    max_tcp_speed: Mapping[str, float] = field(default_factory=dict)
+    default_tcp_speed: float = 0.5
+    ttc_samples: int = 4
+    planner: PlannerParams = field(default_factory=PlannerParams)
+    indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
+    grasp_tolerance: float = 0.002
+    grasp_cycles: int = 2
+    tt_timeout: float = 5.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("dt", "t_max", "default_tcp_speed", "tt_timeout", "grasp_tolerance"):
+            if getattr(self, name) <= 0.0:
+                raise ValueError(f"KernelConfig.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("horizon", "stride", "window", "texec_window", "ttc_samples"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"KernelConfig.{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.ntt_threshold <= 0.0:
+            raise ValueError(f"KernelConfig.ntt_threshold must be > 0, got {self.ntt_threshold!r}")
+        for spec in self.indices:
+            if spec.name not in INDICES:
+                raise ValueError(f"KernelConfig.indices: unknown index {spec.name!r}; "
+                                 f"known: {INDICES.names()}")
+
+
+@dataclass
+class Evaluation:
+    """Per-(robot, point) results of one cycle (for plots and the event log)."""
+
+    values: dict[str, float]
+    texec: dict[str, float]
+    texec_min: float
+    ttransf: float
+    tus: float
+
+
+@dataclass
+class CycleRecord:
+    """What one cycle decided.
+
+    Attributes:
+        t: cycle time [s].
+        state: kernel state after the cycle.
+        rsel, cutp: the robot holding the task and its point (after the cycle).
+        holders: robots grasping the task after the cycle (never empty).
+        task_position, task_rotation: the achieved task pose after the cycle.
+        commands: robot -> commanded configuration.
+        evaluations: (robot, point) -> :class:`Evaluation` (TOp cycles only).
+        continuity: RCnt and NTT (TOp cycles only).
+        rcnt, target: the transfer's receiving robot and point (during TT).
+        events: what happened, e.g. ``"transfer_start r2@3 (ntt=0.93, rj)"``.
+    """
+
+    t: float
+    state: KernelState
+    rsel: str
+    cutp: int
+    holders: tuple[str, ...]
+    task_position: FloatArray
+    task_rotation: FloatArray | None
+    commands: dict[str, FloatArray]
+    evaluations: dict[Key, Evaluation]
+    continuity: Continuity | None
+    rcnt: str | None
+    target: int | None
+    events: list[str]
+
+
+class MRCPKernel:
+    """The MRCP control kernel over a set of arms and a proximity world.
+
+    Args:
+        arms: robot name -> kinematics (names as in ``world``).
+        world: the station, posed at the robots' current configurations.
+        task_points: the task's grasp points (task frame).
+        rsel: the robot holding the task at start.
+        cutp: the task point it holds.
+        task_position, task_rotation: the task pose at start (world frame).
+        config: kernel parameters.
+        predictor: trajectory predictor (default: least squares, ``config.predictor_degree``).
+        indices: index instances (default: created from ``config.indices``).
+
+    Raises:
+        ValueError: when a name or index is inconsistent.
+    """
+
+    def __init__(self, arms: Mapping[str, ArmKinematics], world: ProximityWorld,
+                 task_points: Sequence[TaskPoint], rsel: str, cutp: int,
+                 task_position: FloatArray, task_rotation: FloatArray | None = None,
+                 config: KernelConfig | None = None, predictor: Predictor | None = None,
+                 indices: Sequence[Index] | None = None, t0: float = 0.0) -> None:
+        self.config = config or KernelConfig()
+        self.arms = dict(arms)
+        self.world = world
+        if rsel not in self.arms:
+            raise ValueError(f"rsel {rsel!r} is not one of the arms {sorted(self.arms)}")
+        missing = set(self.arms) - set(world.robot_names())
+        if missing:
+            raise ValueError(f"arms {sorted(missing)} are not robots of the world")
+        if not 0 <= cutp < len(task_points):
+            raise ValueError(f"cutp {cutp!r} is not a task point index (0..{len(task_points)-1})")
+        self.task_points = list(task_points)
+        self.predictor = predictor or PolynomialPredictor(self.config.predictor_degree)
+        self.indices: list[Index] = (list(indices) if indices is not None else
+                                     [INDICES.create(s.name, **dict(s.params))
+                                      for s in self.config.indices])
+        self.state = KernelState.TOP
+        self.rsel = rsel
+        self.cutp = cutp
+        self.holders: tuple[str, ...] = (rsel,)
+        self.rcnt: str | None = None
+        self.target: int | None = None
+        self._tt_start = 0.0
+        self._grasp_count = 0
+        self._rng = np.random.default_rng(self.config.seed)
+        self._memory = ObstacleMemory()
+        w = self.config.window
+        self._times: deque[float] = deque([t0], maxlen=w)
+        rot0 = np.eye(3) if task_rotation is None else np.asarray(task_rotation, dtype=float)
+        self._has_rotation = task_rotation is not None
+        self._positions: deque[FloatArray] = deque([np.asarray(task_position, float)], maxlen=w)
+        self._rotations: deque[FloatArray] = deque([rot0], maxlen=w)
+        self._last_cmd: tuple[FloatArray, FloatArray] = (self._positions[-1].copy(), rot0)
+        self._tp_local = np.array([tp.position for tp in self.task_points], dtype=float)
+        self._cycle_times: deque[float] = deque(maxlen=self.config.texec_window)
+        self._index_hist: dict[tuple[str, int, str], deque[tuple[float, float]]] = {}
+        self._pred_hist: dict[Key, deque[FloatArray]] = {}
+        self._last_q = {r: world.configuration(r).copy() for r in self.arms}
+        self._seeds: dict[Key, FloatArray] = {}
+        self._last_goals: dict[Key, float] = {}
+
+    # ------------------------------------------------------------------ geometry helpers
+    def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
+        """The achieved task pose (position, rotation or None)."""
+        return self._positions[-1].copy(), (self._rotations[-1].copy()
+                                            if self._has_rotation else None)
+
+    def point_pose(self, q: int, position: FloatArray, rotation: FloatArray
+                   ) -> tuple[FloatArray, FloatArray | None]:
+        """World pose of task point ``q`` for a task pose."""
+        tp = self.task_points[q]
+        pos = position + rotation @ tp.position
+        rot = rotation @ tp.rotation if tp.rotation is not None else None
+        return pos, rot
+
+    def pregrasp(self, q: int, position: FloatArray, rotation: FloatArray
+                 ) -> tuple[FloatArray, FloatArray | None]:
+        pos, rot = self.point_pose(q, position, rotation)
+        return pos + rotation @ self.task_points[q].approach, rot
+
+    # ------------------------------------------------------------------ the cycle
+    def step(self, t: float, task_position: FloatArray, task_rotation: FloatArray | None = None,
+             wrench: Wrench | None = None, extras: Mapping[str, Any] | None = None
+             ) -> CycleRecord:
+        """Run one control cycle at time ``t`` with the operator's task pose.
+
+        Args:
+            t: cycle time [s] (increasing).
+            task_position: ``(3,)`` commanded task position [m] (held during TT).
+            task_rotation: ``(3, 3)`` commanded task orientation (None: keep the current).
+            wrench: force-torque reading at the task, if any.
+            extras: scenario data passed to the indices.
+        """
+        events: list[str] = []
+        q_meas = {r: self.world.configuration(r).copy() for r in self.arms}
+        qdot = {r: (q_meas[r] - self._last_q[r]) / self.config.dt for r in self.arms}
+        evaluations: dict[Key, Evaluation] = {}
+        continuity: Continuity | None = None
+        if self.state is KernelState.FAULT:
+            return self._record(t, q_meas, evaluations, None, ["fault: no motion"])
+        pos_now, rot_now = self._positions[-1], self._rotations[-1]
+        if self.state is KernelState.TOP:
+            evaluations = self._evaluate(t, q_meas, qdot, wrench, extras or {})
+            continuity = self._decide(evaluations)
+            if continuity.transfer:
+                self.state = next_state(self.state, KernelEvent.START_TRANSFER)
+                self.rcnt, self.target = continuity.robot, continuity.point
+                self._tt_start = t
+                cause = min(evaluations[(self.rsel, self.cutp)].texec.items(),
+                            key=lambda kv: kv[1])[0]
+                events.append(f"transfer_start {self.rcnt}@{self.target} "
+                              f"(ntt={continuity.ntt:.2f}, cause={cause})")
+        # Act: RSel follows the operator in TOp; the task is held in TT.
+        new_pos, new_rot = pos_now, rot_now
+        cmd_pos = np.asarray(task_position, float)
+        cmd_rot = (np.asarray(task_rotation, float) if task_rotation is not None
+                   else self._last_cmd[1])
+        if self.state is KernelState.TOP:
+            goal_pos = pos_now + (cmd_pos - self._last_cmd[0])
+            goal_rot = cmd_rot @ self._last_cmd[1].T @ rot_now
+            if self._follow(goal_pos, goal_rot, q_meas, events):
+                new_pos, new_rot = goal_pos, goal_rot
+        self._last_cmd = (cmd_pos, cmd_rot)
+        if self.state is not KernelState.FAULT:
+            self._act_candidates(t, q_meas, evaluations, pos_now, rot_now, events)
+        self._times.append(t)
+        self._positions.append(new_pos)
+        self._rotations.append(new_rot)
+        self._last_q = q_meas
+        return self._record(t, q_meas, evaluations, continuity, events)
+
+    def reset_fault(self) -> None:
+        """Leave the safety stop (the operator acknowledged it)."""
+        self.state = next_state(self.state, KernelEvent.RESET)
+
+    # ------------------------------------------------------------------ evaluate
+    def _prediction(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(times (K+1,), positions (K+1, nq, 3), std (K+1, nq, 3), task rotations (K+1,3,3))."""
+        cfg = self.config
+        times = np.array(self._times)
+        pos = np.array(self._positions)
+        rots = np.array(self._rotations)
+        nq = len(self.task_points)
+        world_tp = pos[:, None, :] + np.einsum("nij,qj->nqi", rots, self._tp_local)
+        future = t + cfg.dt * cfg.stride * np.arange(1, cfg.horizon + 1)
+        pred = self.predictor.predict(times, world_tp.reshape(len(times), -1), future)
+        all_t = np.concatenate([[t], future])
+        mean = np.concatenate([world_tp[-1:], pred.mean.reshape(-1, nq, 3)])
+        std = np.concatenate([np.zeros((1, nq, 3)), pred.std.reshape(-1, nq, 3)])
+        if self._has_rotation and len(times) > 1:
+            rpred = predict_rotations(times, rots, future, self.predictor)
+        else:
+            rpred = np.repeat(rots[-1:], cfg.horizon, axis=0)
+        return all_t, mean, std, np.concatenate([rots[-1:], rpred])
+
+    def _trajectory_configs(self, arm: ArmKinematics, key: Key, first: FloatArray | None,
+                            seed: FloatArray, positions: FloatArray,
+                            rotations: list[FloatArray | None]) -> tuple[FloatArray, NDArray]:
+        n_pts = positions.shape[0]
+        configs = np.full((n_pts, arm.n_joints), np.nan)
+        reach = np.zeros(n_pts, dtype=bool)
+        s = self._seeds.get(key, seed)
+        for k in range(n_pts):
+            sol = first if (k == 0 and first is not None) else arm.ik(positions[k],
+                                                                     rotations[k], s)
+            if sol is None:
+                if k == 0:
+                    return configs, reach
+                continue
+            configs[k], reach[k] = sol, True
+            s = sol
+        self._seeds[key] = configs[0].copy()
+        return configs, reach
+
+    def _evaluate(self, t: float, q_meas: Mapping[str, FloatArray],
+                  qdot: Mapping[str, FloatArray], wrench: Wrench | None,
+                  extras: Mapping[str, Any]) -> dict[Key, Evaluation]:
+        cfg = self.config
+        times, mean, std, trot = self._prediction(t)
+        dt_pred = cfg.dt * cfg.stride
+        raw: dict[Key, dict[str, float]] = {}
+        pairs = [(self.rsel, self.cutp)] + [(r, q) for r in self.arms if r != self.rsel
+                                            for q in range(len(self.task_points))
+                                            if q != self.cutp]
+        for r, q in pairs:
+            arm = self.arms[r]
+            selected = r == self.rsel
+            tp = self.task_points[q]
+            rotations = [trot[k] @ tp.rotation if tp.rotation is not None else None
+                         for k in range(times.shape[0])]
+            configs, reach = self._trajectory_configs(
+                arm, (r, q), q_meas[r] if selected else None, q_meas[r], mean[:, q], rotations)
+            hist = self._pred_hist.setdefault((r, q), deque(maxlen=cfg.horizon * cfg.stride))
+            if not reach[0]:
+                raw[(r, q)] = {ix.name: 0.0 for ix in self.indices}
+                hist.clear()
+                continue
+            filled = np.where(reach[:, None], configs, np.nan)
+            vel = np.zeros_like(configs)
+            diffs = np.diff(np.nan_to_num(filled, nan=0.0), axis=0) / dt_pred
+            ok = reach[1:] & reach[:-1]
+            vel[:-1] = np.where(ok[:, None], diffs, 0.0)
+            vel[-1] = vel[-2] if configs.shape[0] > 1 else 0.0
+            if selected:
+                vel[0] = qdot[r]
+            past = [hist[-cfg.stride * (j + 1)] for j in range(cfg.horizon)
+                    if len(hist) >= cfg.stride * (j + 1)]
+            ctx = EvalContext(
+                robot=r, arm=arm, point=q, selected=selected, times=times,
+                positions=mean[:, q], std=std[:, q],
+                rotations=np.array(rotations) if tp.rotation is not None else None,
+                configs=configs, reachable=reach, joint_velocity=vel, past_configs=past,
+                world=self.world, wrench=wrench, extras=extras)
+            raw[(r, q)] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
+            hist.append(configs.copy())
+        for ix in self.indices:
+            if isinstance(ix, GroupIndex):
+                combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
+                for k, v in combined.items():
+                    raw[k][ix.name] = v
+        return self._to_time(t, raw, q_meas)
+
+    def _to_time(self, t: float, raw: Mapping[Key, dict[str, float]],
+                 q_meas: Mapping[str, FloatArray]) -> dict[Key, Evaluation]:
+        cfg = self.config
+        self._cycle_times.append(t)
+        series: dict[tuple[float, int], list[tuple[str, int, str]]] = {}
+        for (r, q), vals in raw.items():
+            for name, v in vals.items():
+                h = self._index_hist.setdefault((r, q, name), deque(maxlen=cfg.texec_window))
+                if h and t - h[-1][0] > 1.5 * cfg.dt:      # a gap: restart the series
+                    h.clear()
+                h.append((t, v))
+                series.setdefault((h[0][0], len(h)), []).append((r, q, name))
+        texecs: dict[tuple[str, int, str], float] = {}
+        for (_, n), keys in series.items():
+            hs = [self._index_hist[k] for k in keys]
+            if n < cfg.texec_min_samples:
+                for k, h in zip(keys, hs, strict=True):
+                    texecs[k] = cfg.t_max if h[-1][1] > 0.0 else 0.0
+                continue
+            times = np.array([s for s, _ in hs[0]])
+            values = np.array([[v for _, v in h] for h in hs]).T
+            for k, te in zip(keys, texec_many(times, values, cfg.t_max, cfg.texec_degree),
+                             strict=True):
+                texecs[k] = float(te)
+        out: dict[Key, Evaluation] = {}
+        for (r, q), vals in raw.items():
+            te = {name: texecs[(r, q, name)] for name in vals}
+            te_min = min(te.values()) if te else cfg.t_max
+            if r == self.rsel:
+                ttr = 0.0
+            elif te_min <= 0.0:
+                ttr = float("inf")
+            else:
+                goal, grot = self.point_pose(q, self._positions[-1], self._rotations[-1])
+                speed = cfg.max_tcp_speed.get(r, cfg.default_tcp_speed)
+                ttr = estimate_transfer(self.arms[r], q_meas[r], goal, grot, speed,
+                                        cfg.ttc_samples).total
+            out[(r, q)] = Evaluation(dict(vals), te, te_min, ttr, te_min - ttr)
+        return out
+
+    def _decide(self, ev: Mapping[Key, Evaluation]) -> Continuity:
+        tus = {k: e.tus for k, e in ev.items()}
+        ttr = {k: e.ttransf for k, e in ev.items()}
+        return continuity_robot(tus, ttr, self.rsel, self.cutp, self.config.ntt_threshold)
+
+    # ------------------------------------------------------------------ act
+    def _follow(self, position: FloatArray, rotation: FloatArray,
+                q_meas: Mapping[str, FloatArray], events: list[str]) -> bool:
+        """RSel follows the task increment; False (task held) when it cannot."""
+        arm = self.arms[self.rsel]
+        q = q_meas[self.rsel]
+        goal, grot = self.point_pose(self.cutp, position, rotation)
+        sol = arm.ik(goal, grot, q)
+        if sol is None:
+            events.append(f"rsel_hold {self.rsel}: task pose unreachable")
+            return False
+        if np.any(np.abs(sol - q) > arm.max_velocity * self.config.dt * (1.0 + 1e-9)):
+            events.append(f"rsel_hold {self.rsel}: joint speed limit")
+            return False
+        self.world.set_configuration(self.rsel, sol)
+        if self.world.in_collision(self.rsel):
+            self.world.set_configuration(self.rsel, q)
+            self.state = next_state(self.state, KernelEvent.RSEL_COLLISION)
+            events.append(f"rsel_collision {self.rsel}: safety stop")
+            return False
+        return True
+
+    def _bodies(self, robot: str) -> list[str]:
+        return [b for b in (*self.world.robot_names(), *self.world.obstacle_names())
+                if b != robot]
+
+    def _act_candidates(self, t: float, q_meas: Mapping[str, FloatArray],
+                        ev: Mapping[Key, Evaluation], pos: FloatArray, rot: FloatArray,
+                        events: list[str]) -> None:
+        cfg = self.config
+        reserved = {self.cutp}
+        if self.state is not KernelState.TOP and self.target is not None:
+            reserved.add(self.target)
+            self._act_rcnt(t, q_meas, pos, rot, events)
+        candidates = [r for r in self.arms if r not in self.holders and r != self.rcnt]
+        tus = {k: e.tus for k, e in ev.items() if k[0] in candidates}
+        if not tus:   # TT cycles are not evaluated: keep going to the last goals
+            tus = {(r, q): v for (r, q), v in self._last_goals.items() if r in candidates}
+        order: list[Assignment] = candidate_hierarchy(tus, candidates, reserved)
+        self._last_goals = {(a.robot, a.point): a.tus for a in order if a.point is not None}
+        for a in order:
+            goal = grot = None
+            if a.point is not None:
+                goal, grot = self.pregrasp(a.point, pos, rot)
+            move_candidate(self.world, self.arms[a.robot], a.robot, q_meas[a.robot], goal,
+                           grot, self._bodies(a.robot), self._memory, cfg.planner, cfg.dt,
+                           self._rng)
+
+    def _act_rcnt(self, t: float, q_meas: Mapping[str, FloatArray], pos: FloatArray,
+                  rot: FloatArray, events: list[str]) -> None:
+        cfg = self.config
+        r, q = self.rcnt, self.target
+        if r is None or q is None:
+            raise RuntimeError("task transfer without a receiving robot")
+        arm = self.arms[r]
+        if self.state is KernelState.TT_HANDOVER:
+            self._grasp_count += 1
+            if self._grasp_count >= cfg.grasp_cycles:
+                self._swap_roles(events)
+            return
+        if t - self._tt_start > cfg.tt_timeout:
+            self.state = next_state(self.state, KernelEvent.ABORT)
+            events.append(f"transfer_abort {r}@{q}: timeout")
+            self.rcnt = self.target = None
+            return
+        grasp, grot = self.point_pose(q, pos, rot)
+        pre, _ = self.pregrasp(q, pos, rot)
+        tcp, _ = arm.tcp_pose(q_meas[r])
+        if self.state is KernelState.TT_APPROACH:
+            if np.linalg.norm(pre - tcp) <= cfg.grasp_tolerance:
+                self.state = next_state(self.state, KernelEvent.AT_PREGRASP)
+                events.append(f"transfer_pregrasp {r}@{q}")
+            else:
+                move_candidate(self.world, arm, r, q_meas[r], pre, grot, self._bodies(r),
+                               self._memory, cfg.planner, cfg.dt, self._rng)
+                return
+        if self.state is KernelState.TT_GRASP:
+            if np.linalg.norm(grasp - tcp) <= cfg.grasp_tolerance and self._snap(
+                    r, arm, q_meas[r], grasp, grot):
+                self.state = next_state(self.state, KernelEvent.GRASPED)
+                self.holders = (self.rsel, r)
+                self._grasp_count = 0
+                events.append(f"transfer_grasped {r}@{q}")
+                return
+            move_candidate(self.world, arm, r, q_meas[r], grasp, grot, self._bodies(r),
+                           self._memory, cfg.planner, cfg.dt, self._rng, repel=False)
+
+    def _snap(self, robot: str, arm: ArmKinematics, q: FloatArray, grasp: FloatArray,
+              grot: FloatArray | None) -> bool:
+        """Close the gripper: the last (sub-tolerance) step onto the grasp pose, if safe."""
+        sol = arm.ik(grasp, grot, q)
+        if sol is None:
+            return False
+        self.world.set_configuration(robot, sol)
+        if self.world.in_collision(robot):
+            self.world.set_configuration(robot, q)
+            return False
+        return True
+
+    def _swap_roles(self, events: list[str]) -> None:
+        old = self.rsel
+        if self.rcnt is None or self.target is None:
+            raise RuntimeError("task transfer without a receiving robot")
+        self.rsel, self.cutp = self.rcnt, self.target
+        self.holders = (self.rsel,)
+        self.state = next_state(self.state, KernelEvent.RELEASED)
+        events.append(f"transfer_done {old} -> {self.rsel}@{self.cutp}")
+        self.rcnt = self.target = None
+        self._pred_hist.clear()
+
+    def _record(self, t: float, q_meas: Mapping[str, FloatArray],
+                ev: dict[Key, Evaluation], cont: Continuity | None,
+                events: list[str]) -> CycleRecord:
+        pos, rot = self.task_pose()
+        commands = {r: self.world.configuration(r).copy() for r in self.arms}
+        return CycleRecord(t, self.state, self.rsel, self.cutp, self.holders, pos, rot,
+                           commands, ev, cont, self.rcnt, self.target, events)
