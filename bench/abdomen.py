@@ -1,6 +1,10 @@
 """The mass-spring abdomen physics vs pybullet's deformable world, and the default abdomen.
 
-Printed in one run (same process, so the ratios compare like with like on this noisy host):
+Printed in one run (same process, so the ratios compare like with like on this noisy host).
+Times are CPU time of the stepping thread (``thread_time``): the cost on one core, which the
+goals are stated in; on this 2-core host shared with other jobs the wall clock also counts
+the waits for a core (section 1 prints it too; pybullet's DIRECT client steps in the calling
+thread, so its CPU time is measured the same way):
 
 1. Per-step time at dt = 1 ms, k = 100 N/m on the closed ellipsoids of the massspring guide
    (0.12 x 0.08 x 0.06 m, geodesic icosahedra of 492 / 1,962 / 7,842 nodes; edge springs k,
@@ -16,13 +20,15 @@ Printed in one run (same process, so the ratios compare like with like on this n
 3. The default abdomen (``protocols/scenes/default.toml``, its real-time solver budget) at
    250 Hz on one core: ms per step while breathing, and with a 1 N contact force on the
    liver (the lead's contact goes through the same ``forces`` hook); positions against a
-   converged solve of the same scene. Goal: <= 4 ms per step.
+   converged solve of the same scene. Goal: <= 4 ms per step on one core, judged on the
+   CPU time of the stepping thread (``thread_time``; the wall clock of this shared 2-core
+   host also counts the waits for a core). The tool's contact itself is in ``bench.contact``.
 4. The 7,842-node ellipsoid as an organ (interior nodes and spokes: 8,298 nodes) at dt = 16 ms
    under a real-time budget (one Newton step of one CG iteration with the prefactored
    preconditioner that "auto" picks there: the quality of one Liu local/global iteration),
    k = 100 and 1,000 N/m; and the guide's membrane (diagonal, 12 CG iterations): stability,
    displacement and ms per step. Goal: <= 16 ms.
-5. Springs processed per second (springs x CG iterations / time) next to the guide's
+5. Springs processed per second (springs x CG iterations / CPU time) next to the guide's
    machine limits (~0.7 G springs/s from DRAM, ~2.4 G from L2).
 6. The two preconditioners on the same problems (the measurement behind
    ``vasim.abdomen.integrate``'s choice).
@@ -141,18 +147,20 @@ def run_vasim(model: OrganModel, dt: float, steps: int, **options: object) -> di
     state = solver.initial_state()
     target = model.rest[model.anchors]
     solver.step(solver.initial_state(), target)  # compile / warm up
-    times, iters, resets, worst, passes = [], [], 0, 0.0, 0
+    times, cpu, iters, resets, worst, passes = [], [], [], 0, 0.0, 0
     for _ in range(steps):
+        c0 = time.thread_time()
         t0 = time.perf_counter()
         report = solver.step(state, target)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.thread_time() - c0)
         iters.append(report.iterations)
         passes += solver.last_spring_passes
         resets += report.reset
         worst = max(worst, float(np.abs(state.x - model.rest).max()))
-    return {"ms": median_ms(times), "iters": float(np.mean(iters)), "resets": resets,
-            "max_disp": worst, "finite": bool(np.all(np.isfinite(state.x))),
-            "springs": len(model.springs), "total_s": sum(times), "cg": int(np.sum(iters)),
+    return {"ms": median_ms(cpu), "wall": median_ms(times), "iters": float(np.mean(iters)),
+            "resets": resets, "max_disp": worst, "finite": bool(np.all(np.isfinite(state.x))),
+            "springs": len(model.springs), "total_s": sum(cpu), "cg": int(np.sum(iters)),
             "passes": passes, "preconditioner": solver.preconditioner, "nodes": model.n_nodes}
 
 
@@ -191,11 +199,13 @@ def run_pybullet(mesh: trimesh.Trimesh, k: float, dt: float, steps: int) -> dict
                     raise RuntimeError("pybullet reordered the mesh nodes")
                 for i in top_anchors(mesh):
                     p.createSoftBodyAnchor(body, int(i), -1, -1, physicsClientId=cid)
-                times, blew_up, worst = [], None, 0.0
+                times, cpu, blew_up, worst = [], [], None, 0.0
                 for s in range(steps):
+                    c0 = time.thread_time()
                     t0 = time.perf_counter()
                     p.stepSimulation(physicsClientId=cid)
                     times.append(time.perf_counter() - t0)
+                    cpu.append(time.thread_time() - c0)
                     if s % 10 == 9 or s == steps - 1:
                         _, verts = p.getMeshData(body, -1, flags=p.MESH_DATA_SIMULATION_MESH,
                                                  physicsClientId=cid)
@@ -207,7 +217,8 @@ def run_pybullet(mesh: trimesh.Trimesh, k: float, dt: float, steps: int) -> dict
                             break
             finally:
                 p.disconnect(cid)
-    return {"ms": median_ms(times), "blew_up": blew_up, "max_disp": worst, "steps": len(times)}
+    return {"ms": median_ms(cpu), "wall": median_ms(times), "blew_up": blew_up,
+            "max_disp": worst, "steps": len(times)}
 
 
 # -- the default abdomen ---------------------------------------------------------------------
@@ -219,6 +230,9 @@ def run_abdomen(steps: int = 400, ref_steps: int = 250) -> dict:
     nodes = sum(m.n_nodes for m in models if m.kind != "wall")
     springs = sum(len(m.springs) for m in models)
 
+    free_c: list[float] = []
+    push_c: list[float] = []
+
     def simulate(n: int, **options: object) -> tuple[list[float], list[float], dict, int]:
         physics = ScenePhysics(scene, models, **options)
         liver = physics.models["liver"]
@@ -229,9 +243,12 @@ def run_abdomen(steps: int = 400, ref_steps: int = 250) -> dict:
         free_t, push_t, cg, passes = [], [], 0, 0
         for i in range(n):
             pushing = i >= n // 2
+            c0 = time.thread_time()
             t0 = time.perf_counter()
             reports = physics.step({"liver": push} if pushing else None)
-            (push_t if pushing else free_t).append(time.perf_counter() - t0)
+            t1 = time.perf_counter()
+            (push_t if pushing else free_t).append(t1 - t0)
+            (push_c if pushing else free_c).append(time.thread_time() - c0)
             cg += sum(r.iterations * len(physics.models[k].springs) for k, r in reports.items())
             passes += sum(s.last_spring_passes * len(physics.models[k].springs)
                           for k, s in physics.solvers.items() if reports[k].iterations)
@@ -239,6 +256,7 @@ def run_abdomen(steps: int = 400, ref_steps: int = 250) -> dict:
 
     log(f"default abdomen: {nodes} nodes, {springs} springs, {steps} steps")
     free_t, push_t, _, (spring_cg, spring_passes) = simulate(steps)
+    free_cpu, push_cpu = list(free_c), list(push_c)
     log(f"default abdomen: converged reference, {ref_steps} steps")
     _, _, ref_fast, _ = simulate(ref_steps)
     _, _, ref, _ = simulate(ref_steps, tol=1e-4, cg_tol=1e-4, max_newton=10,
@@ -247,7 +265,8 @@ def run_abdomen(steps: int = 400, ref_steps: int = 250) -> dict:
     return {"nodes": nodes, "springs": springs, "free_ms": median_ms(free_t),
             "free_p95": float(np.percentile(free_t, 95)) * 1e3, "push_ms": median_ms(push_t),
             "push_p95": float(np.percentile(push_t, 95)) * 1e3, "dev_mm": dev * 1e3,
-            "cg_per_step": spring_cg / steps, "total_s": sum(free_t) + sum(push_t),
+            "free_cpu": median_ms(free_cpu), "push_cpu": median_ms(push_cpu),
+            "cg_per_step": spring_cg / steps, "total_s": sum(free_cpu) + sum(push_cpu),
             "spring_cg": spring_cg, "spring_passes": spring_passes, "scene": scene}
 
 
@@ -298,15 +317,17 @@ def main() -> None:
 
 
 def report(r: dict, meshes: dict) -> None:
+    print("(every ms below is the median CPU time of the stepping thread per step; the wall "
+          "clock of this shared host also counts the waits for a core)")
     print("1. per step at dt = 1 ms, k = 100 N/m (median; vasim library defaults)")
     print(f"   {'nodes':>6} {'springs':>8} {'vasim ms':>9} {'CG it':>6} {'precond':>9} "
-          f"{'pybullet ms':>12} {'speed-up':>9}  goal >= 5x")
+          f"{'pybullet ms':>12} {'speed-up':>9}  goal >= 5x   wall ms: vasim, pybullet")
     for f in SIZES:
         v, b = r[f"v{f}"], r[f"b{f}"]
         ratio = b["ms"] / v["ms"]
         print(f"   {len(meshes[f].vertices):>6} {v['springs']:>8} {v['ms']:>9.3f} "
               f"{v['iters']:>6.1f} {v['preconditioner']:>9} {b['ms']:>12.3f} {ratio:>8.1f}x  "
-              f"{'ok' if ratio >= 5 else 'MISSED'}")
+              f"{'ok' if ratio >= 5 else 'MISSED':<6}       {v['wall']:.3f}, {b['wall']:.3f}")
     vs, bs = r["vstab"], r["bstab"]
     print("2. stability, 1962 nodes, k = 1000 N/m, dt = 4 ms, 250 steps (1 s)")
     bl = (f"blew up at step {bs['blew_up']} (a node > {BLOW_UP_M:g} m from rest)"
@@ -320,10 +341,12 @@ def report(r: dict, meshes: dict) -> None:
     print(f"3. default abdomen: {a['nodes']} nodes (+ kinematic wall), {a['springs']} springs, "
           f"dt = {phys.dt * 1e3:g} ms; budget: {phys.max_newton} Newton step, <= "
           f"{phys.max_iterations} CG it per organ, cg_tol {phys.cg_tol:g}")
-    for label, med, p95 in (("breathing", a["free_ms"], a["free_p95"]),
-                            ("breathing + 1 N on the liver", a["push_ms"], a["push_p95"])):
-        print(f"   {label:<30} {med:6.2f} ms/step (p95 {p95:5.2f}) = {1e3 / med:5.0f} Hz  "
-              f"goal <= 4 ms: {'ok' if med <= 4.0 else 'MISSED'}")
+    for label, med, p95, cpu in (
+            ("breathing", a["free_ms"], a["free_p95"], a["free_cpu"]),
+            ("breathing + 1 N on the liver", a["push_ms"], a["push_p95"], a["push_cpu"])):
+        print(f"   {label:<30} {med:6.2f} ms/step (p95 {p95:5.2f}), CPU {cpu:5.2f} ms = "
+              f"{1e3 / cpu:5.0f} Hz  goal <= 4 ms on one core: "
+              f"{'ok' if cpu <= 4.0 else 'MISSED'}")
     print(f"   {a['cg_per_step'] / a['springs']:.1f} CG it/step (spring-weighted organ mean); "
           f"after 250 steps the positions are within {a['dev_mm']:.2f} mm of a converged solve")
     print("4. dt = 16 ms, real-time budget (1 Newton step, 1 CG it), 60 steps (0.96 s) "

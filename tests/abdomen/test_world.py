@@ -166,5 +166,15 @@ def test_physics_thread_publishes_whole_snapshots():
         second = physics.latest
     assert physics.error is None
     assert second.seq > first.seq > 0
-    assert physics.stats()["steps"] >= second.seq
+    stats = physics.stats()
+    assert stats["steps"] >= second.seq
+    # the physics thread's CPU time per step is measured, and within its wall-clock time
+    assert 0.0 < stats["cpu_p50"] <= stats["cpu_max"] <= stats["cost_max"] + 1e-6
     assert not physics.running
+
+
+def test_frame_velocities_are_point_motions_velocities_to_the_bit():
+    world = Abdomen("default")
+    for b in world._bodies:
+        for t in (0.0, 0.123, 1.7, 12.345):
+            np.testing.assert_array_equal(b.frame_velocities(t), b.node_motion.velocities(t))

@@ -127,14 +127,19 @@ def _objective(x, y, z, free, mass_dt2, c_dt, si, sj, k, r, grad, coef):
         coef[s, 2] = n2
         coef[s, 3] = a
         f = ks * dl
-        if free[i]:
-            grad[i, 0] += f * n0
-            grad[i, 1] += f * n1
-            grad[i, 2] += f * n2
-        if free[j]:
-            grad[j, 0] -= f * n0
-            grad[j, 1] -= f * n1
-            grad[j, 2] -= f * n2
+        # accumulated on every row (no branch in the hot loop); the anchored rows are
+        # zeroed below, the free rows get the same sums in the same order
+        grad[i, 0] += f * n0
+        grad[i, 1] += f * n1
+        grad[i, 2] += f * n2
+        grad[j, 0] -= f * n0
+        grad[j, 1] -= f * n1
+        grad[j, 2] -= f * n2
+    for i in range(n):
+        if not free[i]:
+            grad[i, 0] = 0.0
+            grad[i, 1] = 0.0
+            grad[i, 2] = 0.0
     return g
 
 
@@ -153,43 +158,6 @@ def _objective_value(x, y, z, free, mass_dt2, c_dt, si, sj, k, r):
             g += 0.5 * mass_dt2[i] * (a0 * a0 + a1 * a1 + a2 * a2)
             g += 0.5 * c_dt * (b0 * b0 + b1 * b1 + b2 * b2)
     return g + spring_energy(x, si, sj, k, r)
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _hess_vec(p, free, diag, si, sj, k, coef, out):
-    """out = H p: H = diag(m/dt^2 + c/dt) + sum of clamped spring Hessians (free rows only)."""
-    n = p.shape[0]
-    for i in range(n):
-        d = diag[i]
-        out[i, 0] = d * p[i, 0]
-        out[i, 1] = d * p[i, 1]
-        out[i, 2] = d * p[i, 2]
-    for s in range(si.shape[0]):
-        i = si[s]
-        j = sj[s]
-        q0 = p[i, 0] - p[j, 0]
-        q1 = p[i, 1] - p[j, 1]
-        q2 = p[i, 2] - p[j, 2]
-        n0 = coef[s, 0]
-        n1 = coef[s, 1]
-        n2 = coef[s, 2]
-        a = coef[s, 3]
-        ks = k[s]
-        nq = (1.0 - a) * (n0 * q0 + n1 * q1 + n2 * q2)
-        h0 = ks * (a * q0 + nq * n0)
-        h1 = ks * (a * q1 + nq * n1)
-        h2 = ks * (a * q2 + nq * n2)
-        out[i, 0] += h0
-        out[i, 1] += h1
-        out[i, 2] += h2
-        out[j, 0] -= h0
-        out[j, 1] -= h1
-        out[j, 2] -= h2
-    for i in range(n):
-        if not free[i]:
-            out[i, 0] = 0.0
-            out[i, 1] = 0.0
-            out[i, 2] = 0.0
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -278,6 +246,103 @@ def _precondition(kind, r, out, free, pdiag, lp, li, lx, up, ui, ux, dinv, perm,
             out[i, 1] = buf[q, 1]
             out[i, 2] = buf[q, 2]
             rz += r[i, 0] * buf[q, 0] + r[i, 1] * buf[q, 1] + r[i, 2] * buf[q, 2]
+    return rz
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _spring_hess_dot(p, free, si, sj, k, coef, out):
+    """``out = H p`` and returns ``p . H p`` over the free nodes.
+
+    ``H = diag(m/dt^2 + c/dt) + sum of clamped spring Hessians`` on the free rows (anchored
+    rows zeroed). The caller has already written the diagonal term ``out = diag * p`` (fused
+    with its direction update); the dot product is fused with the zeroing of the anchored
+    rows (the sums of :func:`_dot`, in the same order).
+    """
+    for s in range(si.shape[0]):
+        i = si[s]
+        j = sj[s]
+        q0 = p[i, 0] - p[j, 0]
+        q1 = p[i, 1] - p[j, 1]
+        q2 = p[i, 2] - p[j, 2]
+        n0 = coef[s, 0]
+        n1 = coef[s, 1]
+        n2 = coef[s, 2]
+        a = coef[s, 3]
+        ks = k[s]
+        nq = (1.0 - a) * (n0 * q0 + n1 * q1 + n2 * q2)
+        h0 = ks * (a * q0 + nq * n0)
+        h1 = ks * (a * q1 + nq * n1)
+        h2 = ks * (a * q2 + nq * n2)
+        out[i, 0] += h0
+        out[i, 1] += h1
+        out[i, 2] += h2
+        out[j, 0] -= h0
+        out[j, 1] -= h1
+        out[j, 2] -= h2
+    total = 0.0
+    for i in range(p.shape[0]):
+        if free[i]:
+            total += p[i, 0] * out[i, 0] + p[i, 1] * out[i, 1] + p[i, 2] * out[i, 2]
+        else:
+            out[i, 0] = 0.0
+            out[i, 1] = 0.0
+            out[i, 2] = 0.0
+    return total
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _update_precondition(kind, alpha, pdir, hp, d, r, out, free, pdiag, lp, li, lx, up, ui,
+                         ux, dinv, perm, buf):
+    """``d += alpha pdir``, ``r -= alpha hp``, then ``out = P^-1 r``; returns ``r . out``
+    over the free nodes: the CG update and :func:`_precondition` in one pass over the nodes
+    (kind 0) or with the update fused into the factor's gather (kind 1; the anchored rows
+    of ``d`` and ``r`` are left alone: ``pdir`` and ``hp`` are zero there)."""
+    n = r.shape[0]
+    rz = 0.0
+    if kind == 0:
+        for i in range(n):
+            d0 = d[i, 0] + alpha * pdir[i, 0]
+            d1 = d[i, 1] + alpha * pdir[i, 1]
+            d2 = d[i, 2] + alpha * pdir[i, 2]
+            r0 = r[i, 0] - alpha * hp[i, 0]
+            r1 = r[i, 1] - alpha * hp[i, 1]
+            r2 = r[i, 2] - alpha * hp[i, 2]
+            d[i, 0] = d0
+            d[i, 1] = d1
+            d[i, 2] = d2
+            r[i, 0] = r0
+            r[i, 1] = r1
+            r[i, 2] = r2
+            if free[i]:
+                w = pdiag[i]
+                out[i, 0] = w * r0
+                out[i, 1] = w * r1
+                out[i, 2] = w * r2
+                rz += w * (r0 * r0 + r1 * r1 + r2 * r2)
+            else:
+                out[i, 0] = 0.0
+                out[i, 1] = 0.0
+                out[i, 2] = 0.0
+        return rz
+    m = perm.shape[0]
+    for q in range(m):
+        i = perm[q]
+        for c in range(3):
+            d[i, c] += alpha * pdir[i, c]
+            v = r[i, c] - alpha * hp[i, c]
+            r[i, c] = v
+            buf[q, c] = v
+    ldl_solve_inplace(lp, li, lx, up, ui, ux, dinv, buf)
+    for i in range(n):
+        out[i, 0] = 0.0
+        out[i, 1] = 0.0
+        out[i, 2] = 0.0
+    for q in range(m):
+        i = perm[q]
+        out[i, 0] = buf[q, 0]
+        out[i, 1] = buf[q, 1]
+        out[i, 2] = buf[q, 2]
+        rz += r[i, 0] * buf[q, 0] + r[i, 1] * buf[q, 1] + r[i, 2] * buf[q, 2]
     return rz
 
 
@@ -424,32 +489,37 @@ def implicit_step(
         rz0 = rz
         model = 0.0  # decrease of the quadratic model so far (sum of alpha_i r_i.z_i / 2)
         cg_done = False
+        # The node-wise passes of each CG iteration are fused (same operations in the same
+        # order as one pass each, so the same bits): the direction update with the diagonal
+        # term of the next Hessian product, the zeroing of anchored rows with p.Hp, the
+        # update of d and the residual with the preconditioner's first pass.
         for i in range(n):
+            w = diag[i]
             for c in range(3):
-                pdir[i, c] = pz[i, c]
+                pv = pz[i, c]
+                pdir[i, c] = pv
+                hp[i, c] = w * pv
         while n_cg < max_cg:
-            _hess_vec(pdir, free, diag, si, sj, k, coef, hp)
+            php = _spring_hess_dot(pdir, free, si, sj, k, coef, hp)
             n_cg += 1
-            php = _dot(pdir, hp, free)
             if not php > 0.0:
                 cg_done = True  # round-off level: nothing left to solve
                 break
             alpha = rz / php
             model += 0.5 * alpha * rz
-            for i in range(n):
-                for c in range(3):
-                    d[i, c] += alpha * pdir[i, c]
-                    res[i, c] -= alpha * hp[i, c]
-            rz_new = _precondition(kind, res, pz, free, pdiag, lp, li, lx, up, ui, ux, dinv,
-                           perm, buf)
+            rz_new = _update_precondition(kind, alpha, pdir, hp, d, res, pz, free, pdiag, lp, li,
+                                          lx, up, ui, ux, dinv, perm, buf)
             if rz_new <= cg_tol * cg_tol * rz0:
                 cg_done = True
                 break
             beta = rz_new / rz
             rz = rz_new
             for i in range(n):
+                w = diag[i]
                 for c in range(3):
-                    pdir[i, c] = pz[i, c] + beta * pdir[i, c]
+                    pv = pz[i, c] + beta * pdir[i, c]
+                    pdir[i, c] = pv
+                    hp[i, c] = w * pv
         # Backtracking line search on g along d (Armijo), from alpha = 1.
         slope = _dot(grad, d, free)
         if not slope < 0.0:
@@ -665,3 +735,24 @@ def self_intersections(vertices, faces, limit):
                 if m >= limit:
                     return out[:m]
     return out[:m]
+
+
+# ---------------------------------------------------------------------------------------
+# The moving frame (per step, per organ)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def frame_velocity(cb, amp_b, ch, w_h, heart, out):  # pragma: no cover - compiled
+    """``out = cb A_b (+ ch W_h)``: the frame velocity of every node into ``out`` (n, 3).
+
+    The same products and sum as ``vasim.abdomen.motion.PointMotion.velocities`` (so the
+    same bits), without its two temporaries. ``cb``, ``ch``: the breathing and heartbeat
+    rate factors ``ω cos(ω t + φ)``; amp_b: (3,) [m]; w_h: (n, 3) heartbeat weight times
+    amplitude [m]; heart: add the heartbeat term.
+    """
+    for i in range(out.shape[0]):
+        for c in range(3):
+            v = cb * amp_b[c]
+            if heart:
+                v += ch * w_h[i, c]
+            out[i, c] = v

@@ -51,17 +51,21 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.abdomen._contact_kernels import box_apart, cells_near, scatter_forces
+from vasim.abdomen._kernels import frame_velocity
 from vasim.abdomen.attach import SurfaceBinding, bind_points
 from vasim.abdomen.contact import (
     ContactPatch,
     ContactResult,
     ToolPose,
     ToolShape,
+    _vec3,
     detect_contacts,
+    patch_force,
 )
 from vasim.abdomen.integrate import OrganSolver, StepReport
 from vasim.abdomen.model import OrganModel, OrganState
-from vasim.abdomen.motion import PhysioMotion, PointMotion
+from vasim.abdomen.motion import PhysioMotion, PointMotion, _sin_cos
 from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
 
@@ -255,6 +259,10 @@ class _Body:
         self.amp_b = np.asarray(motion.breathing.amplitude_m, dtype=np.float64)
         self.amp_h = np.asarray(motion.heartbeat.amplitude_m, dtype=np.float64)
         self.weight_h = motion.heartbeat.weight(settled)
+        # the frame velocity of every node, per step, into one buffer (frame_velocity)
+        self.w_h = self.weight_h[:, None] * self.amp_h[None, :]
+        self.heart = bool(any(motion.heartbeat.amplitude_m))
+        self.v_frame = np.zeros_like(settled)
         self.max_edge = _max_edge(settled, model.faces)
         # Bounding sphere of the settled shape, inflated by the largest motion and the
         # longest edge: the broad phase of the tool test (floats: a few µs per organ).
@@ -300,6 +308,15 @@ class _Body:
 
     def positions(self, t: float) -> FloatArray:
         return self.state.x if self.awake else self.sleeping_x(t)
+
+    def frame_velocities(self, t: float) -> FloatArray:
+        """(n, 3) frame velocity of every node at ``t`` [m/s], in a buffer the next call
+        overwrites: ``node_motion.velocities(t)``, bit for bit, without temporaries."""
+        b, h = self.motion.breathing, self.motion.heartbeat
+        _, cb = _sin_cos(b.frequency_hz, b.phase, t)
+        _, ch = _sin_cos(h.frequency_hz, h.phase, t)
+        frame_velocity(cb, self.amp_b, ch, self.w_h, self.heart, self.v_frame)
+        return self.v_frame
 
 
 def _max_edge(x: FloatArray, faces: NDArray[np.int64]) -> float:
@@ -354,7 +371,20 @@ class Abdomen:
         for b in self._bodies:
             if always_awake and not b.kinematic:
                 b.wake(0.0)
+        self._warm_up()
         self._latest = self._snapshot(())
+
+    def _warm_up(self) -> None:
+        """Loads the compiled contact kernels now (from numba's disk cache; compiles them on
+        the very first run), with the argument types of the stepping and the 1 kHz loop, so
+        that the first contact costs no loading inside a real-time loop."""
+        far = ToolPose(np.array([0.0, 0.0, 1e3]), np.array([0.0, 0.0, 1e3 - 0.01]))
+        patch_force(self._empty_patch, far)
+        for b in self._bodies:
+            if not b.kinematic:
+                detect_contacts(b.state.x, b.model.faces, b.model.mass, far, self.tool,
+                                dt=self.dt, max_edge=b.max_edge)
+                break
 
     # -- queries --------------------------------------------------------------------------
 
@@ -458,9 +488,10 @@ class Abdomen:
     def _contacts(self, pose: ToolPose) -> dict[int, ContactResult]:
         """Contacts of the tool with every deformable organ near its axis.
 
-        Broad phase, vectorised over every organ's cell spheres (see ``_Body``): the tool
-        axis (fulcrum → tip) passes within one of them, or the organ is awake (it deforms, so
-        its cells do not bound it).
+        Broad phase, one compiled pass over every organ's cell spheres (see ``_Body``;
+        ``vasim.abdomen._contact_kernels.cells_near``): the tool axis (fulcrum → tip) passes
+        within one of them, or the organ is awake (it deforms, so its cells do not bound it;
+        then its current bounding box decides).
         """
         ful = np.asarray(pose.fulcrum, dtype=np.float64)
         tip = np.asarray(pose.tip, dtype=np.float64)
@@ -472,30 +503,17 @@ class Abdomen:
         if (last is not None and not awake and np.array_equal(last[0], ful)
                 and float(np.sum((tip - last[1]) ** 2)) < last[2] ** 2):
             return {}
-        d = tip - ful
-        pc = self._cell_centres - ful
-        dd = float(d @ d)
-        u = np.clip(pc @ d / dd, 0.0, 1.0) if dd > 0 else np.zeros(len(pc))
-        e = pc - u[:, None] * d
-        dist2 = (e * e).sum(axis=1)
-        hit = dist2 <= self._cell_r2
-        near = set(self._cell_body[hit].tolist())
-        if not near:
-            gap = float(np.min(np.sqrt(dist2) - np.sqrt(self._cell_r2))) if len(dist2) else 0.0
-            self._clear = (ful.copy(), tip.copy(), gap)
-        else:
-            self._clear = None
+        near, gap = cells_near(self._cell_centres, self._cell_r2, self._cell_body,
+                               len(self._bodies), _vec3(ful), _vec3(tip))
+        self._clear = None if near.any() else (ful.copy(), tip.copy(), float(gap))
         out: dict[int, ContactResult] = {}
         lo = np.minimum(ful, tip) - self.tool.radius
         hi = np.maximum(ful, tip) + self.tool.radius
         for i, b in enumerate(self._bodies):
-            if b.kinematic or not (i in near or b.awake):
+            if b.kinematic or not (near[i] or b.awake):
                 continue
-            if b.awake and i not in near:  # deformed: test its current bounding box
-                x = b.state.x
-                m = b.max_edge
-                if np.any(x.min(axis=0) - m > hi) or np.any(x.max(axis=0) + m < lo):
-                    continue
+            if b.awake and not near[i] and box_apart(b.state.x, lo, hi, b.max_edge):
+                continue  # deformed, but its current bounding box is out of reach
             c = detect_contacts(b.positions(self.t), b.model.faces, b.model.mass, pose,
                                 self.tool, dt=self.dt, max_edge=b.max_edge)
             if c.in_contact:
@@ -525,12 +543,11 @@ class Abdomen:
                 continue
             f = None
             if c is not None:
-                b.f_ext[...] = 0.0
-                np.add.at(b.f_ext, c.node_index, c.node_force)
+                scatter_forces(b.f_ext, c.node_index, c.node_force)
                 f = b.f_ext
             targets = b.anchor_rest + b.anchor_motion.offsets(t1)
             report: StepReport = b.solver.step(
-                b.state, targets, f, v_frame=b.node_motion.velocities(t1))
+                b.state, targets, f, v_frame=b.frame_velocities(t1))
             b.state.t = t1
             if report.reset:
                 detail = f"{b.model.name}: {report.reason}"
@@ -567,7 +584,12 @@ class Abdomen:
         views = tuple((b.model.name, _readonly(b.state.x[: b.model.n_surface])
                        if b.awake else None, b) for b in self._bodies)
         contacts = self._last_contacts
-        if contacts:
+        if len(contacts) == 1:  # one organ touched (the usual case): no sums to form
+            (c,) = contacts.values()
+            force, force_tip = _readonly(c.force), _readonly(c.force_tip)
+            torque, stiff = _readonly(c.torque), _readonly(c.stiffness_tip)
+            patch = c.patch
+        elif contacts:
             cs = list(contacts.values())
             force = _readonly(np.sum([c.force for c in cs], axis=0))
             force_tip = _readonly(np.sum([c.force_tip for c in cs], axis=0))
