@@ -222,3 +222,38 @@ def test_configuration_round_trip_and_unknown_names() -> None:
         world.configuration("r2")
     with pytest.raises(ValueError, match="already exists"):
         world.add_sphere("r1", 0.1, [0, 0, 0])
+
+
+def test_branch_and_bound_distance_equals_the_whole_body_query() -> None:
+    world = PybulletWorld()
+    world.add_robot("a", RX, pose_matrix([-0.3, 0, 0]))
+    world.add_robot("b", RX, pose_matrix([0.3, 0, 0], dh.rot_z(math.pi)))
+    ba, bb = world.body_id("a"), world.body_id("b")
+    for qa, qb in zip(_samples(60, seed=12), _samples(60, seed=13), strict=True):
+        world.set_configuration("a", qa)
+        world.set_configuration("b", qb)
+        prox = world.min_distance("a", "b", max_distance=1.0)
+        pts = pb.getClosestPoints(ba, bb, 1.0, physicsClientId=world.client_id)
+        expect = min((p[8] for p in pts), default=1.0)
+        assert prox.distance == pytest.approx(expect, abs=1e-9)
+
+
+def test_closed_form_and_numeric_ik_agree_on_what_is_reachable_within_limits() -> None:
+    # poses of configurations partly outside the limits: reachable in space, but maybe
+    # not within the limits; the closed form's None must match an exhaustive numeric search
+    exact = PybulletArm(RX, BASE)
+    numeric = PybulletArm(RX, BASE, closed_form=False)
+    rng = np.random.default_rng(31)
+    outcomes = set()
+    for _ in range(25):
+        q = rng.uniform(RX.lower - 1.0, RX.upper + 1.0)
+        pos, rot = dh.fk(RX, q, BASE)
+        a = exact.ik(pos, rot)
+        b = numeric.ik(pos, rot, restarts=64)
+        assert (a is None) == (b is None)
+        outcomes.add(a is None)
+        for sol in (a, b):
+            if sol is not None:
+                assert RX.within_limits(sol)
+                assert np.linalg.norm(dh.fk(RX, sol, BASE)[0] - pos) < 1e-6
+    assert outcomes == {True, False}

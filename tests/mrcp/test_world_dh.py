@@ -145,3 +145,34 @@ def test_bad_robot_files_name_file_field_and_value(old: str, new: str, field: st
 def test_unknown_robot_name_lists_the_shipped_ones() -> None:
     with pytest.raises(ConfigError, match="rx60b"):
         load_robot("no_such_robot")
+
+
+def test_closed_form_ik_returns_every_branch_and_the_original() -> None:
+    base = np.eye(4)
+    base[:3, 3] = [0.2, -0.1, 0.3]
+    base[:3, :3] = dh.rot_z(0.7)
+    assert dh.is_puma_like(RX)
+    for q in np.random.default_rng(21).uniform(RX.lower, RX.upper, size=(100, 6)):
+        pos, rot = dh.fk(RX, q, base)
+        sols = dh.puma_ik(RX, pos, rot, base)
+        assert len(sols) == 8
+        for s in sols:
+            p2, r2 = dh.fk(RX, s, base)
+            np.testing.assert_allclose(p2, pos, atol=1e-12)
+            np.testing.assert_allclose(r2, rot, atol=1e-12)
+        wrapped = dh.wrap_into_batch(np.array(sols), RX.lower - 10, RX.upper + 10, q)
+        assert np.min(np.linalg.norm(wrapped - q, axis=1)) < 1e-9
+
+
+def test_closed_form_ik_out_of_reach_and_other_structures() -> None:
+    assert dh.puma_ik(RX, np.array([0.0, 0.0, 0.8]), np.eye(3)) == []
+    planar = dh.RobotModel("p", RX.joints[:2], home=RX.home[:2])
+    assert not dh.is_puma_like(planar)
+    assert dh.puma_ik(planar, np.zeros(3), np.eye(3)) == []
+
+
+def test_wrap_into_picks_the_in_limit_turn_nearest_the_reference() -> None:
+    lo, up = np.array([-3.0, 0.0]), np.array([3.0, 6.0])
+    out = dh.wrap_into(np.array([2.0 * math.pi + 0.5, -0.5]), lo, up, np.array([0.0, 5.0]))
+    np.testing.assert_allclose(out, [0.5, 2 * math.pi - 0.5])
+    assert dh.wrap_into(np.array([3.1, 1.0]), lo, up, np.zeros(2)) is None

@@ -16,6 +16,7 @@ from vasim.mrcp.fulcrum import (
     Fulcrum,
     LaparoscopicArm,
     LaparoscopicTool,
+    endoscope_view,
     fulcrum_offset,
     polar_azimuth,
     tool_pose_through_fulcrum,
@@ -102,3 +103,11 @@ def test_tip_jacobian_matches_finite_differences(lap: LaparoscopicArm) -> None:
         dq[i] = h
         num = (lap.tcp_pose(q + dq)[0] - lap.tcp_pose(q - dq)[0]) / (2 * h)
         np.testing.assert_allclose(jac[:3, i], num, atol=1e-7)
+
+
+def test_endoscope_view_tilts_toward_the_tool_x_axis() -> None:
+    pose = tool_pose_through_fulcrum(WALL.point + np.array([0.02, 0.0, -0.1]), WALL, TOOL)
+    np.testing.assert_allclose(endoscope_view(pose.rotation), pose.rotation[:, 2])
+    view = endoscope_view(pose.rotation, math.radians(30))
+    assert math.degrees(math.acos(view @ pose.rotation[:, 2])) == pytest.approx(30.0)
+    assert view @ pose.rotation[:, 1] == pytest.approx(0.0, abs=1e-12)

@@ -9,12 +9,13 @@ the poses of the station the proximity queries see, and two worlds never share s
 18 ms cycle): :class:`PybulletArm` answers ``tcp_pose`` / ``jacobian`` from the compiled DH
 chain of ``vasim.mrcp.dh`` by default (``kinematics="dh"``, about 3 µs a call), and from
 pybullet with ``kinematics="pybullet"`` (``getLinkState`` / ``calculateJacobian``, 30-100 µs
-a call). The tests hold the two to the same model: Jacobians agree to 1e-12 (pybullet
-computes them in double precision), link frames to pybullet's reporting precision
-(``getLinkState`` returns single-precision floats: about 3e-8 m measured). IK starts from
-pybullet's ``calculateInverseKinematics``. :meth:`PybulletArm.tcp_pose_batch` /
-:meth:`PybulletArm.jacobian_batch` evaluate many sampled configurations at once (numpy).
-Joint states are written to pybullet only when ``q`` changes.
+a call). The tests hold the two to the same model: Jacobians agree to 1e-9 (measured 1e-15;
+pybullet computes them in double precision), link frames to pybullet's reporting precision
+(``getLinkState`` returns single-precision floats: about 3e-8 m measured). IK refines on the
+compiled chain from the seed, with pybullet's ``calculateInverseKinematics`` among its
+fallback starts. :meth:`PybulletArm.tcp_pose_batch` / :meth:`PybulletArm.jacobian_batch`
+evaluate many sampled configurations at once (numpy). Joint states are written to pybullet
+only when ``q`` changes, all joints in one call.
 
 Example:
     >>> from vasim.mrcp.dh import load_robot
@@ -148,11 +149,13 @@ class PybulletArm:
         name: the arm's name (default: the model's).
         kinematics: ``"dh"`` (compiled DH chain, default) or ``"pybullet"`` for
             ``tcp_pose`` and ``jacobian`` (see the module docstring).
+        closed_form: use the closed-form IK when the arm has the PUMA structure (default);
+            False forces the numeric search (for comparisons).
     """
 
     def __init__(self, robot: RobotModel, base: FloatArray | None = None,
-                 name: str | None = None, kinematics: Literal["dh", "pybullet"] = "dh"
-                 ) -> None:
+                 name: str | None = None, kinematics: Literal["dh", "pybullet"] = "dh",
+                 closed_form: bool = True) -> None:
         if kinematics not in ("dh", "pybullet"):
             raise ConfigError(f"kinematics must be 'dh' or 'pybullet', got {kinematics!r}",
                               field="kinematics")
@@ -174,6 +177,8 @@ class PybulletArm:
         self._shoulder = (self.base @ dh.joint_origin(robot.joints[0]))[:3, 3]
         self._reach = sum(float(np.linalg.norm(dh.joint_origin(j)[:3, 3]))
                           for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
+        self._closed_form = closed_form and dh.is_puma_like(robot)
+        self._offsets = robot.table[3]  # type: ignore[attr-defined]
         unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
         self._spread = robot.lower + unit * (robot.upper - robot.lower)
 
@@ -208,8 +213,9 @@ class PybulletArm:
             raise ValueError(f"{self.name}: q must have shape ({self._n},), got {q.shape}")
         if self._q is not None and np.array_equal(q, self._q):
             return
-        for j in range(self._n):
-            pb.resetJointState(self._body, j, float(q[j]), physicsClientId=self._cid)
+        pb.resetJointStatesMultiDof(self._body, list(range(self._n)),
+                                    targetValues=[[float(v)] for v in q],
+                                    physicsClientId=self._cid)
         self._q = q.copy()
 
     def tcp_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -259,17 +265,23 @@ class PybulletArm:
            tol_rotation: float = 1e-6, restarts: int = 16) -> FloatArray | None:
         """A configuration within the joint limits reaching the pose, or None.
 
-        Damped least squares on the compiled DH chain, projected into the joint limits at
-        every step (joints wrapped by 2π, then clamped), started from ``q_seed`` (the
-        nearest branch when the target moved a little: the kernel's tracking case); if that
-        fails, from pybullet's ``calculateInverseKinematics`` (joint limits, rest pose = the
-        seed), from the home configuration, then from ``restarts`` fixed configurations
-        spread over the joint space (scrambled Halton). A start is abandoned when its error
-        stops shrinking. Targets beyond the chain's reach return None at once.
+        Arms with the PUMA structure (the RX60B) and a full pose: up to four Newton steps
+        from ``q_seed`` (tracking a small task increment, ~50 µs), else the closed form
+        (:func:`vasim.mrcp.dh.puma_ik`, all 8 solutions) wrapped into the limits, the one
+        closest to ``q_seed`` returned; no in-limit solution -> None (exact, ~0.1 ms).
+        Otherwise (other arms, position-only targets, wrist singularities): damped least
+        squares on the compiled DH chain, projected into the joint limits at every step
+        (joints wrapped by 2π, then clamped), started from ``q_seed`` (the nearest branch
+        when the target moved a little: the kernel's tracking case); for a position-only
+        target on a PUMA-like arm next the closed form with the seed's orientation; then
+        pybullet's ``calculateInverseKinematics`` (joint limits, rest pose = the seed), the
+        home configuration, and ``restarts`` fixed configurations spread over the joint
+        space (scrambled Halton). A start is abandoned when its error stops shrinking.
+        Targets beyond the chain's reach return None at once.
 
-        Costs (RX60B, one core): tracking ~0.1 ms; an arbitrary reachable pose from home
-        ~1.5 ms (no failure in 200 random in-limit poses); an unreachable orientation within
-        reach ~10 ms with the default ``restarts`` (lower it to trade robustness for time).
+        Costs of the numeric path (RX60B, one core): tracking ~0.1 ms; an arbitrary
+        reachable pose from home ~1.5 ms (no failure in 200 random in-limit poses); an
+        unreachable orientation within reach ~10 ms with the default ``restarts``.
 
         Args:
             position: ``(3,)`` TCP target [m], world frame.
@@ -287,9 +299,22 @@ class PybulletArm:
         rot = None if rotation is None else np.asarray(rotation, dtype=float)
         seed = self.robot.home if q_seed is None else np.asarray(q_seed, dtype=float)
         seed = np.clip(seed, self.robot.lower, self.robot.upper)
+        if rot is not None and self._closed_form:
+            if q_seed is not None:      # tracking: a few Newton steps from the seed suffice
+                q = self._refine(seed, target, rot, tol_position, tol_rotation, iterations=4)
+                if q is not None:
+                    return q
+            q, complete = self._closed_form_ik(target, rot, seed, tol_position, tol_rotation)
+            if q is not None or complete:
+                return q
         q = self._refine(seed, target, rot, tol_position, tol_rotation)
         if q is not None:
             return q
+        if rot is None and self._closed_form:      # keep the seed's orientation
+            q, _ = self._closed_form_ik(target, dh.fk(self.robot, seed, self.base)[1], seed,
+                                        tol_position, tol_rotation)
+            if q is not None:
+                return q
         starts = [self._pybullet_guess(target, rot, seed), self.robot.home,
                   *self._spread[:max(0, restarts)]]
         for start in starts:
@@ -297,6 +322,28 @@ class PybulletArm:
             if q is not None:
                 return q
         return None
+
+    def _closed_form_ik(self, target: FloatArray, rot: FloatArray, seed: FloatArray,
+                        tol_p: float, tol_r: float) -> tuple[FloatArray | None, bool]:
+        """The in-limit closed-form solution closest to the seed, and whether the closed
+        form enumerated every solution (False at a wrist singularity, where a continuum
+        exists and only one split of theta4 + theta6 was tried)."""
+        lower, upper = self.robot.lower, self.robot.upper
+        cands = dh.puma_ik(self.robot, target, rot, self.base)
+        complete = all(abs(math.sin(c[4] + self._offsets[4])) > 1e-9 for c in cands)
+        if not cands:
+            return None, complete
+        wrapped = dh.wrap_into_batch(np.array(cands), lower, upper, seed)
+        fits = ~np.isnan(wrapped[:, 0])
+        if not np.any(fits):
+            return None, complete
+        wrapped = wrapped[fits]
+        best = wrapped[int(np.argmin(np.linalg.norm(wrapped - seed, axis=1)))]
+        pos, cur = dh.fk(self.robot, best, self.base)
+        if (np.linalg.norm(pos - target) > tol_p
+                or np.linalg.norm(rotation_error(cur, rot)) > tol_r):
+            best = self._refine(best, target, rot, tol_p, tol_r)   # polish round-off
+        return best, complete
 
     def _pybullet_guess(self, target: FloatArray, rot: FloatArray | None,
                         seed: FloatArray) -> FloatArray:
@@ -505,11 +552,12 @@ class PybulletWorld:
         return self._cid
 
     def _known(self, name: str, robot: bool = False, obstacle: bool = False) -> str:
+        if (name in self._robots and (robot or not obstacle)) or \
+                (name in self._obstacles and (obstacle or not robot)):
+            return name
         names = (list(self._robots) if robot or not obstacle else []) + \
                 (list(self._obstacles) if obstacle or not robot else [])
-        if name not in names:
-            raise KeyError(f"unknown body {name!r} (known: {', '.join(names) or 'none'})")
-        return name
+        raise KeyError(f"unknown body {name!r} (known: {', '.join(names) or 'none'})")
 
     def set_configuration(self, robot: str, q: FloatArray) -> None:
         r = self._robots[self._known(robot, robot=True)]
@@ -517,12 +565,19 @@ class PybulletWorld:
         if q.shape != (r.model.n_joints,):
             raise ValueError(f"{robot}: q must have shape ({r.model.n_joints},), got {q.shape}")
         changed = np.flatnonzero(q != r.q)
-        for j in changed:
-            pb.resetJointState(r.body, int(j), float(q[j]), physicsClientId=self._cid)
+        if changed.size:
+            pb.resetJointStatesMultiDof(r.body, [int(j) for j in changed],
+                                        targetValues=[[float(q[j])] for j in changed],
+                                        physicsClientId=self._cid)
         r.q = q.copy()
+        r.q.setflags(write=False)
 
     def configuration(self, robot: str) -> FloatArray:
         return self._robots[self._known(robot, robot=True)].q.copy()
+
+    def joint_view(self, robot: str) -> FloatArray:
+        """The robot's current joints without a copy (read-only; for hot query loops)."""
+        return self._robots[robot].q
 
     def min_distance(self, a: str, b: str, max_distance: float = 1.0) -> Proximity:
         """Closest approach between two named bodies (signed, < 0 = penetration), or
@@ -533,6 +588,9 @@ class PybulletWorld:
         the best distance so far as the threshold, until the next bound exceeds it. Exact
         (the same minimum as one whole-body query) at a fraction of the cost.
         """
+        if a == b:
+            raise ValueError(f"min_distance needs two different bodies, got {a!r} twice "
+                             "(self-proximity: in_collision / self_collision_pairs)")
         spheres_a, spheres_b = self._spheres(a), self._spheres(b)
         body_a, body_b = self.body_id(a), self.body_id(b)
         ca, ra, la = spheres_a

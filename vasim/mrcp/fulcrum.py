@@ -12,7 +12,9 @@ wall. For a tip target ``p`` the pose is fixed up to the roll about the shaft:
 :class:`~vasim.mrcp.interfaces.ArmKinematics` so that its TCP *is the tool tip* with the
 fulcrum constraint built in (IK of a tip target = IK of the mount pose), which is what the
 kernel needs to move a task held by a laparoscopic tool. :func:`fulcrum_offset` checks the
-constraint against the geometry: the distance from the fulcrum to the shaft's line.
+constraint against the geometry: the distance from the fulcrum to the shaft's line. An
+endoscope-holding robot is the same construction with the camera at the tip
+(:func:`endoscope_view` gives its viewing direction).
 
 Frames and units: world frame, metres, radians; the wall normal points out of the body.
 
@@ -162,6 +164,15 @@ def polar_azimuth(shaft: FloatArray, fulcrum: Fulcrum, reference: FloatArray | N
                    else np.asarray(reference, dtype=float))
     theta = math.atan2(float(s @ frame[:, 1]), float(s @ frame[:, 0]))
     return alpha, theta
+
+
+def endoscope_view(rotation: FloatArray, optics_angle: float = 0.0) -> FloatArray:
+    """Viewing direction ``(3,)`` of an endoscope held as a :class:`LaparoscopicTool` (the
+    camera at the tip): the shaft axis for 0° optics, tilted by ``optics_angle`` [rad]
+    toward the tool's x axis for angled optics (e.g. the common 30° scope); the roll about
+    the shaft turns the view around it."""
+    rot = np.asarray(rotation, dtype=float)
+    return math.cos(optics_angle) * rot[:, 2] + math.sin(optics_angle) * rot[:, 0]
 
 
 def _skew(v: FloatArray) -> FloatArray:

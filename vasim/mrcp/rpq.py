@@ -192,6 +192,25 @@ def _aabb(boxes: FloatArray, half: FloatArray) -> FloatArray:  # pragma: no cove
 
 
 @njit(cache=True, nogil=True, fastmath=False)
+def _robot_pair_boxes(table_a: FloatArray, tcp_a: FloatArray, base_a: FloatArray,
+                      qa: FloatArray, obb_a: FloatArray, half_a: FloatArray,
+                      table_b: FloatArray, tcp_b: FloatArray, base_b: FloatArray,
+                      qb: FloatArray, obb_b: FloatArray, half_b: FloatArray
+                      ) -> tuple[FloatArray, FloatArray, bool]:  # pragma: no cover
+    """Both robots' link boxes (world) and whether their whole-robot boxes are apart (L4),
+    in one compiled call."""
+    boxes_a = _robot_boxes(table_a, tcp_a, base_a, qa, obb_a)
+    boxes_b = _robot_boxes(table_b, tcp_b, base_b, qb, obb_b)
+    aa = _aabb(boxes_a, half_a)
+    ab = _aabb(boxes_b, half_b)
+    apart = False
+    for ax in range(3):
+        if aa[1, ax] < ab[0, ax] or ab[1, ax] < aa[0, ax]:
+            apart = True
+    return boxes_a, boxes_b, apart
+
+
+@njit(cache=True, nogil=True, fastmath=False)
 def _obb_pass(order: NDArray[np.int64], boxes_a: FloatArray, half_a: FloatArray,
               boxes_b: FloatArray, half_b: FloatArray) -> NDArray[np.bool_]:  # pragma: no cover
     """Which of the ordered link pairs ``(P, 2)`` have overlapping OBBs."""
@@ -260,7 +279,7 @@ class RPQ:
             b.reach = np.array([float(np.linalg.norm(half))])
             return t, half
         return _robot_boxes(b.model.table, b.model.tcp, b.base,  # type: ignore[attr-defined]
-                            self.world.configuration(b.name), b.obb_local), b.half
+                            self.world.joint_view(b.name), b.obb_local), b.half
 
     def collision_matrix(self, a: str, b: str) -> NDArray[np.bool_]:
         """``(La, Lb)`` True where link i of ``a`` and link j of ``b`` can ever meet."""
@@ -307,13 +326,21 @@ class RPQ:
         ba, bb = self._body(a), self._body(b)
         st = self.stats
         st.queries += 1
-        boxes_a, half_a = self._boxes(ba)
-        boxes_b, half_b = self._boxes(bb)
-        if self.use_box:
+        if ba.model is not None and bb.model is not None:     # two robots: one compiled call
+            ma, mb = ba.model, bb.model
+            boxes_a, boxes_b, apart = _robot_pair_boxes(
+                ma.table, ma.tcp, ba.base, self.world.joint_view(a),  # type: ignore[attr-defined]
+                ba.obb_local, ba.half, mb.table, mb.tcp, bb.base,  # type: ignore[attr-defined]
+                self.world.joint_view(b), bb.obb_local, bb.half)
+            half_a, half_b = ba.half, bb.half
+        else:
+            boxes_a, half_a = self._boxes(ba)
+            boxes_b, half_b = self._boxes(bb)
             aa, ab = _aabb(boxes_a, half_a), _aabb(boxes_b, half_b)
-            if np.any(aa[1] < ab[0]) or np.any(ab[1] < aa[0]):
-                st.by_box += 1
-                return False
+            apart = bool(np.any(aa[1] < ab[0]) or np.any(ab[1] < aa[0]))
+        if self.use_box and apart:
+            st.by_box += 1
+            return False
         n_pairs = len(ba.links) * len(bb.links)
         ii, jj = self._candidate_pairs(a, b, ba, bb)
         st.pairs_in_matrix += len(ii)

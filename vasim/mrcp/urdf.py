@@ -64,10 +64,15 @@ def link_hulls(robot: RobotModel) -> tuple[trimesh.Trimesh, ...]:
 
 
 def model_key(robot: RobotModel) -> str:
-    """A short content hash of the model (DH table, TCP, link geometry)."""
-    h = hashlib.sha256()
-    h.update(repr((robot.name, robot.joints, robot.links, tuple(robot.tcp))).encode())
-    return h.hexdigest()[:16]
+    """A short content hash of the model (DH table, TCP, link geometry); computed once per
+    model object (the model is frozen)."""
+    key = robot.__dict__.get("_content_key")
+    if key is None:
+        h = hashlib.sha256()
+        h.update(repr((robot.name, robot.joints, robot.links, tuple(robot.tcp))).encode())
+        key = h.hexdigest()[:16]
+        object.__setattr__(robot, "_content_key", key)
+    return key
 
 
 def _origin_xml(t: np.ndarray) -> str:
