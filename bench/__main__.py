@@ -7,7 +7,7 @@ import sys
 
 BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "bench.haptics",
            "bench.report", "bench.abdomen", "bench.contact",
-           "bench.mrcp_rpq"]
+           "bench.mrcp_rpq", "bench.viewer"]
 
 
 def main(argv: list[str]) -> int:

@@ -8,7 +8,8 @@ Threads and hand-offs (guides/architecture.md):
   protocol). The live trial runs on its own thread (the 1 kHz servo loop of
   ``vasim.haptics.realtime`` when present, else the viewer's ``SimThreadTrial``): the viewer
   never slows the physics or the haptic loop, it only reads their latest frame.
-* The **view thread** (``view_hz``, 30 Hz) reads ``controller.current()`` (the trial's
+* The **view thread** (``view_hz``, 40 Hz: the issue asks for >= 30 scene updates/s in
+  the browser, and a loaded host loses a few) reads ``controller.current()`` (the trial's
   immutable info and latest frame) and, if new, updates every view inside one
   ``server.atomic()`` block, streams the AG cue to the pages' synths (:mod:`audio`) and
   redraws the experimenter panel when its ``PanelState`` version changed.
@@ -241,7 +242,7 @@ class ViewerApp:
         pause_s: float = 1.5,
         speed: float = 1.0,
         control_hz: float = 50.0,
-        view_hz: float = 30.0,
+        view_hz: float = 40.0,
         audio_hz: float = 20.0,
         trial_factory: Callable[..., Any] | None = None,
     ):
@@ -409,7 +410,11 @@ class ViewerApp:
         timing = trial.timing() if trial is not None else None
         d = timing.to_dict() if hasattr(timing, "to_dict") else {}
         for k, v in d.items():
-            if isinstance(v, int | float):
+            if isinstance(v, dict):  # RealtimeTiming's physics thread figures
+                for k2, v2 in v.items():
+                    if isinstance(v2, int | float) and not isinstance(v2, bool):
+                        out[f"trial_{k}_{k2}"] = float(v2)
+            elif isinstance(v, int | float) and not isinstance(v, bool):
                 out[f"trial_{k}"] = float(v)
         return out
 

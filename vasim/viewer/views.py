@@ -155,7 +155,7 @@ class ToolView:
         *,
         shaft_radius: float = 0.0025,
         outside: float = 0.05,
-        tip_radius: float = 0.0028,
+        tip_radius: float = 0.0018,
     ):
         self.trocar = np.asarray(trocar, dtype=np.float64).reshape(3)
         self.outside = float(outside)
@@ -365,10 +365,15 @@ def arrow_mesh(sections: int = 12) -> tuple[FloatArray, NDArray[np.uint32]]:
 
 def arrow_vertices(template: FloatArray, start: FloatArray, end: FloatArray,
                    shaft_radius: float) -> NDArray[np.float32]:
-    """World-frame vertices of the arrow from ``start`` to ``end`` (both (3,) [m])."""
+    """World-frame vertices of the arrow from ``start`` to ``end`` (both (3,) [m]).
+
+    The shaft is at most a tenth of the length thick, so a short arrow (VG near the path:
+    a few mm) still reads as an arrow instead of a blob; ``shaft_radius`` [m] is the cap.
+    """
     s = (len(template) - 3) // 3
     d = np.asarray(end, dtype=np.float64) - np.asarray(start, dtype=np.float64)
     length = float(np.linalg.norm(d))
+    shaft_radius = min(float(shaft_radius), 0.1 * length)
     head_r = 2.4 * shaft_radius
     head_l = min(0.45 * length, 7.0 * shaft_radius)
     shaft_l = length - head_l

@@ -1,0 +1,190 @@
+"""The viewer's TrainingController without a server: modes, storage exactly like a headless
+trial, protocol sessions (no duplicate, interrupted attempts stay pending), f5PL editing,
+and bad commands that leave the running trial alone. The test thread plays the
+controller thread (``handle`` + ``poll``); trials run faster than real time (``speed``)."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from contextlib import closing
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from vasim.errors import ConfigError
+from vasim.fixtures.logistic import Logistic5
+from vasim.fixtures.schema import load_schema
+from vasim.study.store import TrialStore
+from vasim.study.trial import run_trial
+from vasim.viewer.controller import Command, TrainingController, f5pl_fields, with_f5pl
+
+SPEED = 25.0
+
+
+def drive(ctl: TrainingController, cond: Callable[[], bool], timeout: float = 30.0) -> bool:
+    """Polls like the controller thread until ``cond`` holds."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        ctl.poll()
+        if cond():
+            return True
+        time.sleep(0.01)
+    return cond()
+
+
+@pytest.fixture
+def ctl(tmp_path: Path) -> Iterator[TrainingController]:
+    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED, pause_s=0.05,
+                           max_time=20.0)
+    try:
+        yield c
+    finally:
+        c.close()
+
+
+def run(ctl: TrainingController, *cmds: Command) -> None:
+    for cmd in cmds:
+        ctl.handle(cmd)
+
+
+def store(ctl: TrainingController) -> TrialStore:
+    return TrialStore(ctl.db, readonly=True)  # type: ignore[arg-type]
+
+
+def test_demo_loops_over_variants_and_stores_nothing(tmp_path: Path) -> None:
+    c = TrainingController(scene="none", db=tmp_path / "d.sqlite", speed=SPEED, pause_s=0.02,
+                           max_time=0.5)
+    try:
+        assert c.panel.mode == "demo" and c.info.trial_id is None
+        assert drive(c, lambda: c.info.number >= 3)
+        assert c.info.config.variant == 2 and c.info.config.seed == 2
+    finally:
+        c.close()
+    assert not (tmp_path / "d.sqlite").exists()  # the store was never opened
+
+
+def test_free_and_protocol_need_a_database() -> None:
+    c = TrainingController(scene="none", db=None, speed=SPEED)
+    try:
+        with pytest.raises(ConfigError, match="--db"):
+            c.handle(Command("mode", "free"))
+        assert c.panel.mode == "demo" and c.active()  # the demo goes on
+    finally:
+        c.close()
+
+
+def test_a_free_trial_is_stored_exactly_like_a_headless_one(ctl: TrainingController,
+                                                            tmp_path: Path) -> None:
+    run(ctl, Command("mode", "free"), Command("subject", "S01"), Command("task", "point"),
+        Command("start"))
+    info = ctl.info
+    assert info.mode == "free" and info.trial_id is not None and ctl.panel.running
+    assert drive(ctl, lambda: not ctl.panel.running)
+    assert "stored" in ctl.panel.status and ctl.panel.summary["completed"] is True
+    assert [n for n, *_ in ctl.panel.curve] == [1]
+    # The same config run headless: same rows, same per-point metrics, same summary.
+    with closing(TrialStore(tmp_path / "headless.sqlite")) as hs:
+        _, hid = run_trial(info.config, hs)
+        h_row = hs.trial(hid)
+        h_pm = hs.point_metrics(hid)
+        h_n = len(hs.samples(hid))
+    with closing(store(ctl)) as st:
+        row = st.trial(info.trial_id)
+        pm = st.point_metrics(info.trial_id)
+        assert len(st.samples(info.trial_id)) == h_n > 100
+        assert row["timing_json"]  # the live loop's timing, which a headless run lacks
+    assert row["status"] == h_row["status"] == "completed"
+    for k in ("subject", "task", "variant", "schema", "operator", "seed", "dt",
+              "active_fixtures", "config_json", "schema_toml", "n_samples"):
+        assert row[k] == h_row[k], k
+    assert json.loads(row["summary_json"]) == json.loads(h_row["summary_json"])
+    pd.testing.assert_frame_equal(pm, h_pm)
+
+
+def test_protocol_trials_follow_the_schedule_without_duplicates(
+        ctl: TrainingController) -> None:
+    run(ctl, Command("mode", "protocol"), Command("subject", "S02"),
+        Command("protocol", "vf_point_targeting"))
+    p = ctl.panel
+    assert (p.position, p.total, p.completed) == (1, 27, 0)
+    ctl.speed = 1.0  # slow enough to stop and to double-start it
+    run(ctl, Command("start"))
+    first = ctl.info
+    assert first.schedule_index == 0 and first.condition == "none"
+    with pytest.raises(ConfigError, match="already running"):
+        ctl.handle(Command("start"))  # a second tab's Start
+    assert ctl.info is first
+    run(ctl, Command("stop"))
+    assert "stays pending" in ctl.panel.status and not ctl.panel.running
+    ctl.speed = SPEED
+    run(ctl, Command("start"))  # the same scheduled trial, a second attempt
+    second = ctl.info
+    assert second.schedule_index == 0 and second.trial_id != first.trial_id
+    assert drive(ctl, lambda: not ctl.panel.running)
+    assert (ctl.panel.position, ctl.panel.completed) == (2, 1)
+    with closing(store(ctl)) as st:
+        trials = st.trials(subject="S02").set_index("id")
+        assert trials.loc[first.trial_id, "status"] == "interrupted"
+        assert trials.loc[second.trial_id, "status"] == "completed"
+        assert list(trials["schedule_index"]) == [0, 0]
+        sched = st.schedule(ctl.panel.session_id)
+        assert int(sched["trial_id"].iloc[0]) == second.trial_id
+        assert sched["trial_id"].iloc[1:].isna().all()
+    # The protocol fixes the schema: free-training edits are refused.
+    with pytest.raises(ConfigError, match="protocol"):
+        ctl.handle(Command("schema", "vg"))
+
+
+def test_f5pl_edit_runs_and_stores_the_edited_schema(ctl: TrainingController) -> None:
+    run(ctl, Command("mode", "free"), Command("schema", "trajectory_following"))
+    inst, p0 = f5pl_fields(load_schema("trajectory_following"))[0]
+    edited = Logistic5(a=p0.a, b=p0.b, c=p0.c * 2.0, d=p0.d, g=p0.g)
+    run(ctl, Command("f5pl", (inst, edited)))
+    assert dict(ctl.panel.f5pl)[inst] == edited
+    run(ctl, Command("task", "trajectory"), Command("start"))
+    tid = ctl.info.trial_id
+    run(ctl, Command("stop"))
+    with closing(store(ctl)) as st:
+        toml = st.trial(tid)["schema_toml"]
+    assert f"c = {edited.c!r}" in toml or f"c = {edited.c}" in toml
+    with pytest.raises(ConfigError, match="no fixture"):
+        with_f5pl(load_schema("vg"), "ff", edited)
+
+
+def test_bad_commands_leave_the_running_trial_alone(ctl: TrainingController) -> None:
+    info = ctl.info
+    for cmd, needle in ((Command("mode", "juggle"), "juggle"),
+                        (Command("schema", "no_such_schema"), "no_such_schema"),
+                        (Command("subject", "<script>alert(1)</script>"), "subject code"),
+                        (Command("protocol", "nope"), "nope"),
+                        (Command("launch"), "launch")):
+        with pytest.raises(ConfigError, match=needle):
+            ctl.handle(cmd)
+    assert ctl.info is info and ctl.active()
+    t = ctl.frame().t
+    assert drive(ctl, lambda: ctl.frame().t > t)
+    assert ctl.panel.subject is None
+
+
+def test_browser_input_moves_the_tool_by_the_dragged_increment(
+        ctl: TrainingController) -> None:
+    ctl.speed = 1.0  # the device renders browser samples in wall time
+    run(ctl, Command("mode", "free"), Command("schema", "none"), Command("input", "browser"),
+        Command("start"))
+    dev = ctl.browser
+    assert dev is not None and ctl.info.input == "browser"
+    x0 = np.array(ctl.frame().tcp)
+    p = np.array([0.1, 0.2, 0.3])
+    for i in range(11):  # a 2 cm drag along x at 50 Hz
+        dev.push(time.perf_counter(), p + np.array([0.002 * i, 0.0, 0.0]))
+        time.sleep(0.02)
+    assert drive(ctl, lambda: abs(ctl.frame().tcp[0] - x0[0] - 0.02) < 1e-3, timeout=5)
+    np.testing.assert_allclose(ctl.frame().tcp[1:], x0[1:], atol=1e-6)
+    run(ctl, Command("stop"))
+    with closing(store(ctl)) as st:
+        row = st.trial(ctl.info.trial_id)
+    assert row["operator"] == "browser" and row["status"] == "interrupted"
