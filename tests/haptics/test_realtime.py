@@ -178,18 +178,20 @@ sustains, so a ripple below it at a steady contact is not felt as buzz."""
 
 
 def test_no_buzz_when_the_stylus_rests_against_the_tissue() -> None:
-    force, tissue = _rest_force(blend_s=0.02)
+    force, _ = _rest_force(blend_s=0.02)
     assert float(np.linalg.norm(force.mean(axis=0))) > 0.1  # a real push, not free space
     assert np.all(np.isfinite(force))
     assert (_buzz(force) < BUZZ_BOUND_N).all(), _buzz(force)
-    # The physics' contact force itself chatters at its update rate (the penalty contact
-    # of the mass-spring liver, ~125 Hz): the bound is not met by rendering it raw ...
-    assert (_buzz(tissue) > BUZZ_BOUND_N).any(), _buzz(tissue)
 
 
 def test_rendering_physics_updates_unblended_buzzes() -> None:
-    """... nor by switching to each new physics snapshot at once (``blend_s=0``)."""
-    force, _ = _rest_force(blend_s=0.0)
+    """The bound is not met for free: the physics' contact force chatters at its update
+    rate (the penalty contact of the mass-spring liver, ~125 Hz, ~0.15 N at the time of
+    writing), and switching to each new snapshot at once (``blend_s=0``) passes it on."""
+    force, tissue = _rest_force(blend_s=0.0)
+    if (_buzz(tissue) <= BUZZ_BOUND_N).all():
+        pytest.skip(f"the physics' contact force no longer chatters ({_buzz(tissue)} N): "
+                    "nothing for the blending to remove")
     assert (_buzz(force) > BUZZ_BOUND_N).any(), _buzz(force)
 
 
@@ -303,3 +305,55 @@ def test_cli_replay_needs_a_database(capsys) -> None:
 
     assert main(["trial", "--replay", "1"]) == 2
     assert "--replay needs --db" in capsys.readouterr().err
+
+
+def test_a_device_failing_mid_trial_leaves_an_interrupted_trial_with_its_samples(
+        tmp_path: Path) -> None:
+    from vasim.errors import DeviceError
+
+    db = tmp_path / "s.sqlite"
+    device = _stream(np.zeros((300, 3)))  # runs out of readings after 300 ticks
+    with TrialStore(db) as store:
+        with pytest.raises(DeviceError, match="end of the recording"):
+            run_realtime_trial(TrialConfig(schema="none", scene="none", max_time=5.0),
+                               store, device, physics="off")
+        trials = store.trials()
+        assert list(trials["status"]) == ["interrupted"]
+        tid = int(trials["id"].iloc[0])
+        assert len(store.samples(tid)) == 300
+        kinds = list(store.events(tid)["kind"])
+    assert "recording" in kinds and "interrupted" in kinds
+    assert stream_path(db, tid).exists()
+
+
+def test_servo_loop_asks_for_real_time_priority_and_reports_the_answer() -> None:
+    from vasim.haptics.servo import NullPlant, ServoLoop
+
+    for bad in (0, 100, True, 1.5):
+        with pytest.raises(ValueError, match="rt_priority"):
+            ServoLoop(EmulatorDevice(hand=np.zeros(3)), NullPlant(), rt_priority=bad)  # type: ignore[arg-type]
+    loop = ServoLoop(EmulatorDevice(hand=np.zeros(3)), NullPlant(), rt_priority=10)
+    assert loop.priority_granted is None
+    loop.start()
+    time.sleep(0.05)
+    loop.stop()
+    assert loop.priority_granted in (True, False)  # granted as root, refused otherwise
+    assert [e.kind for e in loop.events].count("priority") == 1
+    plain = ServoLoop(EmulatorDevice(hand=np.zeros(3)), NullPlant())  # default: not asked
+    plain.start()
+    time.sleep(0.02)
+    plain.stop()
+    assert plain.priority_granted is None
+
+
+def test_cli_realtime_in_process_runs_the_threaded_loop(tmp_path: Path, capsys) -> None:
+    from vasim.cli import main
+
+    db = tmp_path / "study.sqlite"
+    assert main(["trial", "--realtime", "--in-process", "--device", "emulator",
+                 "--scene", "none", "--max-time", "0.2", "--db", str(db)]) == 0
+    assert "servo rate" in capsys.readouterr().out
+    with TrialStore(db, readonly=True) as store:
+        row = store.trial(int(store.trials()["id"].iloc[0]))
+    assert row["operator"] == "emulator" and row["timing"]["mode"] == "realtime"
+    assert row["n_samples"] == 200

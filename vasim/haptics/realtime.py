@@ -43,20 +43,20 @@ recorded samples keep the physics' force (``f_contact``) unblended.
 reading is indexed onto the task's start (``ServoLoop(home=...)``), so only increments
 matter and the clutch re-indexes as usual.
 
-Threads or a process (**decision, measured**): everything runs in threads of one process.
-The abdomen's solver kernels are numba ``nogil`` (the Python glue of a 4 ms step holds the
-interpreter lock for ~0.4 ms) and the servo loop lowers the switch interval to 0.5 ms, so
-the interpreter lock is not what breaks the rate. The operating system is: on the shared
-2-core development host (load average 2-3 from other jobs) a normally scheduled servo
-thread reached only 903-975 Hz with p99 2.7-4.7 ms and gaps of 50-160 ms, with physics on
-and off alike; a full garbage collection of the process' heap (133-283 ms, in whichever
-thread triggers it) adds its own gaps. So the trial (**decision**) asks for real-time
-scheduling of the servo thread (``SCHED_FIFO`` priority ``DEFAULT_RT_PRIORITY``, when the
-OS grants it; refused -> normal scheduling, logged, and the timing says so) and freezes the
-collector's heap at start (``gc.freeze``). Measured then (``bench/haptics.py``, 30 s
-runs, the scripted operator doing the ``ff`` trajectory task in the default abdomen, a
-browser-less viewer stream at 60 Hz building the organ meshes; host load average 2-3.5
-from other jobs):
+Threads or a process (**decision, measured**): here everything runs in threads of one
+process. The abdomen's solver kernels are numba ``nogil`` (the Python glue of a 4 ms step
+holds the interpreter lock for ~0.4 ms) and the servo loop lowers the switch interval to
+0.5 ms, so the lock's hand-over is not what breaks the rate first. The operating system is:
+on the shared 2-core development host (load average 2-3 from other jobs) a normally
+scheduled servo thread reached only 903-975 Hz with p99 2.7-4.7 ms and gaps of 50-160 ms,
+with physics on and off alike; a full garbage collection of the process' heap (133-283 ms,
+in whichever thread triggers it) adds its own gaps. So the trial (**decision**) asks for
+real-time scheduling of the servo thread (``SCHED_FIFO`` priority ``DEFAULT_RT_PRIORITY``,
+when the OS grants it; refused -> normal scheduling, logged, and the timing says so) and
+freezes the collector's heap at start (``gc.freeze``). Measured then (``bench/haptics.py``,
+30 s runs, the scripted operator doing the ``ff`` trajectory task in the default abdomen, a
+browser-less viewer stream at 60 Hz building the organ meshes; host load average 2-3.5 from
+other jobs):
 
 =================================  =======  ======  ======  =======  ========
 run                                rate Hz  p50 ms  p99 ms  max ms   overruns
@@ -73,10 +73,13 @@ the servo thread alone (physics off, no viewer) max 4.6 ms (the host's floor); +
 5.3 ms; + physics thread 8.7 ms; both 25 ms. The long gaps are priority inversion through
 the interpreter lock: a normally scheduled thread of the process (physics glue, viewer)
 preempted by another process while it holds the lock. On an unloaded machine that does not
-happen (6 s runs at load ~2: max 4.9-6.0 ms). A separate servo process with shared memory
-would remove the inversion at the cost of moving every trial frame and the physics'
-contact snapshot across processes; it is not built in this release (the threads meet the
-median/p99 targets), and is the next step if the longest gap matters on the lab machine.
+happen (6 s runs at load ~2: max 4.9-6.0 ms). So (**decision, measured**) the servo loop
+can also run in a process of its own, ``vasim.haptics.realtime_process``: 20 s runs with
+every organ awake and the viewer stream, load average 5-6, alternating: threads 971-984 Hz,
+p99 1.9 ms, longest gap 49-101 ms; servo process 999.9 Hz, p99 1.000 ms, longest gap
+4.5-4.8 ms. ``vasim trial --realtime`` and ``run_realtime_trial(process=True)`` use it. This
+class stays the threaded form: the viewer's trials use it, because the viewer's browser
+device is fed in the viewer's process; it meets the median and p99 targets.
 
 Recording and replay: with ``record=True`` (default) the loop keeps every raw device
 reading (``StreamRecorder``) and the physics keeps a :class:`PhysicsLog`: the tool pose each
@@ -549,7 +552,6 @@ class RealtimeTrial:
         self._t_start: float | None = None
         self._t_done: float | None = None
         self._started = False
-        self._stopped = False
 
     # -- life cycle -----------------------------------------------------------------------
     def _mark_done(self) -> None:
@@ -610,7 +612,6 @@ class RealtimeTrial:
         if self._t_done is None and self._t_start is not None:
             self._t_done = time.perf_counter()
         self._unfreeze()
-        self._stopped = True
 
     def __enter__(self) -> RealtimeTrial:
         return self
@@ -744,8 +745,10 @@ class RealtimeRecording:
 
 def run_realtime_trial(config: TrialConfig, store: object | None = None,
                        device: Device | None = None, *, schema: Schema | None = None,
-                       physics: PhysicsMode = "thread", poll_s: float = 0.05,
-                       on_poll: Any = None) -> tuple[TrialResult, int | None, RealtimeTiming]:
+                       physics: PhysicsMode = "thread", process: bool = False,
+                       device_factory: Any = None, device_name: str | None = None,
+                       poll_s: float = 0.05, on_poll: Any = None,
+                       ) -> tuple[TrialResult, int | None, RealtimeTiming]:
     """Runs one trial in real time and stores it like ``run_trial``, with its timing and
     its recording.
 
@@ -760,6 +763,10 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
         config: the trial. store: a ``TrialStore`` or None. device: the input device
             (None: the scripted operator). schema: overrides ``config.schema``.
         physics: ``"thread"`` (real time) or ``"off"``.
+        process: run the servo loop in its own process
+            (``vasim.haptics.realtime_process``: measured steadier on a loaded host); the
+            device is then built there by ``device_factory`` (picklable; None: the
+            scripted operator) and stored under ``device_name``.
         poll_s: how often the caller's thread checks for the end [s].
         on_poll: optional ``fn(trial)`` called at every poll (progress display).
 
@@ -773,12 +780,24 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
                           field="physics")
     if store is not None and not isinstance(store, TrialStore):
         raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
-    trial = RealtimeTrial(config, device, schema=schema, physics=physics)
+    trial: Any
+    if process:
+        if device is not None:
+            raise ConfigError("a device object cannot move to the servo process: pass "
+                              "device_factory (or process=False)", field="device")
+        from vasim.haptics.realtime_process import ProcessRealtimeTrial
+
+        trial = ProcessRealtimeTrial(config, device_factory, schema=schema, physics=physics)
+        scripted = device_factory is None
+        name = "scripted" if scripted else (device_name or "device")
+    else:
+        trial = RealtimeTrial(config, device, schema=schema, physics=physics)
+        scripted = isinstance(trial.device, ScriptedDevice)
+        name = getattr(trial.device, "name", "device")
     trial_id: int | None = None
     if store is not None:
         meta = trial_meta(config, trial.runner.schema, make_profile(config))
-        name = getattr(trial.device, "name", "device")
-        if not isinstance(trial.device, ScriptedDevice):
+        if not scripted:
             cfg = dict(meta.config or {})
             cfg["operator"] = name
             cfg.pop("profile", None)  # no simulated person behind a device
@@ -798,8 +817,10 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
             if on_poll is not None:
                 on_poll(trial)
         trial.stop()
-        if trial.error is not None:
-            raise DeviceError(f"the real-time trial stopped: {trial.error!r}") from trial.error
+        err = trial.error
+        if err is not None:
+            raise DeviceError(f"the real-time trial stopped: {err!s}") from (
+                err if isinstance(err, BaseException) else None)
         result = trial.result()
         timing = trial.timing()
         if store is not None and trial_id is not None:
@@ -811,18 +832,24 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
     except BaseException as exc:
         trial.stop()
         if store is not None and trial_id is not None:
-            partial = trial.result()
             try:
                 files = save_recording()
             except Exception:  # the store's row matters more than the recording
                 log.exception("saving the recording of trial %s failed", trial_id)
                 files = None
-            store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
-                                   samples=partial.samples, point_metrics=partial.metrics,
-                                   summary=partial.summary, events=[
-                                       *partial.events,
-                                       (None, "recording", json.dumps(files))],
-                                   trial_metrics=partial.trial_metrics)
+            reason = f"{type(exc).__name__}: {exc}"
+            events = [(None, "recording", json.dumps(files))]
+            try:
+                partial = trial.result()
+            except Exception:  # e.g. the device failed before the first sample
+                log.exception("the partial result of trial %s failed", trial_id)
+                store.mark_interrupted(trial_id, reason=reason, events=events)
+            else:
+                store.mark_interrupted(trial_id, reason=reason, samples=partial.samples,
+                                       point_metrics=partial.metrics,
+                                       summary=partial.summary,
+                                       events=[*partial.events, *events],
+                                       trial_metrics=partial.trial_metrics)
         raise
     return result, trial_id, timing
 

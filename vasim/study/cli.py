@@ -56,7 +56,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "real time", "run the trial in real time through the 1 kHz haptic servo loop "
         "(vasim.haptics.realtime), or replay a recorded real-time trial exactly")
     rt.add_argument("--realtime", action="store_true",
-                    help="run in real time (servo loop, physics thread); prints the loop's "
+                    help="run in real time (1 kHz servo loop in its own process, physics "
+                         "thread beside it); prints the loop's "
                          "timing; with --db the timing and the device recording are stored")
     rt.add_argument("--device", choices=["scripted", "emulator", "openhaptics"],
                     default="scripted",
@@ -64,6 +65,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                          "operator; emulator: an emulated Omni held still)")
     rt.add_argument("--physics", choices=["thread", "off"], default="thread",
                     help="abdomen physics of a --realtime trial (default: its own thread)")
+    rt.add_argument("--in-process", action="store_true",
+                    help="run the servo loop as a thread of this process instead of its "
+                         "own process (the viewer's way; less steady on a loaded host)")
     rt.add_argument("--replay", type=int, default=None, metavar="TRIAL_ID",
                     help="re-run a stored real-time trial from its recording (needs --db) "
                          "and compare it with the stored samples and metrics")
@@ -101,19 +105,20 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     return 0
 
 
-def _realtime_device(kind: str) -> object | None:
-    """The input device ``--device`` names (None: the scripted operator)."""
+def _realtime_device_factory(kind: str) -> object | None:
+    """A picklable factory of the input device ``--device`` names (None: the scripted
+    operator); the servo process calls it."""
     if kind == "scripted":
         return None
     if kind == "emulator":
-        import numpy as np
+        from functools import partial
 
         from vasim.haptics.devices.emulator import EmulatorDevice
 
-        return EmulatorDevice(hand=np.zeros(3))
+        return partial(EmulatorDevice, hand=(0.0, 0.0, 0.0))
     from vasim.haptics.devices.openhaptics import OpenHapticsDevice
 
-    return OpenHapticsDevice()
+    return OpenHapticsDevice
 
 
 def _cmd_realtime(args: argparse.Namespace) -> int:
@@ -126,15 +131,22 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
         max_time=args.max_time, scene=args.scene,
     )
-    device = _realtime_device(args.device)
+    factory = _realtime_device_factory(args.device)
+    in_process = bool(getattr(args, "in_process", False))
     store = None
     if args.db is not None:
         if args.db.exists() and args.db.is_dir():
             raise ConfigError(f"--db {args.db} is a directory, expected a database file")
         store = TrialStore(args.db)
     try:
-        result, trial_id, timing = run_realtime_trial(
-            config, store, device, physics=args.physics)  # type: ignore[arg-type]
+        if in_process:
+            device = factory() if callable(factory) else None
+            result, trial_id, timing = run_realtime_trial(
+                config, store, device, physics=args.physics)  # type: ignore[arg-type]
+        else:
+            result, trial_id, timing = run_realtime_trial(
+                config, store, physics=args.physics, process=True,  # type: ignore[arg-type]
+                device_factory=factory, device_name=args.device)
     finally:
         if store is not None:
             store.close()
