@@ -335,3 +335,30 @@ def test_box_apart_matches_the_bounding_box_test(seed, n, margin):
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     want = bool(np.any(x.min(axis=0) - margin > hi) or np.any(x.max(axis=0) + margin < lo))
     assert box_apart(x, lo, hi, margin) == want
+
+
+def test_a_patch_made_of_any_arrays_gives_the_same_force():
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8]])
+    plain = ContactPatch(np.zeros((2, 3)), normals, np.array([200.0, 300.0]),
+                         np.array([0.0, 0.0025]), 0.0025)
+    ro = normals.copy()
+    ro.setflags(write=False)
+    odd = ContactPatch(np.zeros((2, 6))[:, ::2], ro, [200, 300], (0.0, 0.0025), 0.0025)
+    for a in (odd.points, odd.normals, odd.stiffness, odd.offsets):
+        assert a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+    pose = ToolPose(np.array([0.0, 0.01, 0.1]), np.array([0.0, 0.0, 0.001]))
+    for got, want in zip(patch_force(odd, pose), patch_force(plain, pose), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_inconsistent_arrays_are_refused_not_read_out_of_bounds():
+    model = MODELS[0]
+    pose = ToolPose(np.array([0.0, 0.0, 0.1]), np.array([0.0, 0.0, 0.0]))
+    bad_faces = np.array(model.faces)
+    bad_faces[0, 0] = model.n_nodes
+    with pytest.raises(ValueError, match="faces index nodes"):
+        detect_contacts(model.rest, bad_faces, model.mass, pose, SHAPE, dt=4e-3)
+    with pytest.raises(ValueError, match="mass"):
+        detect_contacts(model.rest, model.faces, model.mass[:-1], pose, SHAPE, dt=4e-3)
+    with pytest.raises(ValueError, match="contact patch"):
+        ContactPatch(np.zeros((2, 3)), np.zeros((3, 3)), np.zeros(2), np.zeros(2), 0.0025)

@@ -241,7 +241,8 @@ def tool_contacts(x, faces, mass, tip, fulcrum, radius, spacing, max_spheres,
         max_edge: longest surface edge [m]; negative: computed here.
 
     Returns:
-        (count (-1: the pose is not finite), max_penetration, force (3,), force_tip (3,),
+        (count (-1: the pose is not finite, -2: a face index is out of range),
+        max_penetration, force (3,), force_tip (3,),
         torque (3,), stiffness_tip (3, 3), node_index (3 count,), node_force (3 count, 3),
         points (count, 3), normals (count, 3), stiffness (count,), offsets (count,)).
     """
@@ -252,9 +253,16 @@ def tool_contacts(x, faces, mass, tip, fulcrum, radius, spacing, max_spheres,
     force_tip = np.zeros(3)
     torque = np.zeros(3)
     stiff = np.zeros((3, 3))
+    bad = 0
     if not (math.isfinite(length) and math.isfinite(tip[0] + tip[1] + tip[2])):
+        bad = -1
+    for f in range(nf):  # every index in range (the loops below do not check)
+        for j in range(3):
+            if faces[f, j] < 0 or faces[f, j] >= n:
+                bad = -2
+    if bad < 0:
         e = np.empty(0)
-        return (-1, 0.0, force, force_tip, torque, stiff, np.empty(0, dtype=np.int64),
+        return (bad, 0.0, force, force_tip, torque, stiff, np.empty(0, dtype=np.int64),
                 np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3)), e, e)
     ms = math.floor(length / spacing) + 1
     if ms > max_spheres:

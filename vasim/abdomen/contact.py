@@ -140,6 +140,25 @@ class ContactPatch:
     offsets: FloatArray
     radius: float
 
+    def __post_init__(self) -> None:
+        # One array type for the compiled 1 kHz kernel whatever the caller built the patch
+        # from (a read-only or strided array would be another type, compiled on its first
+        # call, inside the loop); and the kernel loaded now, off the loop (patch_force).
+        for name in ("points", "normals", "stiffness", "offsets"):
+            a = getattr(self, name)
+            if not (type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous
+                    and a.flags.writeable):
+                object.__setattr__(self, name, np.array(a, dtype=np.float64))
+        m = self.points.shape[0] if self.points.ndim == 2 else -1
+        if (self.points.shape != (m, 3) or self.normals.shape != (m, 3)
+                or self.stiffness.shape != (m,) or self.offsets.shape != (m,)):
+            raise ValueError(f"a contact patch needs points (m, 3), normals (m, 3), stiffness "
+                             f"(m,) and offsets (m,), got {self.points.shape}, "
+                             f"{self.normals.shape}, {self.stiffness.shape} and "
+                             f"{self.offsets.shape}")
+        if not _KERNELS_LOADED:
+            load_kernels()
+
     @property
     def size(self) -> int:
         return int(self.points.shape[0])
@@ -204,6 +223,21 @@ class ContactResult:
         return f
 
 
+_KERNELS_LOADED = False
+
+
+def load_kernels() -> None:
+    """Loads the compiled contact kernels into this process (numba's disk cache, ~30 ms, plus
+    numba's own start-up, ~1 s, when nothing compiled has run yet; the very first run of an
+    install compiles them). Called when the first :class:`ContactPatch` is made, so that the
+    1 kHz loop's first :func:`patch_force` costs no more than the others."""
+    global _KERNELS_LOADED
+    _KERNELS_LOADED = True
+    z = np.zeros((0, 3))
+    patch_tip_force(z, z, np.zeros(0), np.zeros(0), 0.0025, np.zeros(3),
+                    np.array([0.0, 0.0, 0.1]), np.empty(3), np.empty((3, 3)))
+
+
 def sphere_offsets(pose: ToolPose, shape: ToolShape) -> FloatArray:
     """(m,) distances ℓ_j of the sampling spheres from the tip [m], tip first.
 
@@ -249,18 +283,26 @@ def detect_contacts(
         The contact forces on the tool and on the tissue nodes, and the haptic patch.
     """
     r = shape.radius
+    x, faces, mass = _f64(x), _i64(faces), _f64(mass)
+    if x.ndim != 2 or x.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3 \
+            or mass.shape != (x.shape[0],):
+        raise ValueError(f"detect_contacts needs x (n, 3), faces (f, 3) and mass (n,), got "
+                         f"{x.shape}, {faces.shape} and {mass.shape}")
     # The whole detection runs in one compiled pass (vasim.abdomen._contact_kernels): the
     # spheres inside the organ's box grown by r + h, the nodes near the axis they span, per
     # sphere the nearest face with a node within r + h of its centre, then the forces.
     (count, max_pen, force, force_tip, torque, stiff, node_index, node_force, points,
      normals, k, ell) = tool_contacts(
-        _f64(x), _i64(faces), _f64(mass), _vec3(pose.tip), _vec3(pose.fulcrum), float(r),
+        x, faces, mass, _vec3(pose.tip), _vec3(pose.fulcrum), float(r),
         float(shape.spacing), int(shape.max_spheres), float(shape.contact_stiffness),
         STABILITY_FRACTION, float(dt), -1.0 if max_edge is None else float(max_edge))
     if count <= 0:
-        if count < 0:
+        if count == -1:
             raise ValueError(f"the tool pose must be finite, got tip {pose.tip!r} and fulcrum "
                              f"{pose.fulcrum!r}")
+        if count == -2:
+            raise ValueError(f"faces index nodes outside 0..{x.shape[0] - 1}, got "
+                             f"{int(faces.min())}..{int(faces.max())}")
         return ContactResult.none(r)
     patch = ContactPatch(points, normals, k, ell, r)
     return ContactResult(force, force_tip, torque, stiff, node_index, node_force, int(count),
@@ -352,6 +394,7 @@ __all__ = [
     "ToolPose",
     "ToolShape",
     "detect_contacts",
+    "load_kernels",
     "patch_force",
     "patch_force_into",
     "point_segment_distance",

@@ -61,7 +61,6 @@ from vasim.abdomen.contact import (
     ToolShape,
     _vec3,
     detect_contacts,
-    patch_force,
 )
 from vasim.abdomen.integrate import OrganSolver, StepReport
 from vasim.abdomen.model import OrganModel, OrganState
@@ -375,11 +374,11 @@ class Abdomen:
         self._latest = self._snapshot(())
 
     def _warm_up(self) -> None:
-        """Loads the compiled contact kernels now (from numba's disk cache; compiles them on
-        the very first run), with the argument types of the stepping and the 1 kHz loop, so
-        that the first contact costs no loading inside a real-time loop."""
+        """Loads the compiled detection kernel now (from numba's disk cache; compiles it on
+        the very first run) with the argument types of the stepping, so that the first
+        contact costs no loading inside the physics loop (the 1 kHz kernel is loaded with the
+        first ``ContactPatch``, ``vasim.abdomen.contact.load_kernels``)."""
         far = ToolPose(np.array([0.0, 0.0, 1e3]), np.array([0.0, 0.0, 1e3 - 0.01]))
-        patch_force(self._empty_patch, far)
         for b in self._bodies:
             if not b.kinematic:
                 detect_contacts(b.state.x, b.model.faces, b.model.mass, far, self.tool,
