@@ -285,31 +285,28 @@ class PlanarWorld:
         a0, a1 = self._segments_batch(robot, qs)                  # (N, 2, 3)
         ra = self.arms[robot].radius
         out = np.empty((a0.shape[0], len(bodies)))
-        robots = [j for j, b in enumerate(bodies) if b in self.arms]
-        spheres = [j for j, b in enumerate(bodies) if b not in self.arms]
-        if robots:
-            segs = [self._posed_segments(bodies[j]) for j in robots]
-            b0 = np.stack([s0 for s0, _ in segs])                   # (R, 2, 3)
-            b1 = np.stack([s1 for _, s1 in segs])
-            d = segment_distances(a0[:, :, None, None, :], a1[:, :, None, None, :],
-                                  b0[None, None], b1[None, None])   # (N, 2, R, 2)
-            radii = np.array([self.arms[bodies[j]].radius for j in robots])
-            out[:, robots] = d.min(axis=(1, 3)) - ra - radii[None, :]
-        if spheres:
-            c = np.stack([self.obstacles[bodies[j]].center for j in spheres])    # (S, 3)
-            d = segment_distances(a0[:, :, None, :], a1[:, :, None, :], c[None, None],
-                                  c[None, None])                  # (N, 2, S)
-            radii = np.array([self.obstacles[bodies[j]].radius for j in spheres])
-            out[:, spheres] = d.min(axis=1) - ra - radii[None, :]
+        b0 = np.empty((len(bodies), 2, 3))
+        b1 = np.empty((len(bodies), 2, 3))
+        radii = np.empty(len(bodies))
+        for j, body in enumerate(bodies):
+            if body in self.arms:
+                b0[j], b1[j] = self._posed_segments(body)
+                radii[j] = self.arms[body].radius
+            else:                       # a sphere: a degenerate segment, twice
+                sph = self.obstacles[body]
+                b0[j] = b1[j] = sph.center
+                radii[j] = sph.radius
+        d = segment_distances(a0[:, :, None, None, :], a1[:, :, None, None, :],
+                              b0[None, None], b1[None, None])       # (N, 2, B, 2)
+        out = d.min(axis=(1, 3)) - ra - radii[None, :]
         return np.minimum(out, max_distance)
 
     def in_collision(self, robot: str) -> bool:
-        for other in self.arms:
-            if other != robot and self.min_distance(robot, other).distance < 0.0:
-                return True
-        return any(sph.solid and self.min_distance(robot, name).distance < 0.0
-                   for name, sph in self.obstacles.items())
-
+        solid = [b for b in self.arms if b != robot] + [
+            name for name, sph in self.obstacles.items() if sph.solid]
+        if not solid:
+            return False
+        return bool(np.any(self.min_distances(robot, self.q[robot][None, :], solid) < 0.0))
 
 def make_context(arm: PlanarArm, world: PlanarWorld, positions: FloatArray,
                  std: FloatArray | None = None, dt: float = 0.05,

@@ -176,9 +176,10 @@ def test_theta_threshold_zeroes_near_singular_samples() -> None:
     p0, _ = arm.tcp_pose(q)
     pos = p0[None, :] + 0.005 * np.arange(4)[:, None] * np.array([0.0, 1.0, 0.0])[None, :]
     ctx = make_context(arm, world, pos, seed=q)
-    assert AnisotropicDexterityIndex(rows=(0, 1)).evaluate(ctx) > 0.0
+    assert AnisotropicDexterityIndex(rows=(0, 1), threshold_rows=(0, 1)).evaluate(ctx) > 0.0
     # σ_min of J_xy here is below l1 l2 sin(0.4) / σ_max < 0.1: a 0.2 threshold kills it.
-    assert AnisotropicDexterityIndex(rows=(0, 1), sigma_min_threshold=0.2).evaluate(ctx) == 0.0
+    assert AnisotropicDexterityIndex(rows=(0, 1), threshold_rows=(0, 1),
+                                     sigma_min_threshold=0.2).evaluate(ctx) == 0.0
 
 
 def test_theta_is_psi_for_a_certain_straight_trajectory() -> None:

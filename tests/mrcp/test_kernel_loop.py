@@ -153,3 +153,28 @@ def test_bad_configuration_is_named() -> None:
         MRCPKernel(arms, world, BAR, "Z", 0, obj0)
     with pytest.raises(ValueError, match="cutp 9"):
         MRCPKernel(arms, world, BAR, "A", 9, obj0)
+
+
+def test_an_aborted_transfer_cools_down() -> None:
+    """RCnt too slow to arrive: the transfer is aborted at the timeout, RSel keeps the task,
+    and the same (robot, point) is not chosen again before the cooldown."""
+
+    class Forbidden:
+        name = "forbidden"
+
+        def evaluate(self, ctx: EvalContext) -> float:
+            return 0.0 if ctx.robot == "A" else 1.0
+
+    arms, world, obj0 = two_robots()
+    arms["B"].vmax = np.full(3, 1e-3)                      # B can hardly move
+    cfg = KernelConfig(tt_timeout=0.3, abort_cooldown=1.0)
+    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg, indices=[Forbidden()])
+    recs = run(k, world, arms, lambda t: obj0, 150)
+    aborts = events(recs, "transfer_abort")
+    assert aborts and all(r.rsel == "A" for r in recs)
+    t_abort, text = aborts[0]
+    target = text.split()[1]                              # e.g. "B@3"
+    again = [t for t, e in events(recs, "transfer_start") if f" {target} " in f" {e} "
+             and t > t_abort]
+    assert not again or again[0] >= t_abort + 1.0 - 1e-9
+    assert len(events(recs, "transfer_start")) >= 2       # other points were tried meanwhile

@@ -33,8 +33,52 @@ a robot driver sends :attr:`CycleRecord.commands` to the controllers.
   limit, or a collision): the task is held where it is (the achieved task pose, not the
   commanded one, feeds the predictor); a collision also raises the safety stop.
 * A transfer that has not completed within ``tt_timeout`` is aborted (back to TOp, roles
-  unchanged); RCnt's final approach to the grasp ignores repulsion (collision checks stay)
-  and, once within ``grasp_tolerance``, closing the gripper centres it on the grasp pose.
+  unchanged) and that (robot, point) sits out ``abort_cooldown``; RCnt's final approach to
+  the grasp ignores repulsion (collision checks stay) and, once within
+  ``grasp_tolerance``, closing the gripper centres it on the grasp pose.
+* ``texec`` needs ``texec_min_samples`` values of a series (a fit through fewer
+  extrapolates noise); a series restarts after a gap (the TT cycles are not evaluated).
+* The transfer event names its cause: the index with the smallest ``texec`` of RSel.
+
+Cost options for arms or worlds with expensive queries: ``trajectory_ik="linear"`` and
+``distance_points="ends"`` (see :class:`KernelConfig`); ``bench/mrcp.py`` prints both.
+
+Example:
+    A candidate takes over a task that its holder must not continue (a plug-in index):
+
+    >>> import numpy as np
+    >>> from vasim.mrcp.interfaces import Proximity
+    >>> class Point:                       # a 3-DoF Cartesian "arm" (TCP = q)
+    ...     def __init__(self, name): self.name = name
+    ...     n_joints = 3
+    ...     joint_lower = np.full(3, -1.0); joint_upper = np.full(3, 1.0)
+    ...     max_velocity = np.full(3, 1.0); max_acceleration = np.full(3, 10.0)
+    ...     def tcp_pose(self, q): return np.array(q, float), np.eye(3)
+    ...     def jacobian(self, q): return np.vstack([np.eye(3), np.zeros((3, 3))])
+    ...     def ik(self, p, rotation=None, q_seed=None):
+    ...         return np.array(p, float) if np.all(np.abs(p) <= 1.0) else None
+    >>> class Empty:                       # a world with nothing to hit
+    ...     def __init__(self): self.q = {"a": np.zeros(3), "b": np.array([0.3, 0, 0])}
+    ...     def robot_names(self): return list(self.q)
+    ...     def obstacle_names(self): return []
+    ...     def set_configuration(self, r, q): self.q[r] = np.array(q, float)
+    ...     def configuration(self, r): return self.q[r].copy()
+    ...     def min_distance(self, a, b, max_distance=1.0):
+    ...         nan = np.full(3, np.nan); return Proximity(max_distance, nan, nan)
+    ...     def in_collision(self, r): return False
+    >>> class NotA:
+    ...     name = "not_a"
+    ...     def evaluate(self, ctx): return 0.0 if ctx.robot == "a" else 1.0
+    >>> points = [TaskPoint(np.zeros(3)), TaskPoint(np.array([0.1, 0.0, 0.0]))]
+    >>> k = MRCPKernel({"a": Point("a"), "b": Point("b")}, Empty(), points, "a", 0,
+    ...                np.zeros(3), indices=[NotA()])
+    >>> events = [e for i in range(30) for e in k.step((i + 1) * 0.018, np.zeros(3)).events]
+    >>> for e in events:
+    ...     print(e.split(" (")[0])
+    transfer_start b@1
+    transfer_pregrasp b@1
+    transfer_grasped b@1
+    transfer_done a -> b@1
 """
 
 from __future__ import annotations
@@ -46,6 +90,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
@@ -99,12 +144,21 @@ class KernelConfig:
         t_max: the confidence window of ``texec`` [s].
         ntt_threshold: start a transfer when ``NTT >= ntt_threshold``.
         max_tcp_speed: robot name -> maximum TCP speed [m/s] (``default_tcp_speed`` else).
-        ttc_samples: IK samples along a transfer line for TTC.
+        ttc_samples: joint samples along a transfer line for TTC (ends included).
+        trajectory_ik: ``"exact"`` (IK at every predicted point) or ``"linear"``
+            (**decision**, an option for arms with costly IK: IK at the current point, then
+            first-order steps ``q + J⁺ Δx`` along the prediction; a step leaving the joint
+            limits makes the point unreachable).
+        distance_points: ``"all"`` or ``"ends"``: where along the trajectory the world's
+            distance queries are made (:class:`~vasim.mrcp.indices.EvalContext`).
         planner: action planner parameters.
         indices: the indices evaluated each cycle.
         grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
         grasp_cycles: cycles both robots hold the task before RSel releases.
         tt_timeout: a transfer not done within it is aborted [s].
+        abort_cooldown: after an aborted transfer, that (robot, point) is not chosen as
+            RCnt again for this long [s] (**decision**: otherwise the same blocked transfer
+            would restart at once and keep the operator's input held).
         seed: seed of the planner's random force.
     """
 
@@ -121,11 +175,14 @@ class KernelConfig:
     max_tcp_speed: Mapping[str, float] = field(default_factory=dict)
     default_tcp_speed: float = 0.5
     ttc_samples: int = 4
+    trajectory_ik: str = "exact"
+    distance_points: str = "all"
     planner: PlannerParams = field(default_factory=PlannerParams)
     indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
     grasp_tolerance: float = 0.002
     grasp_cycles: int = 2
     tt_timeout: float = 5.0
+    abort_cooldown: float = 1.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -135,6 +192,12 @@ class KernelConfig:
         for name in ("horizon", "stride", "window", "texec_window", "ttc_samples"):
             if getattr(self, name) < 1:
                 raise ValueError(f"KernelConfig.{name} must be >= 1, got {getattr(self, name)!r}")
+        if self.trajectory_ik not in ("exact", "linear"):
+            raise ValueError(f"KernelConfig.trajectory_ik must be 'exact' or 'linear', got "
+                             f"{self.trajectory_ik!r}")
+        if self.distance_points not in ("all", "ends"):
+            raise ValueError(f"KernelConfig.distance_points must be 'all' or 'ends', got "
+                             f"{self.distance_points!r}")
         if self.ntt_threshold <= 0.0:
             raise ValueError(f"KernelConfig.ntt_threshold must be > 0, got {self.ntt_threshold!r}")
         for spec in self.indices:
@@ -186,6 +249,22 @@ class CycleRecord:
     events: list[str]
 
 
+def _linear_step(arm: ArmKinematics, q: FloatArray, dp: FloatArray,
+                 r0: FloatArray | None, r1: FloatArray | None) -> FloatArray | None:
+    """First-order IK step ``q + J⁺ Δx`` (translation, plus rotation when given); None when
+    it leaves the joint limits."""
+    jac = arm.jacobian(q)
+    if r0 is None or r1 is None:
+        dq = np.linalg.pinv(jac[:3], rcond=1e-6) @ dp
+    else:
+        dw = Rotation.from_matrix(r1 @ r0.T).as_rotvec()
+        dq = np.linalg.pinv(jac, rcond=1e-6) @ np.concatenate([dp, dw])
+    out = q + dq
+    if np.any(out < arm.joint_lower) or np.any(out > arm.joint_upper):
+        return None
+    return out
+
+
 class MRCPKernel:
     """The MRCP control kernel over a set of arms and a proximity world.
 
@@ -224,6 +303,8 @@ class MRCPKernel:
         self.indices: list[Index] = (list(indices) if indices is not None else
                                      [INDICES.create(s.name, **dict(s.params))
                                       for s in self.config.indices])
+        self._groups: list[GroupIndex] = [ix for ix in self.indices
+                                          if isinstance(ix, GroupIndex)]
         self.state = KernelState.TOP
         self.rsel = rsel
         self.cutp = cutp
@@ -248,6 +329,7 @@ class MRCPKernel:
         self._last_q = {r: world.configuration(r).copy() for r in self.arms}
         self._seeds: dict[Key, FloatArray] = {}
         self._last_goals: dict[Key, float] = {}
+        self._cooldown: dict[Key, float] = {}
 
     # ------------------------------------------------------------------ geometry helpers
     def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
@@ -291,7 +373,7 @@ class MRCPKernel:
         pos_now, rot_now = self._positions[-1], self._rotations[-1]
         if self.state is KernelState.TOP:
             evaluations = self._evaluate(t, q_meas, qdot, wrench, extras or {})
-            continuity = self._decide(evaluations)
+            continuity = self._decide(t, evaluations)
             if continuity.transfer:
                 self.state = next_state(self.state, KernelEvent.START_TRANSFER)
                 self.rcnt, self.target = continuity.robot, continuity.point
@@ -350,9 +432,15 @@ class MRCPKernel:
         configs = np.full((n_pts, arm.n_joints), np.nan)
         reach = np.zeros(n_pts, dtype=bool)
         s = self._seeds.get(key, seed)
+        linear = self.config.trajectory_ik == "linear"
         for k in range(n_pts):
-            sol = first if (k == 0 and first is not None) else arm.ik(positions[k],
-                                                                     rotations[k], s)
+            if k == 0:
+                sol = first if first is not None else arm.ik(positions[0], rotations[0], s)
+            elif linear:
+                sol = _linear_step(arm, s, positions[k] - positions[k - 1],
+                                   rotations[k - 1], rotations[k])
+            else:
+                sol = arm.ik(positions[k], rotations[k], s)
             if sol is None:
                 if k == 0:
                     return configs, reach
@@ -400,14 +488,14 @@ class MRCPKernel:
                 positions=mean[:, q], std=std[:, q],
                 rotations=np.array(rotations) if tp.rotation is not None else None,
                 configs=configs, reachable=reach, joint_velocity=vel, past_configs=past,
-                world=self.world, wrench=wrench, extras=extras)
+                world=self.world, wrench=wrench, extras=extras,
+                distance_points=cfg.distance_points)
             raw[(r, q)] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
             hist.append(configs.copy())
-        for ix in self.indices:
-            if isinstance(ix, GroupIndex):
-                combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
-                for k, v in combined.items():
-                    raw[k][ix.name] = v
+        for ix in self._groups:
+            combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
+            for k, v in combined.items():
+                raw[k][ix.name] = v
         return self._to_time(t, raw, q_meas)
 
     def _to_time(self, t: float, raw: Mapping[Key, dict[str, float]],
@@ -446,12 +534,13 @@ class MRCPKernel:
                 goal, grot = self.point_pose(q, self._positions[-1], self._rotations[-1])
                 speed = cfg.max_tcp_speed.get(r, cfg.default_tcp_speed)
                 ttr = estimate_transfer(self.arms[r], q_meas[r], goal, grot, speed,
-                                        cfg.ttc_samples).total
+                                        cfg.ttc_samples, self._seeds.get((r, q))).total
             out[(r, q)] = Evaluation(dict(vals), te, te_min, ttr, te_min - ttr)
         return out
 
-    def _decide(self, ev: Mapping[Key, Evaluation]) -> Continuity:
-        tus = {k: e.tus for k, e in ev.items()}
+    def _decide(self, t: float, ev: Mapping[Key, Evaluation]) -> Continuity:
+        tus = {k: (e.tus if self._cooldown.get(k, -np.inf) <= t else -np.inf)
+               for k, e in ev.items()}
         ttr = {k: e.ttransf for k, e in ev.items()}
         return continuity_robot(tus, ttr, self.rsel, self.cutp, self.config.ntt_threshold)
 
@@ -518,6 +607,7 @@ class MRCPKernel:
         if t - self._tt_start > cfg.tt_timeout:
             self.state = next_state(self.state, KernelEvent.ABORT)
             events.append(f"transfer_abort {r}@{q}: timeout")
+            self._cooldown[(r, q)] = t + cfg.abort_cooldown
             self.rcnt = self.target = None
             return
         grasp, grot = self.point_pose(q, pos, rot)

@@ -207,12 +207,24 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
             return q
     q_new = step_limits(arm, q, q_new, dt)
     world.set_configuration(robot, q_new)
-    if world.in_collision(robot) or any(
-            world.min_distance(robot, b, p.influence).distance
-            < min(p.safety_margin, before[b]) for b in bodies):
+    if world.in_collision(robot) or _too_close(world, robot, q_new, bodies, before, p):
         world.set_configuration(robot, q)
         return q
     return q_new
+
+
+def _too_close(world: ProximityWorld, robot: str, q: FloatArray, bodies: Sequence[str],
+               before: dict[str, float], p: PlannerParams) -> bool:
+    """A body now nearer than the safety margin that was farther before the move."""
+    if not bodies:
+        return False
+    batched = getattr(world, "min_distances", None)
+    if batched is not None:
+        after = np.asarray(batched(robot, q[None, :], list(bodies), p.influence))[0]
+    else:
+        after = np.array([world.min_distance(robot, b, p.influence).distance for b in bodies])
+    limit = np.minimum(p.safety_margin, np.array([before[b] for b in bodies]))
+    return bool(np.any(after < limit))
 
 
 def remember(memory: ObstacleMemory, bodies: Sequence[str], robot: str,

@@ -11,8 +11,9 @@ Indices live in different spaces; MRCP compares them as time.
 * ``ttransf``: straight-line TCP motion to the task point at half the maximum TCP speed,
   inflated by the transfer complexity ``TTC = (1/n) Σ_j (1/K) Σ_k |θ̈_{j,k}| / θ̈max_j``
   (clipped to [0, 1]): ``ttransf* = ttransf (1 + TTC)``. **Decision**: the joint
-  accelerations are second differences of IK solutions at ``K`` evenly spaced samples of the
-  line timed at that speed; a sample IK cannot reach makes ``TTC = 1``.
+  accelerations are second differences of the joint values at ``K`` evenly spaced samples of
+  the line (the current configuration, IK solutions between, the grasp configuration),
+  timed at that speed; a sample IK cannot reach makes ``TTC = 1``.
 * ``tus = texec - ttransf*`` (``ttransf* = 0`` for RSel at CuTP).
 * RCnt (Algorithm 1): the (robot, point) with the largest ``tus``, RSel at CuTP included.
 * ``NTT = 1 - (tus_RSel - ttransf*_RCnt) / tus_RSel = ttransf*_RCnt / tus_RSel``; the
@@ -144,15 +145,25 @@ def transfer_complexity(joint_path: FloatArray | None, duration: float,
 
 
 def transfer_path(arm: ArmKinematics, q: FloatArray, goal: FloatArray,
-                  goal_rotation: FloatArray | None, samples: int) -> FloatArray | None:
-    """IK at ``samples`` points of the straight line from the current TCP to ``goal``
-    (``(samples, n)``, seeded sequentially from ``q``), or None if one is unreachable."""
+                  goal_rotation: FloatArray | None, samples: int,
+                  q_goal: FloatArray | None = None) -> FloatArray | None:
+    """Joint values at ``samples`` evenly spaced points of the straight TCP line from the
+    current TCP to ``goal`` (``(samples, n)``), or None if one is unreachable.
+
+    The first sample is ``q`` itself and the last ``q_goal`` when given (the kernel already
+    solved it); the points between are IK solutions seeded along the line.
+    """
     tcp, _ = arm.tcp_pose(q)
     out = np.empty((samples, q.shape[0]))
+    out[0] = q
     seed = q
-    for i, s in enumerate(np.linspace(0.0, 1.0, samples)):
+    for i, s in enumerate(np.linspace(0.0, 1.0, samples)[1:], start=1):
+        last = i == samples - 1
+        if last and q_goal is not None:
+            out[i] = q_goal
+            break
         p = tcp + s * (np.asarray(goal) - tcp)
-        sol = arm.ik(p, goal_rotation if i == samples - 1 else None, seed)
+        sol = arm.ik(p, goal_rotation if last else None, seed)
         if sol is None:
             return None
         out[i] = sol
@@ -174,11 +185,12 @@ class TransferEstimate:
 
 def estimate_transfer(arm: ArmKinematics, q: FloatArray, goal: FloatArray,
                       goal_rotation: FloatArray | None, max_tcp_speed: float,
-                      samples: int = 4) -> TransferEstimate:
-    """ttransf and TTC of moving ``arm`` from ``q`` to the task point at ``goal``."""
+                      samples: int = 4, q_goal: FloatArray | None = None) -> TransferEstimate:
+    """ttransf and TTC of moving ``arm`` from ``q`` to the task point at ``goal``
+    (``q_goal``: the configuration at the goal, if already known)."""
     tcp, _ = arm.tcp_pose(q)
     tt = transfer_time(tcp, goal, max_tcp_speed)
-    path = transfer_path(arm, q, goal, goal_rotation, samples)
+    path = transfer_path(arm, q, goal, goal_rotation, max(samples, 2), q_goal)
     return TransferEstimate(tt, transfer_complexity(path, tt, arm.max_acceleration))
 
 

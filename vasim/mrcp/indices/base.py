@@ -76,6 +76,9 @@ class EvalContext:
             poses a robot must restore it).
         wrench: the force-torque reading of the task, if the station has a sensor.
         extras: scenario data for task-oriented indices (e.g. the camera pose).
+        distance_points: ``"all"`` (distance queries at every reachable trajectory point)
+            or ``"ends"`` (the first and last only: half the queries for a costly world;
+            points in between are NaN, skipped by the indices).
     """
 
     robot: str
@@ -93,6 +96,7 @@ class EvalContext:
     world: ProximityWorld
     wrench: Wrench | None = None
     extras: Mapping[str, Any] = field(default_factory=dict)
+    distance_points: str = "all"
     _memo: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -121,6 +125,8 @@ class EvalContext:
         names = [b for b in (*world.robot_names(), *world.obstacle_names()) if b != self.robot]
         out = np.full((self.configs.shape[0], len(names)), np.nan)
         idx = np.flatnonzero(self.reachable)
+        if self.distance_points == "ends" and idx.size > 2:
+            idx = idx[[0, -1]]
         batched = getattr(world, "min_distances", None)
         if names and idx.size:
             if batched is not None:

@@ -23,8 +23,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
-from vasim.mrcp.indices.joint_limits import jeval
+from vasim.mrcp.indices._index_kernels import cone_along
+from vasim.mrcp.indices.base import INDICES, EvalContext
 
 FloatArray = NDArray[np.float64]
 
@@ -59,6 +59,11 @@ class ToolCone:
     def frame(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The cone's orthonormal frame ``(x, y, z)``, ``z`` the normal."""
         return self._frame
+
+    @cached_property
+    def sector_table(self) -> FloatArray:
+        """``(S, 4)`` rows ``(start, end, a, b)`` of the sectors."""
+        return np.array([[s.start, s.end, s.a, s.b] for s in self.sectors], dtype=np.float64)
 
     @cached_property
     def _frame(self) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -139,6 +144,14 @@ class ToolConeIndex:
         cone = self.cones.get(ctx.robot)
         if cone is None:
             return 1.0 if ctx.reachable[0] else 0.0
-        vals = np.where(ctx.reachable, jeval(cone.margins(ctx.positions), self.b), 0.0)
-        w = prediction_weights(vals.shape[0])
-        return float((w * vals).sum() / w.sum())
+        x, y, z = cone.frame()
+        value = cone_along(np.ascontiguousarray(ctx.positions, dtype=np.float64),
+                           np.ascontiguousarray(ctx.reachable), _f64(cone.fulcrum), x, y, z,
+                           cone.sector_table, self.b)
+        if value < 0.0:   # an azimuth outside the sectors: the numpy path names it
+            cone.margins(ctx.positions)
+        return float(value)
+
+
+def _f64(a: FloatArray) -> FloatArray:
+    return np.ascontiguousarray(a, dtype=np.float64)

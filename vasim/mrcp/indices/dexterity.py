@@ -33,10 +33,10 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.mrcp.indices._theta_kernels import sample_configs, sigma_min_many, theta_segments
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
 from vasim.mrcp.indices.measures import (
     directional_manipulability,
-    directional_manipulability_svd,
     isotropy,
     manipulability,
     order_independent_manipulability,
@@ -76,20 +76,27 @@ class AnisotropicDexterityIndex:
             destinations alike).
         sigma_min_threshold: below this smallest singular value of the task Jacobian a
             sample scores ψ = 0 [m/rad].
-        rows: the task-space rows of the geometric Jacobian (default the translation).
+        rows: the task-space rows of the geometric Jacobian for ψ (default the
+            translation: ψ is measured along the predicted motion of the task point).
+        threshold_rows: the rows whose σ_min is held against the threshold. **Decision**:
+            default the whole geometric Jacobian, so a wrist singularity (the seed's
+            joint-3/5 alignment, 0-based: joints 4 and 6 aligned at θ5 = 0 on the RX60B),
+            invisible to the translation, still zeroes Θ (seed Fig. 3.11).
         seed: seed of the fixed standard-normal draws.
     """
 
     name = "theta"
 
     def __init__(self, n_samples: int = 6, sigma_min_threshold: float = 0.01,
-                 rows: Sequence[int] = (0, 1, 2), seed: int = 0) -> None:
+                 rows: Sequence[int] = (0, 1, 2),
+                 threshold_rows: Sequence[int] = (0, 1, 2, 3, 4, 5), seed: int = 0) -> None:
         if n_samples < 1:
             raise ValueError(f"theta: n_samples must be >= 1, got {n_samples!r}")
         if sigma_min_threshold < 0.0:
             raise ValueError(f"theta: sigma_min_threshold must be >= 0, got "
                              f"{sigma_min_threshold!r}")
         self.rows = tuple(int(r) for r in rows)
+        self.threshold_rows = tuple(int(r) for r in threshold_rows)
         self.sigma_min_threshold = float(sigma_min_threshold)
         self.samples = _Samples(int(n_samples), len(self.rows), seed)
 
@@ -100,54 +107,25 @@ class AnisotropicDexterityIndex:
             return 0.0
         rows = list(self.rows)
         m, n = len(rows), ctx.arm.n_joints
-        thr = self.sigma_min_threshold
         z, dens = self.samples.z, self.samples.weight
         s_count = z.shape[0]
-        pos = ctx.positions[:, rows]
-        configs = np.where(reach[:, None], ctx.configs, ctx.configs[0][None, :])
-        jac = jacobians(ctx.arm, configs)[:, rows, :]                      # (K+1, m, n)
-        u_pts, s_pts, vt_pts = np.linalg.svd(jac)
-        r = s_pts.shape[-1]
-        inv = np.where(s_pts > 1e-10 * s_pts[:, :1], 1.0 / np.maximum(s_pts, 1e-300), 0.0)
-        # samp[j]: samples of predicted point j + 1; first-order IK q' = q + J⁺ (p' - p).
-        delta = ctx.std[1:, None, :][..., rows] * z[None, :, :]              # (K, S, m)
-        samp = pos[1:, None, :] + delta
-        coef = np.einsum("kmr,ksm->ksr", u_pts[1:, :, :r], delta) * inv[1:, None, :]
-        q_samp = configs[1:, None, :] + np.einsum("krn,ksr->ksn", vt_pts[1:, :r, :], coef)
-        jac_s = jacobians(ctx.arm, q_samp.reshape(-1, n))[:, rows, :]
-        u_s, s_s, _ = np.linalg.svd(jac_s.reshape(kk, s_count, m, n))
-        sig_s = _pad(s_s, m)                                                  # (K, S, m)
-        ok = (sig_s[..., -1] >= thr) & reach[1:, None]                        # (K, S)
-        sig0 = _pad(s_pts[0], m)
-        # Every segment k at once: origins (K, S, m) — segment 0's single known origin is
-        # repeated S times (an average of equal values) — and destinations samp[k].
-        org = np.concatenate([np.repeat(pos[None, :1, :], s_count, axis=1), samp[:-1]])
-        org_u = np.concatenate([np.repeat(u_pts[None, :1], s_count, axis=1), u_s[:-1]])
-        org_sig = np.concatenate([np.repeat(sig0[None, None, :], s_count, axis=1),
-                                  sig_s[:-1]])
-        org_ok = np.concatenate([np.full((1, s_count), sig0[-1] >= thr), ok[:-1]])
-        diff = samp[:, None, :, :] - org[:, :, None, :]                      # (K, S, S, m)
-        norm = np.sqrt(np.einsum("...i,...i->...", diff, diff))
-        moving = norm > 1e-9
-        u = diff / np.where(moving, norm, 1.0)[..., None]
-        psi = directional_manipulability_svd(org_u, org_sig, u)             # (K, S, S)
-        still = np.prod(org_sig, axis=-1) ** (1.0 / m)
-        psi = np.where(moving, psi, still[..., None])
-        total = dens.sum()
-        per_origin = np.einsum("kab,kb->ka", psi, dens[None, :] * ok) / total
-        seg = np.einsum("ka,ka->k", per_origin, dens[None, :] * org_ok) / total
-        seg = np.where(reach[:-1] & reach[1:], seg, 0.0)
+        pos = np.ascontiguousarray(ctx.positions[:, rows], dtype=np.float64)
+        std = np.ascontiguousarray(ctx.std[:, rows], dtype=np.float64)
+        configs = np.ascontiguousarray(
+            np.where(reach[:, None], ctx.configs, ctx.configs[0][None, :]), dtype=np.float64)
+        full = jacobians(ctx.arm, configs)                                 # (K+1, 6, n)
+        jac = np.ascontiguousarray(full[:, rows, :])                        # (K+1, m, n)
+        q_samp = sample_configs(std, z, configs, jac)                       # (K, S, n)
+        full_s = jacobians(ctx.arm, q_samp.reshape(-1, n))                  # (K S, 6, n)
+        tr = list(self.threshold_rows)
+        smin = sigma_min_many(np.ascontiguousarray(
+            np.concatenate([full[:1, tr, :], full_s[:, tr, :]])))
+        thr = self.sigma_min_threshold
+        ok = (smin[1:].reshape(kk, s_count) >= thr) & reach[1:, None]
+        jac_s = np.ascontiguousarray(full_s[:, rows, :].reshape(kk, s_count, m, n))
+        seg = theta_segments(pos, std, z, dens, reach, jac, jac_s, bool(smin[0] >= thr), ok)
         w = prediction_weights(kk)
         return float((w * seg).sum() / w.sum())
-
-
-def _pad(sig: FloatArray, m: int) -> FloatArray:
-    """Singular values padded with zeros to ``m`` (a tall Jacobian has m - n lost ones)."""
-    if sig.shape[-1] == m:
-        return sig
-    out = np.zeros((*sig.shape[:-1], m))
-    out[..., : sig.shape[-1]] = sig
-    return out
 
 
 @INDICES.add("psi")

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.mrcp.indices._index_kernels import rj_along
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
 
 FloatArray = NDArray[np.float64]
@@ -113,11 +114,10 @@ def prediction_errors(configs: FloatArray, past_configs: list[FloatArray] | tupl
     """
     out = np.zeros_like(configs)
     now = configs[0]
-    for k in range(1, configs.shape[0]):
-        if k - 1 < len(past_configs):
-            past = past_configs[k - 1][k]
-            if np.all(np.isfinite(past)) and np.all(np.isfinite(now)):
-                out[k] = now - past
+    for k in range(1, min(configs.shape[0], len(past_configs) + 1)):
+        err = now - past_configs[k - 1][k]
+        if np.isfinite(err).all():
+            out[k] = err
     return out
 
 
@@ -140,11 +140,20 @@ class JointLimitIndex:
         self.b_max = float(b_max)
 
     def evaluate(self, ctx: EvalContext) -> float:
+        """:func:`rj_trajectory` with :func:`modulation_b` and :func:`prediction_errors`
+        (compiled in one call; the tests hold it to the numpy functions)."""
         if not ctx.reachable[0]:
             return 0.0
         arm = ctx.arm
-        configs = np.where(ctx.reachable[:, None], ctx.configs, ctx.configs[0][None, :])
-        b = modulation_b(configs, ctx.joint_velocity, arm.joint_lower, arm.joint_upper,
-                         arm.max_velocity, self.b_min, self.b_max)
+        reach = np.ascontiguousarray(ctx.reachable)
+        configs = np.ascontiguousarray(
+            np.where(reach[:, None], ctx.configs, ctx.configs[0][None, :]), dtype=np.float64)
         errors = prediction_errors(configs, list(ctx.past_configs))
-        return rj_trajectory(configs, ctx.reachable, arm.joint_lower, arm.joint_upper, b, errors)
+        return float(rj_along(configs, reach, np.ascontiguousarray(ctx.joint_velocity,
+                                                                    dtype=np.float64),
+                              _f64(arm.joint_lower), _f64(arm.joint_upper),
+                              _f64(arm.max_velocity), self.b_min, self.b_max, errors))
+
+
+def _f64(a: FloatArray) -> FloatArray:
+    return np.ascontiguousarray(a, dtype=np.float64)

@@ -1,0 +1,214 @@
+"""One complete MRCP control cycle against the seed's 18 ms budget (issue #7 §5).
+
+A cycle is everything :meth:`vasim.mrcp.kernel.MRCPKernel.step` does in TOp: predict the
+task, evaluate RSel at CuTP and every candidate at every other task point with every index,
+texec / ttransf* / tus, RCnt and NTT, RSel's follow step and the candidates' guided moves.
+The figure is for ``n`` robots x 6 indices (RJ, Θ, CR, tool cone, visibility, force-torque)
+x 6 task points with the kernel's default sampling, for n = 2, 4 and 8, on a task moving
+along a smooth closed path. Transfers are disabled (NTT threshold out of reach) so every
+timed cycle is a full evaluation cycle.
+
+Stations (the arm factory is pluggable, ``STATIONS``):
+
+* ``planar``: the analytic planar arms of ``tests/mrcp/planar.py`` (numpy kinematics and
+  capsule distances) — the kernel's own cost with a cheap world;
+* ``rx60b``: Stäubli RX60B arms of ``vasim.mrcp.backend`` (compiled DH kinematics, pybullet
+  distance queries), used when that module is importable.
+
+Two kernel variants per station: ``default`` (IK at every predicted point, distance queries
+at every point) and ``fast`` (``KernelConfig(trajectory_ik="linear",
+distance_points="ends")``: first-order steps along the prediction, distances at its two
+ends).
+
+Prints wall-clock median and p99 per configuration, the same for the process CPU time (on a
+shared machine the wall time includes waiting for a core), and wall p99 / 18 ms.
+``VASIM_BENCH_MRCP_N`` sets the timed cycles per configuration (default 150).
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vasim.mrcp.indices.cone import ToolCone
+from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
+from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
+
+BUDGET_MS = 18.0
+CYCLES = int(os.environ.get("VASIM_BENCH_MRCP_N", "150"))
+WARMUP = 20
+
+
+@dataclass
+class Station:
+    """What the bench needs: arms, their world, the task and the operator's path."""
+
+    arms: dict[str, ArmKinematics]
+    world: ProximityWorld
+    task_points: list[TaskPoint]
+    start: np.ndarray
+    path: Callable[[float], np.ndarray]
+    cones: dict[str, ToolCone]
+    ignore: tuple[str, ...] = ()
+
+
+def _hexagon(radius: float) -> list[TaskPoint]:
+    """Six grasp points around the object, candidates waiting 4 cm further out."""
+    out = []
+    for k in range(6):
+        a = k * np.pi / 3
+        p = radius * np.array([np.cos(a), np.sin(a), 0.0])
+        out.append(TaskPoint(p, approach=0.04 * p / radius))
+    return out
+
+
+def planar_station(n: int) -> Station:
+    """``n`` planar arms on a circle around the task (reach 0.55 m, circle radius 0.5 m)."""
+    root = Path(__file__).resolve().parents[1]
+    if str(root) not in sys.path:
+        sys.path.insert(0, str(root))
+    from tests.mrcp.planar import PlanarArm, PlanarWorld, Sphere
+
+    centre = np.array([0.0, 0.0, 0.0])
+    tps = _hexagon(0.05)
+    arms: dict[str, ArmKinematics] = {}
+    configs = {}
+    cones = {}
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        base = centre + 0.5 * np.array([np.cos(a), np.sin(a), 0.0])
+        arm = PlanarArm(f"r{i}", base=base, yaw=a + np.pi, radius=0.012,
+                        lower=np.array([-2.8, -2.8, -0.2]), upper=np.array([2.8, 2.8, 0.2]))
+        goal = tps[i % 6].position if i == 0 else centre + 0.15 * (base - centre)
+        q = arm.ik(goal, None, np.array([0.3, 1.2, 0.0]))
+        if q is None:
+            raise RuntimeError(f"planar station: robot {i} cannot reach its start")
+        arms[arm.name], configs[arm.name] = arm, q
+        cones[arm.name] = ToolCone(base + np.array([0.0, 0.0, 0.3]), np.array([0.0, 0.0, -1.0]),
+                                   np.array([1.0, 0.0, 0.0]))
+    obstacles = {"view_cone": Sphere(np.array([0.0, 0.0, 0.35]), 0.05, solid=False)}
+    world = PlanarWorld(arms, configs, obstacles)  # type: ignore[arg-type]
+
+    def path(t: float) -> np.ndarray:
+        return centre + np.array([0.05 * np.sin(0.8 * t), 0.04 * np.sin(1.3 * t), 0.0])
+
+    return Station(arms, world, tps, centre.copy(), path, cones)
+
+
+def rx60b_station(n: int) -> Station:
+    """``n`` RX60B arms of the pybullet backend on a circle (0.5 m) facing the task."""
+    from vasim.mrcp.backend import PybulletArm, PybulletWorld, pose_matrix
+    from vasim.mrcp.dh import load_robot
+
+    model = load_robot("rx60b")
+    world = PybulletWorld()
+    centre = np.array([0.0, 0.0, 0.2])
+    tps = _hexagon(0.04)
+    arms: dict[str, ArmKinematics] = {}
+    cones = {}
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        pos = 0.5 * np.array([np.cos(a), np.sin(a), 0.0])
+        c, s = np.cos(a + np.pi), np.sin(a + np.pi)
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        base = pose_matrix(pos, rot)
+        arm = PybulletArm(model, base, name=f"r{i}")
+        goal = (centre + tps[0].position) if i == 0 else centre + 0.35 * (pos - centre)
+        q = arm.ik(goal, None, arm.home)
+        if q is None:
+            raise RuntimeError(f"rx60b station: robot {i} cannot reach its start")
+        world.add_robot(arm.name, model, base, q)
+        arms[arm.name] = arm
+        cones[arm.name] = ToolCone(pos + np.array([0.0, 0.0, 0.6]), np.array([0.0, 0.0, -1.0]),
+                                   np.array([1.0, 0.0, 0.0]))
+    world.add_sphere("view_cone", 0.05, centre + np.array([0.0, 0.0, 0.45]))
+
+    def path(t: float) -> np.ndarray:
+        return centre + np.array([0.04 * np.sin(0.8 * t), 0.03 * np.sin(1.3 * t),
+                                  0.02 * np.sin(0.5 * t)])
+
+    return Station(arms, world, tps, centre.copy(), path, cones, ("view_cone",))
+
+
+STATIONS: dict[str, Callable[[int], Station]] = {"planar": planar_station}
+try:  # the RX60B world exists once vasim.mrcp.backend (helper M1) is present
+    import vasim.mrcp.backend  # noqa: F401
+
+    STATIONS["rx60b"] = rx60b_station
+except ImportError:  # pragma: no cover - depends on the checkout
+    pass
+
+
+def six_indices(st: Station) -> tuple[IndexSpec, ...]:
+    return (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr", {"ignore": st.ignore}),
+            IndexSpec("cone", {"cones": st.cones}), IndexSpec("visibility"),
+            IndexSpec("force_torque"))
+
+
+def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
+                distance_points: str = "all") -> tuple[list[float], list[float], int]:
+    """Per-cycle wall and process-CPU times [ms] of ``cycles`` full TOp cycles, and the
+    (robot, point) evaluations per cycle.
+
+    Raises:
+        RuntimeError: if a timed cycle is not a full evaluation cycle (a fault).
+    """
+    cfg = KernelConfig(indices=six_indices(st), ntt_threshold=1e9, trajectory_ik=trajectory_ik,
+                       distance_points=distance_points)
+    rsel = next(iter(st.arms))
+    k = MRCPKernel(st.arms, st.world, st.task_points, rsel, 0, st.start, config=cfg)
+    wall, cpu = [], []
+    pairs = 0
+    for i in range(WARMUP + cycles):
+        t = (i + 1) * cfg.dt
+        c0, t0 = time.process_time(), time.perf_counter()
+        rec = k.step(t, st.path(t))
+        dt, dc = (time.perf_counter() - t0) * 1e3, (time.process_time() - c0) * 1e3
+        if not rec.evaluations:
+            raise RuntimeError(f"cycle {i} did not evaluate (state {rec.state.value}, "
+                               f"events {rec.events})")
+        if i >= WARMUP:
+            wall.append(dt)
+            cpu.append(dc)
+            pairs = len(rec.evaluations)
+    return wall, cpu, pairs
+
+
+def main() -> None:
+    print(f"one MRCP cycle (6 indices x 6 task points, default sampling), {CYCLES} cycles; "
+          f"budget {BUDGET_MS:.0f} ms; load average {os.getloadavg()[0]:.1f} on "
+          f"{os.cpu_count()} cores (wall time includes waiting for a core, CPU time not)")
+    print("variants: default = IK at every predicted point, distances at every point; "
+          "fast = first-order steps along the prediction, distances at its two ends")
+    print(f"{'station':8s} {'variant':7s} {'robots':>6s} {'pairs':>5s} {'wall p50':>9s} "
+          f"{'wall p99':>9s} {'cpu p50':>8s} {'cpu p99':>8s} {'p99/18ms':>8s}")
+    variants = [("planar", "default"), ("planar", "fast"), ("rx60b", "default"),
+                ("rx60b", "fast")]
+    for name, variant in variants:
+        traj, dist = ("linear", "ends") if variant == "fast" else ("exact", "all")
+        factory = STATIONS.get(name)
+        if factory is None:
+            print(f"{name:8s} not available")
+            continue
+        for n in (2, 4, 8):
+            try:
+                st = factory(n)
+                wall, cpu, pairs = time_cycles(st, CYCLES, traj, dist)
+            except RuntimeError as exc:
+                print(f"{name:8s} {variant:7s} {n:6d}  skipped: {exc}")
+                continue
+            w50, w99 = statistics.median(wall), float(np.percentile(wall, 99))
+            c50, c99 = statistics.median(cpu), float(np.percentile(cpu, 99))
+            print(f"{name:8s} {variant:7s} {n:6d} {pairs:5d} {w50:9.2f} {w99:9.2f} {c50:8.2f} "
+                  f"{c99:8.2f} {w99 / BUDGET_MS:8.2f}", flush=True)
+
+
+if __name__ == "__main__":
+    main()
