@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: install
-	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080
+	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080 --db study.sqlite
 
 test: install
 	.ci/ensure-chromium

@@ -8,8 +8,11 @@ Mag camera, AG audio stream), a scripted operator playing the trial in real time
 (8 s; ``--seconds`` or ``VASIM_BENCH_VIEWER_S`` override), each on a fresh trial:
 
 1. no browser: the views are updated all the same (40 Hz), nobody receives them;
-2. one headless Chromium attached (Debian's ``/usr/bin/chromium`` + playwright; the run is
-   skipped with the reason when either is missing).
+2. a bare websocket client (Python, viser's subprotocol) that receives the stream without
+   rendering it: the server's streaming cost alone, with no browser competing for the CPU;
+3. one headless Chromium attached (Debian's ``/usr/bin/chromium`` + playwright; the run is
+   skipped with the reason when either is missing). Its software WebGL shares the host's
+   cores with the servo loop: compare its loop rates with run 2 to tell the two apart.
 
 Figures per run:
 
@@ -66,7 +69,50 @@ def _cpu() -> float:
     return t.user + t.system
 
 
-def _measure(app: Any, seconds: float, page: Any = None) -> dict[str, float]:
+class _BareClient:
+    """Receives the viewer's websocket stream on a thread without rendering it."""
+
+    def __init__(self, url: str):
+        import threading
+
+        self.url = url.replace("http://", "ws://")
+        self.messages = 0
+        self.bytes = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> _BareClient:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+
+    def _run(self) -> None:
+        import asyncio
+
+        asyncio.run(self._recv())
+
+    async def _recv(self) -> None:
+        import asyncio
+
+        import viser
+        import websockets
+
+        async with websockets.connect(self.url, subprotocols=[f"viser-v{viser.__version__}"],
+                                      max_size=None) as ws:
+            while not self._stop.is_set():
+                try:
+                    m = await asyncio.wait_for(ws.recv(), 0.2)
+                except TimeoutError:
+                    continue
+                self.messages += 1
+                self.bytes += len(m)
+
+
+def _measure(app: Any, seconds: float, page: Any = None,
+             bare: _BareClient | None = None) -> dict[str, float]:
     """Restarts the demo trial, runs ``seconds`` and returns the run's figures."""
     app.request_restart()
     n0 = app.snapshot.info.number
@@ -76,6 +122,7 @@ def _measure(app: Any, seconds: float, page: Any = None) -> dict[str, float]:
     app._view_costs.clear()
     u0, c0, w0 = app._view_updates, _cpu(), time.perf_counter()
     b0 = page.evaluate("() => ({...window.__vasimBench})") if page is not None else None
+    m0 = (bare.messages, bare.bytes) if bare is not None else (0, 0)
     time.sleep(seconds)
     wall = time.perf_counter() - w0
     stats = app.stats()
@@ -89,6 +136,9 @@ def _measure(app: Any, seconds: float, page: Any = None) -> dict[str, float]:
         "sim_t": float(app.snapshot.frame.t),
         "wall": wall,
     }
+    if bare is not None:
+        out["ws_messages_per_s"] = (bare.messages - m0[0]) / wall
+        out["ws_kb_per_s"] = (bare.bytes - m0[1]) / wall / 1e3
     if page is not None:
         b1 = page.evaluate("() => ({...window.__vasimBench})")
         for k in ("tip", "messages", "frames", "batches"):
@@ -121,6 +171,9 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
     try:
         time.sleep(2.0)  # kernels compiled, the first trial under way
         rows.append(("no browser", _measure(app, seconds)))
+        with _BareClient(app.url) as bare:
+            time.sleep(1.0)
+            rows.append(("bare websocket client", _measure(app, seconds, bare=bare)))
         reason = _browser_missing()
         if reason:
             print(f"browser run skipped: {reason}")
@@ -154,7 +207,7 @@ def main(argv: list[str] | None = None) -> None:
           "per run, scripted operator in real time")
     head = (f"{'run':32s} {'view ms p50':>11s} {'p95':>6s} {'view/s':>7s} {'CPU/s':>6s} "
             f"{'servo Hz':>9s} {'physics Hz':>10s} {'tip upd/s':>9s} {'msgs/s':>7s} "
-            f"{'page fps':>8s}")
+            f"{'page fps':>8s} {'ws msg/s':>8s} {'ws kB/s':>8s}")
     print(head)
     for name, r in rows:
         def f(k: str, fmt: str, r: dict[str, float] = r) -> str:
@@ -165,13 +218,15 @@ def main(argv: list[str] | None = None) -> None:
               f"{f('view_hz', '.1f'):>7s} {f('process_cpu', '.2f'):>6s} "
               f"{f('servo_hz', '.1f'):>9s} {f('physics_hz', '.1f'):>10s} "
               f"{f('browser_tip_per_s', '.1f'):>9s} {f('browser_messages_per_s', '.0f'):>7s} "
-              f"{f('browser_frames_per_s', '.1f'):>8s}")
-    if len(rows) == 2:
-        a, b = rows[0][1], rows[1][1]
-        print(f"servo rate with/without browser: {b['servo_hz'] / a['servo_hz']:.3f}; "
-              f"physics rate with/without browser: {b['physics_hz'] / a['physics_hz']:.3f}; "
-              f"tool-tip updates streamed: {b.get('browser_tip_per_s', 0):.1f}/s "
-              "(target >= 30/s)")
+              f"{f('browser_frames_per_s', '.1f'):>8s} {f('ws_messages_per_s', '.0f'):>8s} "
+              f"{f('ws_kb_per_s', '.0f'):>8s}")
+    a = rows[0][1]
+    for name, r in rows[1:]:
+        print(f"{name}: servo rate / no browser {r['servo_hz'] / a['servo_hz']:.3f}, physics "
+              f"rate / no browser {r['physics_hz'] / a['physics_hz']:.3f}")
+    if len(rows) == 3:
+        print(f"tool-tip updates received by the browser: "
+              f"{rows[2][1].get('browser_tip_per_s', 0):.1f}/s (target >= 30/s)")
 
 
 if __name__ == "__main__":

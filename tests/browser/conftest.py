@@ -19,7 +19,7 @@ import pytest
 CHROMIUM = "/usr/bin/chromium"
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run"]
-VIEWPORT = {"width": 900, "height": 600}
+VIEWPORT = {"width": 820, "height": 520}
 READY_TIMEOUT_MS = 45_000  # page-to-first-frame stalls of 5-11 s happen under load
 
 

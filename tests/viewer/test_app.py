@@ -182,6 +182,7 @@ class _FakeApp:
 
     def __init__(self, host, port, schema, seed, task, **kw):
         self.host, self.port, self.schema, self.task = host, port, schema, task
+        self.kw = kw
         self.url = f"http://{host}:{port}/"
         self.stopped = False
         _FakeApp.instances.append(self)
@@ -217,6 +218,11 @@ def test_cli_warns_when_binding_beyond_loopback(monkeypatch, capsys) -> None:
     # --task point without --schema picks the point-targeting VFS.
     viewer_cli.serve(_serve_args(task="point"))
     assert _FakeApp.instances[-1].schema == "point_targeting"
+    # --scene and --db reach the app; the banner says where trials are stored.
+    viewer_cli.serve(_serve_args(scene="none", db="study.sqlite"))
+    assert _FakeApp.instances[-1].kw["scene"] == "none"
+    assert _FakeApp.instances[-1].kw["db"] == "study.sqlite"
+    assert "trials stored in study.sqlite" in capsys.readouterr().out
 
 
 def test_vasim_serve_end_to_end(capsys) -> None:
@@ -403,3 +409,46 @@ def test_serve_rejects_a_bad_bind_address_in_one_line(args: list[str], needle: s
     assert p.returncode == 2
     err = [ln for ln in p.stderr.splitlines() if ln.startswith("vasim serve: error")]
     assert len(err) == 1 and needle in err[0] and "Traceback" not in p.stderr
+
+
+class _Device:
+    def __init__(self) -> None:
+        self.samples: list[tuple[float, tuple[float, ...], int]] = []
+
+    def push(self, t, position, buttons=0) -> bool:
+        self.samples.append((t, tuple(float(v) for v in position), int(buttons)))
+        return True
+
+
+def test_drag_gizmo_feeds_the_device_and_snaps_back_clutched(app: ViewerApp) -> None:
+    from vasim.haptics.device import BUTTON_2
+    from vasim.viewer import DragInput
+
+    dev = _Device()
+    current: list[_Device | None] = [dev]
+    drag = DragInput(app.server, lambda: current[0], app._guard, name="/test_drag")
+    try:
+        tip = np.array([0.01, 0.02, 0.1])
+        drag.update(tip, active=True)  # a browser-driven trial starts: the gizmo on the tip
+        assert drag.handle.visible and dev.samples[-1][1] == tuple(tip)
+        for dx in (0.001, 0.002, 0.003):
+            drag.handle.position = tuple(tip + np.array([dx, 0.0, 0.0]))
+            drag._on_update(SimpleNamespace(phase="update"))
+        assert [s[1][0] for s in dev.samples[1:]] == pytest.approx([0.011, 0.012, 0.013])
+        assert all(s[2] == 0 for s in dev.samples)
+        moved_tip = tip + np.array([0.0026, 0.0, 0.0])  # the tool lagged behind the hand
+        drag.update(moved_tip, active=True)
+        drag._on_update(SimpleNamespace(phase="end"))
+        # Release: the hand's last pose, then clutched there and at the tip: no jump.
+        (t0, p0, b0), (t1, p1, b1), (t2, p2, b2) = dev.samples[-3:]
+        assert b0 == 0 and b1 == b2 == BUTTON_2 and t0 < t1 < t2
+        assert p1 == p0 and p2 == pytest.approx(tuple(moved_tip))
+        np.testing.assert_allclose(drag.handle.position, moved_tip)
+        drag.update(moved_tip, active=False)  # the trial ends: the gizmo goes away
+        assert not drag.handle.visible
+        current[0] = None  # no browser-driven trial: a late drag event is ignored
+        n = len(dev.samples)
+        drag._on_update(SimpleNamespace(phase="update"))
+        assert len(dev.samples) == n
+    finally:
+        drag.handle.remove()

@@ -188,3 +188,58 @@ def test_browser_input_moves_the_tool_by_the_dragged_increment(
     with closing(store(ctl)) as st:
         row = st.trial(ctl.info.trial_id)
     assert row["operator"] == "browser" and row["status"] == "interrupted"
+
+
+def test_a_failing_trial_loop_is_stored_as_interrupted_and_reported(tmp_path: Path) -> None:
+    from vasim.errors import VasimError
+    from vasim.viewer.live import SimThreadTrial
+
+    def factory(config, device=None, *, schema=None, speed=1.0):
+        trial = SimThreadTrial(config, device, schema=schema, speed=speed)
+        advance, calls = trial.runner.advance, [0]
+
+        def flaky(dt: float):
+            calls[0] += 1
+            if calls[0] > 5 and config.subject == "S05":
+                raise FloatingPointError("solver diverged")
+            return advance(dt)
+
+        trial.runner.advance = flaky  # type: ignore[method-assign]
+        return trial
+
+    c = TrainingController(scene="none", db=tmp_path / "f.sqlite", speed=SPEED,
+                           trial_factory=factory)
+    try:
+        run(c, Command("mode", "free"), Command("subject", "S05"), Command("start"))
+        tid = c.info.trial_id
+        with pytest.raises(VasimError, match="solver diverged"):
+            drive(c, lambda: False, timeout=10)
+        assert not c.panel.running and "solver diverged" in c.panel.status
+        c.poll()  # reported once; the controller stays usable
+        with closing(store(c)) as st:
+            row = st.trial(tid)
+            assert row["status"] == "interrupted"
+            assert len(st.samples(tid)) > 0  # what it recorded before failing
+    finally:
+        c.close()
+
+
+def test_a_real_time_trial_keeps_its_recording_and_replays_identically(
+        tmp_path: Path) -> None:
+    from vasim.haptics.realtime import replay_trial
+
+    c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
+    try:
+        run(c, Command("mode", "free"), Command("task", "point"), Command("start"))
+        tid = c.info.trial_id
+        assert type(c.trial).__name__ == "RealtimeTrial"  # the 1 kHz servo loop
+        assert drive(c, lambda: not c.panel.running, timeout=60), c.panel.status
+    finally:
+        c.close()
+    with closing(TrialStore(tmp_path / "r.sqlite")) as st:
+        timing = json.loads(st.trial(tid)["timing_json"])
+        assert timing["achieved_hz"] > 0
+        files = timing["recording"]
+        assert all((tmp_path / name).exists() for name in files.values())
+        report = replay_trial(st, tid)
+    assert report.samples_equal and report.metrics_equal, report.differences

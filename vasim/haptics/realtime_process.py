@@ -13,7 +13,9 @@ that the OS preempts while it holds the interpreter lock stalls the real-time se
 (priority inversion); a process of its own has no such thread. The 30 s bench at load
 average 6.7-7.6 (physics default / every organ awake): servo process 998.9 / 999.3 Hz,
 p99 1.000 / 1.011 ms, longest gap 33.8 / 6.4 ms, 6 / 18 overruns; threads 997.5 / 964.6
-Hz, p99 1.018 / 2.909 ms, longest gap 12.4 / 121.3 ms, 59 / 919 overruns.
+Hz, p99 1.018 / 2.909 ms, longest gap 12.4 / 121.3 ms, 59 / 919 overruns; at load 3-5:
+servo process 999.7 / 999.5 Hz, p99 1.000 / 1.000 ms, longest gap 4.76 / 5.21 ms; threads
+999.5 / 992.8 Hz, p99 1.018 / 1.902 ms, longest gap 5.02 / 10.74 ms.
 
 Hand-offs (one direction each, never a half-written value):
 

@@ -1,17 +1,24 @@
 """The browser viewer (viser): ``vasim serve`` starts :class:`ViewerApp`.
 
 ``views`` holds one class per visual (each owns its viser handles and exposes ``update``);
-``app`` wires them to a trial running in real time; ``cli`` registers ``vasim serve``.
+``controller`` owns the training state (modes, sessions, the live trial, the store); ``live``
+runs a trial in real time; ``panel`` is the experimenter's panel, ``audio`` the page's AG
+synth; ``app`` wires them together; ``cli`` registers ``vasim serve``.
 """
 
 from __future__ import annotations
 
 from vasim.viewer.app import Command as Command
+from vasim.viewer.app import DragInput as DragInput
 from vasim.viewer.app import Snapshot as Snapshot
 from vasim.viewer.app import TrialInfo as TrialInfo
 from vasim.viewer.app import ViewerApp as ViewerApp
 from vasim.viewer.app import endoscope_pose as endoscope_pose
 from vasim.viewer.app import is_loopback as is_loopback
+from vasim.viewer.audio import AudioStream as AudioStream
+from vasim.viewer.controller import PanelState as PanelState
+from vasim.viewer.controller import TrainingController as TrainingController
+from vasim.viewer.panel import ExperimenterPanel as ExperimenterPanel
 from vasim.viewer.views import ArrowView as ArrowView
 from vasim.viewer.views import CameraController as CameraController
 from vasim.viewer.views import CameraPose as CameraPose
@@ -24,15 +31,20 @@ from vasim.viewer.views import TrajectoryView as TrajectoryView
 
 __all__ = [
     "ArrowView",
+    "AudioStream",
     "CameraController",
     "CameraPose",
     "Command",
+    "DragInput",
+    "ExperimenterPanel",
     "GhostView",
     "HudInfo",
     "HudView",
     "OrganView",
+    "PanelState",
     "Snapshot",
     "ToolView",
+    "TrainingController",
     "TrajectoryView",
     "TrialInfo",
     "ViewerApp",

@@ -148,12 +148,14 @@ class DragInput:
         server: the viser server.
         device: returns the current trial's ``BrowserDevice`` (or None).
         guard: wraps the callback.
+        name: the gizmo's scene node.
     """
 
     def __init__(self, server: viser.ViserServer, device: Callable[[], Any],
-                 guard: Callable[[Callable[..., Any]], Callable[..., Any]]):
+                 guard: Callable[[Callable[..., Any]], Callable[..., Any]], *,
+                 name: str = "/input/tip"):
         self.handle = server.scene.add_transform_controls(
-            "/input/tip", scale=0.03, disable_rotations=True, depth_test=False,
+            name, scale=0.03, disable_rotations=True, depth_test=False,
             visible=False)
         self._device = device
         self._dragging = False

@@ -334,18 +334,20 @@ class TrainingController:
         self._pair = (self.info, trial)
         return self.info
 
-    def _close_trial(self, reason: str) -> None:
-        """Stops the running trial; a stored one that is not done is marked interrupted."""
+    def _close_trial(self, reason: str, *, failed: bool = False) -> None:
+        """Stops the running trial; a stored one that is not done (or whose loop ``failed``)
+        is marked interrupted."""
         trial, info = self._trial, self.info
         if trial is None or self._closed:
             return
         trial.stop()
         self._closed = True
         if info.trial_id is not None and not self._stored_done:
-            if trial.done:
+            if trial.done and not failed:
                 self._store_result()
             else:
                 res = trial.result()
+                self._timing(info.trial_id)  # writes the recording (as run_realtime_trial)
                 self.store().mark_interrupted(
                     info.trial_id, reason=reason, samples=res.samples,
                     point_metrics=res.metrics, summary=_plain_dict(res.summary),
@@ -369,11 +371,9 @@ class TrainingController:
         res = trial.result(**kw)
         summary = _plain_dict(res.summary)
         if info.trial_id is not None:
-            timing = trial.timing()
             self.store().finish_trial(
                 info.trial_id, res.samples, res.metrics, res.summary, events=res.events,
-                timing=timing.to_dict() if hasattr(timing, "to_dict") else None,
-                trial_metrics=res.trial_metrics)
+                timing=self._timing(info.trial_id), trial_metrics=res.trial_metrics)
         self._stored_done = True
         changes: dict[str, Any] = {"running": False, "summary": summary}
         if info.trial_id is not None:
@@ -384,6 +384,23 @@ class TrainingController:
         if info.schedule_index is not None:
             changes.update(self._progress())
         self._publish(**changes)
+
+    def _timing(self, trial_id: int) -> dict[str, Any] | None:
+        """The live trial's timing for ``timing_json``; a real-time trial's recording (the
+        device stream and the physics log) is written next to the database and named
+        there, as ``run_realtime_trial`` does, so viewer trials replay like CLI ones."""
+        trial = self._trial
+        assert trial is not None
+        timing = trial.timing()
+        out: dict[str, Any] | None = timing.to_dict() if hasattr(timing, "to_dict") else None
+        recording = getattr(trial, "recording", None)
+        if callable(recording) and out is not None:
+            try:
+                p_dev, p_rt = recording().save(self.store().path, trial_id)
+                out["recording"] = {"device_stream": p_dev.name, "realtime": p_rt.name}
+            except Exception:  # the trial's data matter more than its replay files
+                log.exception("saving the recording of trial %s failed", trial_id)
+        return out
 
     def _curve(self) -> tuple[tuple[int, float, float], ...]:
         """The learning curve so far: the session's completed trials in schedule order
@@ -665,6 +682,17 @@ class TrainingController:
         trial = self._trial
         if trial is None or not trial.done or (self._closed and self._stored_done):
             return
+        error = getattr(trial, "error", None)
+        if error is not None and not self._stored_done:
+            # **decision**: a trial whose loop failed is stored as interrupted (with what it
+            # recorded and the error as the reason), never as completed; the scheduled trial
+            # stays pending. The error goes on to the app, which notifies the page.
+            reason = f"the trial loop failed: {type(error).__name__}: {error}"
+            self._close_trial(reason, failed=True)
+            self._stored_done = True
+            self._done_since = math.inf
+            self._publish(running=False, status=reason)
+            raise VasimError(f"trial {self.info.number}: {reason}")
         if not self._stored_done:
             trial.stop()
             if self.info.mode == "demo":

@@ -1,7 +1,7 @@
 """A trial running in real time for the viewer, with the shape of ``RealtimeTrial``.
 
-The haptics layer is adding ``vasim.haptics.realtime.RealtimeTrial`` (the servo loop driving
-a trial at 1 kHz on its own thread). The viewer codes against that interface::
+``vasim.haptics.realtime.RealtimeTrial`` is the servo loop driving a trial at 1 kHz on its
+own thread (physics on another). The viewer codes against its interface::
 
     RealtimeTrial(config, device=None, *, schema=None, physics=..., rate_hz=1000.0)
     .start(); .stop(); .done; .frame() -> TrialFrame; .timing(); .result(**kw)

@@ -130,6 +130,7 @@ class ExperimenterPanel:
         self.latencies: list[float] = []
         self._lat_trial: int | None = None
         self._lat_goal = 0
+        self._shown_subject: str | None = None
 
         def on(handle: Any, fn: Callable[[Any], None]) -> None:
             def cb(event: Any) -> None:
@@ -255,6 +256,10 @@ class ExperimenterPanel:
                             value not in handle.options:
                         handle.options = (*handle.options, value)
                     handle.value = value
+            if p.subject != self._shown_subject:  # only on a change: never clobber typing
+                self._shown_subject = p.subject
+                if self.subject.value != (p.subject or ""):
+                    self.subject.value = p.subject or ""
             free = p.mode != "protocol"
             for h in (self.schema, self.task, self.fixture, self.apply,
                       *self.numbers.values()):

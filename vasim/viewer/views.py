@@ -145,7 +145,11 @@ class ToolView:
         trocar: (3,) trocar (port) point the shaft passes through [m].
         shaft_radius: [m] (5 mm instruments: 2.5 mm).
         outside: length of shaft drawn beyond the trocar, outside the body [m].
-        tip_radius: radius of the tip marker [m].
+        tip_radius: radius of the tip marker [m] (just over the shaft's: the tip reads as a
+            golden end without swallowing the overlay arrows that start there).
+        shaft_opacity: the shaft is drawn see-through (**decision**): Mag's camera looks
+            down the instrument, and an opaque shaft hid the VG and FF arrows starting at the
+            tip behind it.
     """
 
     def __init__(
@@ -155,7 +159,8 @@ class ToolView:
         *,
         shaft_radius: float = 0.0025,
         outside: float = 0.05,
-        tip_radius: float = 0.0018,
+        tip_radius: float = 0.0026,
+        shaft_opacity: float = 0.55,
     ):
         self.trocar = np.asarray(trocar, dtype=np.float64).reshape(3)
         self.outside = float(outside)
@@ -165,7 +170,8 @@ class ToolView:
         self._template = v
         self.shaft = server.scene.add_mesh_simple(
             "/tool/shaft", self._placed(self.trocar - np.array([0.0, 0.0, 0.05])),
-            cyl.faces.astype(np.uint32), color=(150, 155, 165),
+            cyl.faces.astype(np.uint32), color=(150, 155, 165), opacity=shaft_opacity,
+            cast_shadow=False,
         )
         self.tip = server.scene.add_icosphere(
             "/tool/tip", radius=tip_radius, color=(255, 200, 40), subdivisions=2,
@@ -220,7 +226,7 @@ class TrajectoryView:
         normal_length: length of the drawn surface normal [m].
     """
 
-    def __init__(self, server: viser.ViserServer, *, point_size: float = 0.003,
+    def __init__(self, server: viser.ViserServer, *, point_size: float = 0.0018,
                  normal_length: float = 0.03):
         self.server = server
         self.point_size = float(point_size)
