@@ -109,16 +109,14 @@ def test_latin_square_counterbalances_consecutive_seeds() -> None:
     assert block_order(p, 3)[0] == 0  # the baseline keeps its place
 
 
-def test_mrcp_protocol_validates_but_does_not_run() -> None:
+def test_mrcp_protocol_validates_and_runs() -> None:
     p = load_protocol("mrcp_vs_stdt")
     assert p.teleoperation_modes == ("stdt", "mrcp", "mrcp_cam")
     s = generate_schedule(p, 5)
     assert len(s) == 18 and Counter(t.condition for t in s) == {"stdt": 6, "mrcp": 6,
                                                                  "mrcp_cam": 6}
     assert all(t.schema is None for t in s)
-    with pytest.raises(ConfigError, match="MRCP slave station") as e:
-        p.check_runnable()
-    assert "mrcp_vs_stdt.toml" in str(e.value)
+    p.check_runnable()  # the MRCP slave station exists (vasim.mrcp.teleop)
 
 
 # ---------------------------------------------------------------------- validation

@@ -283,15 +283,15 @@ def test_cli_answers_file_and_run(tmp_path: Path, tiny: Path, capsys) -> None:
 # ---------------------------------------------------------------------- CLI errors
 @pytest.mark.parametrize(("argv", "needle"), [
     (["study", "run", "--protocol", "nope", "--subject", "S01"], "unknown protocol 'nope'"),
-    (["study", "run", "--protocol", "mrcp_vs_stdt", "--subject", "S01"],
-     "MRCP slave station"),
+    (["study", "run", "--protocol", "mrcp_vs_stdt", "--subject", "S01", "--max-time", "-1"],
+     "max_trial_time"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "S01", "--operator",
       "browser"], "vasim serve"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "Jane Doe"],
      "Jane Doe"),
     (["study", "resume", "--subject", "S77"], "no session for subject 'S77'"),
-    (["study", "simulate", "--protocol", "mrcp_vs_stdt", "--subjects", "2"],
-     "MRCP slave station"),
+    (["study", "simulate", "--protocol", "mrcp_vs_stdt", "--subjects", "2", "--workers", "-1"],
+     "workers must be >= 0"),
 ])
 def test_cli_errors_are_one_line_exit_2(tmp_path: Path, capsys, argv, needle) -> None:
     db = tmp_path / "s.db"

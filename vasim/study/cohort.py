@@ -340,6 +340,10 @@ def simulate_trial(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
         ``metrics`` (per-point frame), ``summary``, ``events``, ``trial_metrics``,
         ``wall_time`` [s], ``sim_time`` [s].
     """
+    if config.mode is not None:  # a teleoperation mode: the MRCP station's trial
+        from vasim.mrcp.teleop import simulate_teleop
+
+        return simulate_teleop(config, params)
     t0 = time.perf_counter()
     runner = TrialRunner(config)
     while not runner.done:
@@ -523,6 +527,12 @@ _SCHEMAS: dict[str, Schema] = {}
 
 def _begin(store: TrialStore, job: _Job) -> int:
     cfg = job.config
+    if cfg.mode is not None:  # a teleoperation mode: the needle task's trial row
+        from vasim.mrcp.teleop import teleop_meta
+
+        return store.begin_trial(teleop_meta(cfg, session_id=job.session.id,
+                                             schedule_index=job.scheduled.index,
+                                             protocol=job.session.protocol.name))
     schema = _SCHEMAS.get(cfg.schema)
     if schema is None:
         schema = _SCHEMAS[cfg.schema] = load_schema(cfg.schema)

@@ -474,18 +474,14 @@ class Protocol:
         return sum(b.n_trials for b in self.blocks)
 
     def check_runnable(self) -> None:
-        """Raises ``ConfigError`` unless this release can run the protocol's trials.
+        """The hook where a protocol this release cannot run would be refused.
 
-        Teleoperation modes (StdT, MRCP, MRCP+Cam) need the MRCP slave station, a later
-        issue: such protocols validate and schedule, but do not run yet.
+        Nothing is refused now: every protocol that validates runs, fixture conditions
+        through the trial runner (``vasim.study.trial``) and teleoperation modes (StdT,
+        MRCP, MRCP+Cam) through the MRCP slave station's needle task
+        (``vasim.mrcp.teleop``), whatever the protocol's ``task`` names. The callers
+        (session, cohort, CLI) keep calling it before anything is started.
         """
-        modes = self.teleoperation_modes
-        if modes:
-            raise ConfigError(
-                f"protocol {self.name!r} compares teleoperation modes ({', '.join(modes)}), "
-                "which need the MRCP slave station (a later issue); it validates and can be "
-                "scheduled, but its trials cannot run yet", file=self.source,
-                field="blocks")
 
 
 def _replace_item(item: QuestionItem, **changes: Any) -> QuestionItem:

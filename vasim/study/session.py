@@ -51,6 +51,7 @@ import pandas as pd
 from vasim.errors import ConfigError, StoreError
 from vasim.haptics.scripted import OperatorProfile
 from vasim.study.protocol import (
+    TELEOPERATION_MODES,
     Protocol,
     ScheduledTrial,
     generate_schedule,
@@ -185,9 +186,13 @@ class Session:
         if scheduled.schema is None:
             self.protocol.check_runnable()
         s = self.settings
+        # A teleoperation mode runs the MRCP station's needle task (vasim.mrcp.teleop).
+        mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
         return TrialConfig(
             task=scheduled.task,  # type: ignore[arg-type]
-            variant=scheduled.variant, schema=str(scheduled.schema), operator=s.operator,
+            variant=scheduled.variant,
+            schema="none" if mode is not None else str(scheduled.schema), mode=mode,
+            operator=s.operator,
             skill=s.skill, seed=trial_seed(self.seed, scheduled.index),
             practice=scheduled.index, dt=s.dt,
             max_time=s.max_trial_time if s.max_trial_time is not None
@@ -216,7 +221,7 @@ def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
         The session id.
 
     Raises:
-        ConfigError: the protocol cannot run in this release (teleoperation modes), a bad
+        ConfigError: the protocol cannot run in this release (``check_runnable``), a bad
             subject code or seed.
         StoreError: the subject already has a running session of this protocol.
     """

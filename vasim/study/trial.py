@@ -66,6 +66,7 @@ from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
 from vasim.study.metrics import evaluate_trial
+from vasim.study.protocol import TELEOPERATION_MODES
 from vasim.study.samples import SampleBuffer
 from vasim.study.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
@@ -126,6 +127,11 @@ class TrialConfig:
         scene: the virtual abdomen the task lives in: a scene name
             (``protocols/scenes/NAME.toml``) or TOML path, or ``"none"`` for a static task
             with no tissue (no breathing, no contact).
+        mode: None for a trial of ``task`` under ``schema`` (this module's runner), or a
+            teleoperation mode of the MRCP study (``"stdt"``, ``"mrcp"``, ``"mrcp_cam"``):
+            the needle task on the MRCP slave station (``vasim.mrcp.teleop``, 18 ms
+            control cycle), where ``task``, ``variant``, ``schema``, ``dt`` and
+            ``velocity_cutoff_hz`` are not used.
     """
 
     task: TaskName = "trajectory"
@@ -142,8 +148,12 @@ class TrialConfig:
     profile: OperatorProfile | None = field(default=None, compare=False)
     reach_radius: float | None = None
     scene: str = "default"
+    mode: str | None = None
 
     def __post_init__(self) -> None:
+        if self.mode is not None and self.mode not in TELEOPERATION_MODES:
+            raise ConfigError(f"unknown teleoperation mode {self.mode!r} (expected one of "
+                              f"{', '.join(TELEOPERATION_MODES)} or None)", field="mode")
         if self.task not in ("trajectory", "point"):
             raise ConfigError(f"unknown task {self.task!r} (expected 'trajectory' or 'point')",
                               field="task")
@@ -742,7 +752,8 @@ _MAX_PREALLOCATED = 1_000_000
 
 def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
     """The trial configuration as plain JSON-able data (stored with the trial)."""
-    rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"}
+    rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
+           and not (f.name == "mode" and config.mode is None)}  # as before MRCP trials
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
     return rec
 
@@ -792,6 +803,12 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
     """
     from vasim.study.store import TrialStore
 
+    if config.mode is not None:  # a teleoperation mode: the MRCP slave station's trial
+        from vasim.mrcp.teleop import run_teleop_trial
+
+        return run_teleop_trial(config, store, session_id=session_id,
+                                schedule_index=schedule_index, protocol=protocol,
+                                metric_params=metric_params)
     runner = TrialRunner(config)
     trial_id: int | None = None
     if store is not None:

@@ -83,8 +83,8 @@ def _probe_browser() -> Availability:
     if importlib.util.find_spec("viser") is None:
         return Availability(False, (Missing("package", "viser",
                                             "pip install vasim (viser is a dependency)"),))
-    return Availability(True, detail="fed by the viewer's pointer side channel "
-                                     "(the viewer's drag input is not wired in yet)")
+    return Availability(True, detail="fed by `vasim serve`: drag the gizmo on the tool "
+                                     "tip (Experimenter tab, input: browser)")
 
 
 def _probe_openhaptics() -> Availability:

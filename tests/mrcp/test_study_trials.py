@@ -1,0 +1,156 @@
+"""Trials of the three teleoperation modes through the study pipeline, checked from the store.
+
+One session of a one-repetition copy of ``mrcp_vs_stdt`` (StdT, MRCP, MRCP+Cam) is run with
+``vasim study run`` into a temporary database; every check reads the stored rows back and
+recomputes from the stored samples with plain numpy (not ``vasim.study.trial_metrics``).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from vasim.cli import main
+from vasim.mrcp.needle import needle_task
+from vasim.mrcp.teleop import CYCLE_DT, TeleopTrial
+from vasim.study.protocol import load_protocol
+from vasim.study.store import TrialStore
+from vasim.study.trial import TrialConfig, run_trial
+
+SEED = 3
+
+
+def short_protocol(d: Path, repetitions: int = 1) -> Path:
+    """``mrcp_vs_stdt`` with ``repetitions`` trials per mode (same questionnaires)."""
+    text = load_protocol("mrcp_vs_stdt").text or ""
+    text = text.replace("repetitions = 6", f"repetitions = {repetitions}")
+    text = text.replace('name = "mrcp_vs_stdt"', 'name = "mrcp_short"')
+    p = d / "mrcp_short.toml"
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
+    d = tmp_path_factory.mktemp("mrcp_trials")
+    db = d / "run.sqlite"
+    assert main(["study", "run", "--protocol", str(short_protocol(d)), "--subject", "S01",
+                 "--db", str(db), "--seed", str(SEED)]) == 0
+    with TrialStore(db, readonly=True) as st:
+        sched = st.schedule(1)
+        by_mode = {row["condition"]: int(row["trial_id"]) for _, row in sched.iterrows()}
+        data = {m: {"trial": st.trial(t), "samples": st.samples(t),
+                    "metrics": st.trial_metrics(t).set_index("metric")["value"],
+                    "events": st.events(t)} for m, t in by_mode.items()}
+        status = st.sessions()["status"].tolist()
+    return {"db": db, "data": data, "status": status}
+
+
+def test_each_mode_runs_and_is_stored(session) -> None:
+    assert session["status"] == ["completed"]
+    data = session["data"]
+    assert set(data) == {"stdt", "mrcp", "mrcp_cam"}
+    n = needle_task().n_rings
+    for mode, d in data.items():
+        tr = d["trial"]
+        assert tr["status"] == "completed" and tr["task"] == "needle"
+        assert tr["config"]["mode"] == mode and tr["dt"] == CYCLE_DT
+        s = d["samples"]
+        np.testing.assert_allclose(np.diff(s["t"]), CYCLE_DT, atol=1e-9)
+        assert s["goal_index"].iloc[-1] == n - 1      # the trial ends at the last pass
+        assert d["metrics"]["completed"] == 1.0 and d["metrics"]["points_reached"] == n
+
+
+def test_rings_are_passed_by_the_instrument_of_their_side(session) -> None:
+    sides = needle_task().sides
+    for d in session["data"].values():
+        ev = d["events"]
+        passed = [re.match(r"ring (\d+) passed \((\w+)\)", s).groups()
+                  for s in ev.loc[ev["kind"] == "ring", "detail"]]
+        assert [(int(i), side) for i, side in passed] == list(enumerate(sides))
+
+
+def test_stdt_transfers_by_hand_with_regrasps_mrcp_transfers_automatically(session) -> None:
+    data = session["data"]
+    needed = needle_task().n_transfers
+    std = data["stdt"]["metrics"]
+    assert std["transfers"] == needed
+    assert std["regrasps"] + std["misaligned_transfers"] >= 1
+    kinds = set(data["stdt"]["events"]["kind"])
+    assert {"transfer", "regrasp"} <= kinds or {"transfer", "misaligned_transfer"} <= kinds
+    assert data["stdt"]["samples"]["clutch"].sum() == 0   # two masters, never decoupled
+    for mode in ("mrcp", "mrcp_cam"):
+        m = data[mode]["metrics"]
+        assert m["regrasps"] == 0 and m["misaligned_transfers"] == 0
+        assert m["transfers"] >= needed
+        details = data[mode]["events"]["detail"]
+        assert details.str.startswith("transfer_done").sum() == m["transfers"]
+    # one master instead of two hands doing the transfers: shorter and less movement
+    assert data["mrcp"]["metrics"]["completion_time"] < std["completion_time"]
+    assert data["mrcp"]["metrics"]["master_path_l2"] < std["master_path_l2"]
+
+
+def test_the_task_is_held_while_the_master_is_decoupled(session) -> None:
+    for mode in ("mrcp", "mrcp_cam"):
+        s = session["data"][mode]["samples"]
+        m = session["data"][mode]["metrics"]
+        held = (s["clutch"].to_numpy() == 1)
+        assert held.any()
+        assert held.sum() * CYCLE_DT == pytest.approx(m["tt_time"], abs=1e-9)
+        x = s[["x_x", "x_y", "x_z"]].to_numpy()
+        both = held[1:] & held[:-1]
+        np.testing.assert_array_equal(x[1:][both], x[:-1][both])
+
+
+def test_et_em_q_match_a_recomputation_from_the_samples(session) -> None:
+    n = needle_task().n_rings
+    for d in session["data"].values():
+        s: pd.DataFrame = d["samples"]
+        m = d["metrics"]
+        t = s["t"].to_numpy()
+        w = np.diff(np.concatenate([[0.0], t]))
+        gi = s["goal_index"].to_numpy()
+        x = s[["x_x", "x_y", "x_z"]].to_numpy()
+        g = s[["g_x", "g_y", "g_z"]].to_numpy()
+        passed = (gi == n - 1) & (np.linalg.norm(x - g, axis=1) <= needle_task().ring_radius)
+        assert m["completion_time"] == pytest.approx(t[np.argmax(passed)], abs=1e-12)
+        assert m["completion_time"] == pytest.approx(t[-1], abs=1e-12)
+        assert m["path_l2"] == pytest.approx(np.linalg.norm(np.diff(x, axis=0), axis=1).sum(),
+                                             rel=1e-12)
+        c = s["contact"].to_numpy() != 0
+        assert m["contact_time"] == pytest.approx(w[c].sum(), abs=1e-12)
+        fc = np.linalg.norm(s[["fc_x", "fc_y", "fc_z"]].to_numpy(), axis=1)
+        tc = np.linalg.norm(s[["tc_x", "tc_y", "tc_z"]].to_numpy(), axis=1)
+        assert m["accumulated_force"] == pytest.approx((fc * w).sum(), rel=1e-12, abs=1e-15)
+        assert m["accumulated_torque"] == pytest.approx((tc * w).sum(), rel=1e-12, abs=1e-15)
+        assert not np.any(fc[~c])                   # a force only in contact
+        summary = d["trial"]["summary"]
+        assert m["target_displacement_max"] == pytest.approx(
+            summary["tissue_target_displacement_max"])
+        assert m["out_of_view_time"] == pytest.approx(w[s["in_view"].to_numpy() == 0].sum(),
+                                                      abs=1e-12)
+
+
+def test_the_camera_hand_moves_only_in_mrcp_cam(session) -> None:
+    data = session["data"]
+    cam = data["mrcp_cam"]
+    assert cam["metrics"]["camera_path_l2"] > 0
+    assert cam["metrics"]["master_path_l2"] > cam["metrics"]["camera_path_l2"]
+    assert (cam["samples"]["zoom"] > 1.5).all()
+    for mode in ("stdt", "mrcp"):
+        assert data[mode]["metrics"]["camera_path_l2"] == 0
+        assert (data[mode]["samples"]["zoom"] == 1.0).all()
+
+
+def test_run_trial_dispatches_a_mode_and_same_seed_same_trial() -> None:
+    cfg = TrialConfig(mode="stdt", seed=11, max_time=3.0, scene="none")
+    a, tid = run_trial(cfg)
+    assert tid is None and a.summary["mode"] == "stdt"
+    b = TeleopTrial(cfg).run()
+    np.testing.assert_array_equal(a.samples.view()["x"], b.samples.view()["x"])
+    with pytest.raises(Exception, match="mode"):
+        TrialConfig(mode="bimanual")

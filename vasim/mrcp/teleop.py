@@ -1,0 +1,662 @@
+"""Trials of the MRCP vs standard-teleoperation study (spec/study.md §4, spec/mrcp.md §8).
+
+One trial carries the needle of :mod:`vasim.mrcp.needle` through its rings in the virtual
+abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes:
+
+* ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
+  masters : 2 slaves). At every change of side the scripted operator transfers the needle
+  itself: it carries the needle to a hand-over point at the midline
+  (:func:`~vasim.mrcp.needle.handover_point`), brings the other tool to the pre-grasp and
+  grasp points, closes that jaw, then opens the first one. Jaw placement errors, drawn
+  from the operator's skill model (:mod:`vasim.mrcp.needle`), cause re-grasps and
+  misaligned transfers.
+* ``"mrcp"`` — task-oriented teleoperation (1 master : 2 slaves): the operator moves the
+  needle only; the MRCP kernel (:class:`~vasim.mrcp.kernel.MRCPKernel` with the RJ, tool
+  cone and CR indices) decides which robot holds it and transfers it automatically; while
+  a transfer runs (TT) the master is decoupled (logged as ``clutch = 1``).
+* ``"mrcp_cam"`` — MRCP plus a second master that drives the camera robot: the
+  endoscope follows the needle (a narrower, closer view: ``CAMERA_ZOOM``), instead of the
+  fixed wide-angle endoscope of the other modes.
+
+The operator is the study pipeline's scripted person (:mod:`vasim.haptics.scripted`, its
+profile, seed and practice from the session): minimum-jerk submovements aimed at what it
+sees, Fitts timing, motor and perceptual noise, tremor, learning. A hand runs
+``OPERATOR_SUBSTEPS`` steps per control cycle; the station runs at the seed's 18 ms cycle
+(``CYCLE_DT``); the abdomen physics at its own rate (4 ms), with the instrument that holds
+the needle as its tool.
+
+Logged (one sample per control cycle, ``vasim.study.samples`` columns): ``x`` the needle
+centre (the task), ``g`` the ring it was compared with (its position that cycle: the rings
+ride on the tissue), ``goal_index`` that ring's index, the tissue
+contact flag, force and torque of the latest physics step, ``clutch`` (master decoupled),
+``zoom`` and ``in_view`` (needle inside the camera's view cone). The trial metrics are the
+pipeline's (``vasim.study.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
+needle trajectory, spec/study.md §4 "length of the needle/tool trajectory"), Q =
+``contact_time``, ``accumulated_force``, ``accumulated_torque`` and
+``target_displacement_max`` (the abdomen's quality accumulator). Added per trial:
+``master_path_l2`` (the summed path of the operator's hands on the masters, camera hand
+included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfers``,
+``tt_time`` (time the master was decoupled), ``safety_stops``.
+
+**Decisions**:
+
+* The abdomen's contact model takes one instrument: it is the one holding the needle
+  (trocar to tool tip) — the one near the rings. The free instrument in StdT approaches
+  the needle from above and is not in the contact model (its tissue contacts are not
+  counted, in either mode).
+* The StdT operator plans each phase (carry to a ring, carry to the hand-over point,
+  approach and grasp) as a new path of the scripted operator starting at rest, as a person
+  pauses between a gripper action and the next movement; gripper actions take the
+  reaction delay plus ``GRIPPER_TIME``.
+* An MRCP safety stop (the kernel's FAULT: RSel would collide) freezes the operator's
+  hand; after the reaction delay plus ``FAULT_ACK_TIME`` the operator acknowledges it
+  (``MRCPKernel.reset_fault``) and starts a new movement; more than ``MAX_SAFETY_STOPS``
+  end the trial. Repeated kernel events ("rsel_hold" on consecutive cycles, "fault: no
+  motion") are counted, not logged one by one.
+* MRCP kernel settings for this station: guidance step ``ΔR_max`` = 2 mm per cycle
+  (0.11 m/s at the tool tip, a laparoscopic pace; the default 1 cm per cycle makes the
+  mount move faster than the joints allow and breaks the fulcrum constraint), transfer
+  speed 0.1 m/s, repulsion influence 5 cm.
+* Camera: in ``stdt`` and ``mrcp`` the endoscope stays aimed at the centroid of the rings
+  with the 100 deg field of view of the study's fixed endoscope
+  (``vasim.study.trial.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
+  above this task). The camera hand of ``mrcp_cam`` re-aims only when the needle leaves
+  the central third of its 70 deg view (a dead zone), then follows it with a 0.4 s time
+  constant; its path is the aim point's.
+
+Example:
+    >>> from vasim.study.trial import TrialConfig
+    >>> res = TeleopTrial(TrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
+    ...                   n_rings=2).run()
+    >>> res.summary["mode"], float(res.samples.view()["t"][0])
+    ('mrcp', 0.018)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from vasim.errors import ConfigError
+from vasim.haptics.scripted import OperatorProfile, ScriptedOperator
+from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
+from vasim.mrcp.modes import KernelState
+from vasim.mrcp.needle import (
+    RING_RADIUS,
+    RING_SITES,
+    NeedleTask,
+    Side,
+    classify_grasp,
+    grasp_offset,
+    grasp_sigma,
+    handover_point,
+    lateral_error,
+    needle_task,
+    pregrasp_offset,
+)
+from vasim.mrcp.planner import PlannerParams
+from vasim.mrcp.toolstation import CameraRobot, Station, build_station
+from vasim.study.metrics import evaluate_trial
+from vasim.study.samples import SampleBuffer
+from vasim.study.trial import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_view_cone
+from vasim.study.trial_metrics import MetricParams, trial_metrics
+
+if TYPE_CHECKING:
+    from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+    from vasim.study.store import TrialMeta
+
+CYCLE_DT = 0.018
+"""Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""
+
+OPERATOR_SUBSTEPS = 3
+"""Steps of the scripted hands per control cycle (6 ms each)."""
+
+GRIPPER_TIME = 0.25
+"""Duration of closing or opening a jaw once decided [s] (plus the reaction delay)."""
+
+PREGRASP_REACH = 0.005
+"""The operator judges the jaw at the pre-grasp point within this distance [m]."""
+
+GRASP_REACH = 0.003
+"""... and at the grasp point within this distance, then closes it [m]."""
+
+MAX_GRASP_ATTEMPTS = 5
+"""After this many misses the next closing holds the needle (misaligned at worst)."""
+
+FAULT_ACK_TIME = 1.0
+"""After an MRCP safety stop (RSel collision) the operator acknowledges it this long after
+the reaction delay [s] and starts a new movement."""
+
+MAX_SAFETY_STOPS = 5
+"""A trial with more safety stops than this is ended (not completed)."""
+
+CAMERA_FOV_DEG = 70.0
+"""Full field of view of the camera robot of ``mrcp_cam`` [deg]."""
+
+CAMERA_ZOOM = math.tan(math.radians(DEFAULT_ENDOSCOPE.fov_deg / 2)) / math.tan(
+    math.radians(CAMERA_FOV_DEG / 2))
+"""Magnification of the following camera relative to the fixed endoscope (1.70)."""
+
+CAMERA_TIME_CONSTANT = 0.4
+"""The camera hand's pursuit time constant [s]."""
+
+def _seed(seed: int, *key: int) -> int:
+    return int(np.random.SeedSequence([int(seed), *key]).generate_state(1)[0])
+
+
+def kernel_config(station: Station, seed: int = 0) -> KernelConfig:
+    """The MRCP kernel settings of the study station (module docstring, decisions)."""
+    return KernelConfig(
+        dt=CYCLE_DT, seed=seed % 2**32, default_tcp_speed=0.1,
+        planner=PlannerParams(dr_max=0.002, influence=0.05),
+        indices=(IndexSpec("rj"), IndexSpec("cone", {"cones": dict(station.cones)})))
+
+
+def needle_points() -> list[TaskPoint]:
+    """The needle's grasp points (right instrument: 0, left: 1) in the needle frame."""
+    return [TaskPoint(grasp_offset(s), approach=pregrasp_offset(s) - grasp_offset(s))
+            for s in ("right", "left")]
+
+
+class _Hand:
+    """One scripted hand on one master, following a path of goals."""
+
+    def __init__(self, profile: OperatorProfile, task: NeedleTask, points: np.ndarray,
+                 start: np.ndarray, seed: int, practice: int,
+                 reach: float | tuple[float, ...]) -> None:
+        self.points = np.asarray(points, dtype=float).reshape(-1, 3)
+        self.reach = np.broadcast_to(np.asarray(reach, dtype=float), (len(self.points),))
+        self.op = ScriptedOperator(profile, task.operator_task(
+            self.points, start, float(self.reach.min())), seed=seed, practice=practice)
+        self.op.reset(start)
+        self.j = 0
+
+    @property
+    def done(self) -> bool:
+        return self.j >= len(self.points)
+
+    def move(self, dt: float, seen: np.ndarray, goal: np.ndarray, zoom: float) -> np.ndarray:
+        """One hand step: the master increment [m] toward ``goal`` (current position)."""
+        dx = self.op.step_floats(dt, tuple(seen.tolist()), tuple(goal.tolist()),
+                                 min(self.j, len(self.points) - 1), False, 0.0, zoom,
+                                 (1.0, 1.0, 1.0), (0.0, 0.0, 0.0))
+        d = np.asarray(dx, dtype=float)
+        return np.where(np.isfinite(d), d, 0.0)
+
+    def check(self, position: np.ndarray, goal: np.ndarray) -> bool:
+        """Advances the goal when ``position`` is within reach of it; True if it did."""
+        if float(np.linalg.norm(position - goal)) <= self.reach[min(self.j,
+                                                                     len(self.reach) - 1)]:
+            self.j += 1
+            return True
+        return False
+
+
+@dataclass
+class _Camera:
+    """The endoscope: fixed on the rings' centroid, or (``follows``) driven by a hand."""
+
+    robot: CameraRobot
+    aim: np.ndarray
+    follows: bool
+    path: float = 0.0
+
+    @property
+    def zoom(self) -> float:
+        return CAMERA_ZOOM if self.follows else 1.0
+
+    def view(self) -> tuple[np.ndarray, np.ndarray, float]:
+        return self.robot.lens(self.aim), self.aim, math.radians(self.robot.fov_deg)
+
+    def contains(self, p: np.ndarray) -> bool:
+        pos, look, fov = self.view()
+        return bool(in_view_cone(p[None, :], pos, look, fov)[0])
+
+    def follow(self, p: np.ndarray, dt: float) -> None:
+        """The camera hand: re-aim when ``p`` leaves the central third of the view."""
+        if not self.follows:
+            return
+        pos, look, fov = self.view()
+        if bool(in_view_cone(p[None, :], pos, look, fov / 3.0)[0]):
+            return
+        step = (p - self.aim) * (1.0 - math.exp(-dt / CAMERA_TIME_CONSTANT))
+        self.aim = self.aim + step
+        self.path += float(np.linalg.norm(step))
+
+
+class TeleopTrial:
+    """One trial of a teleoperation mode (module docstring).
+
+    Args:
+        config: the trial; ``config.mode`` names the mode (required).
+        n_rings: rings of the needle task (default: all of ``RING_SITES``); their pass
+            radius is ``config.reach_radius`` (the protocol's), else ``RING_RADIUS``.
+        abdomen: a fresh abdomen to use (of ``config.scene``; it accumulates this trial's
+            quality metrics); default: a new one (``config.scene == "none"``: no tissue,
+            static rings).
+        holder: the tool holder of the station (``build_station``).
+
+    Raises:
+        ConfigError: no mode in ``config``.
+    """
+
+    def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
+                 abdomen: Abdomen | None = None, holder: str = "positioner") -> None:
+        if config.mode is None:
+            raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
+                              "'mrcp_cam')", field="mode")
+        self.config = config
+        self.mode = config.mode
+        radius = config.reach_radius if config.reach_radius is not None else RING_RADIUS
+        self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
+                                ring_radius=radius)
+        self.profile = config.profile if config.profile is not None else _preset(config.skill)
+        self.rng = np.random.default_rng(_seed(config.seed, 41))
+        self.station = build_station({"right": self.task.start + grasp_offset("right")},
+                                     holder=holder)
+        self.dt = CYCLE_DT
+        self.abdomen = abdomen
+        if self.abdomen is None and config.scene != "none":
+            from vasim.abdomen.world import Abdomen
+
+            self.abdomen = Abdomen(config.scene)
+        self._snap: AbdomenSnapshot | None = None
+        if self.abdomen is not None:
+            self.abdomen.bind_targets(self.task.rings)
+            self._snap = self.abdomen.latest
+        self.rings = (self.task.rings.copy() if self._snap is None
+                      else np.array(self._snap.targets))
+        capacity = int(config.max_time / self.dt) + 2
+        self.samples = SampleBuffer(capacity=capacity, active_fixtures="")
+        self.events: list[tuple[float, str, str]] = []
+        self.needle = self.task.start.copy()
+        self.holder: Side = "right"
+        self.i = 0
+        self.k = -1
+        self.t = 0.0
+        self.reach_times: list[float] = []
+        self.counts = {"transfers": 0, "regrasps": 0, "misaligned_transfers": 0,
+                       "transfer_aborts": 0, "tool_holds": 0, "rsel_holds": 0,
+                       "safety_stops": 0}
+        self.master_path = 0.0
+        self.tt_time = 0.0
+        self.done = False
+        follows = self.mode == "mrcp_cam"
+        cam = CameraRobot(self.station.camera.fulcrum, fov_deg=CAMERA_FOV_DEG if follows
+                          else DEFAULT_ENDOSCOPE.fov_deg)
+        self.camera = _Camera(cam, self.task.start.copy() if follows
+                              else self.task.rings.mean(axis=0), follows)
+        self._clutch = 0
+
+    # -- shared pieces ---------------------------------------------------------------
+    def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
+              key: int) -> _Hand:
+        return _Hand(self.profile, self.task, points, start,
+                     _seed(self.config.seed, 43, key), self.config.practice, reach)
+
+    def _physics(self) -> None:
+        """Steps the abdomen up to the current time with the needle holder as its tool."""
+        ab = self.abdomen
+        if ab is None:
+            return
+        from vasim.abdomen.contact import ToolPose
+
+        port = self.station.arms[self.holder].fulcrum.point
+        tip = self.station.tip(self.holder)
+        while ab.t + 0.5 * ab.dt <= self.t:
+            self._snap = ab.step(ToolPose(port, tip))
+            for kind, detail in self._snap.events:
+                self.events.append((self._snap.t, kind, detail))
+        if self._snap is not None:
+            self.rings = np.array(self._snap.targets)
+
+    def _goal(self) -> np.ndarray:
+        return self.rings[min(self.i, self.task.n_rings - 1)]
+
+    def _check_ring(self) -> None:
+        if self.i < self.task.n_rings and float(
+                np.linalg.norm(self.needle - self._goal())) <= self.task.ring_radius:
+            self.reach_times.append(self.t)
+            self.events.append((self.t, "ring", f"ring {self.i} passed ({self.holder})"))
+            self.i += 1
+
+    def _log(self, g: np.ndarray, i: int) -> None:
+        snap = self._snap
+        view = 1 if self.camera.contains(self.needle) else 0
+        if snap is not None and snap.in_contact:
+            self.samples.append(self.k, self.t, self.needle, g, i, None, None,
+                                self.camera.zoom, 0.0, 0.0, 0.0, 1, snap.force, snap.torque,
+                                1 if snap.delicate_contact else 0, self._clutch, view)
+        else:
+            self.samples.append(self.k, self.t, self.needle, g, i, None, None,
+                                self.camera.zoom, 0.0, 0.0, 0.0, 0, None, None, 0,
+                                self._clutch, view)
+
+    def _tick(self) -> None:
+        self.k += 1
+        self.t = (self.k + 1) * self.dt
+
+    def _finish_cycle(self) -> None:
+        """Physics, the ring test, the camera hand, the sample (with the ring it was
+        compared with: the goal advances after the row, as in ``vasim.study.trial``)."""
+        self._physics()
+        g, i = self._goal().copy(), self.i
+        self._check_ring()
+        self.camera.follow(self.needle, self.dt)
+        self._log(g, i)
+        self.done = (self.i >= self.task.n_rings
+                     or self.t >= self.config.max_time - 1e-12)
+
+    # -- the modes -------------------------------------------------------------------
+    def run(self) -> TrialResult:
+        """Runs the trial to the end (all rings passed or ``max_time``)."""
+        t0 = time.perf_counter()
+        for _ in self.cycles():
+            pass
+        return self.result(wall_time=time.perf_counter() - t0)
+
+    def cycles(self) -> Iterator[int]:
+        """Runs the trial cycle by cycle, yielding the cycle index after each."""
+        loop = self._stdt() if self.mode == "stdt" else self._mrcp()
+        yield from loop
+
+    def _mrcp(self) -> Iterator[int]:
+        st = self.station
+        kernel = MRCPKernel(st.arms, st.world, needle_points(), "right", 0, self.needle,
+                            config=kernel_config(st, self.config.seed))
+        master = self.needle.copy()
+        key = 0
+        hand = self._hand(self.task.rings, self.needle, self.task.ring_radius, key)
+        dt_op = self.dt / OPERATOR_SUBSTEPS
+        ack = 0.0            # time left until the operator acknowledges a safety stop
+        holding = False
+        while not self.done:
+            self._tick()
+            if kernel.state is not KernelState.FAULT:
+                for _ in range(OPERATOR_SUBSTEPS):
+                    dx = hand.move(dt_op, self.needle, self._goal(), self.camera.zoom)
+                    master = master + dx
+                    self.master_path += float(np.linalg.norm(dx))
+            rec = kernel.step(self.t, master)   # the kernel applies its increments
+            self.needle = kernel.task_pose()[0]
+            self.holder = "right" if kernel.rsel == "right" else "left"
+            self._clutch = 0 if rec.state is KernelState.TOP else 1
+            if self._clutch:
+                self.tt_time += self.dt
+            hold_now = False
+            for e in rec.events:
+                kind = e.split(" ", 1)[0]
+                if kind == "transfer_done":
+                    self.counts["transfers"] += 1
+                elif kind == "transfer_abort":
+                    self.counts["transfer_aborts"] += 1
+                elif kind == "rsel_hold":
+                    self.counts["rsel_holds"] += 1
+                    hold_now = True
+                    if holding:
+                        continue               # one event per run of held cycles
+                elif kind == "fault:":
+                    continue                   # "fault: no motion", every stopped cycle
+                self.events.append((self.t, "mrcp", e))
+            holding = hold_now
+            if rec.state is KernelState.FAULT:
+                if ack <= 0.0:                 # the stop has just happened
+                    self.counts["safety_stops"] += 1
+                    ack = self.profile.reaction_delay + FAULT_ACK_TIME
+                    if self.counts["safety_stops"] > MAX_SAFETY_STOPS:
+                        self.events.append((self.t, "aborted", "repeated safety stops"))
+                        self._finish_cycle()
+                        self.done = True
+                        yield self.k
+                        break
+                else:
+                    ack -= self.dt
+                    if ack <= 0.0:             # acknowledged: resume, a new movement
+                        kernel.reset_fault()
+                        self.events.append((self.t, "mrcp", "safety stop acknowledged"))
+                        key += 1
+                        hand = self._hand(self.task.rings, self.needle,
+                                          self.task.ring_radius, key)
+            self._finish_cycle()
+            hand.j = self.i
+            yield self.k
+        self.master_path += self.camera.path
+
+    def _stdt(self) -> Iterator[int]:
+        st = self.station
+        dt_op = self.dt / OPERATOR_SUBSTEPS
+        sigma = grasp_sigma(self.profile, self.config.practice)
+        delay = self.profile.reaction_delay + GRIPPER_TIME
+        key = 0
+        offset = self.needle - st.tip(self.holder)       # needle centre - holder tip
+        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key)
+        phase = "carry"
+        other: Side = "left"
+        wait = 0.0
+        attempts = 0
+        while not self.done:
+            self._tick()
+            if phase in ("carry", "handover"):
+                goal = self._goal() if phase == "carry" else hand.points[0]
+                dx = np.zeros(3)
+                for _ in range(OPERATOR_SUBSTEPS):
+                    dx = dx + hand.move(dt_op, self.needle + dx, goal, self.camera.zoom)
+                self._move_tool(self.holder, dx)
+                self.needle = st.tip(self.holder) + offset
+                if phase == "handover" and hand.check(self.needle, goal):
+                    phase, attempts = "approach", 0
+                    self.events.append((self.t, "stdt", f"at hand-over point; {other} "
+                                                        "approaches"))
+                    key += 1
+                    hand = self._approach_hand(other, key)
+            elif phase == "approach":
+                tip = st.tip(other)
+                goal = self.needle + (pregrasp_offset(other) if hand.j == 0
+                                      else grasp_offset(other))
+                dx = np.zeros(3)
+                for _ in range(OPERATOR_SUBSTEPS):
+                    dx = dx + hand.move(dt_op, tip + dx, goal, self.camera.zoom)
+                self._move_tool(other, dx)
+                hand.check(st.tip(other), goal)
+                if hand.done:
+                    phase, wait = "close", delay
+                    self.events.append((self.t, "stdt", f"{other} closes its jaw"))
+            elif phase == "close":
+                wait -= self.dt
+                if wait <= 0.0:
+                    attempts += 1
+                    # across the needle: where the tip is, plus the misjudgement
+                    error = st.tip(other) - (self.needle + grasp_offset(other))
+                    error = error * np.array([0.0, 1.0, 1.0]) + lateral_error(self.rng, sigma)
+                    miss = float(np.linalg.norm(error))
+                    outcome = classify_grasp(miss)
+                    if outcome == "missed" and attempts < MAX_GRASP_ATTEMPTS:
+                        self.counts["regrasps"] += 1
+                        self.events.append((self.t, "regrasp",
+                                            f"{other} missed the needle by "
+                                            f"{1e3 * miss:.1f} mm"))
+                        key += 1
+                        hand = self._approach_hand(other, key)
+                        phase = "approach"
+                    else:
+                        if outcome != "clean":
+                            self.counts["misaligned_transfers"] += 1
+                            self.events.append((self.t, "misaligned_transfer",
+                                                f"{other} grasped {1e3 * miss:.1f} mm "
+                                                "off the grasp point"))
+                        self.needle = self.needle + error     # the closing jaw drags it
+                        phase, wait = "release", delay
+            elif phase == "release":
+                wait -= self.dt
+                if wait <= 0.0:
+                    self.counts["transfers"] += 1
+                    self.events.append((self.t, "transfer", f"{self.holder} -> {other}"))
+                    self.holder, other = other, self.holder
+                    offset = self.needle - st.tip(self.holder)
+                    key += 1
+                    hand = self._hand(self._goal()[None, :], self.needle,
+                                      self.task.ring_radius, key)
+                    phase = "carry"
+            before = self.i
+            self._finish_cycle()
+            if self.i != before and not self.done:     # a ring passed: what next
+                key += 1
+                if self.task.sides[self.i] != self.holder:
+                    h = handover_point(self.rings[self.i - 1], self.rings[self.i])
+                    hand = self._hand(h[None, :], self.needle, self.task.ring_radius, key)
+                    phase = "handover"
+                else:
+                    hand = self._hand(self._goal()[None, :], self.needle,
+                                      self.task.ring_radius, key)
+                    phase = "carry"
+            yield self.k
+
+    def _approach_hand(self, side: Side, key: int) -> _Hand:
+        pts = np.array([self.needle + pregrasp_offset(side), self.needle + grasp_offset(side)])
+        return self._hand(pts, self.station.tip(side), (PREGRASP_REACH, GRASP_REACH), key)
+
+    def _move_tool(self, side: Side, dx: np.ndarray) -> None:
+        """A master increment moves its tool tip (IK through the fulcrum; held if none)."""
+        st = self.station
+        arm = st.arms[side]
+        q = st.world.configuration(side)
+        self.master_path += float(np.linalg.norm(dx))
+        sol = arm.ik(st.tip(side) + dx, None, q)
+        if sol is None:
+            self.counts["tool_holds"] += 1
+            return
+        st.world.set_configuration(side, sol)
+
+    # -- result ----------------------------------------------------------------------
+    def result(self, wall_time: float = 0.0, *,
+               metric_params: MetricParams | None = None) -> TrialResult:
+        """Samples, per-ring metrics, summary and trial metrics (module docstring)."""
+        from vasim.fixtures.schema import load_schema
+
+        view = self.samples.view()
+        n = self.task.n_rings
+        metrics, summary = evaluate_trial(
+            view["t"], view["x"], view["g"], view["goal_index"], self.task.rings,
+            r_reach=self.task.ring_radius,
+            t_reached=self.reach_times + [math.nan] * (n - len(self.reach_times)))
+        summary.update({
+            "finished": bool(self.i >= n), "sim_time": self.t, "steps": self.k + 1,
+            "schema": "none", "active_fixtures": "", "nonfinite_inputs": 0,
+            "scene": self.config.scene, "mode": self.mode, "task": "needle",
+            "n_rings": n, "n_transfers_needed": self.task.n_transfers,
+            **{k: int(v) for k, v in self.counts.items()},
+        })
+        if self.abdomen is not None:
+            summary.update({f"tissue_{k}": v
+                            for k, v in self.abdomen.quality.as_dict().items()})
+        tm = trial_metrics(view, summary=summary,
+                           params=metric_params if metric_params is not None else MetricParams())
+        tm.update({"master_path_l2": self.master_path, "camera_path_l2": self.camera.path,
+                   "transfers": float(self.counts["transfers"]),
+                   "regrasps": float(self.counts["regrasps"]),
+                   "misaligned_transfers": float(self.counts["misaligned_transfers"]),
+                   "safety_stops": float(self.counts["safety_stops"]),
+                   "tt_time": self.tt_time})
+        return TrialResult(config=self.config, schema=load_schema("none"),
+                           task=self.task.operator_task(self.task.rings, self.task.start),
+                           samples=self.samples, metrics=metrics, summary=summary,
+                           events=list(self.events), wall_time=wall_time, trial_metrics=tm)
+
+
+def _preset(skill: str) -> OperatorProfile:
+    return {"novice": OperatorProfile.novice, "expert": OperatorProfile.expert}.get(
+        skill, OperatorProfile.intermediate)()
+
+
+# ---------------------------------------------------------------------------- storing
+def teleop_meta(config: TrialConfig, *, session_id: int | None = None,
+                schedule_index: int | None = None, protocol: str | None = None) -> TrialMeta:
+    """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``)."""
+    from vasim.fixtures.schema import dumps_schema, load_schema
+    from vasim.study.store import TrialMeta
+    from vasim.study.trial import config_record
+
+    profile = config.profile if config.profile is not None else _preset(config.skill)
+    return TrialMeta(
+        subject=config.subject, task="needle", variant=0, schema="none",
+        operator=config.operator, seed=config.seed, dt=CYCLE_DT, active_fixtures="",
+        pid=os.getpid(), host=socket.gethostname(), config=config_record(config, profile),
+        schema_toml=dumps_schema(load_schema("none")), session_id=session_id,
+        schedule_index=schedule_index, protocol=protocol)
+
+
+def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
+    """``vasim.study.cohort.simulate_trial`` for a teleoperation trial (same dict)."""
+    t0 = time.perf_counter()
+    trial = TeleopTrial(config)
+    for _ in trial.cycles():
+        pass
+    result = trial.result(wall_time=time.perf_counter() - t0, metric_params=params)
+    cols = {k: np.array(v) for k, v in result.samples.columns().items()}
+    return {"columns": cols, "active_fixtures": "", "metrics": result.metrics,
+            "summary": result.summary, "events": result.events,
+            "trial_metrics": result.trial_metrics, "wall_time": result.wall_time,
+            "sim_time": float(result.summary["sim_time"])}
+
+
+def run_teleop_trial(config: TrialConfig, store: object | None = None, *,
+                     session_id: int | None = None, schedule_index: int | None = None,
+                     protocol: str | None = None, metric_params: MetricParams | None = None,
+                     n_rings: int | None = None, abdomen: Abdomen | None = None,
+                     ) -> tuple[TrialResult, int | None]:
+    """``vasim.study.trial.run_trial`` for a teleoperation mode: runs the trial headless and,
+    with a ``TrialStore``, stores it the same way (row 'running' first, everything in one
+    transaction at the end, 'interrupted' with the partial samples on any exception).
+
+    ``n_rings`` and ``abdomen`` are passed to :class:`TeleopTrial` (shorter tasks, a shared
+    abdomen in tests)."""
+    from vasim.study.store import TrialStore
+
+    trial = TeleopTrial(config, n_rings=n_rings, abdomen=abdomen)
+    trial_id: int | None = None
+    if store is not None:
+        if not isinstance(store, TrialStore):
+            raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
+        trial_id = store.begin_trial(teleop_meta(config, session_id=session_id,
+                                                 schedule_index=schedule_index,
+                                                 protocol=protocol))
+    t0 = time.perf_counter()
+    try:
+        for _ in trial.cycles():
+            pass
+        result = trial.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
+        if store is not None and trial_id is not None:
+            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
+                               events=result.events, trial_metrics=result.trial_metrics)
+    except BaseException as exc:
+        if store is not None and trial_id is not None:
+            partial = trial.result(wall_time=time.perf_counter() - t0,
+                                   metric_params=metric_params)
+            store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
+                                   samples=partial.samples, point_metrics=partial.metrics,
+                                   summary=partial.summary, events=partial.events,
+                                   trial_metrics=partial.trial_metrics)
+        raise
+    return result, trial_id
+
+
+__all__ = [
+    "CAMERA_FOV_DEG",
+    "CAMERA_ZOOM",
+    "CYCLE_DT",
+    "GRIPPER_TIME",
+    "OPERATOR_SUBSTEPS",
+    "TeleopTrial",
+    "kernel_config",
+    "needle_points",
+    "run_teleop_trial",
+    "simulate_teleop",
+    "teleop_meta",
+]
