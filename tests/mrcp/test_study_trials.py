@@ -154,3 +154,31 @@ def test_run_trial_dispatches_a_mode_and_same_seed_same_trial() -> None:
     np.testing.assert_array_equal(a.samples.view()["x"], b.samples.view()["x"])
     with pytest.raises(Exception, match="mode"):
         TrialConfig(mode="bimanual")
+
+
+def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
+    from vasim.mrcp.teleop import FAULT_ACK_TIME, MAX_SAFETY_STOPS
+
+    tr = TeleopTrial(TrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
+                     n_rings=2)
+    cycles = tr.cycles()
+    for _ in range(20):
+        next(cycles)
+    # an obstacle around the holder's tool tip: every move of RSel now collides
+    tr.station.world.add_sphere("block", tr.station.tip(tr.holder), 0.004)
+    for _ in cycles:
+        pass
+    res = tr.result()
+    ev = [(t, d) for t, k, d in res.events if k in ("mrcp", "aborted")]
+    stops = [t for t, d in ev if d.startswith("rsel_collision")]
+    acks = [t for t, d in ev if d == "safety stop acknowledged"]
+    assert len(stops) == MAX_SAFETY_STOPS + 1 and len(acks) == MAX_SAFETY_STOPS
+    assert ev[-1][1] == "repeated safety stops"
+    wait = tr.profile.reaction_delay + FAULT_ACK_TIME
+    for t_stop, t_ack in zip(stops, acks, strict=False):
+        assert t_ack - t_stop == pytest.approx(wait, abs=CYCLE_DT + 1e-9)
+    assert res.summary["safety_stops"] == MAX_SAFETY_STOPS + 1
+    assert not res.summary["finished"]
+    x = res.samples.view()["x"]
+    after = res.samples.view()["t"] >= stops[0]
+    np.testing.assert_array_equal(x[after], np.repeat(x[after][:1], after.sum(), axis=0))
