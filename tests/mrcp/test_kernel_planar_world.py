@@ -29,7 +29,8 @@ def test_segment_distance_against_dense_sampling(v: list[float]) -> None:
     brute = np.linalg.norm((p1 + np.outer(s, q1 - p1))[:, None]
                            - (p2 + np.outer(s, q2 - p2))[None], axis=-1).min()
     # Sampling at 1/400 of each segment overestimates by at most that step (<= 0.0087 m).
-    assert np.linalg.norm(ca - cb) <= brute + 1e-12
+    # segments shorter than sqrt(1e-15) m (~3e-8 m) are treated as points (planar.py)
+    assert np.linalg.norm(ca - cb) <= brute + 1e-7
     assert np.linalg.norm(ca - cb) >= brute - 0.01
     assert float(segment_distances(p1, q1, p2, q2)) == pytest.approx(np.linalg.norm(ca - cb),
                                                                        abs=1e-12)

@@ -36,7 +36,7 @@ import os
 import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pybullet as pb
@@ -47,9 +47,10 @@ from scipy.stats import qmc
 
 from vasim.errors import ConfigError
 from vasim.mrcp import dh
+from vasim.mrcp._distance_kernels import swept_distances, swept_pair_bounds
 from vasim.mrcp.dh import RobotModel
 from vasim.mrcp.interfaces import FloatArray, Proximity
-from vasim.mrcp.urdf import link_hulls, model_key, write_urdf
+from vasim.mrcp.urdf import link_hulls, link_sweep, model_key, write_urdf
 
 _NAN3 = np.full(3, np.nan)
 
@@ -292,9 +293,12 @@ class PybulletArm:
             restarts: how many spread configurations to try after the first three starts.
         """
         target = np.asarray(position, dtype=float)
-        if target.shape != (3,) or not np.all(np.isfinite(target)):
-            raise ValueError(f"{self.name}: position must be 3 finite numbers, got {position!r}")
-        if np.linalg.norm(target - self._shoulder) > self._reach:
+        if target.shape != (3,) or not math.isfinite(float(target.sum())):
+            if target.shape != (3,) or not np.all(np.isfinite(target)):
+                raise ValueError(f"{self.name}: position must be 3 finite numbers, got "
+                                 f"{position!r}")
+        dx, dy, dz = (target - self._shoulder).tolist()
+        if math.sqrt(dx * dx + dy * dy + dz * dz) > self._reach:
             return None
         rot = None if rotation is None else np.asarray(rotation, dtype=float)
         seed = self.robot.home if q_seed is None else np.asarray(q_seed, dtype=float)
@@ -360,6 +364,8 @@ class PybulletArm:
 
     def _refine(self, q0: FloatArray, target: FloatArray, rot: FloatArray | None,
                 tol_p: float, tol_r: float, iterations: int = 60) -> FloatArray | None:
+        if rot is None:     # the same iteration, compiled (dh.position_dls)
+            return dh.position_dls(self.robot, q0, target, self.base, tol_p, iterations)
         lower, upper = self.robot.lower, self.robot.upper
         q = np.clip(np.array(q0, dtype=float), lower, upper)
         damping = 1e-6
@@ -402,6 +408,31 @@ class PybulletArm:
 # ----------------------------------------------------------------------------- world
 
 _SELF_PAIRS: dict[str, tuple[tuple[int, int], ...]] = {}   # per model content
+#: Bodies the compiled model puts nearer than this [m] are queried in pybullet (exact);
+#: ``-inf``: only where the model has no estimate (the key-point hulls of two links meet,
+#: a deep penetration). The model's signed distances, penetrations included, are within
+#: ``COMPILED_TOLERANCE`` of pybullet's.
+REFINE_BELOW = -math.inf
+#: Direction improvements of the compiled model per link pair (see _distance_kernels).
+DIRECTION_ITERATIONS = 1
+#: The compiled model's distances are never above pybullet's by more than 1e-5 m and
+#: never below by more than this [m] (a conservative lower bound; measured: 0.82 mm, from
+#: the polytope's support direction and pybullet's 0.97-1.0 mm margin; held by
+#: tests/mrcp/test_world_distances.py on random configurations, penetrations included).
+COMPILED_TOLERANCE = 1e-3
+#: The compiled model is never more than this [m] above pybullet's distance.
+_ABOVE = 1e-5
+_PAIRS: dict[tuple[int, int], NDArray[np.int64]] = {}
+_SELF_PAIR_ARRAYS: dict[tuple[tuple[int, int], ...], NDArray[np.int64]] = {}
+
+
+def _self_pair_array(pairs: tuple[tuple[int, int], ...]) -> NDArray[np.int64]:
+    """Self-collision pairs (pybullet link indices) as model link indices ``(P, 2)``."""
+    if pairs not in _SELF_PAIR_ARRAYS:
+        _SELF_PAIR_ARRAYS[pairs] = np.array(pairs, dtype=np.int64).reshape(-1, 2) + 1
+    return _SELF_PAIR_ARRAYS[pairs]
+
+
 _THRESHOLDS = (0.01, 0.04, 0.16, 0.48)    # [m] the growing searches of _closest
 _SPHERES: dict[str, tuple[FloatArray, FloatArray]] = {}
 
@@ -421,6 +452,87 @@ def _link_spheres(model: RobotModel) -> tuple[FloatArray, FloatArray]:
     return _SPHERES[key]
 
 
+@dataclass(frozen=True)
+class _Sweep:
+    """A body as the compiled distance model sees it (``vasim.mrcp._distance_kernels``):
+    per link, key points ``(L, 3, 3)`` (link frame) and their count, the scale of the unit
+    polytope swept over them, a ball radius instead (> 0) and a bounding sphere."""
+
+    pts: FloatArray
+    count: NDArray[np.int64]
+    scale: FloatArray
+    ball: FloatArray
+    centre: FloatArray
+    radius: FloatArray
+
+
+_SWEEPS: dict[str, _Sweep] = {}
+_UNIT: list[NDArray[Any]] = []     # the unit polytope of the link hulls and its graph
+
+
+def _reduce_points(pts: FloatArray) -> FloatArray:
+    """Key points without duplicates; three collinear points -> the two extremes."""
+    out: list[FloatArray] = []
+    for p in pts:
+        if all(np.linalg.norm(p - o) > 1e-9 for o in out):
+            out.append(p)
+    if len(out) == 3:
+        area = np.linalg.norm(np.cross(out[1] - out[0], out[2] - out[0]))
+        if area <= 1e-9 * max(1.0, max(float(np.linalg.norm(o - out[0])) for o in out)):
+            dist = {(i, j): float(np.linalg.norm(out[i] - out[j]))
+                    for i in range(3) for j in range(i + 1, 3)}
+            i, j = max(dist, key=lambda ij: dist[ij])
+            out = [out[i], out[j]]
+    if len(out) > 3:
+        raise ValueError(f"the compiled distance model takes at most 3 key points per link, "
+                         f"got {len(out)}")
+    return np.array(out)
+
+
+def _neighbours(vertices: FloatArray) -> NDArray[np.int64]:
+    """``(V, k)`` neighbours of each vertex of a convex polytope (-1 padded), from the
+    faces of its hull (trimesh)."""
+    hull = trimesh.convex.convex_hull(np.asarray(vertices, dtype=float))
+    if len(hull.vertices) != len(vertices):
+        raise ValueError("every vertex of the sweeping polytope must lie on its hull")
+    # map the hull's vertex order back to ours
+    idx = [int(np.argmin(np.linalg.norm(vertices - v, axis=1))) for v in hull.vertices]
+    nb = hull.vertex_neighbors
+    width = max(len(n) for n in nb)
+    out = np.full((len(vertices), width), -1, dtype=np.int64)
+    for h, ns in enumerate(nb):
+        out[idx[h], :len(ns)] = [idx[k] for k in ns]
+    return out
+
+
+def _robot_sweep(model: RobotModel) -> _Sweep:
+    key = model_key(model)
+    if key not in _SWEEPS:
+        n_links = model.n_joints + 1
+        pts = np.zeros((n_links, 3, 3))
+        count = np.zeros(n_links, dtype=np.int64)
+        scale = np.zeros(n_links)
+        centre = np.zeros((n_links, 3))
+        radius = np.zeros(n_links)
+        for k in range(n_links):
+            raw, unit, sc = link_sweep(model, k)
+            p = _reduce_points(raw)
+            pts[k, :len(p)], count[k], scale[k] = p, len(p), sc
+            c = (p.min(axis=0) + p.max(axis=0)) / 2
+            centre[k] = c
+            radius[k] = float(np.max(np.linalg.norm(p - c, axis=1))) + sc + 1e-9
+            if not _UNIT:
+                _UNIT.append(np.ascontiguousarray(unit, dtype=float))
+                _UNIT.append(_neighbours(unit))
+        _SWEEPS[key] = _Sweep(pts, count, scale, np.zeros(n_links), centre, radius)
+    return _SWEEPS[key]
+
+
+def _sphere_sweep(radius: float) -> _Sweep:
+    return _Sweep(np.zeros((1, 3, 3)), np.ones(1, dtype=np.int64), np.zeros(1),
+                  np.array([float(radius)]), np.zeros((1, 3)), np.array([float(radius)]))
+
+
 @dataclass
 class _Robot:
     model: RobotModel
@@ -428,6 +540,7 @@ class _Robot:
     base: FloatArray
     q: FloatArray
     self_pairs: tuple[tuple[int, int], ...]
+    frames: FloatArray | None = None     # link frames at q (compiled model), lazily
 
 
 class PybulletWorld:
@@ -442,11 +555,17 @@ class PybulletWorld:
     e.g. the wrist housings, which overlap by construction).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, compiled_distances: bool = True,
+                 refine_below: float = REFINE_BELOW) -> None:
         self._client = _Client()
         self._cid = self._client.id
         self._robots: dict[str, _Robot] = {}
         self._obstacles: dict[str, int] = {}
+        self.compiled_distances = compiled_distances
+        self.refine_below = float(refine_below)
+        # sphere obstacles for the compiled model: name -> (model, (1, 4, 4) frame)
+        self._sphere_obstacles: dict[str, tuple[_Sweep, FloatArray]] = {}
+        self._packs: dict[tuple[str, ...], tuple[FloatArray, ...]] = {}
 
     # -- building ----------------------------------------------------------------------
     def _check_new(self, name: str) -> None:
@@ -495,7 +614,10 @@ class PybulletWorld:
         """Adds a static sphere obstacle."""
         shape = pb.createCollisionShape(pb.GEOM_SPHERE, radius=float(radius),
                                         physicsClientId=self._cid)
-        return self._add_obstacle(name, shape, position, None)
+        body = self._add_obstacle(name, shape, position, None)
+        self._sphere_obstacles[name] = (_sphere_sweep(radius),
+                                        pose_matrix(np.asarray(position, float))[None])
+        return body
 
     def add_convex(self, name: str, vertices: FloatArray, position: FloatArray | None = None,
                    rotation: FloatArray | None = None) -> int:
@@ -523,6 +645,9 @@ class PybulletWorld:
                           rotation: FloatArray | None = None) -> None:
         """Moves an obstacle (e.g. the seed's moving obstacle with a hole)."""
         body = self._obstacles[self._known(name, obstacle=True)]
+        if name in self._sphere_obstacles:
+            self._sphere_obstacles[name] = (self._sphere_obstacles[name][0],
+                                            pose_matrix(np.asarray(position, float))[None])
         pb.resetBasePositionAndOrientation(
             body, [float(v) for v in position],
             _quat(np.eye(3) if rotation is None else np.asarray(rotation)),
@@ -571,6 +696,8 @@ class PybulletWorld:
                                         physicsClientId=self._cid)
         r.q = q.copy()
         r.q.setflags(write=False)
+        if changed.size:
+            r.frames = None
 
     def configuration(self, robot: str) -> FloatArray:
         return self._robots[self._known(robot, robot=True)].q.copy()
@@ -591,6 +718,12 @@ class PybulletWorld:
         if a == b:
             raise ValueError(f"min_distance needs two different bodies, got {a!r} twice "
                              "(self-proximity: in_collision / self_collision_pairs)")
+        if self.compiled_distances:
+            pairs = self._all_pairs(a, b)
+            bounds = None if pairs is None else self._pair_bounds(
+                a, b, pairs, max_distance + _ABOVE, COMPILED_TOLERANCE + _ABOVE)
+            if bounds is not None and not np.any(np.isneginf(bounds)):
+                return self._min_distance_among(a, b, pairs, bounds, max_distance)
         spheres_a, spheres_b = self._spheres(a), self._spheres(b)
         body_a, body_b = self.body_id(a), self.body_id(b)
         ca, ra, la = spheres_a
@@ -611,6 +744,148 @@ class PybulletWorld:
                 if p[8] < best.distance:
                     best = Proximity(float(p[8]), np.array(p[5]), np.array(p[6]), int(p[3]),
                                      int(p[4]))
+        return best
+
+    def min_distances(self, robot: str, configs: FloatArray, bodies: Sequence[str],
+                      max_distance: float = 1.0) -> FloatArray:
+        """``(N, B)`` minimum distances from ``robot`` posed at each of ``configs`` ``(N, n)``
+        to each of ``bodies`` (other robots at their current configurations, obstacles),
+        capped at ``max_distance``: the values of posing the robot and calling
+        :meth:`min_distance` per body, within :data:`COMPILED_TOLERANCE`.
+
+        **Decision** (cost: the kernel makes hundreds of these queries per 18 ms cycle):
+        robots and sphere obstacles are answered by the compiled sphere-swept model of the
+        link hulls (``vasim.mrcp._distance_kernels``, a few µs per query, no pybullet call);
+        a pair the model puts nearer than ``refine_below`` (near contact, penetration), and
+        every other kind of obstacle, is queried in pybullet with the robot posed (exact).
+        ``compiled_distances=False`` queries everything in pybullet. The robot's pose in
+        the world is unchanged on return.
+        """
+        r = self._robots[self._known(robot, robot=True)]
+        qs = np.atleast_2d(np.asarray(configs, dtype=float))
+        if qs.shape[1:] != (r.model.n_joints,):
+            raise ValueError(f"{robot}: configs must have shape (N, {r.model.n_joints}), "
+                             f"got {qs.shape}")
+        names = list(bodies)
+        out = np.full((qs.shape[0], len(names)), float(max_distance))
+        exact: list[tuple[int, int]] = []
+        if self.compiled_distances:
+            sweep_a = _robot_sweep(r.model)
+            frames_a = np.ascontiguousarray(dh.frames_many(r.model, qs, r.base)[:, :-1])
+            modelled = [j for j, name in enumerate(names) if self._sweep_of(name) is not None]
+            exact = [(i, j) for j in range(len(names)) if j not in modelled
+                     for i in range(qs.shape[0])]
+            if modelled:
+                packed = self._packed([names[j] for j in modelled])
+                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]
+                                           for j in modelled])
+                dist = np.empty((qs.shape[0], len(modelled)))
+                swept_distances(frames_a, sweep_a.pts, sweep_a.count, sweep_a.scale,
+                                sweep_a.ball, sweep_a.centre, sweep_a.radius, frames_b,
+                                *packed, _UNIT[0], _UNIT[1], float(max_distance),
+                                DIRECTION_ITERATIONS, dist)
+                for col, j in enumerate(modelled):
+                    for i in range(qs.shape[0]):
+                        if dist[i, col] < self.refine_below:
+                            exact.append((i, j))
+                        else:
+                            out[i, j] = min(float(dist[i, col]), max_distance)
+        else:
+            exact = [(i, j) for i in range(qs.shape[0]) for j in range(len(names))]
+        if exact:
+            saved = r.q
+            try:
+                for i in sorted({i for i, _ in exact}):
+                    self.set_configuration(robot, qs[i])
+                    for ii, j in exact:
+                        if ii == i:
+                            out[i, j] = min(self.min_distance(robot, names[j],
+                                                              max_distance).distance,
+                                            max_distance)
+            finally:
+                self.set_configuration(robot, saved)
+        return out
+
+    def _sweep_of(self, name: str) -> tuple[_Sweep, FloatArray] | None:
+        """The compiled model of a body and its link frames, None if it has none."""
+        if name in self._robots:
+            o = self._robots[name]
+            if o.frames is None:
+                o.frames = np.ascontiguousarray(dh.frames_one(o.model, o.q, o.base)[:-1])
+            return _robot_sweep(o.model), o.frames
+        self._known(name)
+        return self._sphere_obstacles.get(name)
+
+    def _packed(self, names: list[str]) -> tuple[FloatArray, ...]:
+        """The static compiled-model arrays of several bodies stacked (key points, counts,
+        scales, balls, bounding centres and radii), their link starts and margins."""
+        key = tuple(names)
+        if key not in self._packs:
+            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]
+            counts = [s.pts.shape[0] for s in sweeps]
+            self._packs[key] = (
+                np.concatenate([s.pts for s in sweeps]),
+                np.concatenate([s.count for s in sweeps]),
+                np.concatenate([s.scale for s in sweeps]),
+                np.concatenate([s.ball for s in sweeps]),
+                np.concatenate([s.centre for s in sweeps]),
+                np.concatenate([s.radius for s in sweeps]),
+                np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+                np.array([HULL_MARGIN + (HULL_MARGIN if n in self._robots else 0.0)
+                          for n in names]))
+        return self._packs[key]
+
+    def _pair_bounds(self, a: str, b: str, pairs: NDArray[np.int64], cutoff: float,
+                     window: float = math.inf) -> FloatArray | None:
+        """Compiled-model distances ``(P,)`` of the link pairs ``pairs`` ``(P, 2)`` (model
+        link indices) of two bodies at their current poses (``inf``: surely ``>= cutoff`` or
+        more than ``window`` above the smallest); None when a body has no model."""
+        sa, sb = self._sweep_of(a), self._sweep_of(b)
+        if sa is None or sb is None:
+            return None
+        (ma, fa), (mb, fb) = sa, sb
+        margin = sum(HULL_MARGIN for n in (a, b) if n in self._robots)
+        out = np.empty(pairs.shape[0])
+        swept_pair_bounds(fa, ma.pts, ma.count, ma.scale, ma.ball, ma.centre, ma.radius, fb,
+                          mb.pts, mb.count, mb.scale, mb.ball, mb.centre, mb.radius, _UNIT[0],
+                          _UNIT[1], margin, float(cutoff), float(window), DIRECTION_ITERATIONS,
+                          np.ascontiguousarray(pairs[:, 0]), np.ascontiguousarray(pairs[:, 1]),
+                          out)
+        return out
+
+    def _all_pairs(self, a: str, b: str) -> NDArray[np.int64] | None:
+        sa, sb = self._sweep_of(a), self._sweep_of(b)
+        if sa is None or sb is None:
+            return None
+        la, lb = sa[1].shape[0], sb[1].shape[0]
+        key = (la, lb)
+        if key not in _PAIRS:
+            _PAIRS[key] = np.array([(i, j) for i in range(la) for j in range(lb)],
+                                   dtype=np.int64).reshape(-1, 2)
+        return _PAIRS[key]
+
+    def _min_distance_among(self, a: str, b: str, pairs: NDArray[np.int64],
+                            bounds: FloatArray, max_distance: float) -> Proximity:
+        """Exact :meth:`min_distance` from pybullet queries of only the link pairs that can
+        hold the minimum: the model's value of a pair is at most ``COMPILED_TOLERANCE``
+        below pybullet's and at most ``_ABOVE`` above it."""
+        best = Proximity(float(max_distance), _NAN3.copy(), _NAN3.copy())
+        if bounds.size == 0 or float(bounds.min()) >= max_distance + _ABOVE:
+            return best
+        body_a, body_b = self.body_id(a), self.body_id(b)
+        limit = float(bounds.min()) + COMPILED_TOLERANCE + _ABOVE
+        for p in np.argsort(bounds):
+            if bounds[p] > limit or bounds[p] >= best.distance + _ABOVE:
+                break
+            pts = pb.getClosestPoints(body_a, body_b, best.distance,
+                                      linkIndexA=int(pairs[p, 0]) - 1,   # pybullet: k - 1
+                                      linkIndexB=int(pairs[p, 1]) - 1,
+                                      physicsClientId=self._cid)
+            if pts:
+                q = min(pts, key=lambda x: x[8])
+                if q[8] < best.distance:
+                    best = Proximity(float(q[8]), np.array(q[5]), np.array(q[6]), int(q[3]),
+                                     int(q[4]))
         return best
 
     def _spheres(self, name: str) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
@@ -673,11 +948,23 @@ class PybulletWorld:
         for name in [*self._robots, *self._obstacles]:
             if name == robot:
                 continue
+            if self.compiled_distances:     # a model value > _ABOVE: surely apart
+                pairs = self._all_pairs(robot, name)
+                bounds = None if pairs is None else self._pair_bounds(robot, name, pairs,
+                                                                      2.0 * _ABOVE)
+                if bounds is not None and float(bounds.min()) > _ABOVE:
+                    continue
             pts = pb.getClosestPoints(r.body, self.body_id(name), 0.0,
                                       physicsClientId=self._cid)
             if any(p[8] <= 0.0 for p in pts):
                 return True
-        return any(self._links_touch(r.body, a, r.body, b) for a, b in r.self_pairs)
+        pairs = r.self_pairs
+        if self.compiled_distances and pairs:
+            idx = _self_pair_array(pairs)
+            bounds = self._pair_bounds(robot, robot, idx, 2.0 * _ABOVE)
+            if bounds is not None:
+                pairs = tuple(p for p, v in zip(pairs, bounds, strict=True) if v <= _ABOVE)
+        return any(self._links_touch(r.body, a, r.body, b) for a, b in pairs)
 
     def self_collision_pairs(self, robot: str) -> tuple[tuple[int, int], ...]:
         """The link pairs (pybullet indices) checked for self-collision."""

@@ -331,6 +331,116 @@ def _jacobian_kernel(frames: FloatArray, jac: FloatArray) -> None:  # pragma: no
         jac[5, i] = z[2]
 
 
+@njit(cache=True, nogil=True, fastmath=False)
+def _many_kernel(table: FloatArray, tcp: FloatArray, base: FloatArray, q: FloatArray,
+                 frames: FloatArray, jac: FloatArray, with_jacobian: bool
+                 ) -> None:  # pragma: no cover - compiled
+    """Frames ``(m, n + 2, 4, 4)`` (and Jacobians ``(m, 6, n)``) of ``m`` configurations."""
+    for k in range(q.shape[0]):
+        _chain_kernel(table, tcp, base, q[k], frames[k])
+        if with_jacobian:
+            _jacobian_kernel(frames[k], jac[k])
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _wrap_clip(q: FloatArray, lower: FloatArray, upper: FloatArray
+               ) -> FloatArray:  # pragma: no cover - compiled
+    """Each joint outside its limits moved by a multiple of 2π (-1, 1, -2, 2) into them
+    when one fits, then clamped (the projection of the numeric IK)."""
+    out = q.copy()
+    for i in range(q.shape[0]):
+        if not lower[i] <= out[i] <= upper[i]:
+            for k in (-1.0, 1.0, -2.0, 2.0):
+                cand = q[i] + k * 2.0 * np.pi
+                if lower[i] <= cand <= upper[i]:
+                    out[i] = cand
+                    break
+        out[i] = min(max(out[i], lower[i]), upper[i])
+    return out
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _position_dls_kernel(table: FloatArray, tcp: FloatArray, base: FloatArray,
+                         q0: FloatArray, target: FloatArray, lower: FloatArray,
+                         upper: FloatArray, tol: float, iterations: int, damping: float
+                         ) -> tuple[FloatArray, bool]:  # pragma: no cover - compiled
+    n = q0.shape[0]
+    q = np.minimum(np.maximum(q0, lower), upper)
+    frames = np.empty((n + 2, 4, 4))
+    jac = np.empty((6, n))
+    history = np.empty(iterations)
+    jj = np.empty((3, 3))
+    dq = np.empty(n)
+    for it in range(iterations):
+        _chain_kernel(table, tcp, base, q, frames)
+        _jacobian_kernel(frames, jac)
+        ep = target - frames[n + 1, :3, 3]
+        norm = np.sqrt(ep @ ep)
+        if norm <= tol:
+            return q, True
+        history[it] = norm
+        if it >= 8 and norm > 0.7 * history[it - 5]:     # stagnating: give this start up
+            return q, False
+        for a in range(3):
+            for b in range(3):
+                acc = 0.0
+                for c in range(n):
+                    acc += jac[a, c] * jac[b, c]
+                jj[a, b] = acc + (damping if a == b else 0.0)
+        # (J Jᵀ + λ I) x = e by Cholesky (symmetric positive definite: λ > 0)
+        l00 = np.sqrt(jj[0, 0])
+        l10 = jj[1, 0] / l00
+        l20 = jj[2, 0] / l00
+        l11 = np.sqrt(jj[1, 1] - l10 * l10)
+        l21 = (jj[2, 1] - l20 * l10) / l11
+        l22 = np.sqrt(jj[2, 2] - l20 * l20 - l21 * l21)
+        y0 = ep[0] / l00
+        y1 = (ep[1] - l10 * y0) / l11
+        y2 = (ep[2] - l20 * y0 - l21 * y1) / l22
+        x2 = y2 / l22
+        x1 = (y1 - l21 * x2) / l11
+        x0 = (y0 - l10 * x1 - l20 * x2) / l00
+        step = 0.0
+        for c in range(n):
+            dq[c] = jac[0, c] * x0 + jac[1, c] * x1 + jac[2, c] * x2
+            step = max(step, abs(dq[c]))
+        scale = 0.5 / step if step > 0.5 else 1.0
+        for c in range(n):
+            dq[c] = q[c] + dq[c] * scale
+        q = _wrap_clip(dq, lower, upper)
+    return q, False
+
+
+def position_dls(robot: RobotModel, q0: FloatArray, target: FloatArray,
+                 base: FloatArray | None = None, tol: float = 1e-6, iterations: int = 60,
+                 damping: float = 1e-6) -> FloatArray | None:
+    """Position-only damped least squares from ``q0`` (compiled): each step
+    ``dq = Jᵀ (J Jᵀ + λ I)⁻¹ e`` on the TCP's linear Jacobian, scaled to at most 0.5 rad,
+    joints wrapped by 2π into their limits then clamped; None when the error stagnates
+    (above 0.7 x its value 5 steps earlier, from step 8 on) or after ``iterations``. The
+    3 x 3 system is solved by an explicit Cholesky factorisation (no LAPACK call)."""
+    q, ok = _position_dls_kernel(
+        robot.table, robot.tcp,  # type: ignore[attr-defined]
+        _EYE4 if base is None else np.ascontiguousarray(base, dtype=float),
+        np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(target, dtype=float),
+        robot.lower, robot.upper, float(tol), int(iterations), float(damping))
+    return q if ok else None
+
+
+def frames_many(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
+                ) -> FloatArray:
+    """``(m, n + 2, 4, 4)`` frames of configurations ``(m, n)`` (compiled; the maths of
+    :func:`frames_one` per configuration)."""
+    q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+    if q.ndim != 2 or q.shape[1] != robot.n_joints:
+        raise ValueError(f"q must have shape (m, {robot.n_joints}), got {q.shape}")
+    frames = np.empty((q.shape[0], robot.n_joints + 2, 4, 4))
+    _many_kernel(robot.table, robot.tcp,  # type: ignore[attr-defined]
+                 _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), q,
+                 frames, np.empty((1, 6, robot.n_joints)), False)
+    return frames
+
+
 _EYE4 = np.eye(4)
 
 
@@ -382,8 +492,17 @@ def jacobian_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = N
     """Geometric TCP Jacobians ``(..., 6, n)`` (world frame, linear rows first).
 
     Column ``i`` of a revolute joint is ``[z_i x (p_tcp - p_i); z_i]`` with ``z_i``, ``p_i``
-    the axis and origin of joint frame ``i``.
+    the axis and origin of joint frame ``i``. A ``(m, n)`` batch is computed by the
+    compiled chain (one pass per configuration, no numpy temporaries).
     """
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 2 and q.shape[1] == robot.n_joints:
+        qc = np.ascontiguousarray(q)
+        jac = np.empty((q.shape[0], 6, robot.n_joints))
+        _many_kernel(robot.table, robot.tcp,  # type: ignore[attr-defined]
+                     _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), qc,
+                     np.empty((q.shape[0], robot.n_joints + 2, 4, 4)), jac, True)
+        return jac
     frames = link_frames(robot, q, base)
     n = robot.n_joints
     z = frames[..., 1:n + 1, :3, 2]                   # (..., n, 3)

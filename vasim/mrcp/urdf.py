@@ -41,15 +41,22 @@ def link_hull(robot: RobotModel, k: int) -> trimesh.Trimesh:
     The sphere is an icosphere scaled so that its faces lie *outside* the true sphere
     (circumscribed), so the hull contains every swept sphere.
     """
+    pts, unit, scale = link_sweep(robot, k)
+    cloud = (pts[:, None, :] + (unit * scale)[None, :, :]).reshape(-1, 3)
+    return trimesh.convex.convex_hull(cloud)
+
+
+def link_sweep(robot: RobotModel, k: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """The two parts of link ``k``'s hull ``conv(P) ⊕ conv(scale * S)``: the key points
+    ``P`` ``(m, 3)`` (link frame), the unit icosphere's vertices ``S`` ``(162, 3)`` and the
+    scale that circumscribes it about the link's sphere radius ``r`` (its faces at ``r``).
+    """
     radius = robot.links[k].radius if robot.links else 0.01
     # the inscribed radius of a subdivided icosphere: the smallest face-plane distance
     normals = _SPHERE.face_normals
     centroids = _SPHERE.triangles_center
     inradius = float(np.min(np.einsum("ij,ij->i", normals, centroids)))
-    sphere = _SPHERE.vertices * (radius / inradius)
-    pts = robot.link_key_points(k)
-    cloud = (pts[:, None, :] + sphere[None, :, :]).reshape(-1, 3)
-    return trimesh.convex.convex_hull(cloud)
+    return robot.link_key_points(k), np.asarray(_SPHERE.vertices), radius / inradius
 
 
 _HULLS: dict[str, tuple[trimesh.Trimesh, ...]] = {}

@@ -55,6 +55,45 @@ def sigma_min_many(jac: np.ndarray) -> np.ndarray:  # pragma: no cover - compile
 
 
 @njit(cache=True, nogil=True)
+def sigma_min_at_least(jac: np.ndarray, threshold: float
+                       ) -> np.ndarray:  # pragma: no cover - compiled
+    """``σ_min(J_i) >= threshold`` for each ``(N, r, n)`` matrix, ``r <= n``, without an
+    eigen-decomposition: ``J Jᵀ - threshold² I`` is positive definite (a Cholesky
+    factorisation succeeds). **Decision**: the same test as ``sigma_min_many(jac) >=
+    threshold`` except exactly at equality (and within round-off of it)."""
+    count, r, n = jac.shape
+    out = np.empty(count, dtype=np.bool_)
+    g = np.empty((r, r))
+    low = np.zeros((r, r))
+    t2 = threshold * threshold
+    for k in range(count):
+        for i in range(r):
+            for j in range(i + 1):
+                acc = 0.0
+                for c in range(n):
+                    acc += jac[k, i, c] * jac[k, j, c]
+                g[i, j] = acc
+        for i in range(r):
+            g[i, i] -= t2
+        ok = True
+        for j in range(r):
+            d = g[j, j]
+            for c in range(j):
+                d -= low[j, c] * low[j, c]
+            if not d > 0.0:
+                ok = False
+                break
+            low[j, j] = np.sqrt(d)
+            for i in range(j + 1, r):
+                acc = g[i, j]
+                for c in range(j):
+                    acc -= low[i, c] * low[j, c]
+                low[i, j] = acc / low[j, j]
+        out[k] = ok or (threshold <= 0.0)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _psi(left: np.ndarray, sig: np.ndarray, u: np.ndarray) -> float:  # pragma: no cover
     """ψ along unit ``u`` from the SVD (``left`` m x m, ``sig`` padded to m)."""
     m = left.shape[0]
@@ -114,6 +153,103 @@ def _phi(origin: np.ndarray, left: np.ndarray, sig: np.ndarray, dest: np.ndarray
 
 
 @njit(cache=True, nogil=True)
+def _gram_inverse(a: np.ndarray, ginv: np.ndarray) -> float:  # pragma: no cover - compiled
+    """``(A Aᵀ)⁻¹`` of a wide ``(m, n)`` matrix into ``ginv`` by Cholesky, and
+    ``det(A Aᵀ)``; returns -1 when ``det < 1e-12 trace^m`` (then ``λ_min / λ_max`` may be
+    below 1e-12 and the caller takes the SVD route, which tells lost directions apart)."""
+    m, n = a.shape
+    g = np.empty((m, m))
+    trace = 0.0
+    for i in range(m):
+        for j in range(i + 1):
+            acc = 0.0
+            for c in range(n):
+                acc += a[i, c] * a[j, c]
+            g[i, j] = acc
+            g[j, i] = acc
+        trace += g[i, i]
+    low = np.zeros((m, m))
+    det = 1.0
+    for j in range(m):
+        d = g[j, j]
+        for c in range(j):
+            d -= low[j, c] * low[j, c]
+        if d <= 0.0:
+            return -1.0
+        low[j, j] = np.sqrt(d)
+        det *= d
+        for i in range(j + 1, m):
+            acc = g[i, j]
+            for c in range(j):
+                acc -= low[i, c] * low[j, c]
+            low[i, j] = acc / low[j, j]
+    if det < 1e-12 * trace ** m:
+        return -1.0
+    # inverse of L, then (L Lᵀ)⁻¹ = L⁻ᵀ L⁻¹
+    linv = np.zeros((m, m))
+    for i in range(m):
+        linv[i, i] = 1.0 / low[i, i]
+        for j in range(i):
+            acc = 0.0
+            for c in range(j, i):
+                acc -= low[i, c] * linv[c, j]
+            linv[i, j] = acc / low[i, i]
+    for i in range(m):
+        for j in range(m):
+            acc = 0.0
+            for c in range(max(i, j), m):
+                acc += linv[c, i] * linv[c, j]
+            ginv[i, j] = acc
+    return det
+
+
+@njit(cache=True, nogil=True)
+def _phi_gram(origin: np.ndarray, ginv: np.ndarray, det: float, dest: np.ndarray,
+              dens: np.ndarray, ok: np.ndarray) -> float:  # pragma: no cover - compiled
+    """:func:`_phi` for a well-conditioned Jacobian from its Gram inverse:
+    ``ψ_u = (uᵀ (J Jᵀ)⁻¹ u)^(-1/2)`` (= the SVD form ``(Σ_j (u·U_j)² / σ_j²)^(-1/2)``) and
+    the geometric mean of the singular values ``det(J Jᵀ)^(1/2m)``."""
+    m = origin.shape[0]
+    total = 0.0
+    acc = 0.0
+    u = np.empty(m)
+    still = det ** (1.0 / (2.0 * m))
+    for b in range(dest.shape[0]):
+        total += dens[b]
+        if not ok[b]:
+            continue
+        norm = 0.0
+        for j in range(m):
+            u[j] = dest[b, j] - origin[j]
+            norm += u[j] * u[j]
+        norm = np.sqrt(norm)
+        if norm > 1e-9:
+            quad = 0.0
+            for i in range(m):
+                row = 0.0
+                for j in range(m):
+                    row += ginv[i, j] * u[j]
+                quad += u[i] * row
+            quad /= norm * norm
+            acc += dens[b] * (1.0 / np.sqrt(quad) if quad > 0.0 else 0.0)
+        else:
+            acc += dens[b] * still
+    return acc / total
+
+
+@njit(cache=True, nogil=True)
+def _phi_of(origin: np.ndarray, jac: np.ndarray, dest: np.ndarray, dens: np.ndarray,
+            ok: np.ndarray, ginv: np.ndarray) -> float:  # pragma: no cover - compiled
+    """Φ from ``origin`` with the task Jacobian ``jac``: the Gram route when it is well
+    conditioned (**decision**: the same value in exact arithmetic, no SVD), else the SVD."""
+    det = _gram_inverse(jac, ginv)
+    if det > 0.0:
+        return _phi_gram(origin, ginv, det, dest, dens, ok)
+    left, sig = _svd_padded(jac)
+    return _phi(origin, left, sig, dest, dens, ok)
+
+
+@njit(cache=True, nogil=True)
 def theta_segments(pos: np.ndarray, std: np.ndarray, z: np.ndarray, dens: np.ndarray,
                    reach: np.ndarray, jac_pts: np.ndarray, jac_s: np.ndarray,
                    ok0: bool, ok: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
@@ -143,19 +279,19 @@ def theta_segments(pos: np.ndarray, std: np.ndarray, z: np.ndarray, dens: np.nda
     total = 0.0
     for s in range(s_count):
         total += dens[s]
+    ginv = np.empty((m, m))
     for k in range(kk):
         if not (reach[k] and reach[k + 1]):
             continue
         if k == 0:
             if ok0:
-                left, sig = _svd_padded(jac_pts[0])
-                seg[0] = _phi(pos[0], left, sig, samp[0], dens, ok[0])
+                seg[0] = _phi_of(pos[0], jac_pts[0], samp[0], dens, ok[0], ginv)
             continue
         acc = 0.0
         for a in range(s_count):
             if not ok[k - 1, a]:
                 continue
-            left, sig = _svd_padded(jac_s[k - 1, a])
-            acc += dens[a] * _phi(samp[k - 1, a], left, sig, samp[k], dens, ok[k])
+            acc += dens[a] * _phi_of(samp[k - 1, a], jac_s[k - 1, a], samp[k], dens, ok[k],
+                                     ginv)
         seg[k] = acc / total
     return seg

@@ -20,6 +20,7 @@ visibility index.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 
 import numpy as np
@@ -43,15 +44,15 @@ def impact_time(times: FloatArray, distances: FloatArray, t_max: float) -> float
         >>> round(impact_time(np.array([0.0, 0.1]), np.array([0.3, 0.2]), 5.0), 9)  # 1 m/s
         0.3
     """
-    t = np.asarray(times, dtype=np.float64) - float(times[0])
-    d = np.asarray(distances, dtype=np.float64)
+    t = (np.asarray(times, dtype=np.float64) - float(times[0])).tolist()
+    d = np.asarray(distances, dtype=np.float64).tolist()    # Python floats: same IEEE maths
     best = float(t_max)
-    for k in range(d.shape[0]):
-        if not np.isfinite(d[k]):
+    for k in range(len(d)):
+        if not math.isfinite(d[k]):
             continue
         if d[k] <= 0.0:
             return float(min(best, t[k]))
-        if k + 1 < d.shape[0] and np.isfinite(d[k + 1]):
+        if k + 1 < len(d) and math.isfinite(d[k + 1]):
             v = -(d[k + 1] - d[k]) / (t[k + 1] - t[k])
             if v > 0.0:
                 best = min(best, t[k] + d[k] / v)

@@ -33,7 +33,12 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.mrcp.indices._theta_kernels import sample_configs, sigma_min_many, theta_segments
+from vasim.mrcp.indices._theta_kernels import (
+    sample_configs,
+    sigma_min_at_least,
+    sigma_min_many,
+    theta_segments,
+)
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
 from vasim.mrcp.indices.measures import (
     directional_manipulability,
@@ -118,12 +123,14 @@ class AnisotropicDexterityIndex:
         q_samp = sample_configs(std, z, configs, jac)                       # (K, S, n)
         full_s = jacobians(ctx.arm, q_samp.reshape(-1, n))                  # (K S, 6, n)
         tr = list(self.threshold_rows)
-        smin = sigma_min_many(np.ascontiguousarray(
-            np.concatenate([full[:1, tr, :], full_s[:, tr, :]])))
         thr = self.sigma_min_threshold
-        ok = (smin[1:].reshape(kk, s_count) >= thr) & reach[1:, None]
+        passes = sigma_min_at_least(np.ascontiguousarray(
+            np.concatenate([full[:1, tr, :], full_s[:, tr, :]])), thr) if len(tr) <= n \
+            else sigma_min_many(np.ascontiguousarray(
+                np.concatenate([full[:1, tr, :], full_s[:, tr, :]]))) >= thr
+        ok = passes[1:].reshape(kk, s_count) & reach[1:, None]
         jac_s = np.ascontiguousarray(full_s[:, rows, :].reshape(kk, s_count, m, n))
-        seg = theta_segments(pos, std, z, dens, reach, jac, jac_s, bool(smin[0] >= thr), ok)
+        seg = theta_segments(pos, std, z, dens, reach, jac, jac_s, bool(passes[0]), ok)
         w = prediction_weights(kk)
         return float((w * seg).sum() / w.sum())
 
