@@ -21,12 +21,13 @@ Registrar = Callable[["argparse._SubParsersAction[argparse.ArgumentParser]"], No
 def _registrars() -> list[Registrar]:
     from vasim.fixtures import cli as fixtures_cli
     from vasim.haptics import cli as haptics_cli
+    from vasim.mrcp import cli as mrcp_cli
     from vasim.study import cli as study_cli
     from vasim.study import report_cli, stats_cli
     from vasim.viewer import cli as viewer_cli
 
     return [study_cli.register, viewer_cli.register, fixtures_cli.register, stats_cli.register,
-            haptics_cli.register, report_cli.register]
+            haptics_cli.register, report_cli.register, mrcp_cli.register]
 
 
 def build_parser() -> argparse.ArgumentParser:

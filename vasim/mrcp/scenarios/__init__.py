@@ -1,0 +1,35 @@
+"""Scripted MRCP scenarios of the seed (issue #7 §3 and §5), one module each, and their registry.
+
+``SCENARIOS`` maps a name to a scenario object (``name``, ``summary``, ``duration``,
+``build(options) -> Setup``); :func:`vasim.mrcp.scenarios.runner.run` runs one through the
+MRCP kernel; ``vasim mrcp run NAME`` is the command line.
+"""
+
+from __future__ import annotations
+
+from vasim.errors import ConfigError
+from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
+from vasim.mrcp.scenarios.cube_rotation import CubeRotation
+from vasim.mrcp.scenarios.cube_translation import CubeTranslation
+from vasim.mrcp.scenarios.faucet import Faucet
+from vasim.mrcp.scenarios.laparoscopic_rings import LaparoscopicRings
+from vasim.mrcp.scenarios.obstacle_hole import ObstacleHole
+
+SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
+    CubeRotation(), CubeTranslation(), ObstacleHole(), LaparoscopicRings(), Faucet())}
+
+
+def get_scenario(name: str) -> Scenario:
+    """The registered scenario ``name``.
+
+    Raises:
+        ConfigError: for an unknown name (the known names are listed).
+    """
+    try:
+        return SCENARIOS[name]
+    except KeyError:
+        raise ConfigError(f"unknown scenario {name!r}; known: {sorted(SCENARIOS)}",
+                          field="scenario") from None
+
+
+__all__ = ["SCENARIOS", "Scenario", "ScenarioOptions", "Setup", "get_scenario"]

@@ -1,0 +1,237 @@
+"""Runs a scenario through the MRCP kernel and keeps what the seed plots (Figs. 4.23-4.26).
+
+Every cycle the runner calls the scenario's ``on_cycle`` hook (moving obstacles), asks the
+operator (:class:`TrackingOperator` following the scenario's script) for the commanded task
+pose, steps :class:`~vasim.mrcp.kernel.MRCPKernel`, and
+checks the invariants of the platform (issue #7 §5): the task is never ungrasped (some robot
+holds it, RSel among the holders, and RSel's TCP is at the held point), RSel never collides,
+no joint leaves its limits. Violations are collected (:attr:`RunResult.violations`), never
+raised, so a run always yields its log and plot.
+
+**Decision** (the controller): the kernel poses its world at the commanded configurations
+and the scenario runs with an ideal controller (the measured configuration is the
+commanded one, as in the kernel's own tests); the kernel already bounds every joint step by
+the robots' speed limits, which is the controller emulator's safety layer.
+
+Per cycle the runner keeps, for every robot, the pair the seed plots: RSel at CuTP, a
+candidate at its best point (largest ``tus``) — its index values, ``texec`` per index and
+their minimum, ``ttransf*`` and ``tus`` — and NTT and RSel (:class:`Sample`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from vasim.mrcp.interfaces import FloatArray
+from vasim.mrcp.kernel import CycleRecord, MRCPKernel
+from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
+
+
+@dataclass(frozen=True)
+class RobotSample:
+    """One robot's evaluation in one cycle (at CuTP for RSel, at its best point otherwise)."""
+
+    point: int
+    values: dict[str, float]
+    texec: dict[str, float]
+    texec_min: float
+    ttransf: float
+    tus: float
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One cycle: mode, roles, NTT and the per-robot evaluations (TOp cycles only), the
+    commanded configurations, the achieved task pose (behind the operator's script after a
+    transfer until :class:`TrackingOperator` has caught up) and the robots in collision
+    (candidates included: the planner's moves must avoid obstacles too)."""
+
+    t: float
+    state: str
+    rsel: str
+    cutp: int
+    holders: tuple[str, ...]
+    rcnt: str | None
+    ntt: float
+    robots: dict[str, RobotSample]
+    events: tuple[str, ...]
+    configs: dict[str, FloatArray]
+    task_position: FloatArray
+    task_rotation: FloatArray | None
+    colliding: tuple[str, ...] = ()
+
+
+@dataclass
+class RunResult:
+    """A finished run: samples, the event log, invariant violations, the final state."""
+
+    scenario: str
+    robots: list[str]
+    samples: list[Sample]
+    violations: list[str]
+    notes: dict[str, Any] = field(default_factory=dict)
+
+    def events(self, prefix: str = "") -> list[tuple[float, str]]:
+        """``(t, event)`` of every event starting with ``prefix``."""
+        return [(s.t, e) for s in self.samples for e in s.events if e.startswith(prefix)]
+
+    def transfers(self) -> list[dict[str, Any]]:
+        """The task transfers: start time, giving and receiving robot, point, NTT, cause,
+        and the completion time (None when aborted or unfinished)."""
+        out: list[dict[str, Any]] = []
+        for s in self.samples:
+            for e in s.events:
+                if e.startswith("transfer_start"):
+                    parse = _parse_start(e)
+                    out.append({"t_start": s.t, "from": s.rsel, **parse, "t_done": None})
+                elif e.startswith("transfer_done") and out:
+                    out[-1]["t_done"] = s.t
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"scenario": self.scenario, "robots": self.robots,
+                "duration": self.samples[-1].t if self.samples else 0.0,
+                "cycles": len(self.samples), "transfers": self.transfers(),
+                "events": [{"t": round(t, 4), "event": e} for t, e in self.events()],
+                "violations": self.violations, "final_rsel": self.samples[-1].rsel
+                if self.samples else None, "notes": self.notes}
+
+
+def _parse_start(event: str) -> dict[str, Any]:
+    """``"transfer_start r1@3 (ntt=0.93, cause=rj)"`` -> to, point, ntt, cause."""
+    head, _, tail = event.partition(" (")
+    who = head.split()[1]
+    robot, _, point = who.partition("@")
+    fields = dict(kv.split("=", 1) for kv in tail.rstrip(")").split(", ") if "=" in kv)
+    return {"to": robot, "point": int(point), "ntt": float(fields.get("ntt", "nan")),
+            "cause": fields.get("cause", "")}
+
+
+def _robot_samples(rec: CycleRecord, robots: list[str]) -> dict[str, RobotSample]:
+    out: dict[str, RobotSample] = {}
+    if not rec.evaluations:
+        return out
+    for r in robots:
+        keys = [k for k in rec.evaluations if k[0] == r]
+        if not keys:
+            continue
+        key = ((r, rec.cutp) if (r, rec.cutp) in rec.evaluations and r == rec.rsel
+               else max(keys, key=lambda k: (rec.evaluations[k].tus, -k[1])))
+        ev = rec.evaluations[key]
+        out[r] = RobotSample(key[1], dict(ev.values), dict(ev.texec), ev.texec_min,
+                             ev.ttransf, ev.tus)
+    return out
+
+
+def check_invariants(kernel: MRCPKernel, setup: Setup, rec: CycleRecord) -> list[str]:
+    """The platform's invariants after one cycle (empty when all hold)."""
+    bad = []
+    t = rec.t
+    if not rec.holders:
+        bad.append(f"t={t:.3f}: task ungrasped")
+    if rec.rsel not in rec.holders:
+        bad.append(f"t={t:.3f}: RSel {rec.rsel} not among the holders {rec.holders}")
+    if setup.world.in_collision(rec.rsel):
+        bad.append(f"t={t:.3f}: RSel {rec.rsel} in collision")
+    for name, arm in setup.arms.items():
+        q = setup.world.configuration(name)
+        if np.any(q < arm.joint_lower - 1e-9) or np.any(q > arm.joint_upper + 1e-9):
+            bad.append(f"t={t:.3f}: {name} outside its joint limits: {np.round(q, 4)}")
+    rot = rec.task_rotation if rec.task_rotation is not None else np.eye(3)
+    for holder, point in ((rec.rsel, rec.cutp),):
+        held, _ = kernel.point_pose(point, rec.task_position, rot)
+        tcp, _ = setup.arms[holder].tcp_pose(setup.world.configuration(holder))
+        gap = float(np.linalg.norm(tcp - held))
+        if gap > 1e-4:
+            bad.append(f"t={t:.3f}: {holder} is {gap * 1e3:.1f} mm off its task point {point}")
+    return bad
+
+
+@dataclass(frozen=True)
+class TrackingOperator:
+    """The operator's hand on the master: each cycle it moves the task from where it is
+    toward where the script wants it, at a bounded speed.
+
+    **Decision**: the kernel applies the master's *increments* in TOp and discards them in
+    TT (the operator is decoupled while the task changes hands). A script replayed as
+    absolute poses would then leave the task behind by every increment lost in TT — a cube
+    put down "on the table" would end below it. A human watches the task and steers it to
+    the target instead; so does this operator: increment = target - achieved pose, limited
+    to ``max_speed`` [m/s] and ``max_rate`` [rad/s] (it catches up after a transfer at that
+    rate, as a person would, rather than in one jump the robot would refuse).
+    """
+
+    max_speed: float = 0.2
+    max_rate: float = float(np.radians(120.0))
+
+    def command(self, target: tuple[FloatArray, FloatArray | None],
+                achieved: tuple[FloatArray, FloatArray | None],
+                last: tuple[FloatArray, FloatArray | None], dt: float
+                ) -> tuple[FloatArray, FloatArray | None]:
+        """The next commanded master pose, given the script's target, the achieved task
+        pose and the last command."""
+        err = np.asarray(target[0], float) - np.asarray(achieved[0], float)
+        n = float(np.linalg.norm(err))
+        step = err if n <= self.max_speed * dt else err * (self.max_speed * dt / n)
+        pos = np.asarray(last[0], float) + step
+        if target[1] is None or last[1] is None:
+            return pos, None
+        ach = np.eye(3) if achieved[1] is None else np.asarray(achieved[1], float)
+        rv = Rotation.from_matrix(np.asarray(target[1], float) @ ach.T).as_rotvec()
+        a = float(np.linalg.norm(rv))
+        if a > self.max_rate * dt:
+            rv = rv * (self.max_rate * dt / a)
+        return pos, Rotation.from_rotvec(rv).as_matrix() @ np.asarray(last[1], float)
+
+
+def run_setup(name: str, setup: Setup, duration: float | None = None,
+              progress: Callable[[Sample], None] | None = None) -> RunResult:
+    """Runs a built scenario for ``duration`` (default: its own) and closes it."""
+    cfg = setup.config
+    pos0, rot0 = setup.operator(0.0)
+    hand = TrackingOperator()
+    last: tuple[FloatArray, FloatArray | None] = (np.asarray(pos0, float), rot0)
+    achieved: tuple[FloatArray, FloatArray | None] = last
+    kernel = MRCPKernel(setup.arms, setup.world, setup.task_points, setup.rsel, setup.cutp,
+                        pos0, rot0, config=cfg)
+    robots = list(setup.arms)
+    samples: list[Sample] = []
+    violations: list[str] = []
+    total = setup.duration if duration is None else duration
+    try:
+        for i in range(math.floor(total / cfg.dt + 1e-9)):
+            t = (i + 1) * cfg.dt
+            if setup.on_cycle is not None:
+                setup.on_cycle(t, setup.world)
+            pos, rot = hand.command(setup.operator(t), achieved, last, cfg.dt)
+            extras = setup.extras(t) if setup.extras is not None else None
+            rec = kernel.step(t, pos, rot, extras=extras)
+            last = (pos, rot)
+            achieved = (rec.task_position, rec.task_rotation)
+            violations.extend(check_invariants(kernel, setup, rec))
+            ntt = rec.continuity.ntt if rec.continuity is not None else math.nan
+            s = Sample(t, rec.state.value, rec.rsel, rec.cutp, rec.holders, rec.rcnt, ntt,
+                       _robot_samples(rec, robots), tuple(rec.events),
+                       {r: q.copy() for r, q in rec.commands.items()},
+                       rec.task_position.copy(),
+                       None if rec.task_rotation is None else rec.task_rotation.copy(),
+                       tuple(r for r in robots if setup.world.in_collision(r)))
+            samples.append(s)
+            if progress is not None:
+                progress(s)
+    finally:
+        setup.close()
+    return RunResult(name, robots, samples, violations, dict(setup.notes))
+
+
+def run(scenario: Scenario, options: ScenarioOptions | None = None,
+        progress: Callable[[Sample], None] | None = None) -> RunResult:
+    """Builds and runs a scenario."""
+    opts = options or ScenarioOptions()
+    return run_setup(scenario.name, scenario.build(opts), opts.duration, progress)
