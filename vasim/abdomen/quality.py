@@ -18,6 +18,14 @@ Definitions (each integral is a left Riemann sum over the physics steps, dt each
 where ``p_free`` is where the target would be with the physiological motion alone (no tool):
 the displacement the operator caused, not breathing.
 
+Several instruments (**decision**, issue #7 §4, :meth:`TissueQuality.add_instruments`): a
+step is "in contact" when any instrument touches tissue (delicate: any instrument on a
+delicate organ); the force and torque of a step are the sums of the instruments'
+magnitudes, ``|F| = Σ_i |F_i|`` and ``|τ| = Σ_i |τ_i|`` (each instrument loads the tissue on
+its own: opposite pushes do not cancel, and each torque is about its own trocar);
+``max_force`` is the largest such sum. With one instrument this is :meth:`TissueQuality.add`,
+bit for bit.
+
 Example:
     >>> q = TissueQuality()
     >>> for f in (0.0, 1.0, 1.0, 0.0, 2.0):
@@ -59,8 +67,42 @@ class TissueQuality:
             in_contact: bool, delicate_contact: bool = False,
             target_displacement: float = 0.0) -> None:
         """Accounts one physics step of length ``dt`` [s]."""
-        f = _norm(force)
-        tau = _norm(torque)
+        self._accumulate(dt, _norm(force), _norm(torque), in_contact, delicate_contact,
+                         target_displacement)
+
+    def add_instruments(self, dt: float, *, forces: Sequence[Sequence[float]],
+                        torques: Sequence[Sequence[float]], in_contact: bool,
+                        delicate_contact: bool = False,
+                        target_displacement: float = 0.0) -> None:
+        """Accounts one physics step with several instruments (module docstring).
+
+        Args:
+            dt: step length [s].
+            forces: per instrument, (3,) contact force on it [N].
+            torques: per instrument, (3,) contact torque about its fulcrum [N·m].
+            in_contact: any instrument touches tissue.
+            delicate_contact: any instrument touches a delicate organ.
+            target_displacement: largest target displacement this step [m].
+
+        Raises:
+            ValueError: ``forces`` and ``torques`` differ in length.
+
+        Example:
+            >>> q = TissueQuality()
+            >>> q.add_instruments(0.5, forces=[(3.0, 0, 0), (-4.0, 0, 0)],
+            ...                   torques=[(0, 0, 0.1), (0, 0, -0.1)], in_contact=True)
+            >>> q.force_integral, q.torque_integral, q.max_force
+            (3.5, 0.1, 7.0)
+        """
+        if len(forces) != len(torques):
+            raise ValueError(f"one torque per instrument force: got {len(forces)} forces and "
+                             f"{len(torques)} torques")
+        f = sum((_norm(v) for v in forces), 0.0)   # 0.0 + |F_0| == |F_0|, bit for bit
+        tau = sum((_norm(v) for v in torques), 0.0)
+        self._accumulate(dt, f, tau, in_contact, delicate_contact, target_displacement)
+
+    def _accumulate(self, dt: float, f: float, tau: float, in_contact: bool,
+                    delicate_contact: bool, target_displacement: float) -> None:
         if not (math.isfinite(f) and math.isfinite(tau) and math.isfinite(target_displacement)):
             return  # a non-finite step is reported by the solver; it never enters the metrics
         self.duration += dt

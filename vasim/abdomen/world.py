@@ -27,6 +27,21 @@ reaction forces go to the organ's solver as external forces for the next step; a
 with a delicate organ (the vessel) counts as damage. The wall is kinematic: the trocars stay
 where the wall puts them and the shaft passes through it without contact.
 
+Several instruments (**decision**, issue #7 §4: in the MRCP study both tools and the
+endoscope are in the abdomen). :meth:`Abdomen.step` takes one :class:`ToolPose`, a sequence
+of them or a mapping name -> pose. Each instrument is detected against the tissue on its own
+(same capsule, :attr:`Abdomen.tool`); the reaction forces of every instrument act on the
+tissue, summed per node (the instruments' contacts concatenated in instrument order, one
+scatter). The snapshot reports each instrument's result in :attr:`AbdomenSnapshot.tools`;
+its top-level ``force`` / ``torque`` / ``patch`` / ``touching`` / ``delicate_contact`` are
+the *first* instrument's (the haptic one, as with a single tool), while
+:attr:`AbdomenSnapshot.any_contact`, ``touching_any`` and ``delicate_any`` cover them all.
+The quality accumulator counts contact time while any instrument touches, the force and
+torque as the sum over instruments of their magnitudes (``Σ_i |F_i|``, ``Σ_i |τ_i|``: two
+tools pressing opposite ways load the tissue twice, they do not cancel; each torque is about
+its own trocar, so only magnitudes add meaningfully) and delicate contacts by any
+instrument. A single pose (or a 1-tuple) is the single-tool path, bit for bit.
+
 Example:
     >>> import numpy as np
     >>> from vasim.abdomen.contact import ToolPose
@@ -43,7 +58,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
 from pathlib import Path
@@ -181,6 +196,36 @@ class OrganView:
 
 
 @dataclass(frozen=True, eq=False)
+class ToolContact:
+    """One instrument's contact result in a snapshot (arrays read-only).
+
+    Attributes:
+        name: the instrument's name (the mapping key given to :meth:`Abdomen.step`, else its
+            position in the sequence, ``"0"``, ``"1"``, ...).
+        force: (3,) total contact force on this instrument [N].
+        force_tip: (3,) contact force felt at its tip [N].
+        torque: (3,) contact torque about its fulcrum [N·m].
+        stiffness_tip: (3, 3) dF_tip/dx [N/m].
+        patch: its contact planes for a 1 kHz force model.
+        touching: names of the organs it touches (scene order).
+        delicate_contact: it touches a delicate organ.
+    """
+
+    name: str
+    force: FloatArray
+    force_tip: FloatArray
+    torque: FloatArray
+    stiffness_tip: FloatArray
+    patch: ContactPatch = field(repr=False)
+    touching: tuple[str, ...]
+    delicate_contact: bool
+
+    @property
+    def in_contact(self) -> bool:
+        return bool(self.touching)
+
+
+@dataclass(frozen=True, eq=False)
 class AbdomenSnapshot:
     """The abdomen after one physics step (immutable: arrays are read-only copies).
 
@@ -192,14 +237,16 @@ class AbdomenSnapshot:
         target_normals: (p, 3) unit normals of the tissue under the targets.
         target_displacement: (p,) distance of each target from where the physiological
             motion alone would put it [m] (what the tool did to it).
-        force: (3,) total contact force on the tool [N].
-        force_tip: (3,) contact force felt at the tip [N].
-        torque: (3,) contact torque about the fulcrum [N·m].
-        stiffness_tip: (3, 3) dF_tip/dx [N/m].
-        patch: contact planes for the 1 kHz force model.
-        touching: names of the organs in contact.
-        delicate_contact: a delicate organ is touched.
+        force: (3,) total contact force on the (first) tool [N].
+        force_tip: (3,) contact force felt at the (first) tool's tip [N].
+        torque: (3,) contact torque about the (first) tool's fulcrum [N·m].
+        stiffness_tip: (3, 3) dF_tip/dx of the first tool [N/m].
+        patch: the first tool's contact planes for the 1 kHz force model.
+        touching: names of the organs the first tool touches.
+        delicate_contact: the first tool touches a delicate organ.
         events: (kind, detail) of what happened in this step (e.g. an organ reset).
+        tools: every instrument's result, in the order given to :meth:`Abdomen.step`
+            (empty without a tool); ``tools[0]`` carries the top-level fields' values.
     """
 
     t: float
@@ -216,10 +263,38 @@ class AbdomenSnapshot:
     touching: tuple[str, ...]
     delicate_contact: bool
     events: tuple[tuple[str, str], ...] = ()
+    tools: tuple[ToolContact, ...] = ()
 
     @property
     def in_contact(self) -> bool:
+        """The first tool touches tissue (see :attr:`any_contact` for every instrument)."""
         return bool(self.touching)
+
+    @property
+    def any_contact(self) -> bool:
+        """Any instrument touches tissue."""
+        return self.in_contact or any(tc.in_contact for tc in self.tools)
+
+    @property
+    def touching_any(self) -> tuple[str, ...]:
+        """Names of the organs touched by any instrument (first-seen order)."""
+        names = dict.fromkeys(self.touching)
+        for tc in self.tools:
+            names.update(dict.fromkeys(tc.touching))
+        return tuple(names)
+
+    @property
+    def delicate_any(self) -> bool:
+        """Any instrument touches a delicate organ."""
+        return self.delicate_contact or any(tc.delicate_contact for tc in self.tools)
+
+    def tool(self, name: str) -> ToolContact:
+        """The result of the instrument named ``name``."""
+        for tc in self.tools:
+            if tc.name == name:
+                return tc
+        raise KeyError(f"no instrument {name!r} in the snapshot "
+                       f"(instruments: {[tc.name for tc in self.tools]!r})")
 
     @cached_property
     def organs(self) -> tuple[OrganView, ...]:
@@ -354,9 +429,11 @@ class Abdomen:
         self.events: list[tuple[float, str, str]] = []
         self._binding: SurfaceBinding | None = None
         self._bound: list[_Body] = []
-        self._last_contacts: dict[int, ContactResult] = {}
+        self._last_contacts: tuple[tuple[str, dict[int, ContactResult]], ...] = ()
         self._empty_patch = ContactPatch.empty(self.tool.radius)
-        self._clear: tuple[FloatArray, FloatArray, float] | None = None
+        # per instrument slot (its position in the step's tools), the clearance of its last
+        # broad phase (see _contacts)
+        self._clears: dict[int, tuple[FloatArray, FloatArray, float] | None] = {}
         # Per-body tables for the vectorised broad phase and motion phases.
         deformable = [i for i, b in enumerate(self._bodies) if not b.kinematic]
         self._cell_body = np.concatenate(
@@ -484,8 +561,9 @@ class Abdomen:
 
     # -- stepping -------------------------------------------------------------------------
 
-    def _contacts(self, pose: ToolPose) -> dict[int, ContactResult]:
-        """Contacts of the tool with every deformable organ near its axis.
+    def _contacts(self, pose: ToolPose, slot: int = 0) -> dict[int, ContactResult]:
+        """Contacts of the tool at ``pose`` (instrument ``slot``) with every deformable organ
+        near its axis.
 
         Broad phase, one compiled pass over every organ's cell spheres (see ``_Body``;
         ``vasim.abdomen._contact_kernels.cells_near``): the tool axis (fulcrum → tip) passes
@@ -497,14 +575,14 @@ class Abdomen:
         # Clearance: the cells are inflated by the organs' whole motion, so while the fulcrum
         # stays and the tip has moved less than the last clearance (no point of the shaft
         # moves more than the tip), no sleeping organ can be reached: skip the broad phase.
-        last = self._clear
+        last = self._clears.get(slot)
         awake = any(b.awake for b in self._bodies)
         if (last is not None and not awake and np.array_equal(last[0], ful)
                 and float(np.sum((tip - last[1]) ** 2)) < last[2] ** 2):
             return {}
         near, gap = cells_near(self._cell_centres, self._cell_r2, self._cell_body,
                                len(self._bodies), _vec3(ful), _vec3(tip))
-        self._clear = None if near.any() else (ful.copy(), tip.copy(), float(gap))
+        self._clears[slot] = None if near.any() else (ful.copy(), tip.copy(), float(gap))
         out: dict[int, ContactResult] = {}
         lo = np.minimum(ful, tip) - self.tool.radius
         hi = np.maximum(ful, tip) + self.tool.radius
@@ -519,30 +597,48 @@ class Abdomen:
                 out[i] = c
         return out
 
-    def step(self, tool: ToolPose | None) -> AbdomenSnapshot:
-        """Advances the abdomen by ``dt`` with the tool at ``tool`` (None: no tool).
+    def step(self, tool: ToolPose | Sequence[ToolPose] | Mapping[str, ToolPose] | None,
+             ) -> AbdomenSnapshot:
+        """Advances the abdomen by ``dt`` with the instruments at ``tool``.
 
-        The contact forces found at the start of the step act on the tissue during it.
+        The contact forces found at the start of the step act on the tissue during it; with
+        several instruments their reaction forces are summed per node (module docstring).
+        A pose with a non-finite point is an instrument out of the abdomen (no contact).
+
+        Args:
+            tool: one pose; a sequence of poses (instruments ``"0"``, ``"1"``, ...); a
+                mapping instrument name -> pose; ``None`` or ``()``: no tool. The first
+                instrument is the haptic one (the snapshot's top-level contact fields).
 
         Returns:
             The new snapshot (also :attr:`latest`).
+
+        Raises:
+            TypeError: an instrument's pose is not a :class:`ToolPose`.
         """
-        contacts: dict[int, ContactResult] = {}
-        if tool is not None and np.isfinite(tool.tip).all() and np.isfinite(tool.fulcrum).all():
-            contacts = self._contacts(tool)
+        per_tool: list[tuple[str, dict[int, ContactResult]]] = []
+        for slot, (name, pose) in enumerate(_tool_poses(tool)):
+            contacts: dict[int, ContactResult] = {}
+            if np.isfinite(pose.tip).all() and np.isfinite(pose.fulcrum).all():
+                contacts = self._contacts(pose, slot)
+            per_tool.append((name, contacts))
         t1 = self.t + self.dt
         step_events: list[tuple[str, str]] = []
         for i, b in enumerate(self._bodies):
             if b.kinematic:
                 continue
-            c = contacts.get(i)
-            if c is not None and not b.awake:
+            cs = [contacts[i] for _, contacts in per_tool if i in contacts]
+            if cs and not b.awake:
                 b.wake(self.t)
             if not b.awake:
                 continue
             f = None
-            if c is not None:
-                scatter_forces(b.f_ext, c.node_index, c.node_force)
+            if len(cs) == 1:
+                scatter_forces(b.f_ext, cs[0].node_index, cs[0].node_force)
+                f = b.f_ext
+            elif cs:  # several instruments on this organ: their forces summed per node
+                scatter_forces(b.f_ext, np.concatenate([c.node_index for c in cs]),
+                               np.concatenate([c.node_force for c in cs]))
                 f = b.f_ext
             targets = b.anchor_rest + b.anchor_motion.offsets(t1)
             report: StepReport = b.solver.step(
@@ -552,14 +648,21 @@ class Abdomen:
                 detail = f"{b.model.name}: {report.reason}"
                 step_events.append(("organ_reset", detail))
                 self.events.append((t1, "organ_reset", detail))
-            self._maybe_sleep(b, c is not None, t1)
+            self._maybe_sleep(b, bool(cs), t1)
         self.t = t1
         self.seq += 1
-        self._last_contacts = contacts
+        self._last_contacts = tuple(per_tool)
         snap = self._snapshot(tuple(step_events))
-        self.quality.add(self.dt, force=snap.force, torque=snap.torque,
-                         in_contact=snap.in_contact, delicate_contact=snap.delicate_contact,
-                         target_displacement=float(snap.target_displacement.max(initial=0.0)))
+        if len(snap.tools) <= 1:  # the single-tool path, as it always was
+            self.quality.add(self.dt, force=snap.force, torque=snap.torque,
+                             in_contact=snap.in_contact, delicate_contact=snap.delicate_contact,
+                             target_displacement=float(snap.target_displacement.max(initial=0.0)))
+        else:
+            self.quality.add_instruments(
+                self.dt, forces=[tc.force for tc in snap.tools],
+                torques=[tc.torque for tc in snap.tools], in_contact=snap.any_contact,
+                delicate_contact=snap.delicate_any,
+                target_displacement=float(snap.target_displacement.max(initial=0.0)))
         self._latest = snap
         return snap
 
@@ -582,7 +685,19 @@ class Abdomen:
     def _snapshot(self, events: tuple[tuple[str, str], ...]) -> AbdomenSnapshot:
         views = tuple((b.model.name, _readonly(b.state.x[: b.model.n_surface])
                        if b.awake else None, b) for b in self._bodies)
-        contacts = self._last_contacts
+        tools = tuple(self._tool_contact(name, contacts)
+                      for name, contacts in self._last_contacts)
+        first = tools[0] if tools else self._tool_contact("", {})
+        p, n, disp = self._targets()
+        return AbdomenSnapshot(
+            t=self.t, seq=self.seq, organ_sources=views, targets=_readonly(p),
+            target_normals=_readonly(n), target_displacement=_readonly(disp),
+            force=first.force, force_tip=first.force_tip, torque=first.torque,
+            stiffness_tip=first.stiffness_tip, patch=first.patch, touching=first.touching,
+            delicate_contact=first.delicate_contact, events=events, tools=tools)
+
+    def _tool_contact(self, name: str, contacts: dict[int, ContactResult]) -> ToolContact:
+        """One instrument's contacts with every organ, summed into its snapshot entry."""
         if len(contacts) == 1:  # one organ touched (the usual case): no sums to form
             (c,) = contacts.values()
             force, force_tip = _readonly(c.force), _readonly(c.force_tip)
@@ -601,12 +716,23 @@ class Abdomen:
             patch = self._empty_patch
         touching = tuple(self._bodies[i].model.name for i in sorted(contacts))
         delicate = any(self._bodies[i].model.delicate for i in contacts)
-        p, n, disp = self._targets()
-        return AbdomenSnapshot(
-            t=self.t, seq=self.seq, organ_sources=views, targets=_readonly(p),
-            target_normals=_readonly(n), target_displacement=_readonly(disp),
-            force=force, force_tip=force_tip, torque=torque, stiffness_tip=stiff, patch=patch,
-            touching=touching, delicate_contact=delicate, events=events)
+        return ToolContact(name, force, force_tip, torque, stiff, patch, touching, delicate)
+
+
+def _tool_poses(tool: ToolPose | Sequence[ToolPose] | Mapping[str, ToolPose] | None,
+                ) -> tuple[tuple[str, ToolPose], ...]:
+    """(name, pose) of every instrument given to :meth:`Abdomen.step`, in order."""
+    if tool is None:
+        return ()
+    if isinstance(tool, ToolPose):
+        return (("0", tool),)
+    items = (tuple((str(k), v) for k, v in tool.items()) if isinstance(tool, Mapping)
+             else tuple((str(i), v) for i, v in enumerate(tool)))
+    for name, pose in items:
+        if not isinstance(pose, ToolPose):
+            raise TypeError(f"instrument {name!r}: expected a ToolPose, got "
+                            f"{type(pose).__name__} {pose!r}")
+    return items
 
 
 _ZERO3 = _readonly(np.zeros(3))
@@ -622,6 +748,7 @@ __all__ = [
     "Abdomen",
     "AbdomenSnapshot",
     "OrganView",
+    "ToolContact",
     "motion_phases",
     "scene_models",
     "settled_positions",
