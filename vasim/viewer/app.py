@@ -24,8 +24,11 @@ A page reload or a second tab is just another client: it gets the scene, the pan
 its own audio synth; the trial and the store are untouched (one owner, the controller).
 
 The MRCP panel (the robots, which one holds the task, NTT, texec/tus per robot) belongs to
-scenes with a slave station; none of the shipped scenes has robots, so no panel is built:
-:meth:`ViewerApp._build_mrcp_panel` is the hook where it goes.
+scenes with a slave station; none of the shipped abdomen scenes has robots, so no panel is
+built: :meth:`ViewerApp._build_mrcp_panel` is the hook where it goes. The scripted MRCP
+scenarios (``--scene mrcp:<scenario>``) are served by
+:class:`vasim.viewer.mrcp_panel.MrcpViewerApp`: the station and an MRCP tab, without the
+abdomen's trainee and experimenter tabs.
 """
 
 from __future__ import annotations
@@ -255,6 +258,10 @@ class ViewerApp:
         if speed <= 0 or control_hz <= 0 or view_hz <= 0 or audio_hz <= 0:
             raise ConfigError("speed, control_hz, view_hz and audio_hz must be > 0, got "
                               f"{(speed, control_hz, view_hz, audio_hz)!r}")
+        if scene.startswith("mrcp:"):
+            raise ConfigError(f"scene {scene!r} is an MRCP slave station: it is served by "
+                              "vasim.viewer.mrcp_panel.MrcpViewerApp (vasim serve --scene "
+                              "mrcp:<scenario> starts it), not by ViewerApp", field="scene")
         self.host = host
         self.requested_port = int(port)
         self.control_period = 1.0 / control_hz

@@ -19,7 +19,7 @@ from typing import Any
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``vasim serve`` to the ``vasim`` command line."""
     p = sub.add_parser(
-        "serve",
+        "serve", formatter_class=_ServeHelpFormatter,
         help="start the browser training viewer (trainee view and experimenter panel)",
         description=(
             "Serve the training viewer: the trainee's view (the deforming abdomen, the tool, "
@@ -37,7 +37,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                         "printed; 0 picks any free port)")
     p.add_argument("--scene", default="default",
                    help="abdomen scene of every trial, a name in protocols/scenes or a file "
-                        "(default: default; none: a static task without physics)")
+                        "(default: default; none: a static task without physics); or an "
+                        "MRCP slave-station scenario served live with its MRCP panel: "
+                        "{mrcp_scenes}")
     p.add_argument("--db", default=None, metavar="FILE",
                    help="study database (SQLite) that trials run from the viewer are stored "
                         "in, like headless ones (default: none: demo mode only)")
@@ -51,7 +53,23 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    default="intermediate", help="scripted operator preset")
     p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
                    help="stop after this many seconds (default: run until Ctrl-C)")
+    p.add_argument("--mrcp-coarse", action="store_true",
+                   help="MRCP scenes: the runner's cheaper 36 ms cycle (keeps real time on a "
+                        "slow machine; default: the seed's 18 ms cycle)")
     p.set_defaults(func=serve)
+
+
+class _ServeHelpFormatter(argparse.HelpFormatter):
+    """Fills ``{mrcp_scenes}`` in a help string with the registered MRCP scenarios, only
+    when help is printed (listing them imports the MRCP kernel: ~1 s)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = super()._get_help_string(action)
+        if text and "{mrcp_scenes}" in text:
+            from vasim.viewer.mrcp_panel import scenario_help
+
+            text = text.replace("{mrcp_scenes}", scenario_help())
+        return text
 
 
 def exposure_warning(host: str, port: int) -> str | None:
@@ -77,18 +95,32 @@ def serve(args: argparse.Namespace) -> int:
     warning = exposure_warning(args.host, args.port)
     if warning:
         print(warning, file=sys.stderr, flush=True)
-    schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
-    app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
-                    scene=getattr(args, "scene", "default"), db=getattr(args, "db", None))
+    from vasim.viewer.mrcp_panel import MrcpViewerApp, scenario_from_scene
+
+    scene = getattr(args, "scene", "default")
+    app: ViewerApp | MrcpViewerApp
+    if scenario_from_scene(scene) is not None:
+        ignored = [f"--{k}" for k in ("db", "schema") if getattr(args, k, None)]
+        if ignored:
+            print(f"note: {', '.join(ignored)} do not apply to an MRCP scene (no trainee "
+                  "trials): ignored", file=sys.stderr)
+        app = MrcpViewerApp(args.host, args.port, scene, seed=args.seed,
+                            coarse=bool(getattr(args, "mrcp_coarse", False)))
+        what = (f"MRCP scenario {app.scenario.name}, seed {args.seed}, "
+                f"{'36' if getattr(args, 'mrcp_coarse', False) else '18'} ms cycle, looping")
+    else:
+        schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
+        app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
+                        scene=scene, db=getattr(args, "db", None))
+        db = getattr(args, "db", None)
+        stored = f"trials stored in {db}" if db else "demo only: no --db"
+        what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"
     app.start()
     previous = _stop_on_sigterm()
     try:
         if app.port != args.port and args.port != 0:
             print(f"port {args.port} is busy; using {app.port}", file=sys.stderr)
-        db = getattr(args, "db", None)
-        stored = f"trials stored in {db}" if db else "demo only: no --db"
-        print(f"vasim viewer: {app.url}  (schema {schema}, task {args.task}, scene "
-              f"{getattr(args, 'scene', 'default')}, {stored}; Ctrl-C stops)", flush=True)
+        print(f"vasim viewer: {app.url}  ({what}; Ctrl-C stops)", flush=True)
         t_end = None if args.duration is None else time.monotonic() + args.duration
         while t_end is None or time.monotonic() < t_end:
             time.sleep(0.2)
