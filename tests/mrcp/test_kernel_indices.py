@@ -289,3 +289,18 @@ def test_registry() -> None:
         INDICES.create("nope")
     with pytest.raises(ValueError, match="b_min"):
         INDICES.create("rj", b_min=0.5)
+
+
+def test_cone_azimuth_just_below_zero_is_covered_by_two_sectors() -> None:
+    """``np.mod(-1e-17, 2π)`` rounds to exactly 2π; a cone split into half-open sectors
+    ending at 2π must still cover that azimuth (it is the azimuth 0)."""
+    cone = ToolCone(fulcrum=np.zeros(3), normal=np.array([0.0, 0.0, 1.0]),
+                    x_axis=np.array([1.0, 0.0, 0.0]),
+                    sectors=(ConeSector(0.0, np.pi, 0.8, 1.0),
+                             ConeSector(np.pi, 2 * np.pi, 0.6, 1.0)))
+    assert float(np.mod(-1e-17, 2 * np.pi)) == 2 * np.pi  # the round-off this guards
+    tip = np.array([0.5, -1e-17, np.sqrt(3) / 2])  # azimuth -1e-17 rad, 30 deg off the normal
+    assert cone.max_polar(-1e-17) == cone.max_polar(0.0)
+    single = cone.margin(tip)
+    assert single == pytest.approx(1.0 - (np.pi / 6) / np.arctan(0.8))  # φ(0) = atan(a)
+    assert cone.margins(tip[None, :])[0] == pytest.approx(single)

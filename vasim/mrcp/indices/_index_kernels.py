@@ -74,6 +74,8 @@ def cone_along(tips: np.ndarray, reach: np.ndarray, fulcrum: np.ndarray, x: np.n
             dy = (d0 * y[0] + d1 * y[1] + d2 * y[2]) / nrm
             alpha = np.arccos(min(1.0, max(-1.0, dz)))
             theta = np.arctan2(dy, dx) % (2.0 * np.pi)
+            if theta >= 2.0 * np.pi:  # -1e-17 % 2π rounds to 2π (cone._wrap)
+                theta = 0.0
         phi = -1.0
         for s in range(sectors.shape[0]):
             if sectors[s, 0] <= theta < sectors[s, 1]:

@@ -29,6 +29,13 @@ from vasim.mrcp.indices.base import INDICES, EvalContext
 FloatArray = NDArray[np.float64]
 
 
+
+def _wrap(angle: float) -> float:
+    """``angle`` in ``[0, 2π)``. ``np.mod(-1e-17, 2π)`` rounds to exactly ``2π``, which no
+    half-open sector ``[start, end)`` covers: such an angle is mapped to 0."""
+    th = float(np.mod(angle, 2 * np.pi))
+    return 0.0 if th >= 2 * np.pi else th
+
 @dataclass(frozen=True)
 class ConeSector:
     """An elliptical piece of the cone's base for azimuths in ``[start, end)`` [rad]."""
@@ -79,7 +86,7 @@ class ToolCone:
 
     def max_polar(self, azimuth: float) -> float:
         """``φ(θ)`` [rad]: the cone's half-angle at azimuth ``θ``."""
-        th = float(np.mod(azimuth, 2 * np.pi))
+        th = _wrap(float(azimuth))
         for s in self.sectors:
             if s.start <= th < s.end or (th == 0.0 and s.end >= 2 * np.pi and s.start == 0.0):
                 r = s.a * s.b / np.hypot(s.b * np.cos(th), s.a * np.sin(th))
@@ -95,7 +102,7 @@ class ToolCone:
             return 0.0, 0.0
         d = d / n
         alpha = float(np.arccos(np.clip(d @ z, -1.0, 1.0)))
-        theta = float(np.mod(np.arctan2(d @ y, d @ x), 2 * np.pi))
+        theta = _wrap(float(np.arctan2(d @ y, d @ x)))
         return alpha, theta
 
     def margin(self, tip: FloatArray) -> float:
@@ -112,6 +119,7 @@ class ToolCone:
         dz, dx, dy = d @ z / safe, d @ x / safe, d @ y / safe
         alpha = np.where(n > 1e-12, np.arccos(np.clip(dz, -1.0, 1.0)), 0.0)
         theta = np.where(n > 1e-12, np.mod(np.arctan2(dy, dx), 2 * np.pi), 0.0)
+        theta = np.where(theta >= 2 * np.pi, 0.0, theta)  # see _wrap
         phi = np.full(theta.shape, np.nan)
         for sec in self.sectors:
             inside = (theta >= sec.start) & (theta < sec.end)
