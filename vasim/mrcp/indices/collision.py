@@ -43,6 +43,9 @@ def impact_time(times: FloatArray, distances: FloatArray, t_max: float) -> float
         >>> import numpy as np
         >>> round(impact_time(np.array([0.0, 0.1]), np.array([0.3, 0.2]), 5.0), 9)  # 1 m/s
         0.3
+        >>> nan = float("nan")  # only the ends measured: the closing speed spans the gap
+        >>> round(impact_time(np.array([0.0, 0.1, 0.2]), np.array([0.3, nan, 0.1]), 5.0), 9)
+        0.3
     """
     t = (np.asarray(times, dtype=np.float64) - float(times[0])).tolist()
     d = np.asarray(distances, dtype=np.float64).tolist()    # Python floats: same IEEE maths
@@ -52,8 +55,13 @@ def impact_time(times: FloatArray, distances: FloatArray, t_max: float) -> float
             continue
         if d[k] <= 0.0:
             return float(min(best, t[k]))
-        if k + 1 < len(d) and math.isfinite(d[k + 1]):
-            v = -(d[k + 1] - d[k]) / (t[k + 1] - t[k])
+        # the next *measured* distance (NaN = skipped point, e.g. distance_points="ends"):
+        # with every point measured this is k + 1
+        j = k + 1
+        while j < len(d) and not math.isfinite(d[j]):
+            j += 1
+        if j < len(d):
+            v = -(d[j] - d[k]) / (t[j] - t[k])
             if v > 0.0:
                 best = min(best, t[k] + d[k] / v)
     return float(max(0.0, best))
