@@ -113,9 +113,14 @@ def test_plots_and_event_log_receive_data(app: MrcpViewerApp) -> None:
     app.render(force_plots=True)
     panel = app.panel
     assert panel is not None
-    t, ntt, thr = panel.ntt.data
+    t, ntt, thr, tt = panel.ntt.data
     assert len(t) > 20 and np.all(np.diff(t) > 0)
     assert np.allclose(thr, 0.9)
+    # The hand-over (TT, 6.30-6.55 s) is shaded: its first cycle is the one whose NTT
+    # crossed the threshold, the next ones are not evaluated (NaN).
+    in_tt = tt > 0
+    assert in_tt.any() and ntt[in_tt][0] >= 0.9 and np.all(np.isnan(ntt[in_tt][1:]))
+    assert np.all((t[in_tt] > 6.2) & (t[in_tt] < 6.7))
     assert np.nanmax(ntt) >= 0.9  # the transfer started when NTT crossed the threshold
     tex = panel.texec.data
     assert len(tex) == 3 and all(len(a) == len(t) for a in tex)
@@ -181,6 +186,12 @@ def test_vasim_serve_mrcp(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["serve", "--port", "0", "--scene", "mrcp:nope"]) == 2
     err = capsys.readouterr().err
     assert "unknown MRCP scenario 'nope'" in err and "mrcp:obstacle_hole" in err
+    with pytest.raises(SystemExit):
+        main(["serve", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    from vasim.mrcp.scenarios import SCENARIOS
+
+    assert all(f"mrcp:{name}" in out for name in SCENARIOS)
 
 
 # -- pure parts -----------------------------------------------------------------------------

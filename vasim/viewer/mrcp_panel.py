@@ -141,7 +141,12 @@ class MrcpFrame:
 class History:
     """The plotted window: time ``(m,)`` [s], NTT ``(m,)``, per robot ``texec`` and ``tus``
     ``(m,)`` [s]; ``events``: ``(t, event)`` of the current run; ``transfers``: the
-    runner's transfer dicts (start, from, to, point, ntt, cause, done)."""
+    runner's transfer dicts (start, from, to, point, ntt, cause, done); ``tt``: ``(m,)``
+    the transfer-phase band (``NTT_TOP`` in TT cycles, else 0).
+
+    TT cycles are not evaluated (NaN). uPlot gaps only at ``null``, which a numeric array
+    cannot carry, so its lines bridge them: the shaded TT band in the NTT plot shows
+    where a line is such a bridge (**decision**)."""
 
     run: int
     t: FloatArray
@@ -150,6 +155,7 @@ class History:
     tus: dict[str, FloatArray]
     events: tuple[tuple[float, str], ...]
     transfers: tuple[dict[str, Any], ...]
+    tt: FloatArray | None = None
 
 
 class _Stopped(Exception):
@@ -276,6 +282,7 @@ class LiveScenario:
         with self._lock:
             self._t.append(s.t)
             self._ntt.append(plot_value(s.ntt, NTT_TOP))
+            self._tt.append(NTT_TOP if str(s.state).startswith("TT") else 0.0)
             for r in self.robots:
                 rs = s.robots.get(r)
                 self._texec[r].append(math.nan if rs is None else plot_value(rs.texec_min))
@@ -293,6 +300,7 @@ class LiveScenario:
         n = max(2, int(self._history_s / getattr(self, "dt", 0.018)))
         self._t: collections.deque[float] = collections.deque(maxlen=n)
         self._ntt: collections.deque[float] = collections.deque(maxlen=n)
+        self._tt: collections.deque[float] = collections.deque(maxlen=n)
         self._texec = {r: collections.deque[float](maxlen=n) for r in robots}
         self._tus = {r: collections.deque[float](maxlen=n) for r in robots}
         self._event_samples: list[Any] = []
@@ -304,13 +312,14 @@ class LiveScenario:
         with self._lock:
             t = np.array(self._t)
             ntt = np.array(self._ntt)
+            tt = np.array(self._tt)
             texec = {r: np.array(v) for r, v in self._texec.items()}
             tus = {r: np.array(v) for r, v in self._tus.items()}
             samples = list(self._event_samples)
             run = self.run
         res = RunResult(self.scenario.name, list(self.robots), samples, [])
         return History(run, t, ntt, texec, tus, tuple(res.events()),
-                       tuple(res.transfers()))
+                       tuple(res.transfers()), tt)
 
 
 # --------------------------------------------------------------------------- the panel
@@ -365,11 +374,13 @@ class MrcpPanel:
         with tabs.add_tab("MRCP", icon=viser.Icon.ROBOT):
             self.status = gui.add_markdown(status_text(scenario, None, 1.0))
             self.ntt = gui.add_uplot(
-                (x, nan, np.full(2, self.ntt_threshold)),
+                (x, nan, np.full(2, self.ntt_threshold), np.zeros(2)),
                 (viser.uplot.Series(label="t [s]"),
                  viser.uplot.Series(label="NTT", stroke="#212529", width=2),
                  viser.uplot.Series(label="threshold", stroke="#e03131", width=1,
-                                    dash=[6, 4])),
+                                    dash=[6, 4]),
+                 viser.uplot.Series(label="TT (not evaluated)", stroke="#f0a0a0",
+                                    width=0, fill="rgba(240, 80, 80, 0.12)")),
                 title="NTT (∞ drawn at 1.5)",
                 scales={**axes, "y": {"auto": False, "range": [0.0, NTT_TOP + 0.05]}},
                 aspect=2.2)
@@ -403,7 +414,8 @@ class MrcpPanel:
     def show_history(self, h: History) -> None:
         """Redraws the plots and, when it changed, the event log."""
         if len(h.t) >= 2:
-            self.ntt.data = (h.t, h.ntt, np.full(len(h.t), self.ntt_threshold))
+            tt = h.tt if h.tt is not None else np.zeros(len(h.t))
+            self.ntt.data = (h.t, h.ntt, np.full(len(h.t), self.ntt_threshold), tt)
             self.texec.data = (h.t, *[h.texec[r] for r in self.robots])
             self.tus.data = (h.t, *[h.tus[r] for r in self.robots])
         key = (h.run, len(h.events))
