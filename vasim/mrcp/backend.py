@@ -14,8 +14,18 @@ pybullet computes them in double precision), link frames to pybullet's reporting
 (``getLinkState`` returns single-precision floats: about 3e-8 m measured). IK refines on the
 compiled chain from the seed, with pybullet's ``calculateInverseKinematics`` among its
 fallback starts. :meth:`PybulletArm.tcp_pose_batch` / :meth:`PybulletArm.jacobian_batch`
-evaluate many sampled configurations at once (numpy). Joint states are written to pybullet
-only when ``q`` changes, all joints in one call.
+evaluate many sampled configurations at once (compiled). Joint states are written to
+pybullet only when ``q`` changes, all joints in one call.
+
+**Decision** (distances; the kernel makes hundreds of queries per cycle, issue #7 §5):
+:meth:`PybulletWorld.min_distances` answers robots and sphere obstacles with the compiled
+sphere-swept model of the link hulls (``vasim.mrcp._distance_kernels``): a conservative
+lower bound of pybullet's value, ``-COMPILED_TOLERANCE <= model - pybullet <= 1e-5`` m
+(penetrations included); pybullet where the model has no estimate (deep overlaps) and for
+other obstacle shapes. :meth:`PybulletWorld.min_distance` and
+:meth:`PybulletWorld.in_collision` stay pybullet's answers: the model only chooses which
+link pairs pybullet is asked about. ``PybulletWorld(compiled_distances=False)`` asks
+pybullet everything.
 
 Example:
     >>> from vasim.mrcp.dh import load_robot

@@ -473,11 +473,14 @@ class MRCPKernel:
                 raw[(r, q)] = {ix.name: 0.0 for ix in self.indices}
                 hist.clear()
                 continue
-            filled = np.where(reach[:, None], configs, np.nan)
             vel = np.zeros_like(configs)
-            diffs = np.diff(np.nan_to_num(filled, nan=0.0), axis=0) / dt_pred
-            ok = reach[1:] & reach[:-1]
-            vel[:-1] = np.where(ok[:, None], diffs, 0.0)
+            if reach.all():     # the common case: the same values without the NaN masking
+                vel[:-1] = np.diff(configs, axis=0) / dt_pred
+            else:
+                filled = np.where(reach[:, None], configs, np.nan)
+                diffs = np.diff(np.nan_to_num(filled, nan=0.0), axis=0) / dt_pred
+                ok = reach[1:] & reach[:-1]
+                vel[:-1] = np.where(ok[:, None], diffs, 0.0)
             vel[-1] = vel[-2] if configs.shape[0] > 1 else 0.0
             if selected:
                 vel[0] = qdot[r]
