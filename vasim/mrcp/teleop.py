@@ -22,28 +22,38 @@ The operator is the study pipeline's scripted person (:mod:`vasim.haptics.script
 profile, seed and practice from the session): minimum-jerk submovements aimed at what it
 sees, Fitts timing, motor and perceptual noise, tremor, learning. A hand runs
 ``OPERATOR_SUBSTEPS`` steps per control cycle; the station runs at the seed's 18 ms cycle
-(``CYCLE_DT``); the abdomen physics at its own rate (4 ms), with the instrument that holds
-the needle as its tool.
+(``CYCLE_DT``); the abdomen physics at its own rate (4 ms), with both instruments and the
+endoscope as its tools.
 
 Logged (one sample per control cycle, ``vasim.study.samples`` columns): ``x`` the needle
 centre (the task), ``g`` the ring it was compared with (its position that cycle: the rings
 ride on the tissue), ``goal_index`` that ring's index, the tissue
-contact flag, force and torque of the latest physics step, ``clutch`` (master decoupled),
+contact flag (any instrument), the force and torque on the needle holder's instrument of
+the latest physics step, ``clutch`` (master decoupled),
 ``zoom`` and ``in_view`` (needle inside the camera's view cone). The trial metrics are the
 pipeline's (``vasim.study.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
 needle trajectory, spec/study.md §4 "length of the needle/tool trajectory"), Q =
 ``contact_time``, ``accumulated_force``, ``accumulated_torque`` and
-``target_displacement_max`` (the abdomen's quality accumulator). Added per trial:
+``target_displacement_max``; with tissue, every Q metric is the abdomen's quality
+accumulator (``TISSUE_METRICS``, decisions below). Added per trial:
 ``master_path_l2`` (the summed path of the operator's hands on the masters, camera hand
 included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfers``,
 ``tt_time`` (time the master was decoupled), ``safety_stops``.
 
 **Decisions**:
 
-* The abdomen's contact model takes one instrument: it is the one holding the needle
-  (trocar to tool tip) — the one near the rings. The free instrument in StdT approaches
-  the needle from above and is not in the contact model (its tissue contacts are not
-  counted, in either mode).
+* Every instrument in the abdomen is in the contact model (issue #7 §4): each physics
+  step gets the two tools (trocar to tool tip, ``"right"`` and ``"left"``) and the
+  endoscope (camera trocar to lens, the same 2.5 mm capsule as the tools: the abdomen has
+  one tool shape), in that fixed order. Q is the abdomen's quality accumulator, at the
+  physics rate: contact time while any instrument touches tissue, force and torque as the
+  per-step sums of the instruments' magnitudes, delicate contacts by any instrument
+  (``vasim.abdomen.quality``). A sample row holds one force vector, so the samples cannot
+  carry that sum: they log the contact flag of any instrument and the force and torque on
+  the needle holder's instrument, and the trial metrics ``TISSUE_METRICS`` are replaced by
+  the accumulator's (``excessive_force_*`` stay the samples', the holder's). Before, only
+  the needle holder was in the contact model, and StdT's free instrument, which approaches
+  the needle near the tissue at every hand-over, touched tissue uncounted.
 * The StdT operator plans each phase (carry to a ring, carry to the hand-over point,
   approach and grasp) as a new path of the scripted operator starting at rest, as a person
   pauses between a gripper action and the next movement; gripper actions take the
@@ -119,6 +129,7 @@ from vasim.study.trial import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_vi
 from vasim.study.trial_metrics import MetricParams, trial_metrics
 
 if TYPE_CHECKING:
+    from vasim.abdomen.contact import ToolPose
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
     from vasim.study.store import TrialMeta
 
@@ -159,6 +170,14 @@ CAMERA_ZOOM = math.tan(math.radians(DEFAULT_ENDOSCOPE.fov_deg / 2)) / math.tan(
 
 CAMERA_TIME_CONSTANT = 0.4
 """The camera hand's pursuit time constant [s]."""
+
+TISSUE_METRICS = {
+    "contact_time": "contact_time", "contact_count": "contact_count",
+    "accumulated_force": "force_integral", "accumulated_torque": "torque_integral",
+    "max_force": "max_force", "delicate_contact_time": "delicate_time",
+    "delicate_contact_count": "delicate_count"}
+"""Trial metric -> the abdomen's quality field replacing it in a trial with tissue."""
+
 
 def _seed(seed: int, *key: int) -> int:
     return int(np.random.SeedSequence([int(seed), *key]).generate_state(1)[0])
@@ -282,6 +301,9 @@ class TeleopTrial:
             self.abdomen = Abdomen(config.scene)
         self._snap: AbdomenSnapshot | None = None
         if self.abdomen is not None:
+            from vasim.abdomen.quality import TissueQuality
+
+            self.abdomen.quality = TissueQuality()    # this trial's Q from its start
             self.abdomen.bind_targets(self.task.rings)
             self._snap = self.abdomen.latest
         self.rings = (self.task.rings.copy() if self._snap is None
@@ -314,17 +336,26 @@ class TeleopTrial:
         return _Hand(self.profile, self.task, points, start,
                      _seed(self.config.seed, 43, key), self.config.practice, reach)
 
+    def instruments(self) -> dict[str, ToolPose]:
+        """Every instrument in the abdomen now: ``"right"``, ``"left"`` (trocar to tool tip)
+        and ``"camera"`` (camera trocar to lens), in this order (module docstring)."""
+        from vasim.abdomen.contact import ToolPose
+
+        st = self.station
+        poses = {side: ToolPose(st.arms[side].fulcrum.point, st.tip(side))
+                 for side in ("right", "left")}
+        cam = self.camera.robot
+        poses["camera"] = ToolPose(cam.fulcrum, cam.lens(self.camera.aim))
+        return poses
+
     def _physics(self) -> None:
-        """Steps the abdomen up to the current time with the needle holder as its tool."""
+        """Steps the abdomen up to the current time with every instrument as its tools."""
         ab = self.abdomen
         if ab is None:
             return
-        from vasim.abdomen.contact import ToolPose
-
-        port = self.station.arms[self.holder].fulcrum.point
-        tip = self.station.tip(self.holder)
+        tools = self.instruments()
         while ab.t + 0.5 * ab.dt <= self.t:
-            self._snap = ab.step(ToolPose(port, tip))
+            self._snap = ab.step(tools)
             for kind, detail in self._snap.events:
                 self.events.append((self._snap.t, kind, detail))
         if self._snap is not None:
@@ -343,10 +374,11 @@ class TeleopTrial:
     def _log(self, g: np.ndarray, i: int) -> None:
         snap = self._snap
         view = 1 if self.camera.contains(self.needle) else 0
-        if snap is not None and snap.in_contact:
+        if snap is not None and snap.any_contact:
+            held = snap.tool(self.holder)
             self.samples.append(self.k, self.t, self.needle, g, i, None, None,
-                                self.camera.zoom, 0.0, 0.0, 0.0, 1, snap.force, snap.torque,
-                                1 if snap.delicate_contact else 0, self._clutch, view)
+                                self.camera.zoom, 0.0, 0.0, 0.0, 1, held.force, held.torque,
+                                1 if snap.delicate_any else 0, self._clutch, view)
         else:
             self.samples.append(self.k, self.t, self.needle, g, i, None, None,
                                 self.camera.zoom, 0.0, 0.0, 0.0, 0, None, None, 0,
@@ -571,6 +603,9 @@ class TeleopTrial:
                             for k, v in self.abdomen.quality.as_dict().items()})
         tm = trial_metrics(view, summary=summary,
                            params=metric_params if metric_params is not None else MetricParams())
+        if self.abdomen is not None:   # Q over every instrument (module docstring)
+            quality = self.abdomen.quality.as_dict()
+            tm.update({k: float(quality[v]) for k, v in TISSUE_METRICS.items()})
         tm.update({"master_path_l2": self.master_path, "camera_path_l2": self.camera.path,
                    "transfers": float(self.counts["transfers"]),
                    "regrasps": float(self.counts["regrasps"]),
@@ -666,6 +701,7 @@ __all__ = [
     "CYCLE_DT",
     "GRIPPER_TIME",
     "OPERATOR_SUBSTEPS",
+    "TISSUE_METRICS",
     "TeleopTrial",
     "kernel_config",
     "needle_points",

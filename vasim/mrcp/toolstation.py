@@ -179,24 +179,34 @@ def segment_closest_points(p1: FloatArray, q1: FloatArray, p2: FloatArray,
     """
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
     a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
-    eps = 1e-15
-    if a <= eps and e <= eps:
+    point = 1e-30   # squared length of a segment that is a point (below any rounding)
+    if a <= point and e <= point:
         return p1.copy(), p2.copy()
-    if a <= eps:
+    if a <= point:
         s, t = 0.0, min(max(f / e, 0.0), 1.0)
     else:
         c = float(d1 @ r)
-        if e <= eps:
+        if e <= point:
             s, t = min(max(-c / a, 0.0), 1.0), 0.0
         else:
             b = float(d1 @ d2)
-            den = a * e - b * b
-            s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > eps else 0.0
-            t = (b * s + f) / e
-            if t < 0.0:
-                t, s = 0.0, min(max(-c / a, 0.0), 1.0)
-            elif t > 1.0:
-                t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
+            den = a * e - b * b   # |d1|² |d2|² sin²θ, to a rounding of ~1e-16 a e
+            if den <= 1e-12 * a * e:
+                # (nearly) parallel: the closest pair has an endpoint of one segment, so
+                # the best of the four endpoint projections (exact for parallel segments)
+                cands = [(0.0, min(max(f / e, 0.0), 1.0)),
+                         (1.0, min(max((b + f) / e, 0.0), 1.0)),
+                         (min(max(-c / a, 0.0), 1.0), 0.0),
+                         (min(max((b - c) / a, 0.0), 1.0), 1.0)]
+                s, t = min(cands, key=lambda st: float(np.sum(
+                    (p1 + d1 * st[0] - p2 - d2 * st[1]) ** 2)))
+            else:
+                s = min(max((b * f - c * e) / den, 0.0), 1.0)
+                t = (b * s + f) / e
+                if t < 0.0:
+                    t, s = 0.0, min(max(-c / a, 0.0), 1.0)
+                elif t > 1.0:
+                    t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
     return p1 + d1 * s, p2 + d2 * t
 
 
