@@ -168,6 +168,9 @@ def test_gain_is_ratio_of_means() -> None:
     assert gain([2.0, 4.0], [1.0, 2.0, 3.0]) == pytest.approx(1.5)
     # seed exp. 3 ET: 181.51 / 113.20 = 1.60 (spec/study.md §4)
     assert round(gain([181.51], [113.20]), 2) == 1.60
+    assert gain([1e-3], [1.001e-12]) == pytest.approx(1e-3 / 1.001e-12)  # 1e9: still a ratio
+    with pytest.raises(ConfigError, match="round-off"):
+        gain([3.6e-5], [1e-17])  # a zero displacement up to floating point
     with pytest.raises(ConfigError, match="mean\\(b\\) is zero"):
         gain([1.0], [-1.0, 1.0])
     with pytest.raises(ConfigError, match="non-finite"):

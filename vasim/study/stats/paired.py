@@ -214,6 +214,10 @@ def pairwise_paired(data: pd.DataFrame, dv: str, subject: str, within: str) -> p
     return out[list(PAIRED_COLUMNS)]
 
 
+MAX_GAIN = 1e9
+"""Largest ratio of means :func:`gain` reports; beyond it ``mean(b)`` is round-off."""
+
+
 def gain(a: Any, b: Any) -> float:
     """The seed's gain: ratio of means, ``mean(a) / mean(b)`` (e.g. StdT over MRCP).
 
@@ -226,7 +230,10 @@ def gain(a: Any, b: Any) -> float:
         forces: ``b`` is better).
 
     Raises:
-        ConfigError: empty or non-finite input, or ``mean(b) == 0``.
+        ConfigError: empty or non-finite input, ``mean(b) == 0``, or ``mean(b)`` at
+            round-off level beside ``mean(a)`` (``|mean(a) / mean(b)| > 1e9``: e.g. a target
+            displacement of 1e-17 m that is zero up to floating point; such a ratio
+            measures the rounding, not the mode).
 
     Examples:
         >>> round(gain([142.0, 143.02], [101.0, 101.26]), 4)  # seed exp. 2 ET: 142.51/101.13
@@ -234,7 +241,10 @@ def gain(a: Any, b: Any) -> float:
     """
     x = finite_array(a, "gain: a")
     z = finite_array(b, "gain: b")
-    mb = float(z.mean())
+    mb, ma = float(z.mean()), float(x.mean())
     if mb == 0.0:
         raise ConfigError("gain: mean(b) is zero, the ratio of means is undefined")
-    return float(x.mean()) / mb
+    if abs(ma) > MAX_GAIN * abs(mb):
+        raise ConfigError(f"gain: mean(b) = {mb:.3g} is zero up to round-off beside mean(a) = "
+                          f"{ma:.3g} (ratio > {MAX_GAIN:.0e}): the ratio of means is undefined")
+    return ma / mb
