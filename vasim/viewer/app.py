@@ -490,21 +490,19 @@ class ViewerApp:
             lambda ev: setattr(self.camera, "follow", bool(ev.target.value))))
 
     def _build_mrcp_panel(self) -> Any:
-        """The MRCP panel for a scene with a slave station, else None.
-
-        Hook: when scenes gain robots, build the panel here (the robots as scene nodes,
-        which one holds the task, NTT and texec/tus per robot as uPlot plots) and feed it in
-        :meth:`render` from the frame's MRCP state. No shipped scene has robots, so no
-        panel (and no placeholder) is built.
-        """
+        """Abdomen scenes carry no robots: slave stations are served as ``mrcp:<scenario>``
+        scenes by :class:`vasim.viewer.mrcp_panel.MrcpViewerApp` (robots, task holder, live
+        NTT / texec / tus plots). A scene file that declares robots is refused here with a
+        pointer to those scenes rather than shown without its robots."""
         from vasim.abdomen.scene import load_scene
 
         if self.scene_name == "none":
             return None
         robots = getattr(load_scene(self.scene_name), "robots", ())
         if robots:
-            raise ConfigError(f"scene {self.scene_name!r} has robots, but the viewer has no "
-                              "MRCP panel yet", field="scene")
+            raise ConfigError(f"scene {self.scene_name!r} declares robots: slave stations are "
+                              "served as --scene mrcp:<scenario> (vasim mrcp list)",
+                              field="scene")
         return None
 
     def _on_connect(self, client: viser.ClientHandle) -> None:

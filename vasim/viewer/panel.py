@@ -75,7 +75,8 @@ def progress_text(p: PanelState) -> str:
 
 
 def summary_text(summary: dict[str, Any] | None) -> str:
-    """The end-of-trial summary as a markdown table (escaped), or a placeholder."""
+    """The end-of-trial summary as a markdown table (escaped), or a line saying that no
+    trial has finished yet."""
     if not summary:
         return "*no finished trial yet*"
     rows = []
