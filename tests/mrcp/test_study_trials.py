@@ -215,3 +215,73 @@ def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
     # the samples' force is the holder's: only the left instrument presses here
     right = np.linalg.norm(view["f_contact"], axis=1)
     assert m["accumulated_force"] > float((right * CYCLE_DT).sum())
+
+
+def test_every_mode_follows_the_same_needle_route() -> None:
+    # the route rule (vasim.mrcp.needle.needle_route): the same waypoints in every mode,
+    # via points at the midline 1.5 cm above the higher ring between rings on different
+    # sides; static rings (no tissue), so the waypoints themselves must agree exactly
+    from vasim.mrcp.needle import VIA_HEIGHT, handover_point, needle_route
+
+    task = needle_task(3)
+    points, kinds = needle_route(task.rings, task.sides)
+    assert kinds == (0, -1, 1, -1, 2)
+    np.testing.assert_allclose(points[1], [0.0, 0.5 * (task.rings[0, 1] + task.rings[1, 1]),
+                                           task.rings[:2, 2].max() + VIA_HEIGHT])
+    np.testing.assert_array_equal(points[3], handover_point(task.rings[1], task.rings[2]))
+    visited = {}
+    for mode in ("stdt", "mrcp"):
+        tr = TeleopTrial(TrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
+                         n_rings=3)
+        res = tr.run()
+        assert res.summary["finished"]
+        log = tr.route_log
+        assert [k for k, *_ in log] == list(kinds)
+        times = [t for _, t, _, _ in log]
+        assert times == sorted(times)
+        for _, _, w, x in log:                    # each reached within the ring radius
+            assert np.linalg.norm(x - w) <= task.ring_radius + 1e-12
+        np.testing.assert_allclose(np.array([w for *_, w, _ in log]), points, atol=1e-12)
+        # the needle crosses the midline (x = 0) above both rings it is between: a
+        # straight ring-to-ring path would cross at their mean height, below the higher
+        x = res.samples.view()["x"]
+        gi = res.samples.view()["goal_index"]
+        cross = np.nonzero(np.sign(x[1:, 0]) != np.sign(x[:-1, 0]))[0]
+        assert len(cross) >= 2
+        for c in cross:
+            i = int(gi[c + 1])
+            assert i >= 1
+            assert max(x[c, 2], x[c + 1, 2]) > task.rings[i - 1:i + 1, 2].max()
+        visited[mode] = np.array([x for *_, x in log])
+    # both modes pass every waypoint within twice the ring radius of each other
+    gap = np.linalg.norm(visited["stdt"] - visited["mrcp"], axis=1)
+    assert gap.max() <= 2 * task.ring_radius
+
+
+def test_the_stored_trials_pass_the_via_points_in_every_mode(session) -> None:
+    # with tissue the rings ride on the bowel: each mode logs the via points it passed,
+    # where they were that cycle; the needle sample of that cycle is within the ring radius
+    # of it, and in every mode each via point is the rest route's (needle_route of the
+    # rings at rest) moved at most by the rings' motion: the loops' breathing (at most 4 mm,
+    # intestine_3/4/5 in protocols/scenes/default.toml) plus the trial's largest target
+    # displacement by the instruments (and the event's 0.01 mm rounding)
+    from vasim.mrcp.needle import needle_route
+
+    task = needle_task()
+    rest, kinds = needle_route(task.rings, task.sides)
+    rest_vias = rest[np.array(kinds) == -1]
+    for d in session["data"].values():
+        ev = d["events"]
+        rows = ev[ev["kind"] == "route"]
+        assert len(rows) == task.n_rings - 1
+        s = d["samples"]
+        x = s[["x_x", "x_y", "x_z"]].to_numpy()
+        pts = []
+        for _, r in rows.iterrows():
+            m = re.search(r"at (-?[\d.]+), (-?[\d.]+), (-?[\d.]+) mm", r["detail"])
+            w = np.array([float(v) for v in m.groups()]) * 1e-3
+            k = int(np.argmin(np.abs(s["t"].to_numpy() - r["t"])))
+            assert np.linalg.norm(x[k] - w) <= task.ring_radius + 1e-5
+            pts.append(w)
+        moved = np.linalg.norm(np.array(pts) - rest_vias, axis=1)
+        assert moved.max() <= 0.004 + d["metrics"]["target_displacement_max"] + 1e-5

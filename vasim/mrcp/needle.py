@@ -91,6 +91,10 @@ RING_SITES: tuple[tuple[str, str, float, float], ...] = (
 )
 """(side, organ, x, y) of the rings, in visiting order (the sides alternate)."""
 
+VIA_HEIGHT = 0.015
+"""Height of the route's via points (and StdT's hand-over points) above the higher of the
+two rings they join [m] (:func:`needle_route`)."""
+
 START_OFFSET = np.array([-0.02, 0.0, 0.02])
 """The needle starts this far from the first ring [m] (in the right instrument's jaw)."""
 
@@ -192,10 +196,58 @@ def needle_task(n_rings: int = len(RING_SITES), *, clearance: float = RING_CLEAR
 
 def handover_point(a: FloatArray, b: FloatArray) -> FloatArray:
     """Where a manual transfer happens between rings at ``a`` and ``b``: above the
-    midpoint at the midline, 1.5 cm above the higher ring (in both instruments' cones)."""
+    midpoint at the midline, ``VIA_HEIGHT`` (1.5 cm) above the higher ring (in both
+    instruments' cones). It is also the via point of the needle route (:func:`needle_route`)
+    in every mode."""
     a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     mid = 0.5 * (a + b)
-    return np.array([0.0, mid[1], max(a[2], b[2]) + 0.015])
+    return np.array([0.0, mid[1], max(a[2], b[2]) + VIA_HEIGHT])
+
+
+def needs_via(sides: tuple[Side, ...], i: int) -> bool:
+    """True if the route to ring ``i`` passes the via point after ring ``i - 1`` (the
+    rings are on different sides: the needle crosses the midline)."""
+    return 1 <= i < len(sides) and sides[i] != sides[i - 1]
+
+
+def needle_route(rings: FloatArray, sides: tuple[Side, ...]) -> tuple[FloatArray, tuple[int, ...]]:
+    """The needle's route through ``rings`` (n, 3) [m], the same in every mode.
+
+    **Decision** (issue #7 §4, the route rule): the scripted operator carries the needle
+    along the same waypoints whatever the mode, so that the modes differ only in how the
+    needle changes hands. From the start straight to the first ring; between consecutive
+    rings on different sides through the via point :func:`handover_point` (midline,
+    ``VIA_HEIGHT`` above the higher ring: the needle crosses over the bowel at this
+    clearance, never at ring height), then down to the next ring; between rings on the
+    same side straight. A waypoint is reached within the ring radius, and a ring counts
+    only after its via point. In StdT the operator's own hand-over happens at the via
+    point; in MRCP the needle passes it while the kernel transfers it wherever its indices
+    decide. Before this rule StdT crossed at the hand-over height and MRCP went straight
+    from ring to ring at ring height, 8 mm above the loops, and its tool tips touched
+    them: Q compared the operator's paths, not the modes.
+
+    Returns:
+        ``(m, 3)`` waypoints in visiting order, and for each the index of its ring, or
+        -1 for a via point (the via point before ring ``i`` uses rings ``i - 1`` and ``i``).
+
+    Example:
+        >>> t = needle_task(3)
+        >>> needle_route(t.rings, t.sides)[1]
+        (0, -1, 1, -1, 2)
+    """
+    r = np.asarray(rings, dtype=float).reshape(-1, 3)
+    if len(r) != len(sides):
+        raise ConfigError(f"needle_route: {len(r)} rings but {len(sides)} sides",
+                          field="sides")
+    pts: list[FloatArray] = []
+    kind: list[int] = []
+    for i in range(len(r)):
+        if needs_via(sides, i):
+            pts.append(handover_point(r[i - 1], r[i]))
+            kind.append(-1)
+        pts.append(r[i])
+        kind.append(i)
+    return np.array(pts), tuple(kind)
 
 
 def grasp_sigma(profile: OperatorProfile, practice: int) -> float:
@@ -233,12 +285,15 @@ __all__ = [
     "RING_CLEARANCE",
     "RING_RADIUS",
     "RING_SITES",
+    "VIA_HEIGHT",
     "NeedleTask",
     "classify_grasp",
     "grasp_offset",
     "grasp_sigma",
     "handover_point",
     "lateral_error",
+    "needle_route",
     "needle_task",
+    "needs_via",
     "pregrasp_offset",
 ]

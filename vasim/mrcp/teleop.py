@@ -5,8 +5,8 @@ abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of thr
 
 * ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
   masters : 2 slaves). At every change of side the scripted operator transfers the needle
-  itself: it carries the needle to a hand-over point at the midline
-  (:func:`~vasim.mrcp.needle.handover_point`), brings the other tool to the pre-grasp and
+  itself: it carries the needle to the route's via point at the midline, the hand-over
+  point (:func:`~vasim.mrcp.needle.handover_point`), brings the other tool to the pre-grasp and
   grasp points, closes that jaw, then opens the first one. Jaw placement errors, drawn
   from the operator's skill model (:mod:`vasim.mrcp.needle`), cause re-grasps and
   misaligned transfers.
@@ -42,6 +42,17 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
 
 **Decisions**:
 
+* One needle route in every mode (issue #7 §4; :func:`~vasim.mrcp.needle.needle_route`):
+  the operator aims at the same waypoints (the rings, and between rings on different
+  sides the via point at the midline 1.5 cm above the higher ring), each reached within
+  the ring radius, a ring counting only after its via point; the via point is computed
+  from the rings where they are that cycle. StdT hands over at the via point; in MRCP the
+  operator's one hand passes it while the kernel transfers the needle where its indices
+  decide. The modes then differ only in how the needle changes hands. Before, MRCP went
+  straight from ring to ring at ring height (8 mm above the loops) and StdT crossed at the
+  hand-over height: in a 4-subject cohort MRCP's tool tips touched the loops in 6 of 8
+  trials and StdT's in 1 of 8, which was the route's doing, not the mode's. Each reached
+  waypoint is in ``route_log`` and, for via points, a ``"route"`` event with its position.
 * Every instrument in the abdomen is in the contact model (issue #7 §4): each physics
   step gets the two tools (trocar to tool tip, ``"right"`` and ``"left"``) and the
   endoscope (camera trocar to lens, the same 2.5 mm capsule as the tools: the abdomen has
@@ -66,8 +77,9 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
 * MRCP kernel settings for this station: guidance step ``ΔR_max`` = 2 mm per cycle
   (0.11 m/s at the tool tip, a laparoscopic pace; the default 1 cm per cycle makes the
   mount move faster than the joints allow and breaks the fulcrum constraint), transfer
-  speed 0.1 m/s, repulsion influence 5 cm, and NTT threshold ``NTT_THRESHOLD`` = 2 (the
-  spec's default is 0.9; it is configurable): a transfer starts once RSel's remaining
+  speed 0.1 m/s, repulsion influence ``REPULSION_INFLUENCE`` = 3 cm, and NTT threshold
+  ``NTT_THRESHOLD`` = 2 (the spec's default is 0.9; it is configurable): a transfer starts
+  once RSel's remaining
   useful time covers only half of the transfer. With the short prediction horizon the
   cone index of a fast-moving needle is extrapolated to zero early, and at 0.9 the kernel
   handed the needle over before the midline, to a robot outside its own cone, which handed
@@ -77,6 +89,13 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
   transfers, no safety stop, every trial completed. Only ``rj`` and ``cone`` are
   evaluated: ``cr``, normalised across the robots, fell for the holder whenever the idle
   instrument stayed near the needle after a hand-over and triggered transfers back.
+  The influence was 5 cm until the shared route: the idle instrument, tracking its
+  pre-grasp pose, stops at its cone's edge near the midline at about the via height, so
+  the needle coming back to the next via point drives the holder's shaft at it; at 5 cm
+  the repulsion pushed it sideways and round behind the holder, its transfer timed out
+  and RSel ran into it (safety stops): 3 of 6 MRCP trials (intermediate operator, tissue,
+  seeds 1-5 and one test seed) ended in repeated safety stops; at 3 cm 12 of 12
+  completed (seeds 1-11 and that one), none stopped.
 * Camera: in ``stdt`` and ``mrcp`` the endoscope stays aimed at the centroid of the rings
   with the 100 deg field of view of the study's fixed endoscope
   (``vasim.study.trial.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
@@ -118,7 +137,9 @@ from vasim.mrcp.needle import (
     grasp_sigma,
     handover_point,
     lateral_error,
+    needle_route,
     needle_task,
+    needs_via,
     pregrasp_offset,
 )
 from vasim.mrcp.planner import PlannerParams
@@ -161,6 +182,10 @@ MAX_SAFETY_STOPS = 5
 NTT_THRESHOLD = 2.0
 """The kernel starts a transfer when NTT >= this (module docstring, decisions)."""
 
+REPULSION_INFLUENCE = 0.03
+"""Influence distance of the MRCP planner's repulsion at this station [m] (module
+docstring, decisions: 3 cm since the shared needle route)."""
+
 CAMERA_FOV_DEG = 70.0
 """Full field of view of the camera robot of ``mrcp_cam`` [deg]."""
 
@@ -187,7 +212,7 @@ def kernel_config(station: Station, seed: int = 0) -> KernelConfig:
     """The MRCP kernel settings of the study station (module docstring, decisions)."""
     return KernelConfig(
         dt=CYCLE_DT, seed=seed % 2**32, default_tcp_speed=0.1, ntt_threshold=NTT_THRESHOLD,
-        planner=PlannerParams(dr_max=0.002, influence=0.05),
+        planner=PlannerParams(dr_max=0.002, influence=REPULSION_INFLUENCE),
         indices=(IndexSpec("rj"), IndexSpec("cone", {"cones": dict(station.cones)})))
 
 
@@ -329,6 +354,11 @@ class TeleopTrial:
         self.camera = _Camera(cam, self.task.start.copy() if follows
                               else self.task.rings.mean(axis=0), follows)
         self._clutch = 0
+        self._via = False          # the next waypoint is the via point before ring i
+        self.route_j = 0           # waypoints of the route reached so far
+        self.route_log: list[tuple[int, float, np.ndarray, np.ndarray]] = []
+        """(ring index or -1 for a via point, time, waypoint, needle centre) per waypoint
+        reached, in order (``needle_route``)."""
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
@@ -364,12 +394,40 @@ class TeleopTrial:
     def _goal(self) -> np.ndarray:
         return self.rings[min(self.i, self.task.n_rings - 1)]
 
+    def _waypoint(self) -> np.ndarray:
+        """The next waypoint of the needle route (``needle_route``; the same in every
+        mode): the via point before ring ``i`` (from the rings where they are now), or
+        ring ``i``."""
+        if self._via:
+            return handover_point(self.rings[self.i - 1], self.rings[self.i])
+        return self._goal()
+
+    def _route_points(self) -> np.ndarray:
+        """The route's waypoints at rest (the scripted operator's task)."""
+        return needle_route(self.task.rings, self.task.sides)[0]
+
+    def _check_via(self) -> bool:
+        """Marks the via point reached when the needle is within the ring radius of it."""
+        w = self._waypoint()
+        if self._via and float(np.linalg.norm(self.needle - w)) <= self.task.ring_radius:
+            self._via = False
+            self.route_j += 1
+            self.route_log.append((-1, self.t, w.copy(), self.needle.copy()))
+            self.events.append((self.t, "route", f"via point {self.i - 1}->{self.i} "
+                                f"({self.holder}) at " + ", ".join(
+                                    f"{1e3 * v:.2f}" for v in w) + " mm"))
+            return True
+        return False
+
     def _check_ring(self) -> None:
-        if self.i < self.task.n_rings and float(
+        if self.i < self.task.n_rings and not self._via and float(
                 np.linalg.norm(self.needle - self._goal())) <= self.task.ring_radius:
             self.reach_times.append(self.t)
+            self.route_log.append((self.i, self.t, self._goal().copy(), self.needle.copy()))
             self.events.append((self.t, "ring", f"ring {self.i} passed ({self.holder})"))
             self.i += 1
+            self.route_j += 1
+            self._via = needs_via(self.task.sides, self.i)
 
     def _log(self, g: np.ndarray, i: int) -> None:
         snap = self._snap
@@ -393,6 +451,7 @@ class TeleopTrial:
         compared with: the goal advances after the row, as in ``vasim.study.trial``)."""
         self._physics()
         g, i = self._goal().copy(), self.i
+        self._check_via()
         self._check_ring()
         self.camera.follow(self.needle, self.dt)
         self._log(g, i)
@@ -418,7 +477,7 @@ class TeleopTrial:
                             config=kernel_config(st, self.config.seed))
         master = self.needle.copy()
         key = 0
-        hand = self._hand(self.task.rings, self.needle, self.task.ring_radius, key)
+        hand = self._hand(self._route_points(), self.needle, self.task.ring_radius, key)
         dt_op = self.dt / OPERATOR_SUBSTEPS
         ack = 0.0            # time left until the operator acknowledges a safety stop
         holding = False
@@ -426,7 +485,7 @@ class TeleopTrial:
             self._tick()
             if kernel.state is not KernelState.FAULT:
                 for _ in range(OPERATOR_SUBSTEPS):
-                    dx = hand.move(dt_op, self.needle, self._goal(), self.camera.zoom)
+                    dx = hand.move(dt_op, self.needle, self._waypoint(), self.camera.zoom)
                     master = master + dx
                     self.master_path += float(np.linalg.norm(dx))
             rec = kernel.step(self.t, master)   # the kernel applies its increments
@@ -467,10 +526,10 @@ class TeleopTrial:
                         kernel.reset_fault()
                         self.events.append((self.t, "mrcp", "safety stop acknowledged"))
                         key += 1
-                        hand = self._hand(self.task.rings, self.needle,
+                        hand = self._hand(self._route_points(), self.needle,
                                           self.task.ring_radius, key)
             self._finish_cycle()
-            hand.j = self.i
+            hand.j = self.route_j
             yield self.k
         self.master_path += self.camera.path
 
@@ -489,13 +548,14 @@ class TeleopTrial:
         while not self.done:
             self._tick()
             if phase in ("carry", "handover"):
-                goal = self._goal() if phase == "carry" else hand.points[0]
+                goal = self._waypoint()
                 dx = np.zeros(3)
                 for _ in range(OPERATOR_SUBSTEPS):
                     dx = dx + hand.move(dt_op, self.needle + dx, goal, self.camera.zoom)
                 self._move_tool(self.holder, dx)
                 self.needle = st.tip(self.holder) + offset
-                if phase == "handover" and hand.check(self.needle, goal):
+                self._check_via()
+                if phase == "handover" and not self._via:
                     phase, attempts = "approach", 0
                     self.events.append((self.t, "stdt", f"at hand-over point; {other} "
                                                         "approaches"))
@@ -554,8 +614,9 @@ class TeleopTrial:
             if self.i != before and not self.done:     # a ring passed: what next
                 key += 1
                 if self.task.sides[self.i] != self.holder:
-                    h = handover_point(self.rings[self.i - 1], self.rings[self.i])
-                    hand = self._hand(h[None, :], self.needle, self.task.ring_radius, key)
+                    # the route's via point (needle_route) is the hand-over point
+                    hand = self._hand(self._waypoint()[None, :], self.needle,
+                                      self.task.ring_radius, key)
                     phase = "handover"
                 else:
                     hand = self._hand(self._goal()[None, :], self.needle,
@@ -701,6 +762,7 @@ __all__ = [
     "CYCLE_DT",
     "GRIPPER_TIME",
     "OPERATOR_SUBSTEPS",
+    "REPULSION_INFLUENCE",
     "TISSUE_METRICS",
     "TeleopTrial",
     "kernel_config",

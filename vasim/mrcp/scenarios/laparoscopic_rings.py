@@ -1,31 +1,40 @@
 """Laparoscopic transfer (seed sec. 5.2): two tool robots, each holding a laparoscopic tool
 through its own trocar (fulcrum), and a camera robot holding the endoscope; the operator
-carries a small object (a rod, a grasp point at each end) beneath an intestine loop and
-through a ring.
+carries a small object (a rod, a grasp point at each end) from under an intestine loop and
+through two rings.
 
 Each tool robot is an RX60B whose TCP is the tool tip
 (:class:`~vasim.mrcp.fulcrum.LaparoscopicArm`: the fulcrum constraint is built into its IK).
 The tools are collision geometry: the robot model's last link is extended into a 10 mm
 shaft (:func:`tool_model`), so the shafts — not only the arms outside the body — see the
 ring, the intestine, the endoscope and each other (CR), and the safety stop covers them.
-A shaft cannot follow its tip through the ring: once the tip is past it, the shaft's
-crossing of the ring's plane climbs toward the ring's rim — so the object must change
-tools while it straddles the ring. The tool-orientation cone of each trocar (spec §4,
-eq. 3.28-3.29; piecewise-elliptical base, semi-axes 0.8 along the path and 0.6 / 0.7
-across it on either side) bounds the shaft's polar angle: carried away from a trocar, the
-object leaves that tool's cone.
+A shaft passes through a ring or under an arch only near its tip: the farther the
+obstacle's plane from the tip, the higher the shaft crosses it, until it meets the rim.
+The intestine loop (an arch over the path, 5 mm ahead of the first tool's tip at the start)
+is thus passed by the first tool's shaft while it carries the object out from under it.
+The first ring lies between the tools: once the first tool's tip came past it, its shaft's
+crossing would climb into the rim — so the object must change tools while it straddles
+that ring (CR). Its leading end is then at the second ring, 45 mm further on: the
+receiving tool takes it there, its shaft through that ring near the tip, and carries the
+object through with no further hand-over (a ring far from that tip would need one more
+transfer, back to the first tool, which its trocar cannot serve once the object is past
+the first ring). The tool-orientation cone of each trocar (spec §4, eq. 3.28-3.29;
+piecewise-elliptical base, semi-axes 0.8 along the path and 0.6 / 0.7 across it on either
+side) bounds the shaft's polar angle: carried away from a trocar, the object leaves that
+tool's cone.
 
-**Decisions**: the abdominal wall is not an obstacle (the shafts pass through it at the
-trocars) and the object itself is not a body; the camera robot does not take part in the
+**Decisions**: the intestine loop is a rigid arch (the upper half of a 70 mm ring of
+boxes, 12 mm thick); the abdominal wall is not an obstacle (the shafts pass through it at
+the trocars) and the object itself is not a body; the camera robot does not take part in the
 task (it is not one of the kernel's robots), it is an obstacle with its endoscope; the
 action planner's repulsion acts within 15 mm only (obstacles in the body are centimetres
 apart: a longer reach pushed the waiting tool away from its grasp point for good).
 
 Geometry (world frame, shoulders at z = 0, abdominal wall at z = 0, the body below):
 trocars 0.14 m apart on the x axis, the endoscope's trocar 0.13 m behind them; the object
-travels 0.15 m below the wall along x from -0.09 to +0.08 m; a ring of radius 50 mm in the
-plane x = -0.02; the intestine loop a 24 mm tube along the path, 35 mm beside and 40 mm
-above it.
+travels 0.15 m below the wall along x from -0.09 to +0.08 m; rings of radius 50 mm in the
+planes x = -0.02 and x = +0.025; the intestine loop an arch of radius 70 mm over the path
+in the plane x = -0.11 (the object's trailing end starts 5 mm before it).
 """
 
 from __future__ import annotations
@@ -52,12 +61,14 @@ PATH_Y = -0.05
 X_START = -0.09
 X_GOAL = 0.08
 SPEED = 0.04
-RING_X = -0.02
+RING_X = -0.02                    # the first ring (forces the hand-over)
+RING_X2 = 0.025                   # the second ring, near the receiving tool's tip
+RINGS = (RING_X, RING_X2)
 RING_RADIUS = 0.05
 HALF_ROD = 0.025
-INTESTINE_DEPTH = 0.11
-INTESTINE_RADIUS = 0.012
-INTESTINE_Y = 0.035               # beside the path, above it
+LOOP_X = -0.11                    # the intestine loop arches over the path near the start
+LOOP_RADIUS = 0.07
+LOOP_THICK = 0.006
 TROCARS = {"R0": np.array([-0.07, PATH_Y, 0.0]), "R1": np.array([0.07, PATH_Y, 0.0])}
 CAMERA_TROCAR = np.array([0.0, 0.08, 0.0])
 
@@ -102,7 +113,7 @@ def ring_segments(centre: FloatArray, radius: float, n: int = 8, thick: float = 
 class LaparoscopicRings:
     name = "laparoscopic_rings"
     summary = ("two laparoscopic tool robots (trocars) and a camera robot: an object carried "
-               "beneath an intestine loop and through a ring, tool-orientation cones active "
+               "from under an intestine loop and through two rings, tool-orientation cones active "
                "(seed sec. 5.2)")
     duration = (X_GOAL - X_START) / SPEED + 1.0
 
@@ -138,16 +149,15 @@ class LaparoscopicRings:
         if qc is None:
             raise RuntimeError("laparoscopic_rings: the camera robot cannot reach its view")
         st.physical.add_robot("C", model, camera.arm.base, qc)  # type: ignore[attr-defined]
+        # bodies ring_k (first ring, the name the viewer's tests count) and ring1_k (second)
+        for i, rx in enumerate(RINGS):
+            for k, (half, centre, rot) in enumerate(ring_segments(
+                    np.array([rx, PATH_Y, -DEPTH]), RING_RADIUS)):
+                st.add_box(f"ring{i}_{k}" if i else f"ring_{k}", half, centre, rot)
         for k, (half, centre, rot) in enumerate(ring_segments(
-                np.array([RING_X, PATH_Y, -DEPTH]), RING_RADIUS)):
-            st.add_box(f"ring_{k}", half, centre, rot)
-        tube = np.array([[x, 0.0, 0.0] for x in (-0.12, 0.12)])
-        ball = INTESTINE_RADIUS * np.array([[1, 0, 0], [-1, 0, 0], [0, 0, 1], [0, 0, -1],
-                                            [0.7, 0, 0.7], [-0.7, 0, 0.7], [0.7, 0, -0.7],
-                                            [-0.7, 0, -0.7]], dtype=float)
-        ball = ball[:, [1, 0, 2]]                                # the tube runs along x
-        st.add_convex("intestine", np.vstack([tube[0] + ball, tube[1] + ball]),
-                      np.array([0.0, PATH_Y + INTESTINE_Y, -INTESTINE_DEPTH]))
+                np.array([LOOP_X, PATH_Y, -DEPTH]), LOOP_RADIUS, thick=LOOP_THICK)):
+            if centre[2] > -DEPTH:                    # the upper half: an arch over the path
+                st.add_box(f"intestine_loop_{k}", half, centre, rot)
         cones = {r: ToolCone(TROCARS[r], -up, np.array([1.0, 0.0, 0.0]),
                              (ConeSector(0.0, np.pi, 0.8, 0.6),
                               # end past 2π: cone.py's np.mod can return exactly 2π
