@@ -23,6 +23,16 @@ Threads (guides/architecture.md):
 Experimenter tabs (and their training controller, which would run demo trials in the
 background) are not built at all; the page shows the station and one "MRCP" tab.
 
+**Decision** (operator input, issue #7 §3): the tab's "Operator" control switches the
+target the runner's operator steers the task toward between the scenario's script
+(``scripted``, the default: the run is the one ``vasim mrcp run`` makes) and a transform
+gizmo on the task (``browser``; :class:`~vasim.mrcp.scenarios.runner.OperatorSwitch`).
+Switching to browser places the gizmo at the task's current pose, so nothing moves until it
+is dragged; the task then follows the gizmo at most 0.2 m/s and 120 deg/s, the kernel still
+chooses the robot that holds it (and hands it over) and the invariants are checked every
+cycle; a released gizmo holds its last pose. Switching back, the task returns to the
+script at the same rate. The mode and the gizmo's pose survive a scenario's loop.
+
 **Decision** (what a robot's ``texec`` / ``tus`` is): the runner's choice — RSel at CuTP, a
 candidate at its best grasp point (largest ``tus``); ``texec`` is the minimum over the
 indices. Transfer-phase (TT) cycles are not evaluated: gaps in the plots, as in the seed's.
@@ -46,7 +56,13 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.errors import ConfigError, VasimError
-from vasim.viewer.mrcp_view import StationFrame, StationGeometry, StationView, station_frame
+from vasim.viewer.mrcp_view import (
+    StationFrame,
+    StationGeometry,
+    StationView,
+    station_frame,
+    task_pose,
+)
 
 log = logging.getLogger(__name__)
 
@@ -195,13 +211,17 @@ class LiveScenario:
         self.cycles = 0
         self._history_s = float(history_s)
         self._reset_history([])
+        self.operator: Any = None
+        """The run's :class:`~vasim.mrcp.scenarios.runner.OperatorSwitch` (after prepare)."""
 
     # -- lifecycle ---------------------------------------------------------------------
     def prepare(self) -> StationGeometry:
         """Builds the first run's station and returns what to draw (call before start)."""
+        from vasim.mrcp.scenarios.runner import OperatorSwitch
         from vasim.viewer.mrcp_view import station_geometry
 
         setup = self.scenario.build(self.options)
+        self.operator = OperatorSwitch(setup.operator)
         try:
             self.geometry = station_geometry(self.scenario.name, setup)
         except BaseException:
@@ -249,13 +269,15 @@ class LiveScenario:
                     self.scenario.build(self.options)
                 self._pending = None
                 self._setup = setup
+                self.operator.script = setup.operator
                 with self._lock:
                     self.run += 1
                     self._reset_history(self.robots)
                 self._t_wall0 = time.perf_counter()
                 self._clock: collections.deque[tuple[float, float]] = collections.deque(
                     maxlen=max(2, int(REALTIME_WINDOW_S / self.dt)))
-                run_setup(self.scenario.name, setup, self.options.duration, self._on_sample)
+                run_setup(self.scenario.name, setup, self.options.duration, self._on_sample,
+                          operator=self.operator)
             except _Stopped:
                 break
             except Exception as exc:
@@ -399,6 +421,10 @@ class MrcpPanel:
                 title=f"tus per robot [s] (< {TUS_BOTTOM:g} drawn at {TUS_BOTTOM:g})",
                 scales={**axes, "y": {"auto": False, "range": [TUS_BOTTOM - 0.25, top]}},
                 aspect=2.2)
+            self.operator = gui.add_dropdown(
+                "Operator", ("scripted", "browser"), initial_value="scripted",
+                hint="scripted: the scenario's script moves the task; browser: drag the "
+                     "gizmo on the task (followed at <= 0.2 m/s, 120 deg/s)")
             with gui.add_folder("Transfers and events"):
                 self.log = gui.add_markdown("*no transfer yet in this run*")
             gui.add_markdown("Robots: orange holds the task (RSel), light orange grasps "
@@ -488,6 +514,7 @@ class MrcpViewerApp:
         self.panel: MrcpPanel | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.gizmo: Any = None
         self._shown_seq = -1
         self._t_plot = 0.0
         self._stopped = False
@@ -522,6 +549,14 @@ class MrcpViewerApp:
             self.station = StationView(s, geometry)
             self.panel = MrcpPanel(s, self.scenario.name, self.live.robots,
                                    self.live.ntt_threshold, self.live.t_max)
+            start = task_pose(geometry.task_start, None)
+            self.gizmo = s.scene.add_transform_controls(
+                "/mrcp/operator_gizmo", scale=0.25, position=tuple(start[:3]),
+                wxyz=tuple(start[3:]), visible=False)
+            self.panel.operator.on_update(self._guard(
+                lambda _: self.set_operator_mode(str(self.panel.operator.value))))  # type: ignore[union-attr]
+            self.gizmo.on_update(self._guard(lambda _: self.set_operator_pose(
+                np.asarray(self.gizmo.position, float), np.asarray(self.gizmo.wxyz, float))))  # type: ignore[union-attr]
             self.live.start()
             self._thread = threading.Thread(target=self._view_loop, name="vasim-viewer-view",
                                             daemon=True)
@@ -581,6 +616,61 @@ class MrcpViewerApp:
                 "view_updates": float(self.view_updates),
                 "panel_updates": float(self.panel.updates if self.panel else 0),
                 "realtime_factor": f.realtime if f is not None else math.nan}
+
+    # -- operator input ------------------------------------------------------------------
+    @property
+    def operator_mode(self) -> str:
+        """``"scripted"`` or ``"browser"`` (see the module's decision)."""
+        return str(self.live.operator.mode) if self.live.operator is not None else "scripted"
+
+    def set_operator_mode(self, mode: str) -> None:
+        """Switches the operator's target source (what the "Operator" control does).
+
+        Switching to ``"browser"`` moves the gizmo to the task's current pose and makes it
+        the target; ``"scripted"`` hides the gizmo and returns to the script.
+
+        Raises:
+            ConfigError: for an unknown mode or before ``start()``.
+        """
+        from vasim.mrcp.scenarios.runner import OPERATOR_MODES
+
+        if mode not in OPERATOR_MODES:
+            raise ConfigError(f"operator mode must be one of {OPERATOR_MODES}, got {mode!r}",
+                              field="operator")
+        if self.live.operator is None or self.gizmo is None or self.panel is None:
+            raise ConfigError("the MRCP viewer is not started", field="operator")
+        if mode == self.live.operator.mode:
+            return
+        if mode == "browser":
+            frame = self.live.latest()
+            if frame is not None:
+                pose = task_pose(frame.sample.task_position, frame.sample.task_rotation)
+            else:
+                p0, r0 = self.live.operator.script(0.0)
+                pose = task_pose(p0, r0)
+            self.gizmo.position = tuple(float(v) for v in pose[:3])
+            self.gizmo.wxyz = tuple(float(v) for v in pose[3:])
+            self.set_operator_pose(pose[:3], pose[3:])
+        self.live.operator.set_mode(mode)
+        self.gizmo.visible = mode == "browser"
+        if self.panel.operator.value != mode:
+            self.panel.operator.value = mode
+
+    def set_operator_pose(self, position: FloatArray, wxyz: FloatArray) -> None:
+        """The browser target (what dragging the gizmo does): position ``(3,)`` [m],
+        quaternion ``wxyz``. Held until the next one; ignored by the scripted mode.
+
+        Raises:
+            ConfigError: for a non-finite pose or a zero quaternion.
+        """
+        from scipy.spatial.transform import Rotation
+
+        q = np.asarray(wxyz, float)
+        if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
+            raise ConfigError(f"gizmo orientation must be a non-zero quaternion wxyz, got "
+                              f"{q!r}", field="operator")
+        rot = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
+        self.live.operator.set_pose(np.asarray(position, float), rot)
 
     # -- errors --------------------------------------------------------------------------
     def _report(self, message: str) -> None:

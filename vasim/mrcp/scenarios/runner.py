@@ -21,6 +21,7 @@ their minimum, ``ttransf*`` and ``tus`` — and NTT and RSel (:class:`Sample`).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -190,10 +191,95 @@ class TrackingOperator:
         return pos, Rotation.from_rotvec(rv).as_matrix() @ np.asarray(last[1], float)
 
 
+#: A target pose source: time [s] -> task position ``(3,)`` and rotation ``(3, 3)`` or None.
+TargetSource = Callable[[float], tuple[FloatArray, FloatArray | None]]
+
+OPERATOR_MODES = ("scripted", "browser")
+
+
+class OperatorSwitch:
+    """Where the operator's target comes from: the scenario's script (``"scripted"``, the
+    default) or a pose set from outside — the viewer's transform gizmo (``"browser"``).
+
+    The runner's :class:`TrackingOperator` steers the task toward either target at the
+    same bounded speed, so a gizmo dragged far away is followed at 0.2 m/s and 120 deg/s;
+    the kernel still decides which robot holds the task.
+
+    **Decision** (releasing the gizmo): the browser target is the last pose set, held until
+    the next one (a released gizmo keeps the task where it was dragged). Before any pose is
+    set, browser mode follows the script. A scenario whose script has no rotation ignores
+    the gizmo's rotation (a position-only task). Thread-safe: the view thread sets, the
+    scenario thread reads.
+
+    Args:
+        script: the scenario's scripted operator (``Setup.operator``).
+    """
+
+    def __init__(self, script: TargetSource):
+        self.script = script
+        self._lock = threading.Lock()
+        self._mode = "scripted"
+        self._pose: tuple[FloatArray, FloatArray] | None = None
+
+    @property
+    def mode(self) -> str:
+        return self._mode
+
+    def set_mode(self, mode: str) -> None:
+        """``"scripted"`` or ``"browser"``.
+
+        Raises:
+            ConfigError: for another mode.
+        """
+        from vasim.errors import ConfigError
+
+        if mode not in OPERATOR_MODES:
+            raise ConfigError(f"operator mode must be one of {OPERATOR_MODES}, got {mode!r}",
+                              field="operator")
+        with self._lock:
+            self._mode = mode
+
+    def set_pose(self, position: FloatArray, rotation: FloatArray) -> None:
+        """The browser target: position ``(3,)`` [m], rotation ``(3, 3)``.
+
+        Raises:
+            ConfigError: for a non-finite or mis-shaped pose.
+        """
+        from vasim.errors import ConfigError
+
+        p = np.asarray(position, float)
+        r = np.asarray(rotation, float)
+        if p.shape != (3,) or r.shape != (3, 3) or not (np.all(np.isfinite(p))
+                                                       and np.all(np.isfinite(r))):
+            raise ConfigError(f"operator pose must be a finite (3,) position and (3, 3) "
+                              f"rotation, got {p!r}, {r!r}", field="operator")
+        with self._lock:
+            self._pose = (p.copy(), r.copy())
+
+    def pose(self) -> tuple[FloatArray, FloatArray] | None:
+        """The last browser target (None before the first)."""
+        with self._lock:
+            return self._pose
+
+    def __call__(self, t: float) -> tuple[FloatArray, FloatArray | None]:
+        script = self.script(t)
+        with self._lock:
+            mode, pose = self._mode, self._pose
+        if mode == "scripted" or pose is None:
+            return script
+        return pose[0].copy(), None if script[1] is None else pose[1].copy()
+
+
 def run_setup(name: str, setup: Setup, duration: float | None = None,
-              progress: Callable[[Sample], None] | None = None) -> RunResult:
-    """Runs a built scenario for ``duration`` (default: its own) and closes it."""
+              progress: Callable[[Sample], None] | None = None,
+              operator: TargetSource | None = None) -> RunResult:
+    """Runs a built scenario for ``duration`` (default: its own) and closes it.
+
+    ``operator`` replaces the script as the source of the operator's target after t = 0
+    (e.g. an :class:`OperatorSwitch`); None (default) follows ``setup.operator``.
+    """
     cfg = setup.config
+    source = setup.operator if operator is None else operator
     pos0, rot0 = setup.operator(0.0)
     hand = TrackingOperator()
     last: tuple[FloatArray, FloatArray | None] = (np.asarray(pos0, float), rot0)
@@ -209,7 +295,7 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
             t = (i + 1) * cfg.dt
             if setup.on_cycle is not None:
                 setup.on_cycle(t, setup.world)
-            pos, rot = hand.command(setup.operator(t), achieved, last, cfg.dt)
+            pos, rot = hand.command(source(t), achieved, last, cfg.dt)
             extras = setup.extras(t) if setup.extras is not None else None
             rec = kernel.step(t, pos, rot, extras=extras)
             last = (pos, rot)
@@ -231,7 +317,11 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
 
 
 def run(scenario: Scenario, options: ScenarioOptions | None = None,
-        progress: Callable[[Sample], None] | None = None) -> RunResult:
-    """Builds and runs a scenario."""
+        progress: Callable[[Sample], None] | None = None,
+        operator: Callable[[Setup], TargetSource] | None = None) -> RunResult:
+    """Builds and runs a scenario; ``operator`` (optional) makes the target source from the
+    built setup (e.g. ``OperatorSwitch``)."""
     opts = options or ScenarioOptions()
-    return run_setup(scenario.name, scenario.build(opts), opts.duration, progress)
+    setup = scenario.build(opts)
+    return run_setup(scenario.name, setup, opts.duration, progress,
+                     None if operator is None else operator(setup))
