@@ -12,6 +12,7 @@ from vasim.mrcp.planner import (
     ObstacleMemory,
     PlannerParams,
     attraction,
+    fallback_steps,
     guidance,
     move_candidate,
     repulsion,
@@ -66,6 +67,8 @@ def test_random_force_breaks_a_deadlock() -> None:
         PlannerParams(w_rand=0.5)
     with pytest.raises(ValueError, match="shape_l"):
         PlannerParams(shape_l=0.5)
+    with pytest.raises(ValueError, match="stall_cycles"):
+        PlannerParams(stall_cycles=0)
 
 
 def test_hierarchy_by_tus_with_distinct_points() -> None:
@@ -90,3 +93,80 @@ def test_candidate_reaches_its_goal_and_never_collides() -> None:
         assert not world.in_collision("a")
         assert np.all(q >= a.lower) and np.all(q <= a.upper)
     assert np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-6
+
+
+def _waiting_at_the_margin(goal_side: float) -> tuple[PlanarArm, PlanarWorld, np.ndarray,
+                                                      np.ndarray, PlannerParams]:
+    """An arm whose TCP end waits exactly ``safety_margin`` in front of a sphere (along its
+    last link), and a goal ``goal_side`` beside the sphere's centre, 2 cm beyond it."""
+    a = PlanarArm("a", radius=0.02)
+    q0 = np.array([0.0, 1.5, 0.0])
+    _, elbow, tcp = a.points(q0)
+    ahead = (tcp - elbow) / np.linalg.norm(tcp - elbow)
+    side = np.array([-ahead[1], ahead[0], 0.0])
+    p = PlannerParams(dr_max=0.01)
+    radius = 0.03
+    centre = tcp + (a.radius + p.safety_margin + radius) * ahead
+    world = PlanarWorld({"a": a}, {"a": q0}, {"ball": Sphere(centre, radius)})
+    goal = centre + goal_side * side + 0.02 * ahead
+    return a, world, q0, goal, p
+
+
+@pytest.mark.parametrize("goal_side", [0.08, -0.08])
+def test_candidate_at_the_margin_slides_around_the_obstacle(goal_side: float) -> None:
+    a, world, q0, goal, p = _waiting_at_the_margin(goal_side)
+    d0 = world.min_distance("a", "ball").distance
+    assert d0 == pytest.approx(p.safety_margin, abs=1e-12)
+    assert a.ik(goal) is not None
+    # The plain guidance step (attraction only: no approach history yet) would cross the
+    # margin, so the old rule rejected it and the candidate stalled at q0 for ever.
+    tcp = a.tcp_pose(q0)[0]
+    plain = a.ik(tcp + attraction(goal - tcp, p.dr_max), None, q0)
+    assert plain is not None
+    assert world.min_distances("a", plain[None, :], ["ball"])[0, 0] < p.safety_margin
+    mem = ObstacleMemory()
+    rng = np.random.default_rng(0)
+    q = q0
+    for _ in range(p.stall_cycles - 1):     # a rejection may be transient: it waits first
+        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        np.testing.assert_array_equal(q, q0)
+    q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+    assert np.linalg.norm(a.tcp_pose(q)[0] - tcp) > 0.5 * p.dr_max     # then it slid
+    # ... and keeps going around the sphere without ever crossing the margin (100 cycles of
+    # at most 1 cm for a ~11 cm detour).
+    for _ in range(100):
+        assert world.min_distance("a", "ball").distance >= min(d0, p.safety_margin) - 1e-12
+        if np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-9:
+            break
+        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+    assert np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-9
+
+
+def test_candidate_at_the_margin_retreats_from_a_goal_straight_behind() -> None:
+    a, world, q0, _, p = _waiting_at_the_margin(0.0)
+    tcp = a.tcp_pose(q0)[0]
+    prox = world.min_distance("a", "ball")
+    normal = (prox.point_b - prox.point_a) / np.linalg.norm(prox.point_b - prox.point_a)
+    goal = tcp + 0.2 * normal                   # straight through the sphere: nothing to slide
+    assert fallback_steps(attraction(goal - tcp, p.dr_max), normal)[0] == pytest.approx(
+        -p.dr_max * normal)
+    mem = ObstacleMemory()
+    rng = np.random.default_rng(0)
+    q = q0
+    for _ in range(p.stall_cycles):
+        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+    assert world.min_distance("a", "ball").distance > prox.distance + 0.5 * p.dr_max
+    for _ in range(60):
+        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        assert world.min_distance("a", "ball").distance >= p.safety_margin - 1e-12
+        assert not world.in_collision("a")
+
+
+def test_fallback_steps_slide_then_retreat() -> None:
+    n = np.array([0.0, 1.0, 0.0])
+    slide, retreat = fallback_steps(np.array([0.006, 0.008, 0.0]), n)
+    np.testing.assert_allclose(slide, [0.006, 0.0, 0.0])              # tangent plane of n
+    np.testing.assert_allclose(retreat, [0.0, -0.01, 0.0])            # |F| away from the body
+    away = fallback_steps(np.array([0.006, -0.008, 0.0]), n)[0]        # not approaching: kept
+    np.testing.assert_allclose(away, [0.006, -0.008, 0.0])
+    assert len(fallback_steps(np.array([0.0, 0.01, 0.0]), n)) == 1     # head-on: retreat only

@@ -24,7 +24,19 @@ Each cycle a candidate's TCP moves by the guidance displacement
 * Within ``ΔR_max`` of its goal a robot takes the last step without repulsion (the
   tangential field would otherwise keep it circling a goal that lies near an obstacle).
 * Safety over progress: a move whose configuration collides (or comes closer than
-  ``safety_margin`` to a body it was farther from) is rejected and the candidate stays.
+  ``safety_margin`` to a body it was farther from) is rejected.
+* Slide, then retreat (no deadlock at the margin): a candidate waiting exactly at
+  ``safety_margin`` from a body has every step toward a goal behind that body's side
+  rejected, so it would stall and its transfer time out. When the guidance step is
+  rejected, the candidate tries the step projected onto the tangent plane of the nearest
+  body (the component along the unit witness direction ``n`` robot -> body removed when it
+  points at the body: ``F - max(F·n, 0) n``, i.e. it slides along the surface); if that is
+  rejected too (or vanishes: the goal lies straight behind the body), a retreat step of the
+  same length straight away from the nearest body (``-|F| n``). Every fallback passes the
+  same collision / margin test; when none does, the candidate stays. The fallbacks start
+  only after ``stall_cycles`` consecutive rejected guidance steps (and stop at the next
+  accepted one): a rejection is usually transient (the holder or the task moves on), and
+  retreating at once set up a slide/retreat limit cycle in the laparoscopic scenario.
 """
 
 from __future__ import annotations
@@ -54,6 +66,8 @@ class PlannerParams:
         w_rand: weight of the random force (0..0.2).
         influence: obstacles farther than this are ignored [m].
         safety_margin: a move may not bring the robot closer than this to any body [m].
+        stall_cycles: consecutive rejected guidance steps before a candidate slides along
+            (or retreats from) the nearest body.
     """
 
     dr_max: float = 0.01
@@ -64,6 +78,7 @@ class PlannerParams:
     w_rand: float = 0.05
     influence: float = 0.3
     safety_margin: float = 0.005
+    stall_cycles: int = 10
 
     def __post_init__(self) -> None:
         if self.dr_max <= 0.0:
@@ -72,6 +87,8 @@ class PlannerParams:
             raise ValueError(f"PlannerParams.shape_l must be >= 1, got {self.shape_l!r}")
         if not 0.0 <= self.w_rand <= 0.2:
             raise ValueError(f"PlannerParams.w_rand must be in [0, 0.2], got {self.w_rand!r}")
+        if self.stall_cycles < 1:
+            raise ValueError(f"PlannerParams.stall_cycles must be >= 1, got {self.stall_cycles!r}")
         if self.d_scale <= 0.0:
             raise ValueError(f"PlannerParams.d_scale must be > 0, got {self.d_scale!r}")
 
@@ -137,12 +154,15 @@ def _limit_rotation(current: FloatArray, goal: FloatArray, rot_max: float) -> Fl
 
 @dataclass
 class ObstacleMemory:
-    """Last cycle's distance and unit vector per (robot, body) for ``Δû``."""
+    """Last cycle's distance and unit vector per (robot, body) for ``Δû``, and per robot
+    the number of consecutive rejected guidance steps."""
 
     last: dict[tuple[str, str], tuple[float, FloatArray]]
+    stalled: dict[str, int]
 
     def __init__(self) -> None:
         self.last = {}
+        self.stalled = {}
 
 
 def _unit(a: FloatArray, b: FloatArray) -> FloatArray | None:
@@ -183,10 +203,13 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
         repel = False                   # the last step onto the goal: settle, no limit cycle
     reps = []
     before: dict[str, float] = {}
+    nearest: tuple[float, FloatArray] | None = None     # (distance, unit witness direction)
     for body in bodies:
         prox = world.min_distance(robot, body, p.influence)
         before[body] = prox.distance
         u = _unit(prox.point_a, prox.point_b)
+        if u is not None and (nearest is None or prox.distance < nearest[0]):
+            nearest = (prox.distance, u)
         key = (robot, body)
         prev = memory.last.get(key)
         if u is not None and prox.distance < p.influence:
@@ -200,16 +223,63 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
         return q
     target_rot = (_limit_rotation(rot, goal_rotation, p.rot_max)
                   if goal_rotation is not None else None)
+    q_new = _safe_step(world, arm, robot, q, tcp, f, target_rot, bodies, before, p, dt)
+    if q_new is not None:
+        memory.stalled[robot] = 0
+        return q_new
+    if nearest is None:
+        return q
+    memory.stalled[robot] = memory.stalled.get(robot, 0) + 1
+    if memory.stalled[robot] < p.stall_cycles:
+        return q
+    for fallback in fallback_steps(f, nearest[1]):
+        q_new = _safe_step(world, arm, robot, q, tcp, fallback, target_rot, bodies, before, p,
+                           dt)
+        if q_new is not None:
+            return q_new
+    return q
+
+
+def fallback_steps(f: FloatArray, n: FloatArray) -> list[FloatArray]:
+    """The slide and retreat steps tried after the step ``f`` was rejected (see the module
+    decision): ``f`` without its component toward the body (unit direction ``n`` robot ->
+    body), when that remains, then ``|f|`` straight away from the body.
+
+    Example:
+        >>> import numpy as np
+        >>> [s.round(6).tolist() for s in fallback_steps(np.array([0.006, 0.008, 0.0]),
+        ...                                             np.array([1.0, 0.0, 0.0]))]
+        [[0.0, 0.008, 0.0], [-0.01, -0.0, -0.0]]
+    """
+    f = np.asarray(f, dtype=np.float64)
+    n = np.asarray(n, dtype=np.float64)
+    size = float(np.linalg.norm(f))
+    out: list[FloatArray] = []
+    slide = f - max(float(f @ n), 0.0) * n
+    if float(np.linalg.norm(slide)) > 1e-6 * size:
+        out.append(slide)
+    if size > 0.0:
+        out.append(-size * n)
+    return out
+
+
+def _safe_step(world: ProximityWorld, arm: ArmKinematics, robot: str, q: FloatArray,
+               tcp: FloatArray, f: FloatArray, target_rot: FloatArray | None,
+               bodies: Sequence[str], before: dict[str, float], p: PlannerParams,
+               dt: float) -> FloatArray | None:
+    """Move the TCP by ``f`` (IK, halved without orientation when out of reach, joint limits);
+    the new configuration, or None (``world`` back at ``q``) when it collides or comes too
+    close to a body."""
     q_new = arm.ik(tcp + f, target_rot, q)
     if q_new is None:
         q_new = arm.ik(tcp + 0.5 * f, None, q)
         if q_new is None:
-            return q
+            return None
     q_new = step_limits(arm, q, q_new, dt)
     world.set_configuration(robot, q_new)
     if world.in_collision(robot) or _too_close(world, robot, q_new, bodies, before, p):
         world.set_configuration(robot, q)
-        return q
+        return None
     return q_new
 
 
