@@ -268,6 +268,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="trial time limit [s] (default: the protocol's)")
     r.add_argument("--answers", type=Path, default=None,
                    help="TOML file with [pre] and [post] questionnaire answers")
+    _no_progress_flag(r)
     r.set_defaults(func=_cmd_run)
 
     r = ss.add_parser("resume", help="continue a session at its first unfinished trial")
@@ -278,6 +279,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="protocol name, when the subject has several running sessions")
     r.add_argument("--answers", type=Path, default=None,
                    help="TOML file with [post] (and [pre]) answers to record")
+    _no_progress_flag(r)
     r.set_defaults(func=_cmd_resume)
 
     r = ss.add_parser("list", help="sessions with their progress")
@@ -292,6 +294,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     r.add_argument("--tables", default=None,
                    help="comma-separated subset of: samples, trials, trial_metrics, "
                         "point_metrics, questionnaires, subjects, sessions, schedule")
+    _no_progress_flag(r)
     r.set_defaults(func=_cmd_export)
 
     r = ss.add_parser("simulate", help="simulate a cohort of scripted subjects")
@@ -305,6 +308,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="worker processes (default: number of cores; 0: in this process)")
     r.add_argument("--max-time", type=float, default=None,
                    help="trial time limit [s] (default: the protocol's)")
+    _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
 
     r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
@@ -340,8 +344,14 @@ def _new_db(path: Path) -> Path:
     return path
 
 
-def _progress() -> bool:
-    return sys.stderr.isatty()
+def _no_progress_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-progress", action="store_true",
+                        help="no progress output (default: a bar on a terminal, a line every "
+                             "15 s in a log file)")
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    return not args.no_progress
 
 
 def _record_file_answers(store: object, session_id: int, path: Path | None,
@@ -388,7 +398,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         recorded = _record_file_answers(store, sid, args.answers, ("pre",))
         print(f"session {sid} started: {protocol.n_trials} trials, seed "
               f"{store.session(sid)['seed']}", file=sys.stderr)
-        run_session(store, sid, progress=_progress())
+        run_session(store, sid, progress=_progress(args))
         if store.session(sid)["status"] == "completed":
             recorded += _record_file_answers(store, sid, args.answers, ("post",))
         print(_session_line(store, sid))
@@ -407,7 +417,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         if store.recovered:
             print(f"marked interrupted (writer gone): trials {store.recovered}",
                   file=sys.stderr)
-        n = run_session(store, sid, progress=_progress())
+        n = run_session(store, sid, progress=_progress(args))
         recorded = []
         if store.session(sid)["status"] == "completed":
             recorded = _record_file_answers(store, sid, args.answers, ("pre", "post"))
@@ -443,7 +453,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     tables = EXPORT_TABLES if args.tables is None else tuple(
         t.strip() for t in args.tables.split(",") if t.strip())
     out = export_study(_existing_db(args.db), args.out, formats=formats, tables=tables,
-                       progress=_progress())
+                       progress=_progress(args))
     import json
 
     manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
@@ -464,12 +474,18 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         surgeons = round(args.subjects * 31 / 46)  # the VF study: 31 surgeons of 46
     rep = simulate_cohort(_new_db(args.db), protocol, n_subjects=args.subjects,
                           n_surgeons=surgeons, seed=args.seed, workers=args.workers,
-                          progress=_progress(), max_trial_time=args.max_time)
-    print(f"cohort of {rep.subjects} subjects ({surgeons} surgeons), seed {args.seed}: "
+                          progress=_progress(args), max_trial_time=args.max_time)
+    print(f"cohort of {_count(rep.subjects, 'subject')} ({_count(surgeons, 'surgeon')}), "
+          f"seed {args.seed}: "
           f"{rep.sessions_completed} sessions completed, {rep.trials_run} trials run now")
     print(f"simulated {rep.sim_seconds:.1f} s in {rep.wall_seconds:.1f} s wall with "
           f"{rep.workers} worker(s): {rep.realtime_ratio:.1f}x real time")
     return 0
+
+
+def _count(n: int, noun: str) -> str:
+    """``3 subjects``, ``1 subject``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:

@@ -58,7 +58,6 @@ from __future__ import annotations
 import math
 import multiprocessing
 import os
-import sys
 import time
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
@@ -72,6 +71,7 @@ import pandas as pd
 from vasim.errors import ConfigError, StoreError
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.scripted import OperatorProfile
+from vasim.progress import progress_bar
 from vasim.study.metrics import POINT_COLUMNS
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
 from vasim.study.samples import SampleBuffer
@@ -464,7 +464,7 @@ def simulate_cohort(
         n_subjects, n_surgeons: cohort size and surgeons among it (the rest residents).
         seed: cohort seed (subjects, profiles, schedules, answers).
         workers: worker processes (None: ``os.cpu_count()``; 0: run in this process).
-        progress: a tqdm bar (stderr) over the cohort's trials.
+        progress: progress output over the cohort's trials (:mod:`vasim.progress`).
         max_trial_time: trial time limit [s] (None: the protocol's).
         max_trials_per_subject: run at most this many (the first pending) trials of each
             subject (None: all); for tests and benchmarks.
@@ -498,10 +498,8 @@ def simulate_cohort(
                     kept.append(job)
             jobs = kept
         remaining = Counter(job.session.id for job in jobs)
-        from tqdm import tqdm
-
-        bar = tqdm(total=total, initial=initial, unit="trial", desc=f"cohort {protocol.name}",
-                   disable=not progress, file=sys.stderr, dynamic_ncols=True)
+        bar = progress_bar(total, f"cohort {protocol.name}", "trial", initial=initial,
+                           enabled=progress)
         trials, sim = 0, 0.0
         try:
             runner = _run_in_process if n_workers == 0 else _run_in_pool

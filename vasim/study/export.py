@@ -73,6 +73,7 @@ import pandas as pd
 
 from vasim import __version__
 from vasim.errors import ConfigError
+from vasim.progress import progress_bar
 from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES
 from vasim.study.store import TrialStore
 from vasim.study.trial_metrics import TRIAL_METRICS
@@ -293,7 +294,7 @@ def export_study(
         out: output folder (created; files of the same names are replaced).
         formats: ``"csv"`` and/or ``"parquet"``.
         tables: a subset of ``EXPORT_TABLES``.
-        progress: a tqdm bar over the trials while writing samples.
+        progress: progress output over the trials while writing samples (:mod:`vasim.progress`).
 
     Returns:
         The output folder.
@@ -356,10 +357,9 @@ def export_study(
 
 def _write_samples(store: TrialStore, trials: pd.DataFrame, w: _Writer,
                    progress: bool) -> None:
-    from tqdm import tqdm
-
     ids = trials["trial_id"].tolist()
-    for tid in tqdm(ids, desc="samples", unit="trial", disable=not progress, leave=False):
+    for tid in progress_bar(None, "samples", "trial", enabled=progress, leave=False,
+                            iterable=ids):
         s = store.samples(int(tid))
         if s.empty:
             continue

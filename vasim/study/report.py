@@ -68,7 +68,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 import time
 import warnings
 from collections.abc import Callable, Iterable, Sequence
@@ -79,10 +78,10 @@ from typing import Any, TypeVar
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from vasim import __version__
 from vasim.errors import ConfigError
+from vasim.progress import progress_bar
 from vasim.study import stats
 from vasim.study.protocol import TELEOPERATION_MODES, Protocol, QuestionItem, parse_protocol
 from vasim.study.report_html import (
@@ -1497,7 +1496,7 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
         out: output folder (created; ``index.html`` and ``tables/`` inside are replaced,
             CSVs of an earlier report listed in its ``tables/manifest.json`` removed).
         protocol: the protocol to report, or None for the store's only protocol.
-        progress: show a tqdm bar over the report's steps on stderr.
+        progress: progress output over the report's steps on stderr (:mod:`vasim.progress`).
 
     Returns:
         :class:`ReportResult`.
@@ -1510,8 +1509,8 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError("exists and is not a folder", file=out_dir, field="--out")
-    with tqdm(total=len(STEPS), desc="vasim report", unit="step", file=sys.stderr,
-              disable=not progress, leave=False) as bar:
+    with progress_bar(len(STEPS), "vasim report", "step", enabled=progress,
+                      leave=False) as bar:
         def step(name: str) -> None:
             bar.set_postfix_str(name)
 

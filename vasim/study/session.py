@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 import secrets
-import sys
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
@@ -50,6 +49,7 @@ import pandas as pd
 
 from vasim.errors import ConfigError, StoreError
 from vasim.haptics.scripted import OperatorProfile
+from vasim.progress import progress_bar
 from vasim.study.protocol import (
     TELEOPERATION_MODES,
     Protocol,
@@ -295,7 +295,7 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
 
     Args:
         store: the study store (the only writer of this session).
-        session_id: the session. progress: a tqdm bar (stderr) over the session's trials.
+        session_id: the session. progress: progress output over the session's trials.
         max_trials: stop after this many trials (None: run to the end).
 
     Returns:
@@ -322,11 +322,8 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
     if max_trials is not None:
         pending = pending[:max_trials]
     n_total = len(session.schedule)
-    from tqdm import tqdm
-
-    bar = tqdm(total=n_total, initial=n_total - len(session.pending), unit="trial",
-               desc=f"{session.subject} {session.protocol.name}", disable=not progress,
-               file=sys.stderr, dynamic_ncols=True)
+    bar = progress_bar(n_total, f"{session.subject} {session.protocol.name}", "trial",
+                       initial=n_total - len(session.pending), enabled=progress)
     done = 0
     try:
         for st in pending:
