@@ -10,11 +10,13 @@ the smallest), then the invariant checks; ``--plot`` saves the Figs. 4.23-4.26-s
 from __future__ import annotations
 
 import argparse
-import json
+import math
 import sys
+from pathlib import Path
 from typing import Any, TextIO
 
 from vasim.errors import ConfigError
+from vasim.jsonio import dumps
 
 _EPILOG = """\
 examples:
@@ -80,14 +82,38 @@ def format_events(events: list[tuple[float, str]]) -> list[str]:
     return lines
 
 
+PLOT_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def check_plot_path(path: Path) -> None:
+    """Refuses a plot path whose format is unknown or whose folder does not exist.
+
+    Example:
+        >>> check_plot_path(Path("run.txt"))
+        Traceback (most recent call last):
+        ...
+        vasim.errors.ConfigError: field '--plot': run.txt: the suffix must be .png, .pdf or .svg
+    """
+    if path.suffix.lower() not in PLOT_SUFFIXES:
+        raise ConfigError(f"{path}: the suffix must be .png, .pdf or .svg", field="--plot")
+    folder = path.parent
+    if not folder.is_dir():
+        raise ConfigError(f"{path}: folder {folder} does not exist", field="--plot")
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from vasim.mrcp.scenarios import get_scenario
     from vasim.mrcp.scenarios.base import ScenarioOptions
     from vasim.mrcp.scenarios.runner import run
 
     out: TextIO = getattr(args, "out", None) or sys.stdout
-    if args.duration is not None and args.duration <= 0.0:
-        raise ConfigError(f"--duration must be > 0, got {args.duration!r}", field="duration")
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0.0):
+        raise ConfigError(f"--duration must be a finite number of seconds > 0, got "
+                          f"{args.duration!r}", field="duration")
+    if args.seed < 0:
+        raise ConfigError(f"--seed must be >= 0, got {args.seed!r}", field="seed")
+    if args.plot:
+        check_plot_path(Path(args.plot))      # before the run, not after it
     scenario = get_scenario(args.scenario)
     opts = ScenarioOptions(seed=args.seed, duration=args.duration, coarse=args.coarse)
     res = run(scenario, opts)
@@ -97,7 +123,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         summary["plot"] = str(plot_run(res, args.plot))
     if args.json:
-        print(json.dumps(summary, indent=2, default=float), file=out)
+        print(dumps(summary, indent=2), file=out)       # strict JSON: inf/NaN -> null
         return 1 if res.violations else 0
     print(f"scenario {res.scenario}: {scenario.summary}", file=out)
     print(f"{len(res.samples)} cycles, {summary['duration']:.2f} s, robots "

@@ -83,6 +83,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -186,20 +187,35 @@ class KernelConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("dt", "t_max", "default_tcp_speed", "tt_timeout", "grasp_tolerance"):
-            if getattr(self, name) <= 0.0:
-                raise ValueError(f"KernelConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("horizon", "stride", "window", "texec_window", "ttc_samples"):
+        def bad(name: str, value: object, rule: str) -> ValueError:
+            return ValueError(f"KernelConfig.{name} must be {rule}, got {value!r}")
+
+        for name in ("dt", "t_max", "default_tcp_speed", "tt_timeout", "grasp_tolerance",
+                     "ntt_threshold"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise bad(name, v, "finite and > 0")
+        if not (math.isfinite(self.abort_cooldown) and self.abort_cooldown >= 0.0):
+            raise bad("abort_cooldown", self.abort_cooldown, "finite and >= 0")
+        for name in ("horizon", "stride", "window", "texec_window", "ttc_samples",
+                     "texec_min_samples", "grasp_cycles"):
             if getattr(self, name) < 1:
-                raise ValueError(f"KernelConfig.{name} must be >= 1, got {getattr(self, name)!r}")
+                raise bad(name, getattr(self, name), ">= 1")
+        for name in ("predictor_degree", "texec_degree", "seed"):
+            if getattr(self, name) < 0:
+                raise bad(name, getattr(self, name), ">= 0")
+        if self.texec_min_samples > self.texec_window:
+            raise bad("texec_min_samples", self.texec_min_samples,
+                      f"<= texec_window ({self.texec_window}): a longer series never forms")
+        for robot, v in self.max_tcp_speed.items():
+            if not (math.isfinite(v) and v > 0.0):
+                raise bad(f"max_tcp_speed[{robot!r}]", v, "finite and > 0")
         if self.trajectory_ik not in ("exact", "linear"):
             raise ValueError(f"KernelConfig.trajectory_ik must be 'exact' or 'linear', got "
                              f"{self.trajectory_ik!r}")
         if self.distance_points not in ("all", "ends"):
             raise ValueError(f"KernelConfig.distance_points must be 'all' or 'ends', got "
                              f"{self.distance_points!r}")
-        if self.ntt_threshold <= 0.0:
-            raise ValueError(f"KernelConfig.ntt_threshold must be > 0, got {self.ntt_threshold!r}")
         for spec in self.indices:
             if spec.name not in INDICES:
                 raise ValueError(f"KernelConfig.indices: unknown index {spec.name!r}; "
@@ -326,6 +342,7 @@ class MRCPKernel:
         self._cycle_times: deque[float] = deque(maxlen=self.config.texec_window)
         self._index_hist: dict[tuple[str, int, str], deque[tuple[float, float]]] = {}
         self._pred_hist: dict[Key, deque[FloatArray]] = {}
+        self._last_eval_t: float | None = None
         self._last_q = {r: world.configuration(r).copy() for r in self.arms}
         self._seeds: dict[Key, FloatArray] = {}
         self._last_goals: dict[Key, float] = {}
@@ -363,12 +380,21 @@ class MRCPKernel:
             wrench: force-torque reading at the task, if any.
             extras: scenario data passed to the indices.
         """
+        if self._times and not t > self._times[-1]:
+            raise ValueError(f"MRCPKernel.step: t = {t!r} is not after the last cycle's "
+                             f"t = {self._times[-1]!r} (cycle times must increase)")
         events: list[str] = []
         q_meas = {r: self.world.configuration(r).copy() for r in self.arms}
         qdot = {r: (q_meas[r] - self._last_q[r]) / self.config.dt for r in self.arms}
         evaluations: dict[Key, Evaluation] = {}
         continuity: Continuity | None = None
         if self.state is KernelState.FAULT:
+            # The operator's input is tracked, not stored up: after reset_fault() the task
+            # follows from where the master is then, not by the motion made during the stop.
+            self._last_cmd = (np.asarray(task_position, float),
+                              np.asarray(task_rotation, float) if task_rotation is not None
+                              else self._last_cmd[1])
+            self._last_q = q_meas
             return self._record(t, q_meas, evaluations, None, ["fault: no motion"])
         pos_now, rot_now = self._positions[-1], self._rotations[-1]
         if self.state is KernelState.TOP:
@@ -433,12 +459,13 @@ class MRCPKernel:
         reach = np.zeros(n_pts, dtype=bool)
         s = self._seeds.get(key, seed)
         linear = self.config.trajectory_ik == "linear"
+        last = 0                    # the last reachable point: a linear step starts there
         for k in range(n_pts):
             if k == 0:
                 sol = first if first is not None else arm.ik(positions[0], rotations[0], s)
             elif linear:
-                sol = _linear_step(arm, s, positions[k] - positions[k - 1],
-                                   rotations[k - 1], rotations[k])
+                sol = _linear_step(arm, s, positions[k] - positions[last],
+                                   rotations[last], rotations[k])
             else:
                 sol = arm.ik(positions[k], rotations[k], s)
             if sol is None:
@@ -446,7 +473,7 @@ class MRCPKernel:
                     return configs, reach
                 continue
             configs[k], reach[k] = sol, True
-            s = sol
+            s, last = sol, k
         self._seeds[key] = configs[0].copy()
         return configs, reach
 
@@ -454,6 +481,9 @@ class MRCPKernel:
                   qdot: Mapping[str, FloatArray], wrench: Wrench | None,
                   extras: Mapping[str, Any]) -> dict[Key, Evaluation]:
         cfg = self.config
+        if self._last_eval_t is not None and t - self._last_eval_t > 1.5 * cfg.dt:
+            self._pred_hist.clear()     # cycles were skipped (TT, fault): stale predictions
+        self._last_eval_t = t
         times, mean, std, trot = self._prediction(t)
         dt_pred = cfg.dt * cfg.stride
         raw: dict[Key, dict[str, float]] = {}

@@ -12,7 +12,8 @@ Each cycle a candidate's TCP moves by the guidance displacement
   robot around the obstacle the way it is already sliding (a tangential field with variable
   direction). Applied only while the distance decreases.
 * ``F_rand`` (unit, random direction) only when ``|F_attr + Σ F_rep|`` is (nearly) zero, with
-  a residual weight ``0 <= w_rand <= 0.2``.
+  a residual weight ``0 <= w_rand <= 0.2``. **Decision**: only when there is an attraction
+  to cancel (a robot with no goal, or on it, is not deadlocked and stays still).
 
 **Decisions**:
 
@@ -131,11 +132,17 @@ def repulsion(u_now: FloatArray, u_prev: FloatArray | None, dist_now: float,
 
 def guidance(f_attr: FloatArray, f_reps: Iterable[FloatArray], p: PlannerParams,
              rng: np.random.Generator) -> FloatArray:
-    """``F = F_attr + Σ F_rep (+ w_rand F_rand on a deadlock)``, clipped to ``ΔR_max``."""
+    """``F = F_attr + Σ F_rep (+ w_rand F_rand on a deadlock)``, clipped to ``ΔR_max``.
+
+    A deadlock is an attraction cancelled by the repulsions. A robot with no goal, or
+    already on it, has no attraction: it gets no random force either (it would otherwise
+    jitter every cycle and wander off, e.g. an idle instrument near tissue).
+    """
     f = np.asarray(f_attr, dtype=np.float64).copy()
+    pulled = float(np.linalg.norm(f)) >= 1e-3 * p.dr_max
     for r in f_reps:
         f = f + r
-    if float(np.linalg.norm(f)) < 1e-3 * p.dr_max and p.w_rand > 0.0:
+    if pulled and float(np.linalg.norm(f)) < 1e-3 * p.dr_max and p.w_rand > 0.0:
         rnd = rng.standard_normal(3)
         f = f + p.w_rand * p.dr_max * rnd / max(float(np.linalg.norm(rnd)), 1e-12)
     n = float(np.linalg.norm(f))

@@ -705,9 +705,12 @@ def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]
     """``vasim.study.cohort.simulate_trial`` for a teleoperation trial (same dict)."""
     t0 = time.perf_counter()
     trial = TeleopTrial(config)
-    for _ in trial.cycles():
-        pass
-    result = trial.result(wall_time=time.perf_counter() - t0, metric_params=params)
+    try:
+        for _ in trial.cycles():
+            pass
+        result = trial.result(wall_time=time.perf_counter() - t0, metric_params=params)
+    finally:
+        trial.station.close()
     cols = {k: np.array(v) for k, v in result.samples.columns().items()}
     return {"columns": cols, "active_fixtures": "", "metrics": result.metrics,
             "summary": result.summary, "events": result.events,
@@ -753,6 +756,8 @@ def run_teleop_trial(config: TrialConfig, store: object | None = None, *,
                                    summary=partial.summary, events=partial.events,
                                    trial_metrics=partial.trial_metrics)
         raise
+    finally:
+        trial.station.close()
     return result, trial_id
 
 

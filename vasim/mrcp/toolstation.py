@@ -44,7 +44,7 @@ Example:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -320,6 +320,17 @@ class Station:
         """Tool tip of ``robot`` at its current configuration [m]."""
         return self.arms[robot].tcp_pose(self.world.configuration(robot))[0]
 
+    def close(self) -> None:
+        """Releases the holders' resources (the pybullet clients of RX60B holders)."""
+        _close_holders(self.arms.values())
+
+
+def _close_holders(arms: Iterable[LaparoscopicArm]) -> None:
+    for arm in arms:
+        close = getattr(arm.arm, "close", None)
+        if close is not None:
+            close()
+
 
 def tool_cone(port: FloatArray, half_angle: float = CONE_HALF_ANGLE) -> ToolCone:
     """The orientation cone of a working trocar (module docstring, decision)."""
@@ -370,6 +381,7 @@ def build_station(start_tips: Mapping[str, FloatArray] | None = None, *,
                else port + np.array([0.0, 0.0, -0.06]))
         q = arm.ik(tip, None, getattr(base, "home", None))
         if q is None:
+            _close_holders([*arms.values(), arm])
             raise ConfigError(f"robot {name!r} cannot reach its start tip {tip.tolist()!r}",
                               field="start_tips")
         world.add_robot(name, arm, q)

@@ -153,6 +153,7 @@ import pandas as pd
 
 from vasim import __version__
 from vasim.errors import ConfigError, StoreError
+from vasim.jsonio import dumps
 from vasim.study.metrics import POINT_COLUMNS
 from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
 
@@ -617,25 +618,11 @@ def _process_alive(pid: int | None, token: str | None) -> bool:
 
 
 # ----------------------------------------------------------------------------- json
-def _plain(v: Any) -> Any:
-    if isinstance(v, Mapping):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return [_plain(x) for x in v.tolist()]
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
 def _to_json(v: Mapping[str, Any] | None) -> str | None:
     if v is None:
         return None
     try:
-        return json.dumps(_plain(v), allow_nan=False)
+        return dumps(v)
     except (TypeError, ValueError) as e:
         raise ConfigError(f"value is not JSON-serialisable: {e}") from None
 

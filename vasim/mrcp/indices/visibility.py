@@ -58,6 +58,10 @@ class VisibilityIndex:
             return 1.0
         names, dist = ctx.body_distances(self.d_ref)
         col = dist[:, names.index(self.cone_body)]
-        vals = np.where(ctx.reachable, np.clip(np.nan_to_num(col) / self.d_ref, 0.0, 1.0), 0.0)
-        w = prediction_weights(vals.shape[0])
+        # An unreachable point scores 0; a reachable point whose distance was not queried
+        # (``distance_points="ends"``) is left out of the average, as in CR.
+        measured = np.isfinite(col)
+        vals = np.where(ctx.reachable & measured,
+                        np.clip(np.where(measured, col, 0.0) / self.d_ref, 0.0, 1.0), 0.0)
+        w = np.where(ctx.reachable & ~measured, 0.0, prediction_weights(vals.shape[0]))
         return float((w * vals).sum() / w.sum())
