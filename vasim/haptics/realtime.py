@@ -110,6 +110,7 @@ import logging
 import math
 import threading
 import time
+import zipfile
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -623,7 +624,7 @@ class RealtimeTrial:
     def done(self) -> bool:
         """The trial is over: every point reached or time up, or the loop stopped on an
         error (``error``)."""
-        return bool(self.runner.done) or self.loop.error is not None
+        return bool(self.runner.done) or self.error is not None
 
     @property
     def error(self) -> BaseException | None:
@@ -734,8 +735,9 @@ class RealtimeRecording:
                 meta = json.loads(str(z["meta"]))
                 plog = (PhysicsLog.from_arrays(z["pose"], z["applied"])
                         if meta.get("has_physics") else None)
-        except (OSError, KeyError, ValueError) as exc:
-            raise DeviceError(f"{p_rt}: cannot read the recording: {exc}") from exc
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise DeviceError(f"{p_rt}: cannot read the recording (truncated or not a "
+                              f"recording): {exc}") from exc
         return cls(stream, plog, meta)
 
 
@@ -795,6 +797,7 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
         scripted = isinstance(trial.device, ScriptedDevice)
         name = getattr(trial.device, "name", "device")
     trial_id: int | None = None
+    meta = None
     if store is not None:
         meta = trial_meta(config, trial.runner.schema, make_profile(config))
         if not scripted:
@@ -802,7 +805,6 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
             cfg["operator"] = name
             cfg.pop("profile", None)  # no simulated person behind a device
             meta = replace(meta, operator=name, config=cfg)
-        trial_id = store.begin_trial(meta)
 
     def save_recording() -> dict[str, str] | None:
         if store is None or trial_id is None:
@@ -811,7 +813,11 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
         return {"device_stream": p_dev.name, "realtime": p_rt.name}
 
     try:
+        # The row is created once the device runs: a device that cannot start leaves no
+        # stray 'interrupted' trial behind, only its one-line error.
         trial.start()
+        if store is not None and meta is not None:
+            trial_id = store.begin_trial(meta)
         while not trial.done and trial.running:
             time.sleep(poll_s)
             if on_poll is not None:
@@ -834,15 +840,18 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
         if store is not None and trial_id is not None:
             try:
                 files = save_recording()
-            except Exception:  # the store's row matters more than the recording
-                log.exception("saving the recording of trial %s failed", trial_id)
+            except Exception as rec_exc:  # the store's row matters more than the recording
+                log.warning("trial %s: the recording could not be saved: %s", trial_id,
+                            rec_exc)
+                log.debug("recording failure", exc_info=True)
                 files = None
             reason = f"{type(exc).__name__}: {exc}"
             events = [(None, "recording", json.dumps(files))]
             try:
                 partial = trial.result()
-            except Exception:  # e.g. the device failed before the first sample
-                log.exception("the partial result of trial %s failed", trial_id)
+            except Exception as res_exc:  # e.g. the device failed before the first sample
+                log.warning("trial %s: no partial result: %s", trial_id, res_exc)
+                log.debug("partial result failure", exc_info=True)
                 store.mark_interrupted(trial_id, reason=reason, events=events)
             else:
                 store.mark_interrupted(trial_id, reason=reason, samples=partial.samples,
@@ -883,6 +892,29 @@ def stored_config(row: dict[str, Any]) -> TrialConfig:
     return TrialConfig(**{k: v for k, v in rec.items() if k in names})  # type: ignore[arg-type]
 
 
+def recorded_files(store: Any, row: dict[str, Any]) -> dict[str, str] | None:
+    """The recording files a stored trial names: ``timing["recording"]`` of a completed
+    trial, the ``recording`` event of an interrupted one; None when it names none.
+
+    **Decision**: a replay needs the trial to say it was recorded, not only files next to
+    the database (a database re-created under the same name must not pick up another run's
+    recording); the files are looked up by the database's current name, so a database
+    renamed or copied together with its recordings still replays.
+    """
+    timing = row.get("timing") or {}
+    if timing.get("recording"):
+        return dict(timing["recording"])
+    ev = store.events(int(row["id"]))
+    for detail in ev.loc[ev["kind"] == "recording", "detail"][::-1]:
+        try:
+            files = json.loads(detail)
+        except (TypeError, ValueError):
+            continue
+        if files:
+            return dict(files)
+    return None
+
+
 def replay_trial(store: object, trial_id: int) -> ReplayReport:
     """Re-runs a stored real-time trial from its recording and compares it.
 
@@ -898,6 +930,10 @@ def replay_trial(store: object, trial_id: int) -> ReplayReport:
     if not isinstance(store, TrialStore):
         raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
     row = store.trial(trial_id)
+    files = recorded_files(store, row)
+    if files is None:
+        raise DeviceError(f"trial {trial_id} has no real-time recording: it was not run with "
+                          "--realtime (or its recording could not be saved)")
     rec = RealtimeRecording.load(store.path, trial_id)
     config = stored_config(row)
     schema = parse_schema(row["schema_toml"], source=f"trial {trial_id}") \
@@ -950,6 +986,7 @@ __all__ = [
     "ReplayReport",
     "TrialPlant",
     "realtime_path",
+    "recorded_files",
     "replay_trial",
     "run_realtime_trial",
     "stored_config",

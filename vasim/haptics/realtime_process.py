@@ -42,9 +42,11 @@ The recording has the same format as the threaded trial's: a replay
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import multiprocessing as mp
+import signal
 import threading
 import time
 import traceback
@@ -110,6 +112,7 @@ class _PoseBoard:
 
     def __init__(self, ctx: Any):
         self.a = ctx.RawArray("d", 8)  # [counter, tip x y z, fulcrum x y z, valid]
+        self._last: ToolPose | None = None      # the reader's last consistent pose
 
     def write(self, pose: ToolPose) -> None:
         a = self.a
@@ -120,6 +123,9 @@ class _PoseBoard:
         a[0] += 1.0
 
     def read(self) -> ToolPose | None:
+        """The newest pose; None before the first write. A read that keeps meeting a write
+        in progress (the writer preempted mid-write) returns the last consistent pose: None
+        there would mean "no tool" and let go of the tissue for a step."""
         a = self.a
         for _ in range(100):
             c = a[0]
@@ -129,8 +135,9 @@ class _PoseBoard:
             if a[0] == c:
                 if vals[6] != 1.0:
                     return None
-                return ToolPose(fulcrum=np.array(vals[3:6]), tip=np.array(vals[0:3]))
-        return None
+                self._last = ToolPose(fulcrum=np.array(vals[3:6]), tip=np.array(vals[0:3]))
+                return self._last
+        return self._last
 
 
 class _PipeWorld:
@@ -237,7 +244,14 @@ class _FramePublisher:
 
 def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, control: Any,
            stop: Any, done: Any, sent: Any, read: Any, taken: Any) -> None:
-    """The servo process: builds the trial, runs it until ``stop``, sends the end state."""
+    """The servo process: builds the trial, runs it until ``stop``, sends the end state.
+
+    It ignores SIGINT: a Ctrl-C in the terminal reaches the whole process group, and the
+    parent, which owns the trial's storage, stops this process through ``stop`` so that the
+    end state (samples, recording) still arrives and the force is zeroed on the way out.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    trial: RealtimeTrial | None = None
     try:
         factory = spec["device_factory"]
         device = factory() if factory is not None else None
@@ -276,6 +290,9 @@ def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, con
                      if trial._t_start is not None else 0.0),
         }))
     except BaseException as exc:  # reported to the parent, never silent
+        if trial is not None:
+            with contextlib.suppress(Exception):
+                trial.stop()            # zero the force, stop the device
         try:
             what = str(exc) if isinstance(exc, DeviceError) else f"{type(exc).__name__}: {exc}"
             control.send(("failed", what, "".join(traceback.format_exception(exc))))
@@ -367,15 +384,36 @@ class ProcessRealtimeTrial:
             args=(self._spec, self._board, self._snap_rx, self._frame_tx, self._ctl_tx,
                   self._stop, self._done, self._sent, self._read, self._taken), daemon=True)
         self._proc.start()
-        if not self._ctl_rx.poll(self.start_timeout_s):
-            self._proc.kill()
-            raise DeviceError(f"the servo process did not start within "
-                              f"{self.start_timeout_s:g} s")
-        msg = self._ctl_rx.recv()
+        # The child has its copies of these ends now: closing ours lets the frame reader
+        # see end-of-file when the child exits (no reader thread or descriptors left over).
+        for end in (self._snap_rx, self._frame_tx, self._ctl_tx):
+            end.close()
+        deadline = time.monotonic() + self.start_timeout_s
+        while not self._ctl_rx.poll(0.1):
+            if not self._proc.is_alive():
+                self._proc.join()
+                self._failure = f"the servo process exited (code {self._proc.exitcode})"
+                self._close_pipes()
+                raise DeviceError(f"{self._failure} before it was ready")
+            if time.monotonic() > deadline:
+                self._proc.kill()
+                self._proc.join()
+                self._failure = "the servo process did not start"
+                self._close_pipes()
+                raise DeviceError(f"the servo process did not start within "
+                                  f"{self.start_timeout_s:g} s")
+        try:
+            msg = self._ctl_rx.recv()
+        except EOFError:                # it exited: our copy of its end is closed
+            self._proc.join()
+            self._failure = f"the servo process exited (code {self._proc.exitcode})"
+            self._close_pipes()
+            raise DeviceError(f"{self._failure} before it was ready") from None
         if msg[0] != "ready":
             self._proc.join(5.0)
             self._failure = str(msg[1])
             log.debug("servo process traceback:\n%s", msg[2])
+            self._close_pipes()
             raise DeviceError(f"the servo process failed: {msg[1]}")
         self.device_name = msg[1]
         self._rx_thread = threading.Thread(target=self._receive, name="vasim-frames",
@@ -408,7 +446,13 @@ class ProcessRealtimeTrial:
         deadline = time.monotonic() + timeout
         while self._end is None and self._failure is None and time.monotonic() < deadline:
             if self._ctl_rx.poll(0.05):
-                msg = self._ctl_rx.recv()
+                try:
+                    msg = self._ctl_rx.recv()
+                except EOFError:
+                    self._proc.join(1.0)
+                    self._failure = (f"the servo process exited (code {self._proc.exitcode})"
+                                     " without its end state")
+                    break
                 if msg[0] == "end":
                     self._end = msg[1]
                 elif msg[0] == "failed":
@@ -420,8 +464,18 @@ class ProcessRealtimeTrial:
         if self._proc.is_alive():
             log.warning("servo process did not exit; killing it")
             self._proc.kill()
+            self._proc.join(1.0)
         if self._end is None and self._failure is None:
             self._failure = "the servo process sent no end state"
+        self._close_pipes()
+
+    def _close_pipes(self) -> None:
+        """Our pipe ends, once the child is gone (the frame reader ends on end-of-file)."""
+        if self._rx_thread is not None:
+            self._rx_thread.join(1.0)
+        for end in (self._snap_tx, self._frame_rx, self._ctl_rx):
+            with contextlib.suppress(OSError):
+                end.close()
 
     def __enter__(self) -> ProcessRealtimeTrial:
         return self
@@ -435,8 +489,8 @@ class ProcessRealtimeTrial:
 
     @property
     def done(self) -> bool:
-        """Every point reached or time up, or the servo process failed."""
-        if self._done.value:
+        """Every point reached or time up, or the servo process or the physics failed."""
+        if self._done.value or self._physics_error() is not None:
             return True
         if self._end is not None:
             return bool(self._end["done"]) or self._end["error"] is not None
@@ -445,10 +499,17 @@ class ProcessRealtimeTrial:
 
     @property
     def error(self) -> str | None:
-        """Why the servo process stopped early, if it did."""
+        """Why the servo process, or the physics thread here, stopped early, if one did
+        (a trial whose tissue froze is not a completed trial)."""
         if self._failure is not None:
             return self._failure
-        return None if self._end is None else self._end["error"]
+        if self._end is not None and self._end["error"] is not None:
+            return str(self._end["error"])
+        phys = self._physics_error()
+        return None if phys is None else f"physics: {type(phys).__name__}: {phys}"
+
+    def _physics_error(self) -> BaseException | None:
+        return None if self.physics_thread is None else self.physics_thread.error
 
     # -- reading --------------------------------------------------------------------------
     def frame(self) -> TrialFrame:

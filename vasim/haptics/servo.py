@@ -82,6 +82,7 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
+from math import isfinite
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
@@ -218,6 +219,7 @@ class CoupledToolPlant:
         self._vp: tuple[float, ...] = (0.0, 0.0, 0.0)
         self._x_prev: tuple[float, ...] | None = None
         self._vd: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self.proxy_resets = 0
 
     def tick(self, t: float, master: FloatArray, buttons: int) -> tuple[float, float, float]:
         del buttons
@@ -236,8 +238,18 @@ class CoupledToolPlant:
             f_t, k_t = tissue_force(tissue, xp)
             fe = np.asarray(self._extra(t, xp, np.array(self._vp)), dtype=np.float64)
             tissue = LinearForce(f_t + fe, k_t, xp)
-        self._xp, self._vp, force = proxy_step_xyz(self._xp, self._vp, (x0, x1, x2), vd,
-                                                   tissue, self.params, dt)
+        xp, vp, force = proxy_step_xyz(self._xp, self._vp, (x0, x1, x2), vd, tissue,
+                                       self.params, dt)
+        if not (isfinite(xp[0]) and isfinite(xp[1]) and isfinite(xp[2])
+                and isfinite(vp[0]) and isfinite(vp[1]) and isfinite(vp[2])):
+            # A non-finite tissue or extra force would leave the proxy NaN for good (every
+            # later force NaN, zeroed by the guard: force feedback silently off for the rest
+            # of the trial). The proxy restarts at the hand instead; this tick outputs 0.
+            self.proxy_resets += 1
+            log.warning("proxy state became non-finite at t=%.3f s; reset to the master", t)
+            self._xp, self._vp = (x0, x1, x2), (0.0, 0.0, 0.0)
+            return (0.0, 0.0, 0.0)
+        self._xp, self._vp = xp, vp
         return force
 
     def on_stop(self) -> None:

@@ -46,6 +46,7 @@ Example:
 from __future__ import annotations
 
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,8 +119,9 @@ class DeviceStream:
                            orientation=z["orientation"].astype(np.float64),
                            buttons=z["buttons"].astype(np.int64),
                            valid=z["valid"].astype(bool))
-        except (OSError, KeyError, ValueError) as exc:
-            raise DeviceError(f"{path}: cannot read the device stream: {exc}") from exc
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise DeviceError(f"{path}: cannot read the device stream (truncated or not a "
+                              f"stream): {exc}") from exc
 
 
 def stream_path(db_path: str | Path, trial_id: int) -> Path:
