@@ -243,3 +243,24 @@ def test_a_real_time_trial_keeps_its_recording_and_replays_identically(
         assert all((tmp_path / name).exists() for name in files.values())
         report = replay_trial(st, tid)
     assert report.samples_equal and report.metrics_equal, report.differences
+
+
+def test_a_stopped_real_time_trial_replays_identically(tmp_path: Path) -> None:
+    """Stop mid-trial: the trial is interrupted, names its recording, and replays."""
+    from vasim.haptics.realtime import recorded_files, replay_trial
+
+    c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
+    try:
+        run(c, Command("mode", "free"), Command("task", "point"), Command("start"))
+        tid = c.info.trial_id
+        assert drive(c, lambda: c.trial is not None and c.trial.frame().k > 300, timeout=60)
+        run(c, Command("stop"))
+    finally:
+        c.close()
+    with closing(TrialStore(tmp_path / "r.sqlite")) as st:
+        row = st.trial(tid)
+        assert row["status"] == "interrupted"
+        files = recorded_files(st, row)
+        assert files is not None and all((tmp_path / n).exists() for n in files.values())
+        report = replay_trial(st, tid)
+    assert report.samples_equal and report.metrics_equal, report.differences

@@ -221,8 +221,8 @@ class ViewerApp:
         trial_factory: builds live trials (default ``make_live_trial``).
 
     Raises:
-        ConfigError: for an unknown schema, task, skill or scene, or a schema that does not
-            fit the task (before any socket is opened).
+        ConfigError: for an unknown schema, task, skill or scene, a schema that does not
+            fit the task, or a ``db`` that is a directory (before any socket is opened).
 
     Example:
         >>> app = ViewerApp(port=0).start()         # doctest: +SKIP

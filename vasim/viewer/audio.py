@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import threading
 import time
 from typing import Any
 
@@ -130,6 +131,10 @@ class AudioStream:
         self.server = server
         self.min_interval = 1.0 / float(rate_hz)
         self._installed: set[int] = set()
+        # Review fix: install() runs on viser's callback threads while update() runs on the
+        # view thread; the lock guards _installed and update() iterates over a snapshot
+        # (iterating the live set raised "Set changed size during iteration").
+        self._lock = threading.Lock()
         self._next_t = -math.inf
         self._last: dict[str, Any] | None = None
         self.sent = 0
@@ -137,7 +142,8 @@ class AudioStream:
     def install(self, client: viser.ClientHandle) -> None:
         """Sends the synth to a newly connected client (a reload is a new client)."""
         run_js(client, SYNTH_JS)
-        self._installed.add(client.client_id)
+        with self._lock:
+            self._installed.add(client.client_id)
         if self._last is not None:
             self._send(client, self._last)
 
@@ -160,8 +166,10 @@ class AudioStream:
             self._next_t = self._next_t + iv if now - self._next_t < iv else now + iv
         self._last = params
         clients = self.server.get_clients()
-        self._installed &= set(clients)
-        for cid in self._installed:
+        with self._lock:
+            self._installed &= set(clients)
+            installed = tuple(self._installed)
+        for cid in installed:
             client = clients.get(cid)
             if client is not None:
                 self._send(client, params)

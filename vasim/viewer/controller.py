@@ -37,6 +37,7 @@ the config is run with it and the stored record is corrected).
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import time
@@ -217,7 +218,8 @@ class TrainingController:
         trial_factory: builds the live trial (default ``make_live_trial``).
 
     Raises:
-        ConfigError: for a bad first trial (before anything runs).
+        ConfigError: for a bad first trial, or a ``db`` that is a directory (before
+            anything runs).
     """
 
     def __init__(self, *, scene: str = "default", db: str | Path | None = None,
@@ -227,6 +229,11 @@ class TrainingController:
                  trial_factory: Callable[..., LiveTrial] | None = None):
         self.scene = scene
         self.db = None if db is None else Path(db)
+        # Review fix: a directory was only refused when Free mode first opened the store;
+        # refuse it at start-up (vasim serve prints this as one line and exits 2).
+        if self.db is not None and self.db.is_dir():
+            raise ConfigError(f"--db {self.db} is a directory, expected a database file",
+                              field="db")
         self.pause_s = float(pause_s)
         self.speed = float(speed)
         self.max_time = float(max_time)
@@ -347,11 +354,16 @@ class TrainingController:
                 self._store_result()
             else:
                 res = trial.result()
-                self._timing(info.trial_id)  # writes the recording (as run_realtime_trial)
+                timing = self._timing(info.trial_id)  # writes the recording
+                # ... and names it in a 'recording' event, as run_realtime_trial does, so
+                # the interrupted trial replays (replay_trial needs the trial to name it).
+                files = (timing or {}).get("recording")
+                events = [*res.events, *([(None, "recording", json.dumps(files))]
+                                         if files else [])]
                 self.store().mark_interrupted(
                     info.trial_id, reason=reason, samples=res.samples,
                     point_metrics=res.metrics, summary=_plain_dict(res.summary),
-                    events=res.events, trial_metrics=res.trial_metrics)
+                    events=events, trial_metrics=res.trial_metrics)
                 self._stored_done = True
                 self._publish(running=False, status=f"trial {info.trial_id} stopped "
                               f"({reason}); it stays pending" if info.schedule_index
@@ -617,6 +629,15 @@ class TrainingController:
         if p.mode == "protocol":
             raise ConfigError("the protocol sets the schema; switch to free training to "
                               "choose one", field="schema")
+        # Review fix: viser does not check dropdown values against the options, and
+        # load_schema accepts file paths, so any client could make the server read (and
+        # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
+        choices = schema_choices(self._base.schema)
+        if not isinstance(name, str) or name not in choices:
+            shown = repr(name)
+            shown = shown if len(shown) <= 80 else shown[:77] + "..."
+            raise ConfigError(f"unknown schema {shown}: choose one from the Schema menu",
+                              field="schema")
         if name == p.schema and self._schema_obj is None:
             return
         schema = load_schema(name)

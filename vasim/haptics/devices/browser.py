@@ -17,7 +17,10 @@ out of order. The servo loop reads at 1 kHz. Policy (**decision**):
   x_n + min((r - t_n) / (t_n - t_(n-1)), h / (t_n - t_(n-1)), 1) (x_n - x_(n-1)). Beyond
   that it holds. So a burst of jittery samples cannot fling the tool: the overshoot is
   bounded by one sample step. When late samples arrive, the interpolation takes over again.
-* Out-of-order and duplicate samples (t <= the newest accepted t) are dropped and counted.
+* Out-of-order and duplicate samples (t <= the newest accepted t) are dropped and counted;
+  so are non-finite ones. Finite positions are clamped to the workspace box of ``limits``
+  (default ``BROWSER_WORKSPACE_HALF_M`` = 1 m around the scene origin), on receipt and
+  after interpolation, so a client cannot send the tool to 1e200 m.
 * Before the first sample, readings are ``valid=False`` (the servo loop holds its home);
   after it, a pause of the user (no new samples) simply holds the last position.
 * Buttons come from the newest sample at or before r (no interpolation).
@@ -55,11 +58,26 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from vasim.errors import ConfigError, DeviceError
-from vasim.haptics.device import UNBOUNDED, DeviceLimits, DeviceSample, FloatArray, as_force
+from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_force
 
-BROWSER_LIMITS = DeviceLimits(workspace_min=UNBOUNDED[0], workspace_max=UNBOUNDED[1],
-                              max_force_n=0.0, max_continuous_force_n=0.0)
-"""A browser pointer: no workspace bound (the scene's), no force output."""
+BROWSER_WORKSPACE_HALF_M = 1.0
+"""Half edge of the browser pointer's workspace box around the scene origin [m].
+
+**decision** (review fix): a viewer client can send any finite coordinate (1e200 passed the
+NaN guard and overflowed the physics), so the pointer lives in a finite box. The default
+abdomen spans about x -0.15..0.15, y -0.12..0.18, z 0..0.16 m and the tasks lie inside it;
++-1 m around the origin (larger than any abdomen) holds the whole scene with a wide margin
+for clutching and for dragging the gizmo past the scene, yet keeps every value far from
+overflow."""
+
+BROWSER_LIMITS = DeviceLimits(
+    workspace_min=(-BROWSER_WORKSPACE_HALF_M, -BROWSER_WORKSPACE_HALF_M,
+                   -BROWSER_WORKSPACE_HALF_M),
+    workspace_max=(BROWSER_WORKSPACE_HALF_M, BROWSER_WORKSPACE_HALF_M,
+                   BROWSER_WORKSPACE_HALF_M),
+    max_force_n=0.0, max_continuous_force_n=0.0)
+"""A browser pointer: the ``BROWSER_WORKSPACE_HALF_M`` box (positions are clamped to it),
+no force output."""
 
 InterpMode = Literal["empty", "before", "interpolate", "extrapolate", "hold"]
 
@@ -118,7 +136,8 @@ class BrowserDevice:
         max_extrapolation_s: longest extrapolation past the newest sample [s] (>= 0).
         history: samples kept (>= 2).
         clock: the device's clock [s] (monotonic; default ``time.perf_counter``).
-        limits: device limits (default: unbounded, no force).
+        limits: device limits (default ``BROWSER_LIMITS``: the +-1 m box, no force);
+            positions are clamped to its workspace box.
         name: device name.
 
     Attributes:
@@ -186,6 +205,7 @@ class BrowserDevice:
             with self._lock:
                 self.dropped += 1
             return False
+        p0, p1, p2 = self._clamp((p0, p1, p2))
         now = self._clock() if arrival is None else float(arrival)
         with self._lock:
             if self._times and t <= self._times[-1]:
@@ -215,10 +235,19 @@ class BrowserDevice:
         x, mode = interpolate_stream(times, pos, r, self.max_extrapolation_s)
         self.last_mode = mode
         assert x is not None
-        return DeviceSample(t=now, position=np.array(x), buttons=buttons)
+        # Extrapolation can step one sample past a clamped sample: clamp again.
+        return DeviceSample(t=now, position=np.array(self._clamp(x)), buttons=buttons)
+
+    def _clamp(self, p: tuple[float, float, float]) -> tuple[float, float, float]:
+        """``p`` clamped to the workspace box of ``limits`` (huge finite coordinates from a
+        client never reach the physics; module docstring)."""
+        lo, hi = self._limits.workspace_min, self._limits.workspace_max
+        return (min(max(p[0], lo[0]), hi[0]), min(max(p[1], lo[1]), hi[1]),
+                min(max(p[2], lo[2]), hi[2]))
 
     def write_force(self, force: FloatArray) -> None:
         self.last_force = as_force(force)
 
 
-__all__ = ["BROWSER_LIMITS", "BrowserDevice", "InterpMode", "interpolate_stream"]
+__all__ = ["BROWSER_LIMITS", "BROWSER_WORKSPACE_HALF_M", "BrowserDevice", "InterpMode",
+           "interpolate_stream"]
