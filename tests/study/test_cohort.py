@@ -196,3 +196,20 @@ def test_cohort_resumes_where_it_stopped(tmp_path: Path, tiny: Path) -> None:
     # another cohort seed must not silently reuse these subjects
     with pytest.raises(ConfigError, match="another cohort"):
         simulate_cohort(db, p, n_subjects=2, n_surgeons=1, seed=4, workers=0, progress=False)
+
+
+def test_latin_square_cohorts_are_counterbalanced() -> None:
+    """Subject j takes row (j - 1) % R of the Williams square: R consecutive simulated
+    subjects use every row once (random session seeds used 6 of 10 rows)."""
+    from vasim.study.protocol import block_order, load_protocol, williams_square
+
+    protocol = load_protocol("vf_point_targeting")
+    assert protocol.block_order == "latin_square"
+    n_rows = len(williams_square(sum(b.counterbalance for b in protocol.blocks)))
+    subjects = cohort_subjects(2 * n_rows, n_rows, seed=7, latin_square=True)
+    orders = [tuple(block_order(protocol, s.session_seed)) for s in subjects]
+    assert len(set(orders[:n_rows])) == n_rows
+    assert orders[:n_rows] == orders[n_rows:]
+    assert len({s.session_seed for s in subjects}) == 2 * n_rows      # still distinct seeds
+    plain = cohort_subjects(2 * n_rows, n_rows, seed=7)
+    assert [s.code for s in plain] == [s.code for s in subjects]

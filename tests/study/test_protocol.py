@@ -213,7 +213,7 @@ def test_answers_become_tidy_rows() -> None:
 
 
 @pytest.mark.parametrize(("q", "change", "field"), [
-    ("post", {"rating": {"vg": 11, "ag": 2, "ms": 7, "mag": 5, "ff": 1}}, "post.rating"),
+    ("post", {"rating": {"vg": 11, "ag": 2, "ms": 7, "mag": 5, "ff": 1}}, "post.rating.vg"),
     ("post", {"rating": {"vg": 1}}, "post.rating"),
     ("post", {"best_vf": "none"}, "post.best_vf"),
     ("post", {"proposed_schemas": [["ff"]]}, "post.proposed_schemas"),

@@ -301,3 +301,55 @@ def test_cli_errors_are_one_line_exit_2(tmp_path: Path, capsys, argv, needle) ->
     assert err.count("\n") == 1 and needle in err and "Traceback" not in err
     with TrialStore(db) as st:  # nothing was started
         assert st.sessions().empty and st.trials().empty
+
+
+def test_cli_resume_records_only_what_is_missing(tmp_path: Path, tiny: Path, capsys) -> None:
+    """`run --answers` stored [pre]; the session was interrupted; `resume --answers` with the
+    same file records [post] instead of failing on the already answered [pre]."""
+    answers = tmp_path / "answers.toml"
+    answers.write_text('[pre]\ngroup = "surgeon"\nspecialisation = "urology"\n'
+                       'laparoscopy_experience = ">200"\nsimulator_experience = "none"\n'
+                       'robotic_experience = "performed"\n[post]\nbest = "ff"\n')
+    db = tmp_path / "s.db"
+    with TrialStore(db) as st:
+        sid = start_session(st, load_protocol(tiny), "C02", seed=4)
+        record_answers(st, sid, "pre", {"group": "surgeon", "specialisation": "urology",
+                                         "laparoscopy_experience": ">200",
+                                         "simulator_experience": "none",
+                                         "robotic_experience": "performed"})
+    assert main(["study", "resume", "--db", str(db), "--subject", "C02", "--answers",
+                 str(answers)]) == 0
+    out = capsys.readouterr().out
+    assert "post (1 answers)" in out and "pre (" not in out
+    with TrialStore(db) as st:
+        assert sorted(set(st.answers(sid)["questionnaire"])) == ["post", "pre"]
+
+
+def test_cli_run_checks_the_answers_file_before_starting(tmp_path: Path, tiny: Path,
+                                                         capsys) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[pre]\ngroup = "surgen"\n')
+    db = tmp_path / "s.db"
+    assert main(["study", "run", "--protocol", str(tiny), "--subject", "C03", "--db", str(db),
+                 "--answers", str(bad)]) == 2
+    assert "bad.toml" in capsys.readouterr().err
+    with TrialStore(db) as st:
+        assert st.sessions().empty                  # no empty running session left behind
+
+
+def test_a_failing_result_still_closes_the_trial(tmp_path: Path, monkeypatch) -> None:
+    """The partial result itself fails (a metric error): the trial is still marked
+    interrupted, with its raw samples, not left 'running'."""
+    import vasim.study.trial as trial_mod
+
+    def boom(*args: object, **kwargs: object) -> None:
+        raise ValueError("metric failure")
+
+    monkeypatch.setattr(trial_mod, "trial_metrics", boom)
+    with TrialStore(tmp_path / "s.db") as st:
+        with pytest.raises(ValueError, match="metric failure"):
+            trial_mod.run_trial(trial_mod.TrialConfig(schema="none", scene="none", seed=1,
+                                                      max_time=1.0), st)
+        rows = st.trials()
+        assert rows["status"].tolist() == ["interrupted"]
+        assert int(rows["n_samples"].iloc[0]) > 0

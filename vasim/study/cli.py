@@ -364,9 +364,10 @@ def _record_file_answers(store: object, session_id: int, path: Path | None,
 
     assert isinstance(store, TrialStore)
     data = load_answers_file(path)
+    answered = set(store.answers(session_id)["questionnaire"])
     done = []
     for q in which:
-        if q in data:
+        if q in data and q not in answered:   # a resumed session: pre was recorded by run
             n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]
             done.append(f"{q} ({n} answers)")
     return done
@@ -393,6 +394,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
     validate_subject_code(args.subject)
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
+    if args.answers is not None:      # a bad answers file must not leave an empty session
+        from vasim.study.protocol import validate_answers
+        from vasim.study.session import load_answers_file
+
+        for q, table in load_answers_file(args.answers).items():
+            validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]
     with TrialStore(_new_db(args.db)) as store:
         sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings)
         recorded = _record_file_answers(store, sid, args.answers, ("pre",))

@@ -187,9 +187,35 @@ def draw_demographics(rng: np.random.Generator, group: str) -> Demographics:
     return Demographics.from_mapping(values)
 
 
+LATIN_PERIOD = 720_720
+"""lcm(1..16): a latin-square row count R up to 16 (a Williams square of up to 8 blocks)
+divides it."""
+
+
+def counterbalanced_seed(seed: int, j: int) -> int:
+    """A random 63-bit session seed congruent to ``j - 1`` modulo :data:`LATIN_PERIOD`.
+
+    **Decision**: ``block_order = "latin_square"`` takes row ``seed % R`` and asks for
+    consecutive subjects on consecutive seeds; random session seeds would pick rows at
+    random (10 subjects used 6 of 10 rows). With this seed subject ``j`` gets row
+    ``(j - 1) % R``: every R consecutive subjects cover the square once.
+
+    Example:
+        >>> [counterbalanced_seed(_seed63(7, 6, j), j) % 10 for j in range(1, 13)]
+        [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 0, 1]
+    """
+    base = seed - seed % LATIN_PERIOD
+    if base + LATIN_PERIOD > 2**63 - 1:
+        base -= LATIN_PERIOD
+    return base + (j - 1) % LATIN_PERIOD
+
+
 def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
-                    prefix: str = SUBJECT_PREFIX) -> list[SimulatedSubject]:
+                    prefix: str = SUBJECT_PREFIX,
+                    latin_square: bool = False) -> list[SimulatedSubject]:
     """The cohort's subjects (a pure function of its arguments; module docstring).
+    ``latin_square``: session seeds that give subject j latin-square row j - 1
+    (:func:`counterbalanced_seed`).
 
     Raises:
         ConfigError: counts out of range.
@@ -216,9 +242,12 @@ def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
         group = groups[order[j - 1]]
         rng = _stream(seed, 5, j)
         profile = OperatorProfile.sample(rng, group)  # type: ignore[arg-type]
+        session_seed = _seed63(seed, 6, j)
+        if latin_square:
+            session_seed = counterbalanced_seed(session_seed, j)
         out.append(SimulatedSubject(
             number=j, code=f"{prefix}{j:0{width}d}", group=group, profile=profile,
-            demographics=draw_demographics(rng, group), session_seed=_seed63(seed, 6, j)))
+            demographics=draw_demographics(rng, group), session_seed=session_seed))
     return out
 
 
@@ -477,7 +506,8 @@ def simulate_cohort(
         KeyboardInterrupt: after marking the trials in flight 'interrupted'.
     """
     protocol.check_runnable()
-    subjects = cohort_subjects(n_subjects, n_surgeons, seed)
+    subjects = cohort_subjects(n_subjects, n_surgeons, seed,
+                               latin_square=protocol.block_order == "latin_square")
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if n_workers < 0:
         raise ConfigError(f"workers must be >= 0, got {workers!r}", field="workers")

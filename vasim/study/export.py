@@ -158,7 +158,7 @@ def _typed(df: pd.DataFrame, table: str) -> pd.DataFrame:
     for c, dtype in spec.items():
         col = df[c]
         if dtype == "str":
-            col = col.astype(object).where(col.notna(), None).astype("str")
+            col = col.astype(pd.StringDtype())   # missing stays missing on pandas 2 and 3
         elif dtype == "boolean":
             col = col.astype("boolean")
         else:

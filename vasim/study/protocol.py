@@ -119,8 +119,8 @@ N_VARIANTS = {"trajectory": 7, "point": 1}
 """Variants per task: the trajectory's original + six mirrored/rotated; one point task."""
 LIKERT_POINTS = 5
 
-_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
-_ID_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")  # fullmatch: no trailing "\n"
+_ID_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # fullmatch
 
 
 # ---------------------------------------------------------------------------- checks
@@ -209,7 +209,7 @@ class QuestionItem:
     max_length: int = 2000
 
     def __post_init__(self) -> None:
-        if not isinstance(self.id, str) or not _ID_RE.match(self.id):
+        if not isinstance(self.id, str) or not _ID_RE.fullmatch(self.id):
             raise ConfigError(f"must be an identifier (letters, digits, '_'), got {self.id!r}",
                               field="id")
         _check_choice(self.type, "type", ITEM_TYPES)
@@ -303,7 +303,7 @@ class Block:
     probes_after: int = 0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not _NAME_RE.match(self.name):
+        if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
             raise ConfigError(f"must be a name of letters, digits, '_', '-', '.', got "
                               f"{self.name!r}", field="name")
         _check_str(self.condition, "condition")
@@ -366,7 +366,7 @@ class Protocol:
     source: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not _NAME_RE.match(self.name):
+        if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
             raise ConfigError(f"must be a name of letters, digits, '_', '-', '.', got "
                               f"{self.name!r}", field="name")
         _check_str(self.description, "description")
@@ -877,7 +877,11 @@ def validate_answers(protocol: Protocol, questionnaire: Literal["pre", "post"],
         try:
             rows += _item_rows(item, answers[item.id])
         except ConfigError as exc:
-            raise ConfigError(exc.reason, file=source, field=path) from exc
+            # An inner field (a condition of a rating: "rating.vg") keeps its detail.
+            inner = exc.field or ""
+            field = (f"{questionnaire}.{inner}" if inner.startswith(f"{item.id}.")
+                     else path)
+            raise ConfigError(exc.reason, file=source, field=field) from exc
     return rows, demo
 
 

@@ -136,12 +136,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import math
 import os
 import re
 import socket
 import sqlite3
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields
 from datetime import UTC, datetime
@@ -156,6 +157,8 @@ from vasim.errors import ConfigError, StoreError
 from vasim.jsonio import dumps
 from vasim.study.metrics import POINT_COLUMNS
 from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
+
+log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 2
 """Schema version written to ``PRAGMA user_version``."""
@@ -761,7 +764,11 @@ class TrialStore:
         if self.readonly:
             raise StoreError(f"trial store {self.path} is open read-only")
         con = self.con
-        con.execute("BEGIN IMMEDIATE")
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.OperationalError as exc:      # e.g. another writer holds the lock
+            raise StoreError(f"{self.path}: the database is busy or locked ({exc}); "
+                             "another vasim process may be writing to it - try again") from exc
         try:
             yield con
         except BaseException:
@@ -924,6 +931,38 @@ class TrialStore:
         """
         self._close_trial(trial_id, "completed", samples, point_metrics, summary, events,
                           timing, trial_metrics, reason=None)
+
+    def keep_interrupted(self, trial_id: int, reason: str, partial: Callable[[], Any], *,
+                         samples: SampleBuffer | None = None,
+                         events: Iterable[tuple[float | None, str, str]] = ()) -> None:
+        """Marks a failed trial 'interrupted' with as much as can be kept, never leaving it
+        'running': the partial result (``partial()``: an object with ``samples``,
+        ``metrics``, ``summary``, ``events`` and ``trial_metrics``); if computing that fails
+        too, the raw ``samples``; if storing those fails, the bare status change. For an
+        ``except`` block: its own failures are logged, not raised.
+        """
+        extra = list(events)
+        attempts: list[Callable[[], object]] = []
+
+        def full() -> object:
+            res = partial()
+            return self.mark_interrupted(
+                trial_id, reason=reason, samples=res.samples, point_metrics=res.metrics,
+                summary=res.summary, events=[*res.events, *extra],
+                trial_metrics=res.trial_metrics)
+
+        attempts.append(full)
+        if samples is not None:
+            attempts.append(lambda: self.mark_interrupted(trial_id, reason=reason,
+                                                          samples=samples, events=extra))
+        attempts.append(lambda: self.mark_interrupted(trial_id, reason=reason, events=extra))
+        for attempt in attempts:
+            try:
+                attempt()
+                return
+            except Exception as exc:                 # fall back to keeping less
+                log.warning("trial %s: keeping its partial data failed (%s); keeping less",
+                            trial_id, exc)
 
     def mark_interrupted(
         self,

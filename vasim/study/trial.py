@@ -838,13 +838,13 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
                                events=result.events, trial_metrics=result.trial_metrics)
     except BaseException as exc:
         if store is not None and trial_id is not None:
-            # Keep what was recorded: the partial samples and metrics, marked interrupted.
-            partial = runner.result(wall_time=time.perf_counter() - t0,
-                                    metric_params=metric_params)
-            store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
-                                   samples=partial.samples, point_metrics=partial.metrics,
-                                   summary=partial.summary, events=partial.events,
-                                   trial_metrics=partial.trial_metrics)
+            # Keep what was recorded: the partial samples and metrics, marked interrupted
+            # (less if those cannot be computed; never left 'running').
+            store.keep_interrupted(
+                trial_id, f"{type(exc).__name__}: {exc}",
+                lambda: runner.result(wall_time=time.perf_counter() - t0,
+                                      metric_params=metric_params),
+                samples=runner.samples)
         raise
     return result, trial_id
 

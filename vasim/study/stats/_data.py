@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from vasim.errors import ConfigError
+from vasim.study.export import CSV_NA
 
 #: Maximum number of offending values or cells quoted in one error message.
 MAX_LISTED = 8
@@ -51,7 +52,7 @@ def read_long_csv(path: str | Path) -> pd.DataFrame:
     if p.is_dir():
         raise ConfigError("is a directory, expected a CSV file", file=p)
     try:
-        df = pd.read_csv(p)
+        df = pd.read_csv(p, na_values=[CSV_NA])   # also reads `vasim study export` files
     except pd.errors.EmptyDataError:
         raise ConfigError("CSV file is empty (no header row)", file=p) from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
