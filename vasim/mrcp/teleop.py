@@ -749,12 +749,10 @@ def run_teleop_trial(config: TrialConfig, store: object | None = None, *,
                                events=result.events, trial_metrics=result.trial_metrics)
     except BaseException as exc:
         if store is not None and trial_id is not None:
-            partial = trial.result(wall_time=time.perf_counter() - t0,
-                                   metric_params=metric_params)
-            store.mark_interrupted(trial_id, reason=f"{type(exc).__name__}: {exc}",
-                                   samples=partial.samples, point_metrics=partial.metrics,
-                                   summary=partial.summary, events=partial.events,
-                                   trial_metrics=partial.trial_metrics)
+            store.keep_interrupted(
+                trial_id, f"{type(exc).__name__}: {exc}",
+                lambda: trial.result(wall_time=time.perf_counter() - t0,
+                                     metric_params=metric_params))
         raise
     finally:
         trial.station.close()
