@@ -60,7 +60,12 @@ def _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):  # pragma: no cove
     if d3 >= 0.0 and d4 <= d3:
         return b0, b1, b2, 0.0, 1.0, 0.0
     vc = d1 * d4 - d3 * d2
+    # Degenerate (zero-area) triangles make these denominators 0: numba raises
+    # ZeroDivisionError on a float division by zero (it would kill the physics thread), so
+    # each is guarded and falls back to a vertex.
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        if not d1 - d3 > 0.0:
+            return a0, a1, a2, 1.0, 0.0, 0.0
         v = d1 / (d1 - d3)
         return a0 + v * ab0, a1 + v * ab1, a2 + v * ab2, 1.0 - v, v, 0.0
     cp0 = p0 - c0
@@ -72,12 +77,18 @@ def _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):  # pragma: no cove
         return c0, c1, c2, 0.0, 0.0, 1.0
     vb = d5 * d2 - d1 * d6
     if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        if not d2 - d6 > 0.0:
+            return a0, a1, a2, 1.0, 0.0, 0.0
         w = d2 / (d2 - d6)
         return a0 + w * ac0, a1 + w * ac1, a2 + w * ac2, 1.0 - w, 0.0, w
     va = d3 * d6 - d5 * d4
     if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        if not (d4 - d3) + (d5 - d6) > 0.0:
+            return b0, b1, b2, 0.0, 1.0, 0.0
         w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
         return (b0 + w * (c0 - b0), b1 + w * (c1 - b1), b2 + w * (c2 - b2), 0.0, 1.0 - w, w)
+    if va + vb + vc == 0.0:
+        return a0, a1, a2, 1.0, 0.0, 0.0
     denom = 1.0 / (va + vb + vc)
     v = vb * denom
     w = vc * denom
@@ -465,6 +476,9 @@ def tool_contacts(x, faces, mass, tip, fulcrum, radius, spacing, max_spheres,
         w1 = min(max(bary[s, 1], 0.0), 1.0)
         w2 = min(max(bary[s, 2], 0.0), 1.0)
         ws = w0 + w1 + w2
+        if not ws > 0.0:  # guarded: a float division by zero raises in numba
+            w0 = 1.0
+            ws = 1.0
         w0 /= ws
         w1 /= ws
         w2 /= ws

@@ -9,8 +9,9 @@ naming the file, the scene field and every problem found:
   grows with the node count);
 * degenerate (zero-area) faces;
 * not closed (boundary edges) or non-manifold (edges shared by more than two faces);
-* a scale that looks like millimetres (extent > :data:`MAX_EXTENT_M`: pass ``units="mm"``),
-  or too small for an organ;
+* a scale that looks like millimetres or centimetres (extent > :data:`MAX_EXTENT_M`: the
+  error names the likely unit, ``units="mm"`` above 100, else ``"cm"`` or ``"mm"``), or too
+  small for an organ;
 * self-intersection: non-adjacent triangles that cross (trimesh has no such test; a sweep and
   prune on bounding boxes plus an exact edge–triangle test, ``vasim.abdomen._kernels``).
 
@@ -57,6 +58,27 @@ MIN_EXTENT_M = 0.005
 _MAX_REPORTED_PAIRS = 1000
 
 
+_NAMES = {"cm": "centimetres", "mm": "millimetres"}
+
+
+def _units_hint(extent: float) -> str:
+    """The likely unit of a mesh ``extent`` [file units] > 1 (the hint always said
+    mm). Above 100 only millimetres give an organ-sized object; from 1 to 100 both cm and mm
+    can, the first named being the one giving the more typical organ (at most 30 cm)."""
+    if extent > 100.0:
+        order = ["mm"]
+    elif extent * UNIT_SCALE["cm"] <= 0.3:
+        order = ["cm", "mm"]
+    else:
+        order = ["mm", "cm"]
+    order = [u for u in order if extent * UNIT_SCALE[u] >= MIN_EXTENT_M] or ["cm"]
+    first = order[0]
+    text = (f"{_NAMES[first]}; pass units=\"{first}\" (scale by {UNIT_SCALE[first]:g})")
+    if len(order) > 1:
+        text += f", or units=\"{order[1]}\" if the file is in {_NAMES[order[1]]}"
+    return text
+
+
 def mesh_problems(mesh: trimesh.Trimesh, *, check_self_intersection: bool = True) -> list[str]:
     """Every reason why ``mesh`` cannot be an organ surface (empty if it can).
 
@@ -81,8 +103,7 @@ def mesh_problems(mesh: trimesh.Trimesh, *, check_self_intersection: bool = True
         problems.append(f"too many vertices ({n}; at most {MAX_VERTICES}: simplify the mesh)")
     extent = float(np.ptp(v, axis=0).max())
     if extent > MAX_EXTENT_M:
-        problems.append(f"extent {extent:.3g} m looks like millimetres; pass units=\"mm\" "
-                        "(scale by 0.001)")
+        problems.append(f"extent {extent:.3g} m looks like {_units_hint(extent)}")
     elif extent < MIN_EXTENT_M:
         problems.append(f"extent {extent:.3g} m is too small for an organ; check the units")
     area = np.asarray(mesh.area_faces)

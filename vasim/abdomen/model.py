@@ -56,6 +56,8 @@ from typing import Literal
 import numpy as np
 import trimesh
 from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from vasim.abdomen import _kernels
@@ -553,10 +555,36 @@ def build_organ(
     anchors = select_anchors(verts, params.anchors, wall=wall, name=name)
     if params.anchors and anchors.size == 0:
         raise ConfigError(f"organ {name!r}: the anchor rules select no node", field="anchors")
+    _check_parts_anchored(m, edges, anchors, name)
     return OrganModel(name=name, rest=rest, faces=faces, n_surface=m, springs=springs,
                       rest_length=rest_length, stiffness=k, mass=mass, damping=params.damping,
                       anchors=anchors, gravity=gravity, delicate=delicate, kind=kind,
                       color=color, spring_type=stype)
+
+
+def _check_parts_anchored(n_surface: int, edges: IntArray, anchors: IntArray,
+                          name: str) -> None:
+    """a deformable organ with no anchor (or a mesh part with none) only falls
+    under gravity and resets; every connected part of the surface needs an anchored node.
+
+    Raises:
+        ConfigError: naming the organ and the unanchored part (its size and a vertex).
+    """
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])),
+                       shape=(n_surface, n_surface))
+    n_parts, label = connected_components(graph, directed=False)
+    held = np.zeros(n_parts, dtype=bool)
+    held[label[anchors]] = True
+    if held.all():
+        return
+    part = int(np.flatnonzero(~held)[0])
+    verts = np.flatnonzero(label == part)
+    which = "the organ has no anchor" if n_parts == 1 else (
+        f"part {part} of {n_parts} connected parts of the mesh ({len(verts)} vertices, e.g. "
+        f"vertex {int(verts[0])}) has no anchored node")
+    raise ConfigError(f"organ {name!r}: {which}; a deformable organ needs at least one anchor "
+                      "([[anchors]] rule) per connected part, else it falls and resets",
+                      field="anchors")
 
 
 __all__ = [

@@ -38,6 +38,9 @@ from vasim.abdomen.world import Abdomen, AbdomenSnapshot
 
 log = logging.getLogger(__name__)
 
+MAX_PENDING_EVENTS = 10_000
+"""Events kept between two :meth:`PhysicsThread.drain_events` calls (the newest)."""
+
 
 class PhysicsThread:
     """Steps an :class:`Abdomen` in real time in a daemon thread.
@@ -57,6 +60,11 @@ class PhysicsThread:
         self._periods: list[float] = []
         self._costs: list[float] = []
         self._cpu: list[float] = []
+        self._steps = 0  # all steps (the timing lists above are trimmed)
+        # Events of the steps since the last drain_events() (they travelled only
+        # inside each snapshot, so a reader skipping snapshots lost organ resets).
+        self._events: list[tuple[float, str, str]] = []
+        self._events_lock = threading.Lock()
         self.error: BaseException | None = None
 
     # -- the hand-off ---------------------------------------------------------------------
@@ -72,6 +80,15 @@ class PhysicsThread:
         """The newest complete snapshot (immutable)."""
         return self._latest
 
+    def drain_events(self) -> list[tuple[float, str, str]]:
+        """The events ``(t, kind, detail)`` of every step since the last call, oldest first
+        (lossless, unlike a snapshot's ``events``: those are one step's only, and a reader
+        that skips snapshots would miss them). At most ``MAX_PENDING_EVENTS`` are kept
+        between calls (the newest)."""
+        with self._events_lock:
+            out, self._events = self._events, []
+        return out
+
     # -- life cycle -----------------------------------------------------------------------
     def start(self) -> PhysicsThread:
         if self._thread is not None:
@@ -81,10 +98,20 @@ class PhysicsThread:
         self._thread.start()
         return self
 
-    def stop(self) -> None:
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stops the thread and waits for it (at most ``timeout`` s).
+
+        A thread still stepping after the timeout is logged and stays registered
+        (forgetting it let a later :meth:`start` step the abdomen from two threads; ``start``
+        refuses while it is registered, ``running`` stays true until it ends).
+        """
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=5.0)
+            self._thread.join(timeout=timeout)
+            if self._thread.is_alive():
+                log.error("the abdomen physics thread did not stop within %.1f s (a step is "
+                          "still running); it stays registered", timeout)
+                return
             self._thread = None
 
     def __enter__(self) -> PhysicsThread:
@@ -109,7 +136,13 @@ class PhysicsThread:
                 last = now
                 c0 = time.thread_time()
                 snap = self.abdomen.step(self._tool)
+                if snap.events and snap.seq != self._latest.seq:  # a new step's events
+                    with self._events_lock:
+                        self._events.extend((snap.t, k, d) for k, d in snap.events)
+                        if len(self._events) > MAX_PENDING_EVENTS:
+                            del self._events[:-MAX_PENDING_EVENTS]
                 self._latest = snap
+                self._steps += 1
                 self._costs.append(time.perf_counter() - now)
                 self._cpu.append(time.thread_time() - c0)
                 next_t += period
@@ -137,7 +170,7 @@ class PhysicsThread:
         c = np.asarray(self._costs[-10_000:])
         u = np.asarray(self._cpu[-10_000:])
         return {
-            "steps": len(self._costs),
+            "steps": self._steps,
             "rate_hz": float(1.0 / p.mean()) if len(p) else float("nan"),
             "period_p50": float(np.median(p)) if len(p) else float("nan"),
             "period_p99": float(np.percentile(p, 99)) if len(p) else float("nan"),
@@ -148,4 +181,4 @@ class PhysicsThread:
         }
 
 
-__all__ = ["PhysicsThread"]
+__all__ = ["MAX_PENDING_EVENTS", "PhysicsThread"]

@@ -13,7 +13,7 @@ TOML layout (every field is validated on load; defaults in brackets)::
 
     [physics]
     dt = 0.004                        # physics step [s], in (0, 0.02]  [0.004: 250 Hz]
-    gravity = [0.0, 0.0, -9.81]       # [m/s²], scene frame (z up)
+    gravity = [0.0, 0.0, -9.81]       # [m/s²], scene frame (z up), magnitude <= 50
     tol = 0.01                        # relative tolerance of each implicit step  [0.01]
     cg_tol = 0.1                      # relative residual of each CG solve  [0.01]
     max_newton = 1                    # Newton iterations per organ and step  [4]
@@ -21,8 +21,8 @@ TOML layout (every field is validated on load; defaults in brackets)::
     preconditioner = "auto"           # "auto" | "diagonal" | "factor"  [auto]
 
     [motion]                          # scene-wide rates; amplitudes are per organ
-    breathing_hz = 0.25
-    heartbeat_hz = 1.2
+    breathing_hz = 0.25               # in [0, 1], below 1/(2 dt)
+    heartbeat_hz = 1.2                # in [0, 3], below 1/(2 dt)
     heart_centre = [0.0, 0.17, 0.05]  # [m] the heartbeat fades with the distance from here
     heart_falloff_m = 0.08            # Gaussian length scale [m]
 
@@ -42,10 +42,12 @@ TOML layout (every field is validated on load; defaults in brackets)::
     volume_stiffness = 80.0           # [N/m]
     volume_spacing = 0.012            # [m] (default: twice the mean edge length)
     mass_distribution = "area"        # "area" | "uniform"
-    kinematic = false                 # every node anchored (the abdominal wall)
-    breathing_m = [0.0, 0.012, 0.0]   # breathing amplitude vector [m]
-    heartbeat_m = [0.0, 0.0, 0.001]   # heartbeat amplitude at the heart centre [m]
+    kinematic = false                 # every node anchored (the abdominal wall; kind "wall"
+                                      # must be kinematic; a scene needs one deformable organ)
+    breathing_m = [0.0, 0.012, 0.0]   # breathing amplitude vector [m], each |.| <= 0.05
+    heartbeat_m = [0.0, 0.0, 0.001]   # heartbeat amplitude at the heart centre [m], <= 0.01
     [[organs.liver.anchors]]          # anchored surface nodes: the union of these rules
+                                      # (a deformable organ needs one per connected part)
     to = "plane"                      # "plane" | "point" | "wall"
     point = [0.0, 0.142, 0.0]
     normal = [0.0, -1.0, 0.0]
@@ -101,6 +103,20 @@ from vasim.paths import read_data_file, scenes_dir
 MAX_DT = 0.02
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""
 KINDS = ("parenchyma", "hollow", "vessel", "wall")
+# Plausibility bounds (**decision**: a value outside them is a typo, e.g. breathing
+# amplitudes in mm where m are expected, which made the organ blow up and reset every step):
+MAX_BREATHING_HZ = 1.0
+"""Fastest breathing accepted [Hz]: 60 breaths/min, above any tachypnoea (rest: 0.2-0.3 Hz)."""
+MAX_HEARTBEAT_HZ = 3.0
+"""Fastest heartbeat accepted [Hz]: 180 beats/min, above any heart rate under anaesthesia."""
+MAX_BREATHING_M = 0.05
+"""Largest breathing amplitude per axis [m]: the diaphragm moves organs by 1-3 cm, at most ~5 cm
+in forced breathing."""
+MAX_HEARTBEAT_M = 0.01
+"""Largest heartbeat amplitude per axis [m]: pulsation moves tissue by millimetres."""
+MAX_GRAVITY = 50.0
+"""Largest gravity magnitude accepted [m/s²]: ~5 g; beyond, the value is not a gravity (a typo
+or units error) and the settling/stepping would only blow up."""
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 _TOP_FIELDS = ("name", "description", "physics", "motion", "organs")
 _PHYSICS_FIELDS = ("dt", "gravity", "tol", "cg_tol", "max_newton", "max_iterations",
@@ -151,6 +167,10 @@ class PhysicsConfig:
     def __post_init__(self) -> None:
         _number(self.dt, field_name="dt", low=0.0, low_open=True, high=MAX_DT)
         object.__setattr__(self, "gravity", _vec3(self.gravity, field_name="gravity"))
+        g = math.sqrt(sum(c * c for c in self.gravity))
+        if g > MAX_GRAVITY:  # plausibility bound (MAX_GRAVITY)
+            raise ConfigError(f"magnitude must be <= {MAX_GRAVITY:g} m/s², got "
+                              f"{list(self.gravity)!r} ({g:.3g} m/s²)", field="gravity")
         _number(self.tol, field_name="tol", low=0.0, low_open=True, high=0.5)
         _number(self.cg_tol, field_name="cg_tol", low=0.0, low_open=True, high=0.99)
         for name in ("max_newton", "max_iterations"):
@@ -172,7 +192,10 @@ class MotionConfig:
     """Scene-wide rates of the physiological motion (amplitudes are per organ).
 
     Attributes:
-        breathing_hz: [Hz], >= 0. heartbeat_hz: [Hz], >= 0.
+        breathing_hz: [Hz], in [0, :data:`MAX_BREATHING_HZ`] (0: no breathing).
+        heartbeat_hz: [Hz], in [0, :data:`MAX_HEARTBEAT_HZ`] (0: no heartbeat); both also
+            below the Nyquist rate ``1 / (2 dt)`` of the physics step (checked by
+            :class:`Scene`), else the motion aliases.
         heart_centre: (3,) [m]. heart_falloff_m: Gaussian length scale [m], > 0.
     """
 
@@ -182,8 +205,8 @@ class MotionConfig:
     heart_falloff_m: float = 0.08
 
     def __post_init__(self) -> None:
-        _number(self.breathing_hz, field_name="breathing_hz", low=0.0)
-        _number(self.heartbeat_hz, field_name="heartbeat_hz", low=0.0)
+        _number(self.breathing_hz, field_name="breathing_hz", low=0.0, high=MAX_BREATHING_HZ)
+        _number(self.heartbeat_hz, field_name="heartbeat_hz", low=0.0, high=MAX_HEARTBEAT_HZ)
         object.__setattr__(self, "heart_centre", _vec3(self.heart_centre,
                                                        field_name="heart_centre"))
         _number(self.heart_falloff_m, field_name="heart_falloff_m", low=0.0, low_open=True)
@@ -239,6 +262,11 @@ class OrganConfig:
                                                       field_name="breathing_m"))
         object.__setattr__(self, "heartbeat_m", _vec3(self.heartbeat_m,
                                                       field_name="heartbeat_m"))
+        for key, bound in (("breathing_m", MAX_BREATHING_M), ("heartbeat_m", MAX_HEARTBEAT_M)):
+            amp = getattr(self, key)
+            if any(abs(c) > bound for c in amp):  # plausibility bounds (module constants)
+                raise ConfigError(f"each component must be within ±{bound:g} m, got "
+                                  f"{list(amp)!r} (a length in mm or cm?)", field=key)
 
     @property
     def is_procedural(self) -> bool:
@@ -292,6 +320,27 @@ class Scene:
         if not organs:
             raise ConfigError("a scene needs at least one organ", field="organs",
                               file=self.source)
+        # a scene of kinematic organs only validated, then a trial failed to bind
+        # its targets ("no deformable organ"): at least one organ must deform.
+        if all(o.params.kinematic for o in organs):
+            raise ConfigError("a scene needs at least one deformable organ (kinematic = "
+                              "false): every organ is kinematic", field="organs",
+                              file=self.source)
+        # a kind="wall" organ is the kinematic wall (no contact, trocars fixed);
+        # a deformable wall was never stepped, so it is refused rather than half-supported.
+        for o in organs:
+            if o.kind == "wall" and not o.params.kinematic:
+                raise ConfigError('an organ of kind "wall" must be kinematic (kinematic = '
+                                  'true): the wall is not deformed', file=self.source,
+                                  field=f"organs.{o.name}.kinematic")
+        # a rate at or above the physics step's Nyquist rate aliases to nothing.
+        nyquist = 0.5 / self.physics.dt
+        for key in ("breathing_hz", "heartbeat_hz"):
+            hz = getattr(self.motion, key)
+            if hz >= nyquist:
+                raise ConfigError(f"must be below the Nyquist rate 1/(2 dt) = {nyquist:g} Hz "
+                                  f"of the physics step dt = {self.physics.dt:g} s, got {hz!r}",
+                                  field=f"motion.{key}", file=self.source)
         object.__setattr__(self, "organs", organs)
 
     def organ(self, name: str) -> OrganConfig:
@@ -605,7 +654,12 @@ def with_organ(scene: Scene, organ: OrganConfig) -> Scene:
 
 __all__ = [
     "KINDS",
+    "MAX_BREATHING_HZ",
+    "MAX_BREATHING_M",
     "MAX_DT",
+    "MAX_GRAVITY",
+    "MAX_HEARTBEAT_HZ",
+    "MAX_HEARTBEAT_M",
     "MotionConfig",
     "OrganConfig",
     "PhysicsConfig",

@@ -25,7 +25,10 @@ every organ at every step (the benchmark of the full cost, and a cross-check in 
 Contact: the tool capsule against every non-wall organ (:mod:`vasim.abdomen.contact`); the
 reaction forces go to the organ's solver as external forces for the next step; a contact
 with a delicate organ (the vessel) counts as damage. The wall is kinematic: the trocars stay
-where the wall puts them and the shaft passes through it without contact.
+where the wall puts them and the shaft passes through it without contact. Any other
+kinematic organ (**decision**, the simplest consistent rule) is a rigid body for contact: it
+is detected, counted (touching, delicate damage, quality) and pushes the tool with the same
+penalty force, but its nodes (all anchored) take no force and it is never stepped.
 
 Several instruments (**decision**, issue #7 §4: in the MRCP study both tools and the
 endoscope are in the abdomen). :meth:`Abdomen.step` takes one :class:`ToolPose`, a sequence
@@ -58,6 +61,7 @@ from __future__ import annotations
 import hashlib
 import math
 import threading
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property, partial
@@ -82,6 +86,7 @@ from vasim.abdomen.model import OrganModel, OrganState
 from vasim.abdomen.motion import PhysioMotion, PointMotion, _sin_cos
 from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
+from vasim.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 
@@ -97,6 +102,13 @@ SETTLE_TIME = 3.0
 """Longest simulated time spent settling an organ under gravity [s]."""
 SETTLE_SPEED = 1e-4
 """An organ counts as settled when no node moves faster than this [m/s]."""
+MAX_SETTLE_RESETS = 3
+"""Solver resets tolerated while settling an organ before it is refused (ConfigError)."""
+MAX_EVENTS = 10_000
+"""Events kept in :attr:`Abdomen.events` (the newest; :attr:`Abdomen.n_events` counts all)."""
+POSE_LIMIT = 1e3
+"""A tool point farther than this from the origin on an axis [m] is out of the abdomen (no
+contact): larger finite values overflow the kernel's squared lengths."""
 
 
 def _readonly(a: FloatArray) -> FloatArray:
@@ -162,10 +174,27 @@ def settled_positions(scene: Scene, model: OrganModel,
     state = solver.initial_state()
     targets = np.array(model.rest[model.anchors])
     if len(model.anchors) < model.n_nodes:
+        # a reset puts the organ back at rest with v = 0, which is not settled;
+        # only a step without reset may end the settling, and an organ that keeps resetting
+        # (e.g. absurd parameters) is refused rather than cached as its rest shape.
+        resets = 0
+        last_reset = False
         for _ in range(math.ceil(SETTLE_TIME / solver.dt)):
-            solver.step(state, targets)
+            report = solver.step(state, targets)
+            last_reset = bool(report.reset)
+            if last_reset:
+                resets += 1
+                if resets > MAX_SETTLE_RESETS:
+                    break
+                continue
             if float(np.abs(state.v).max()) < SETTLE_SPEED:
                 break
+        if last_reset:
+            raise ConfigError(
+                f"organ {model.name!r} does not settle under gravity: the solver reset it "
+                f"{resets} times while settling (last: {report.reason}); check its stiffness, "
+                "mass, anchors and the scene's gravity", file=scene.source,
+                field=f"organs.{model.name}")
     out = _readonly(state.x)
     with _SETTLED_LOCK:
         _SETTLED[key] = out
@@ -426,7 +455,10 @@ class Abdomen:
         self.t = 0.0
         self.seq = 0
         self.quality = TissueQuality()
-        self.events: list[tuple[float, str, str]] = []
+        # Bounded: an organ resetting every step of a long session grew this
+        # list without end; the newest MAX_EVENTS are kept, n_events counts them all.
+        self.events: deque[tuple[float, str, str]] = deque(maxlen=MAX_EVENTS)
+        self.n_events = 0
         self._binding: SurfaceBinding | None = None
         self._bound: list[_Body] = []
         self._last_contacts: tuple[tuple[str, dict[int, ContactResult]], ...] = ()
@@ -435,7 +467,10 @@ class Abdomen:
         # broad phase (see _contacts)
         self._clears: dict[int, tuple[FloatArray, FloatArray, float] | None] = {}
         # Per-body tables for the vectorised broad phase and motion phases.
-        deformable = [i for i, b in enumerate(self._bodies) if not b.kinematic]
+        # Every organ but the wall takes part in contact (a kinematic vessel was
+        # never touched, so its damage never counted). A kinematic organ is rigid: the same
+        # penalty pushes the tool and the contact counts, its anchored nodes take no force.
+        deformable = [i for i, b in enumerate(self._bodies) if b.model.kind != "wall"]
         self._cell_body = np.concatenate(
             [np.full(len(self._bodies[i].cell_radii), i) for i in deformable]) \
             if deformable else np.zeros(0, dtype=np.int64)
@@ -587,7 +622,7 @@ class Abdomen:
         lo = np.minimum(ful, tip) - self.tool.radius
         hi = np.maximum(ful, tip) + self.tool.radius
         for i, b in enumerate(self._bodies):
-            if b.kinematic or not (near[i] or b.awake):
+            if not (near[i] or b.awake):  # (the wall has no cells: never near)
                 continue
             if b.awake and not near[i] and box_apart(b.state.x, lo, hi, b.max_edge):
                 continue  # deformed, but its current bounding box is out of reach
@@ -603,7 +638,8 @@ class Abdomen:
 
         The contact forces found at the start of the step act on the tissue during it; with
         several instruments their reaction forces are summed per node (module docstring).
-        A pose with a non-finite point is an instrument out of the abdomen (no contact).
+        A pose with a non-finite point, or one beyond :data:`POSE_LIMIT` on an axis, is an
+        instrument out of the abdomen (no contact).
 
         Args:
             tool: one pose; a sequence of poses (instruments ``"0"``, ``"1"``, ...); a
@@ -619,7 +655,9 @@ class Abdomen:
         per_tool: list[tuple[str, dict[int, ContactResult]]] = []
         for slot, (name, pose) in enumerate(_tool_poses(tool)):
             contacts: dict[int, ContactResult] = {}
-            if np.isfinite(pose.tip).all() and np.isfinite(pose.fulcrum).all():
+            # Non-finite, or so far out that the kernel's squared lengths overflow (review
+            # fix: a huge finite pose raised ValueError): out of the abdomen, no contact.
+            if _in_reach(pose.tip) and _in_reach(pose.fulcrum):
                 contacts = self._contacts(pose, slot)
             per_tool.append((name, contacts))
         t1 = self.t + self.dt
@@ -644,10 +682,11 @@ class Abdomen:
             report: StepReport = b.solver.step(
                 b.state, targets, f, v_frame=b.frame_velocities(t1))
             b.state.t = t1
-            if report.reset:
-                detail = f"{b.model.name}: {report.reason}"
+            if report.reset:  # the reason already names the organ (not twice)
+                detail = report.reason or f"{b.model.name}: reset to rest"
                 step_events.append(("organ_reset", detail))
                 self.events.append((t1, "organ_reset", detail))
+                self.n_events += 1
             self._maybe_sleep(b, bool(cs), t1)
         self.t = t1
         self.seq += 1
@@ -735,11 +774,19 @@ def _tool_poses(tool: ToolPose | Sequence[ToolPose] | Mapping[str, ToolPose] | N
     return items
 
 
+def _in_reach(p: FloatArray) -> bool:
+    """Every coordinate within ±POSE_LIMIT (False for NaN and infinities)."""
+    return bool((np.abs(p) < POSE_LIMIT).all())
+
+
 _ZERO3 = _readonly(np.zeros(3))
 _ZERO33 = _readonly(np.zeros((3, 3)))
 
 
 __all__ = [
+    "MAX_EVENTS",
+    "MAX_SETTLE_RESETS",
+    "POSE_LIMIT",
     "SETTLE_SPEED",
     "SETTLE_TIME",
     "SLEEP_AFTER",

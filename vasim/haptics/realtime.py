@@ -256,6 +256,7 @@ class _ThreadFeed:
         self.physics = physics
         self.log = log
         self._seq = physics.latest.seq
+        self._pending: list[tuple[float, str, str]] = []
 
     def __call__(self, k: int, pose: ToolPose) -> Any:
         self.physics.set_tool(pose)
@@ -263,6 +264,13 @@ class _ThreadFeed:
         if snap.seq != self._seq:
             self._seq = snap.seq
             self.log.applied.append((k, snap.seq))
+            # the events of every step since the last hand-off (also of skipped
+            # snapshots) ride on this one; those of steps newer than it wait for the next.
+            self._pending += self.physics.drain_events()
+            now = tuple((kind, d) for t, kind, d in self._pending if t <= snap.t)
+            self._pending = [e for e in self._pending if e[0] > snap.t]
+            if now != tuple(snap.events):
+                snap = replace(snap, events=now)
             return snap
         return None
 

@@ -131,7 +131,7 @@ class AudioStream:
         self.server = server
         self.min_interval = 1.0 / float(rate_hz)
         self._installed: set[int] = set()
-        # Review fix: install() runs on viser's callback threads while update() runs on the
+        # install() runs on viser's callback threads while update() runs on the
         # view thread; the lock guards _installed and update() iterates over a snapshot
         # (iterating the live set raised "Set changed size during iteration").
         self._lock = threading.Lock()

@@ -229,7 +229,7 @@ class TrainingController:
                  trial_factory: Callable[..., LiveTrial] | None = None):
         self.scene = scene
         self.db = None if db is None else Path(db)
-        # Review fix: a directory was only refused when Free mode first opened the store;
+        # a directory was only refused when Free mode first opened the store;
         # refuse it at start-up (vasim serve prints this as one line and exits 2).
         if self.db is not None and self.db.is_dir():
             raise ConfigError(f"--db {self.db} is a directory, expected a database file",
@@ -629,7 +629,7 @@ class TrainingController:
         if p.mode == "protocol":
             raise ConfigError("the protocol sets the schema; switch to free training to "
                               "choose one", field="schema")
-        # Review fix: viser does not check dropdown values against the options, and
+        # viser does not check dropdown values against the options, and
         # load_schema accepts file paths, so any client could make the server read (and
         # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
         choices = schema_choices(self._base.schema)

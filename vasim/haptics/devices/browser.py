@@ -63,7 +63,7 @@ from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_forc
 BROWSER_WORKSPACE_HALF_M = 1.0
 """Half edge of the browser pointer's workspace box around the scene origin [m].
 
-**decision** (review fix): a viewer client can send any finite coordinate (1e200 passed the
+**decision**: a viewer client can send any finite coordinate (1e200 passed the
 NaN guard and overflowed the physics), so the pointer lives in a finite box. The default
 abdomen spans about x -0.15..0.15, y -0.12..0.18, z 0..0.16 m and the tasks lie inside it;
 +-1 m around the origin (larger than any abdomen) holds the whole scene with a wide margin
