@@ -51,8 +51,10 @@ def test_robot_nodes_exist_and_move_in_the_browser(app: MrcpViewerApp, page: Any
         assert wait_for(lambda n=name: node_pose(page, n) is not None, 20), name
     # The poses the server sent arrive: R1's wrist turns with the cube it holds.
     first = node_pose(page, "/mrcp/robots/R1/link6")
+    # (60 s: a wait, not a timing goal; on a loaded 2-core host the kernel, the server and
+    # software WebGL share the cores and the first wrist turn took over 20 s once.)
     assert wait_for(lambda: not np.allclose(node_pose(page, "/mrcp/robots/R1/link6"), first,
-                                            atol=1e-4), 20)
+                                            atol=1e-4), 60)
     server_pos = np.asarray(app.station.links["R0"][0].position)  # type: ignore[union-attr]
     assert np.allclose(node_pose(page, "/mrcp/robots/R0/link0")[:3], server_pos, atol=1e-6)
 
