@@ -57,6 +57,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         # the reader went away (e.g. `vasim ... | head`): not an error; silence the flush
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:
+        # The file system refused (an --out under a file, no permission, a full disk): one
+        # line naming the path, like any other bad input. Stored trials are transactional,
+        # so nothing half-written is left in a study database.
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"vasim {args.command}: error:{where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     return int(code or 0)
 
 

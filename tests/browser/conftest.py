@@ -1,8 +1,9 @@
 """Real-browser tests of the viewer: Debian's headless Chromium driven by playwright.
 
 Every test here carries the ``browser`` marker (``pytest -m "not browser"`` leaves them out).
-They skip, with the reason, only when ``/usr/bin/chromium`` or the playwright package is
-missing (``make test`` installs both; never ``playwright install``, which downloads).
+They skip, with the reason, only when ``/usr/bin/chromium`` (or ``$VASIM_CHROMIUM``) or the
+playwright package is missing (``make test`` installs both; never ``playwright install``,
+which downloads).
 Launch flags and readiness waits follow guides/viewer.md.
 """
 
@@ -16,7 +17,7 @@ from typing import Any
 
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
+CHROMIUM = os.environ.get("VASIM_CHROMIUM", "/usr/bin/chromium")   # as .ci/ensure-chromium
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}

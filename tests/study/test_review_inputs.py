@@ -76,3 +76,40 @@ def test_f5pl_derivative_keeps_nan_inputs_nan() -> None:
     y = f5pl_derivative(np.array([np.nan, 0.01, 1e300]), p)
     assert math.isnan(y[0]) and y[1] > 0 and y[2] == 0.0
     assert isinstance(pd.isna(f5pl_derivative(float("nan"), p)), bool)
+
+
+def test_cli_one_line_errors_for_limits_paths_and_flags(tmp_path: Path, capsys) -> None:
+    """A time limit beyond a day, an --out under a file, a real-time flag without
+    --realtime: each a one-line error with exit status 2 (they were tracebacks, or ignored)."""
+    from vasim.cli import main
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    db = tmp_path / "s.sqlite"
+    TrialStore(db).close()
+    cases = [
+        (["trial", "--scene", "none", "--max-time", "1e308"], "max_time"),
+        (["mrcp", "run", "faucet", "--duration", "1e308"], "--duration"),
+        (["study", "export", "--db", str(db), "--out", str(afile / "x")], "afile"),
+        (["report", "--db", str(db), "--out", str(afile / "x")], "afile"),
+        (["trial", "--scene", "none", "--device", "emulator"], "only with --realtime"),
+        (["trial", "--realtime", "--replay", "1", "--db", str(db)], "--replay"),
+    ]
+    for argv, needle in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1 and "Traceback" not in err, (argv, err)
+
+
+def test_a_protocol_time_limit_beyond_a_day_is_refused(tmp_path: Path) -> None:
+    from vasim.study.protocol import load_protocol
+
+    src = Path(__file__).parents[2] / "protocols" / "studies" / "vf_learning_curve.toml"
+    text = src.read_text()
+    assert "max_trial_time_s" in text
+    lines = [("max_trial_time_s = 1e308" if ln.startswith("max_trial_time_s") else ln)
+             for ln in text.splitlines()]
+    p = tmp_path / "p.toml"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match="max_trial_time_s"):
+        load_protocol(p)

@@ -353,3 +353,17 @@ def test_a_failing_result_still_closes_the_trial(tmp_path: Path, monkeypatch) ->
         rows = st.trials()
         assert rows["status"].tolist() == ["interrupted"]
         assert int(rows["n_samples"].iloc[0]) > 0
+
+
+def test_cli_answer_refuses_a_questionnaire_already_answered(tmp_path: Path, tiny: Path,
+                                                             capsys) -> None:
+    db = tmp_path / "s.db"
+    with TrialStore(db) as st:
+        sid = start_session(st, load_protocol(tiny), "C04", seed=4)
+    post = tmp_path / "post.toml"
+    post.write_text('[post]\nbest = "ff"\n')
+    argv = ["study", "answer", "--db", str(db), "--session", str(sid), "--file", str(post)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert main(argv) == 2                        # a second answer: not silently skipped
+    assert "already answered" in capsys.readouterr().err

@@ -17,6 +17,7 @@ from typing import Any, TextIO
 
 from vasim.errors import ConfigError
 from vasim.jsonio import dumps
+from vasim.study.protocol import MAX_TRIAL_TIME_S
 
 _EPILOG = """\
 examples:
@@ -107,9 +108,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from vasim.mrcp.scenarios.runner import run
 
     out: TextIO = getattr(args, "out", None) or sys.stdout
-    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0.0):
-        raise ConfigError(f"--duration must be a finite number of seconds > 0, got "
-                          f"{args.duration!r}", field="duration")
+    if args.duration is not None and not (math.isfinite(args.duration)
+                                          and 0.0 < args.duration <= MAX_TRIAL_TIME_S):
+        raise ConfigError(f"--duration must be a finite number of seconds in "
+                          f"(0, {MAX_TRIAL_TIME_S:g}], got {args.duration!r}", field="duration")
     if args.seed < 0:
         raise ConfigError(f"--seed must be >= 0, got {args.seed!r}", field="seed")
     if args.plot:

@@ -79,10 +79,22 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
     from vasim.study.trial import TrialConfig, run_trial
 
+    realtime_only = [flag for flag, given in (
+        ("--device", getattr(args, "device", "scripted") != "scripted"),
+        ("--physics", getattr(args, "physics", "thread") != "thread"),
+        ("--in-process", getattr(args, "in_process", False))) if given]
     if getattr(args, "replay", None) is not None:
+        if getattr(args, "realtime", False) or realtime_only:
+            raise ConfigError("--replay re-runs the stored trial as recorded: it takes no "
+                              f"{', '.join(['--realtime', *realtime_only][:3])}",
+                              field="replay")
         return _cmd_replay(args)
     if getattr(args, "realtime", False):
         return _cmd_realtime(args)
+    if realtime_only:
+        verb = "applies" if len(realtime_only) == 1 else "apply"
+        raise ConfigError(f"{', '.join(realtime_only)} {verb} only with --realtime",
+                          field=realtime_only[0])
 
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
@@ -355,8 +367,10 @@ def _progress(args: argparse.Namespace) -> bool:
 
 
 def _record_file_answers(store: object, session_id: int, path: Path | None,
-                         which: tuple[str, ...]) -> list[str]:
-    """Records the [pre]/[post] tables of an answers file; returns what was recorded."""
+                         which: tuple[str, ...], *, skip_answered: bool = False) -> list[str]:
+    """Records the [pre]/[post] tables of an answers file; returns what was recorded.
+    ``skip_answered`` (``resume``: the file given to ``run`` again) passes over a table the
+    session already has; otherwise recording it again is an error (StoreError)."""
     if path is None:
         return []
     from vasim.study.session import load_answers_file, record_answers
@@ -364,10 +378,10 @@ def _record_file_answers(store: object, session_id: int, path: Path | None,
 
     assert isinstance(store, TrialStore)
     data = load_answers_file(path)
-    answered = set(store.answers(session_id)["questionnaire"])
+    answered = set(store.answers(session_id)["questionnaire"]) if skip_answered else set()
     done = []
     for q in which:
-        if q in data and q not in answered:   # a resumed session: pre was recorded by run
+        if q in data and q not in answered:
             n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]
             done.append(f"{q} ({n} answers)")
     return done
@@ -427,7 +441,8 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         n = run_session(store, sid, progress=_progress(args))
         recorded = []
         if store.session(sid)["status"] == "completed":
-            recorded = _record_file_answers(store, sid, args.answers, ("pre", "post"))
+            recorded = _record_file_answers(store, sid, args.answers, ("pre", "post"),
+                                            skip_answered=True)
         print(f"{n} trial(s) run")
         print(_session_line(store, sid))
         if recorded:

@@ -154,6 +154,19 @@ def _check_choice(v: object, name: str, choices: Sequence[str]) -> None:
                           field=name)
 
 
+MAX_TRIAL_TIME_S = 86_400.0
+"""Longest trial time limit accepted [s] (**decision**: a day; a trial's sample buffer and
+loop counters are sized from the limit, and 1e308 s overflowed them)."""
+
+
+def check_trial_time(v: object, name: str) -> None:
+    """A trial time limit: a finite number of seconds in (0, :data:`MAX_TRIAL_TIME_S`]."""
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
+            or not 0 < v <= MAX_TRIAL_TIME_S:
+        raise ConfigError(f"must be a number of seconds in (0, {MAX_TRIAL_TIME_S:g}], got "
+                          f"{v!r}", field=name)
+
+
 def _check_positive(v: object, name: str) -> None:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
             or not v > 0:
@@ -372,7 +385,7 @@ class Protocol:
         _check_str(self.description, "description")
         _check_choice(self.task, "task", TASKS)
         _check_positive(self.reach_radius, "reach_radius_m")
-        _check_positive(self.max_trial_time, "max_trial_time_s")
+        check_trial_time(self.max_trial_time, "max_trial_time_s")
         _check_positive(self.excessive_force_n, "excessive_force_n")
         _check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         _check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)

@@ -36,7 +36,6 @@ Example:
 
 from __future__ import annotations
 
-import math
 import secrets
 import tomllib
 from collections.abc import Mapping
@@ -54,6 +53,7 @@ from vasim.study.protocol import (
     TELEOPERATION_MODES,
     Protocol,
     ScheduledTrial,
+    check_trial_time,
     generate_schedule,
     parse_protocol,
     validate_answers,
@@ -124,10 +124,12 @@ class SessionSettings:
             raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
                               field="profile")
         m = self.max_trial_time
-        if m is not None and (isinstance(m, bool) or not isinstance(m, int | float)
-                              or not math.isfinite(m) or m <= 0):
-            raise ConfigError(f"max_trial_time must be > 0 s, got {m!r}",
-                              field="max_trial_time")
+        if m is not None:
+            try:
+                check_trial_time(m, "max_trial_time")
+            except ConfigError as exc:
+                raise ConfigError(f"max_trial_time {exc.reason}",
+                                  field="max_trial_time") from None
         if not isinstance(self.extra, Mapping):
             raise ConfigError(f"extra must be a mapping, got {self.extra!r}", field="extra")
 

@@ -66,7 +66,7 @@ from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
 from vasim.study.metrics import evaluate_trial
-from vasim.study.protocol import TELEOPERATION_MODES
+from vasim.study.protocol import TELEOPERATION_MODES, check_trial_time
 from vasim.study.samples import SampleBuffer
 from vasim.study.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
@@ -175,8 +175,10 @@ class TrialConfig:
                               field="skill")
         if not (math.isfinite(self.dt) and 0 < self.dt <= 0.02):
             raise ConfigError(f"dt must be in (0, 0.02] s, got {self.dt!r}", field="dt")
-        if not (math.isfinite(self.max_time) and self.max_time > 0):
-            raise ConfigError(f"max_time must be > 0 s, got {self.max_time!r}", field="max_time")
+        try:
+            check_trial_time(self.max_time, "max_time")
+        except ConfigError as exc:
+            raise ConfigError(f"max_time {exc.reason}", field="max_time") from None
         if self.practice < 0:
             raise ConfigError(f"practice must be >= 0, got {self.practice!r}", field="practice")
         if not (math.isfinite(self.velocity_cutoff_hz) and self.velocity_cutoff_hz > 0):
