@@ -21,7 +21,8 @@ pybullet only when ``q`` changes, all joints in one call.
 :meth:`PybulletWorld.min_distances` answers robots and sphere obstacles with the compiled
 sphere-swept model of the link hulls (``vasim.mrcp._distance_kernels``): a conservative
 lower bound of pybullet's value, ``-COMPILED_TOLERANCE <= model - pybullet <= 1e-5`` m
-(penetrations included); pybullet where the model has no estimate (deep overlaps) and for
+where the model finds no penetration; pybullet wherever it finds one (its error grows with
+the depth: 1.1 mm at 7 cm measured), where it has no estimate (deep overlaps) and for
 other obstacle shapes. :meth:`PybulletWorld.min_distance` and
 :meth:`PybulletWorld.in_collision` stay pybullet's answers: the model only chooses which
 link pairs pybullet is asked about. ``PybulletWorld(compiled_distances=False)`` asks
@@ -302,16 +303,26 @@ class PybulletArm:
             q_seed: ``(n,)`` start / preferred configuration (default: home).
             restarts: how many spread configurations to try after the first three starts.
         """
+        # inputs validated up front: a NaN seed made pybullet's IK loop forever, a NaN
+        # rotation surfaced as an opaque LinAlgError deep in the solver
         target = np.asarray(position, dtype=float)
         if target.shape != (3,) or not math.isfinite(float(target.sum())):
             if target.shape != (3,) or not np.all(np.isfinite(target)):
                 raise ValueError(f"{self.name}: position must be 3 finite numbers, got "
                                  f"{position!r}")
+        rot = None if rotation is None else np.asarray(rotation, dtype=float)
+        if rot is not None and (rot.shape != (3, 3) or not np.all(np.isfinite(rot))):
+            raise ValueError(f"{self.name}: rotation must be a finite (3, 3) matrix, got "
+                             f"{rotation!r}")
+        if q_seed is not None:
+            q_seed = np.asarray(q_seed, dtype=float)
+            if q_seed.shape != (self._n,) or not np.all(np.isfinite(q_seed)):
+                raise ValueError(f"{self.name}: q_seed must be {self._n} finite angles, got "
+                                 f"{q_seed!r}")
         dx, dy, dz = (target - self._shoulder).tolist()
         if math.sqrt(dx * dx + dy * dy + dz * dz) > self._reach:
             return None
-        rot = None if rotation is None else np.asarray(rotation, dtype=float)
-        seed = self.robot.home if q_seed is None else np.asarray(q_seed, dtype=float)
+        seed = self.robot.home if q_seed is None else q_seed
         seed = np.clip(seed, self.robot.lower, self.robot.upper)
         if rot is not None and self._closed_form:
             if q_seed is not None:      # tracking: a few Newton steps from the seed suffice
@@ -341,12 +352,14 @@ class PybulletArm:
                         tol_p: float, tol_r: float) -> tuple[FloatArray | None, bool]:
         """The in-limit closed-form solution closest to the seed, and whether the closed
         form enumerated every solution (False at a wrist singularity, where a continuum
-        exists and only one split of theta4 + theta6 was tried)."""
+        exists and only one split of theta4 + theta6 was tried; False with no candidate
+        at all, since ``ik`` only calls this within reach: an empty closed form there may
+        be round-off at a boundary, so the numeric search must still run)."""
         lower, upper = self.robot.lower, self.robot.upper
         cands = dh.puma_ik(self.robot, target, rot, self.base)
+        if not cands:       # all([]) would be True and skip the numeric fallback
+            return None, False
         complete = all(abs(math.sin(c[4] + self._offsets[4])) > 1e-9 for c in cands)
-        if not cands:
-            return None, complete
         wrapped = dh.wrap_into_batch(np.array(cands), lower, upper, seed)
         fits = ~np.isnan(wrapped[:, 0])
         if not np.any(fits):
@@ -419,16 +432,19 @@ class PybulletArm:
 
 _SELF_PAIRS: dict[str, tuple[tuple[int, int], ...]] = {}   # per model content
 #: Bodies the compiled model puts nearer than this [m] are queried in pybullet (exact);
-#: ``-inf``: only where the model has no estimate (the key-point hulls of two links meet,
-#: a deep penetration). The model's signed distances, penetrations included, are within
-#: ``COMPILED_TOLERANCE`` of pybullet's.
+#: penetrations (model < 0, ``-inf`` = no estimate: the key-point hulls of two links meet)
+#: are always queried, whatever this threshold: the model's error grows with the
+#: penetration depth (1.1 mm at 7 cm measured) beyond ``COMPILED_TOLERANCE``.
 REFINE_BELOW = -math.inf
 #: Direction improvements of the compiled model per link pair (see _distance_kernels).
 DIRECTION_ITERATIONS = 1
-#: The compiled model's distances are never above pybullet's by more than 1e-5 m and
-#: never below by more than this [m] (a conservative lower bound; measured: 0.82 mm, from
-#: the polytope's support direction and pybullet's 0.97-1.0 mm margin; held by
-#: tests/mrcp/test_world_distances.py on random configurations, penetrations included).
+#: The compiled model's distances are never above pybullet's by more than 1e-5 m and,
+#: where pybullet finds no penetration, never below by more than this [m] (a conservative
+#: lower bound; measured: 0.82 mm, from the polytope's support direction and pybullet's
+#: 0.97-1.0 mm margin). In penetration the error grows with the depth (1.09 mm at 7 cm,
+#: 2.6 mm at 15 cm measured), so the model's penetrations are refined in pybullet
+#: (``min_distances``) and pruning allows the whole depth (``_min_distance_among``); held by
+#: tests/mrcp/test_world_distances.py and test_world_review.py.
 COMPILED_TOLERANCE = 1e-3
 #: The compiled model is never more than this [m] above pybullet's distance.
 _ABOVE = 1e-5
@@ -699,6 +715,8 @@ class PybulletWorld:
         q = np.asarray(q, dtype=float)
         if q.shape != (r.model.n_joints,):
             raise ValueError(f"{robot}: q must have shape ({r.model.n_joints},), got {q.shape}")
+        if not np.all(np.isfinite(q)):      # pybullet would drop the arm from every query
+            raise ValueError(f"{robot}: q must be finite, got {q!r}")
         changed = np.flatnonzero(q != r.q)
         if changed.size:
             pb.resetJointStatesMultiDof(r.body, [int(j) for j in changed],
@@ -766,8 +784,9 @@ class PybulletWorld:
         **Decision** (cost: the kernel makes hundreds of these queries per 18 ms cycle):
         robots and sphere obstacles are answered by the compiled sphere-swept model of the
         link hulls (``vasim.mrcp._distance_kernels``, a few µs per query, no pybullet call);
-        a pair the model puts nearer than ``refine_below`` (near contact, penetration), and
-        every other kind of obstacle, is queried in pybullet with the robot posed (exact).
+        a pair the model puts nearer than ``refine_below`` (near contact) or in penetration
+        (``< 0`` or ``-inf``, whatever ``refine_below``), and every other kind of obstacle,
+        is queried in pybullet with the robot posed (exact).
         ``compiled_distances=False`` queries everything in pybullet. The robot's pose in
         the world is unchanged on return.
         """
@@ -776,6 +795,9 @@ class PybulletWorld:
         if qs.shape[1:] != (r.model.n_joints,):
             raise ValueError(f"{robot}: configs must have shape (N, {r.model.n_joints}), "
                              f"got {qs.shape}")
+        if not np.all(np.isfinite(qs)):     # NaN joints: the arm vanishes from the checks
+            bad = int(np.flatnonzero(~np.all(np.isfinite(qs), axis=1))[0])
+            raise ValueError(f"{robot}: configs must be finite, row {bad} is {qs[bad]!r}")
         names = list(bodies)
         out = np.full((qs.shape[0], len(names)), float(max_distance))
         exact: list[tuple[int, int]] = []
@@ -794,9 +816,14 @@ class PybulletWorld:
                                 sweep_a.ball, sweep_a.centre, sweep_a.radius, frames_b,
                                 *packed, _UNIT[0], _UNIT[1], float(max_distance),
                                 DIRECTION_ITERATIONS, dist)
+                # refined: below refine_below, any penetration (the model's error grows
+                # with the depth: 1.1 mm at 7 cm, 2.6 mm at 15 cm measured) and -inf (no
+                # estimate; -inf < -inf is False, so the default REFINE_BELOW alone missed
+                # the deepest overlaps)
+                threshold = max(self.refine_below, 0.0)
                 for col, j in enumerate(modelled):
                     for i in range(qs.shape[0]):
-                        if dist[i, col] < self.refine_below:
+                        if dist[i, col] < threshold:     # -inf included
                             exact.append((i, j))
                         else:
                             out[i, j] = min(float(dist[i, col]), max_distance)
@@ -877,13 +904,16 @@ class PybulletWorld:
     def _min_distance_among(self, a: str, b: str, pairs: NDArray[np.int64],
                             bounds: FloatArray, max_distance: float) -> Proximity:
         """Exact :meth:`min_distance` from pybullet queries of only the link pairs that can
-        hold the minimum: the model's value of a pair is at most ``COMPILED_TOLERANCE``
-        below pybullet's and at most ``_ABOVE`` above it."""
+        hold the minimum: the model's value of a pair is at most ``_ABOVE`` above pybullet's
+        and, where it finds no penetration, at most ``COMPILED_TOLERANCE`` below it. In
+        penetration the model's error grows with the depth, so the pruning slack does too:
+        pairs are queried up to ``max(smallest, 0) + COMPILED_TOLERANCE`` (a model value
+        ``< 0`` still means pybullet's is below ``COMPILED_TOLERANCE``)."""
         best = Proximity(float(max_distance), _NAN3.copy(), _NAN3.copy())
         if bounds.size == 0 or float(bounds.min()) >= max_distance + _ABOVE:
             return best
         body_a, body_b = self.body_id(a), self.body_id(b)
-        limit = float(bounds.min()) + COMPILED_TOLERANCE + _ABOVE
+        limit = max(float(bounds.min()), 0.0) + COMPILED_TOLERANCE + _ABOVE
         for p in np.argsort(bounds):
             if bounds[p] > limit or bounds[p] >= best.distance + _ABOVE:
                 break

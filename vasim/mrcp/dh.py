@@ -41,6 +41,13 @@ TOML layout::
     points = [[0, 0, -0.3]]           # extra key points, link frame [m]  [none]
     chain = true                      # include the DH key points  [true]
 
+Limits checked at load (``ConfigError`` naming the field): ``name`` matches
+``[A-Za-z0-9_][A-Za-z0-9_.-]*`` (it becomes a folder, a file and URDF text); a link has at
+most 3 distinct key points, the chain's included (the compiled distance model handles
+points, segments and triangles: with ``chain = true`` a link already has up to 3, so extra
+``points`` usually need ``chain = false``); ``|a|, |d| <= 5`` m and ``|lower|, |upper| <=
+4π`` rad (units typos).
+
 Example:
     >>> robot = load_robot("rx60b")
     >>> robot.n_joints, robot.joints[2].a
@@ -52,6 +59,7 @@ Example:
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +73,25 @@ from vasim.errors import ConfigError
 from vasim.paths import data_file, protocols_dir, read_data_file
 
 FloatArray = NDArray[np.float64]
+
+#: Robot names: they become a folder, a file name and URDF (XML) text.
+_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+#: At most this many distinct key points per link (the DH chain's included): the compiled
+#: distance model (``vasim.mrcp._distance_kernels``) handles points, segments, triangles.
+MAX_KEY_POINTS = 3
+#: Plausibility bounds of a robot file (units typos: millimetres, degrees): DH lengths
+#: ``|a|, |d|`` [m] and joint limits [rad].
+MAX_LENGTH = 5.0
+MAX_JOINT_ANGLE = 4.0 * math.pi
+
+
+def _distinct_points(pts: FloatArray, tol: float = 1e-9) -> int:
+    """How many of the points ``(m, 3)`` are distinct (the dedup of the compiled model)."""
+    out: list[FloatArray] = []
+    for p in pts:
+        if all(np.linalg.norm(p - o) > tol for o in out):
+            out.append(p)
+    return len(out)
 
 
 def robots_dir() -> Path:
@@ -126,6 +153,10 @@ class RobotModel:
     links: tuple[LinkGeometry, ...] = ()
 
     def __post_init__(self) -> None:
+        # the name becomes a cache folder, a file name and URDF (XML) text
+        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
+            raise ConfigError(f"name must match {_NAME.pattern} (letters, digits, _ . -; "
+                              f"no leading dot), got {self.name!r}", field="name")
         n = len(self.joints)
         if n == 0:
             raise ConfigError("a robot needs at least one joint", field="joints")
@@ -143,6 +174,12 @@ class RobotModel:
         if self.links and len(self.links) != n + 1:
             raise ConfigError(f"links must list {n + 1} tables (base + one per joint), got "
                               f"{len(self.links)}", field="links")
+        for k in range(len(self.links)):    # else the compiled distance model fails later
+            distinct = _distinct_points(self.link_key_points(k))
+            if distinct > MAX_KEY_POINTS:
+                raise ConfigError(f"link {k} has {distinct} distinct key points (the DH chain's "
+                                  f"and its points); at most {MAX_KEY_POINTS} are supported",
+                                  field=f"links[{k}].points")
         tcp.setflags(write=False)
         home.setflags(write=False)
         object.__setattr__(self, "tcp", tcp)
@@ -558,6 +595,9 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
     if not isinstance(name, str) or not name:
         raise ConfigError(f"name must be a non-empty string, got {name!r}", file=file,
                           field="name")
+    if not _NAME.fullmatch(name):       # becomes a path and XML text (see RobotModel)
+        raise ConfigError(f"name must match {_NAME.pattern}, got {name!r}", file=file,
+                          field="name")
     raw_joints = data.get("joints")
     if not isinstance(raw_joints, list) or not raw_joints:
         raise ConfigError("at least one [[joints]] table is required", file=file,
@@ -572,6 +612,13 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         if missing:
             raise ConfigError("missing field", file=file, field=f"{path}.{missing[0]}")
         vals = {k: _num(jt[k], f"{path}.{k}", file) for k in jt}
+        # plausibility: catches millimetres for metres, degrees for radians
+        for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
+                                 ("lower", MAX_JOINT_ANGLE, "rad"),
+                                 ("upper", MAX_JOINT_ANGLE, "rad")):
+            if abs(vals[key]) > bound:
+                raise ConfigError(f"|{key}| must be <= {bound:g} {unit} (units?), got "
+                                  f"{vals[key]!r}", file=file, field=f"{path}.{key}")
         try:
             joints.append(DHJoint(
                 alpha=math.radians(vals["alpha_deg"]), a=vals["a"], d=vals["d"],
@@ -586,7 +633,11 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         raise ConfigError("missing field", file=file, field="home")
     home = _vec(data["home"], n, "home", file)
     links = []
-    for k, lt in enumerate(data.get("links", [])):
+    raw_links = data.get("links", [])
+    if not isinstance(raw_links, list):     # e.g. links = 5: was a TypeError
+        raise ConfigError(f"expected [[links]] tables, got {raw_links!r}", file=file,
+                          field="links")
+    for k, lt in enumerate(raw_links):
         path = f"links[{k}]"
         if not isinstance(lt, dict):
             raise ConfigError(f"expected a table, got {lt!r}", file=file, field=path)
@@ -654,6 +705,10 @@ def _zyz(m: FloatArray) -> list[tuple[float, float, float]]:
     return out
 
 
+#: [m^2] negative squared lengths of :func:`puma_ik` above ``-_ROUND_OFF`` are round-off.
+_ROUND_OFF = 1e-12
+
+
 def puma_ik(robot: RobotModel, position: FloatArray, rotation: FloatArray,
             base: FloatArray | None = None) -> list[FloatArray]:
     """Closed-form inverse kinematics of a PUMA-like arm (Craig, *Introduction to Robotics*,
@@ -678,13 +733,19 @@ def puma_ik(robot: RobotModel, position: FloatArray, rotation: FloatArray,
     w = p - rot @ robot.tcp
     w[2] -= d[0]
     a2, a3, d3, d4 = a[2], a[3], d[2], d[3]
+    # at the shoulder / elbow-straight boundaries rho2 / disc are 0 up to round-off (seen:
+    # -1e-18): clamped, else a reachable pose there had no candidate
     rho2 = w[0] ** 2 + w[1] ** 2 - d3 ** 2
     if rho2 < 0:
-        return []
+        if rho2 < -_ROUND_OFF:
+            return []
+        rho2 = 0.0
     k = (w @ w - a2 ** 2 - a3 ** 2 - d3 ** 2 - d4 ** 2) / (2 * a2)
     disc = a3 ** 2 + d4 ** 2 - k ** 2
     if disc < 0:
-        return []
+        if disc < -_ROUND_OFF:
+            return []
+        disc = 0.0
     out: list[FloatArray] = []
     for arm_sign in (1.0, -1.0):
         x = arm_sign * math.sqrt(rho2)

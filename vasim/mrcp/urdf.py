@@ -18,6 +18,8 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,13 @@ from scipy.spatial.transform import Rotation
 from vasim.mrcp.dh import RobotModel, joint_origin
 
 _SPHERE = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+#: Part of every :func:`model_key`: bump it whenever the generated geometry or URDF text
+#: changes (icosphere, hull construction, XML), so cached files of the old generator are
+#: never reused.
+GENERATOR_VERSION = 2
+#: Serialises writers within one process (threads); across processes the unique temporary
+#: names and atomic renames keep every visible file complete.
+_WRITE_LOCK = threading.Lock()
 
 
 def cache_dir() -> Path:
@@ -76,7 +85,8 @@ def model_key(robot: RobotModel) -> str:
     key = robot.__dict__.get("_content_key")
     if key is None:
         h = hashlib.sha256()
-        h.update(repr((robot.name, robot.joints, robot.links, tuple(robot.tcp))).encode())
+        h.update(repr((GENERATOR_VERSION, robot.name, robot.joints, robot.links,
+                       tuple(robot.tcp))).encode())
         key = h.hexdigest()[:16]
         object.__setattr__(robot, "_content_key", key)
     return key
@@ -121,19 +131,38 @@ def urdf_text(robot: RobotModel) -> str:
     return "".join(parts)
 
 
+def _atomic_write(path: Path, write: Callable[[Path], object]) -> None:
+    """Writes through a temporary file unique to this call (``mkstemp`` in the same
+    folder: threads of one process used to share a pid-only name and collide) and renames
+    it over ``path`` atomically."""
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def write_urdf(robot: RobotModel, folder: Path | None = None) -> Path:
-    """Writes the URDF and its link hulls (once per content) and returns the URDF path."""
+    """Writes the URDF and its link hulls (once per content) and returns the URDF path.
+
+    The cache is complete only when the URDF *and* every ``link{k}.obj`` exist: missing
+    files (an interrupted or partly cleaned cache) are written again, the URDF last.
+    """
     folder = folder or cache_dir() / f"{robot.name}-{model_key(robot)}"
     path = folder / f"{robot.name}.urdf"
-    if path.is_file():
+    meshes = [folder / f"link{k}.obj" for k in range(robot.n_joints + 1)]
+    if path.is_file() and all(m.is_file() for m in meshes):
         return path
-    folder.mkdir(parents=True, exist_ok=True)
-    for k, hull in enumerate(link_hulls(robot)):
-        mesh_path = folder / f"link{k}.obj"
-        tmp = folder / f".link{k}.obj.{os.getpid()}"
-        hull.export(tmp, file_type="obj")
-        os.replace(tmp, mesh_path)
-    tmp = folder / f".{robot.name}.urdf.{os.getpid()}"
-    tmp.write_text(urdf_text(robot), encoding="utf-8")
-    os.replace(tmp, path)
+    with _WRITE_LOCK:
+        folder.mkdir(parents=True, exist_ok=True)
+        for mesh_path, hull in zip(meshes, link_hulls(robot), strict=True):
+            if not mesh_path.is_file():
+                _atomic_write(mesh_path, lambda t, h=hull: h.export(t, file_type="obj"))
+        if not path.is_file():
+            text = urdf_text(robot)
+            _atomic_write(path, lambda t: t.write_text(text, encoding="utf-8"))
     return path

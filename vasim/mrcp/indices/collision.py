@@ -36,7 +36,8 @@ def impact_time(times: FloatArray, distances: FloatArray, t_max: float) -> float
 
     Args:
         times: ``(K+1,)`` times [s] (``[0]`` = now).
-        distances: ``(K+1,)`` minimum distances [m]; NaN = point skipped.
+        distances: ``(K+1,)`` minimum distances [m]; NaN = point skipped; ``-inf`` (a
+            penetration too deep to estimate) is an impact like any distance ``<= 0``.
         t_max: the window; no impact expected -> ``t_max``.
 
     Example:
@@ -51,16 +52,16 @@ def impact_time(times: FloatArray, distances: FloatArray, t_max: float) -> float
     d = np.asarray(distances, dtype=np.float64).tolist()    # Python floats: same IEEE maths
     best = float(t_max)
     for k in range(len(d)):
+        if d[k] <= 0.0:         # before the finiteness skip: -inf, the deepest, is an impact
+            return float(min(best, t[k]))
         if not math.isfinite(d[k]):
             continue
-        if d[k] <= 0.0:
-            return float(min(best, t[k]))
         # the next *measured* distance (NaN = skipped point, e.g. distance_points="ends"):
         # with every point measured this is k + 1
         j = k + 1
-        while j < len(d) and not math.isfinite(d[j]):
+        while j < len(d) and math.isnan(d[j]):
             j += 1
-        if j < len(d):
+        if j < len(d) and math.isfinite(d[j]):     # a -inf next is the impact at t[j]
             v = -(d[j] - d[k]) / (t[j] - t[k])
             if v > 0.0:
                 best = min(best, t[k] + d[k] / v)
