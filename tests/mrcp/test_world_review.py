@@ -41,7 +41,7 @@ def _pybullet(world: PybulletWorld, robot: str, qs: np.ndarray, bodies: list[str
 
 # ------------------------------------------------------------------ 1. -inf distances
 
-def test_pairs_without_a_model_estimate_are_refined_in_pybullet() -> None:
+def test_pairs_without_a_model_estimate_are_a_penetration_or_refined_on_request() -> None:
     w = PybulletWorld()
     w.add_robot("a", RX)
     frames = dh.frames_one(RX, RX.home)
@@ -50,9 +50,10 @@ def test_pairs_without_a_model_estimate_are_refined_in_pybullet() -> None:
     w.add_sphere("ball", 0.02, centre)
     q = RX.home[None, :]
     fast = w.min_distances("a", q, ["ball"], 1.0)
-    assert np.all(np.isfinite(fast))                 # was -inf (never refined)
-    np.testing.assert_array_equal(fast, _pybullet(w, "a", q, ["ball"]))
-    assert fast[0, 0] < -0.05
+    ref = _pybullet(w, "a", q, ["ball"])
+    assert ref[0, 0] < -0.05 and fast[0, 0] <= ref[0, 0]    # -inf: "in, no estimate"
+    w.refine_below = 0.0                                      # every penetration exact
+    np.testing.assert_array_equal(w.min_distances("a", q, ["ball"], 1.0), ref)
 
 
 def test_minus_infinity_is_an_impact_and_nan_is_still_skipped() -> None:
@@ -315,16 +316,20 @@ def test_deep_penetrations_stay_within_the_tolerance(case: str) -> None:
     fast = w.min_distances("a", q[None], ["b"], 1.0)
     ref = _pybullet(w, "a", q[None], ["b"])
     assert ref[0, 0] < -0.05
-    assert -COMPILED_TOLERANCE <= fast[0, 0] - ref[0, 0] <= 1e-5
+    assert fast[0, 0] - ref[0, 0] <= 1e-5           # still a lower bound
+    w.refine_below = 0.0
+    assert w.min_distances("a", q[None], ["b"], 1.0)[0, 0] == ref[0, 0]
+    w.refine_below = -math.inf
     w.set_configuration("a", q)
     exact = w.min_distance("a", "b").distance
     w.compiled_distances = False
     assert exact == pytest.approx(w.min_distance("a", "b").distance, abs=1e-12)
 
 
-def test_random_penetrations_are_pybullets_values() -> None:
-    """Model penetrations are refined: negative values equal pybullet's; the others are
-    within the tolerance."""
+def test_random_penetrations_are_lower_bounds_and_exact_on_request() -> None:
+    """The model is a lower bound everywhere, within the tolerance where pybullet finds no
+    penetration, and any penetration keeps its sign; refine_below = 0 makes penetrations
+    pybullet's values."""
     rng = np.random.default_rng(11)
     w = PybulletWorld()
     w.add_robot("a", RX)
@@ -334,11 +339,16 @@ def test_random_penetrations_are_pybullets_values() -> None:
     for _ in range(40):
         w.set_configuration("b", rng.uniform(RX.lower, RX.upper))
         qs = rng.uniform(RX.lower, RX.upper, size=(4, 6))
+        w.refine_below = -math.inf
         fast = w.min_distances("a", qs, ["b", "s"], 1.0)
         ref = _pybullet(w, "a", qs, ["b", "s"])
         d = fast - ref
-        assert d.min() >= -COMPILED_TOLERANCE and d.max() <= 1e-5
-        np.testing.assert_allclose(fast[ref < -COMPILED_TOLERANCE],
+        assert d.max() <= 1e-5
+        assert d[ref > 0].min(initial=0.0) >= -COMPILED_TOLERANCE
+        assert np.all(fast[ref < -1e-5] < 0)                   # a penetration stays one
+        w.refine_below = 0.0
+        exact = w.min_distances("a", qs, ["b", "s"], 1.0)
+        np.testing.assert_allclose(exact[ref < -COMPILED_TOLERANCE],
                                    ref[ref < -COMPILED_TOLERANCE], atol=1e-12)
         negative += int(np.sum(ref < 0))
     assert negative > 5

@@ -21,12 +21,12 @@ pybullet only when ``q`` changes, all joints in one call.
 :meth:`PybulletWorld.min_distances` answers robots and sphere obstacles with the compiled
 sphere-swept model of the link hulls (``vasim.mrcp._distance_kernels``): a conservative
 lower bound of pybullet's value, ``-COMPILED_TOLERANCE <= model - pybullet <= 1e-5`` m
-where the model finds no penetration; pybullet wherever it finds one (its error grows with
-the depth: 1.1 mm at 7 cm measured), where it has no estimate (deep overlaps) and for
-other obstacle shapes. :meth:`PybulletWorld.min_distance` and
-:meth:`PybulletWorld.in_collision` stay pybullet's answers: the model only chooses which
-link pairs pybullet is asked about. ``PybulletWorld(compiled_distances=False)`` asks
-pybullet everything.
+where pybullet finds no penetration; in penetration a lower bound whose error grows with
+the depth (1.1 mm at 7 cm measured), or ``-inf`` where it has no estimate (deep overlaps;
+``refine_below`` asks pybullet instead); pybullet for other obstacle shapes.
+:meth:`PybulletWorld.min_distance` and :meth:`PybulletWorld.in_collision` stay pybullet's
+answers: the model only chooses which link pairs pybullet is asked about.
+``PybulletWorld(compiled_distances=False)`` asks pybullet everything.
 
 Example:
     >>> from vasim.mrcp.dh import load_robot
@@ -432,9 +432,10 @@ class PybulletArm:
 
 _SELF_PAIRS: dict[str, tuple[tuple[int, int], ...]] = {}   # per model content
 #: Bodies the compiled model puts nearer than this [m] are queried in pybullet (exact);
-#: penetrations (model < 0, ``-inf`` = no estimate: the key-point hulls of two links meet)
-#: are always queried, whatever this threshold: the model's error grows with the
-#: penetration depth (1.1 mm at 7 cm measured) beyond ``COMPILED_TOLERANCE``.
+#: ``-inf`` (default): never; a penetration is then the model's value, a lower bound
+#: (its error grows with the depth: 1.1 mm at 7 cm, 2.6 mm at 15 cm measured) or ``-inf``
+#: where the key-point hulls of two links meet (no estimate). ``0.0`` refines every
+#: penetration to pybullet's depth.
 REFINE_BELOW = -math.inf
 #: Direction improvements of the compiled model per link pair (see _distance_kernels).
 DIRECTION_ITERATIONS = 1
@@ -442,8 +443,8 @@ DIRECTION_ITERATIONS = 1
 #: where pybullet finds no penetration, never below by more than this [m] (a conservative
 #: lower bound; measured: 0.82 mm, from the polytope's support direction and pybullet's
 #: 0.97-1.0 mm margin). In penetration the error grows with the depth (1.09 mm at 7 cm,
-#: 2.6 mm at 15 cm measured), so the model's penetrations are refined in pybullet
-#: (``min_distances``) and pruning allows the whole depth (``_min_distance_among``); held by
+#: 2.6 mm at 15 cm measured); it stays a lower bound there, and pruning allows the whole
+#: depth (``_min_distance_among``); held by
 #: tests/mrcp/test_world_distances.py and test_world_review.py.
 COMPILED_TOLERANCE = 1e-3
 #: The compiled model is never more than this [m] above pybullet's distance.
@@ -784,9 +785,10 @@ class PybulletWorld:
         **Decision** (cost: the kernel makes hundreds of these queries per 18 ms cycle):
         robots and sphere obstacles are answered by the compiled sphere-swept model of the
         link hulls (``vasim.mrcp._distance_kernels``, a few µs per query, no pybullet call);
-        a pair the model puts nearer than ``refine_below`` (near contact) or in penetration
-        (``< 0`` or ``-inf``, whatever ``refine_below``), and every other kind of obstacle,
-        is queried in pybullet with the robot posed (exact).
+        a pair the model puts nearer than ``refine_below`` (default ``-inf``: none), and
+        every other kind of obstacle, is queried in pybullet with the robot posed (exact).
+        A penetration is reported as the model's (lower) value, or ``-inf`` where the model
+        has no estimate: callers take any value below 0 as a collision.
         ``compiled_distances=False`` queries everything in pybullet. The robot's pose in
         the world is unchanged on return.
         """
@@ -816,14 +818,15 @@ class PybulletWorld:
                                 sweep_a.ball, sweep_a.centre, sweep_a.radius, frames_b,
                                 *packed, _UNIT[0], _UNIT[1], float(max_distance),
                                 DIRECTION_ITERATIONS, dist)
-                # refined: below refine_below, any penetration (the model's error grows
-                # with the depth: 1.1 mm at 7 cm, 2.6 mm at 15 cm measured) and -inf (no
-                # estimate; -inf < -inf is False, so the default REFINE_BELOW alone missed
-                # the deepest overlaps)
-                threshold = max(self.refine_below, 0.0)
+                # Refined below refine_below only. A penetration stays the model's value
+                # (a lower bound: more negative than pybullet's, by up to 2.6 mm at 15 cm
+                # depth) or -inf when the key-point hulls meet (no estimate): the indices
+                # need the sign, not the depth (CR counts both as an impact), and refining
+                # every penetration doubled the 4-robot cycle (15.5 vs 7.7 ms).
+                threshold = self.refine_below
                 for col, j in enumerate(modelled):
                     for i in range(qs.shape[0]):
-                        if dist[i, col] < threshold:     # -inf included
+                        if dist[i, col] < threshold:
                             exact.append((i, j))
                         else:
                             out[i, j] = min(float(dist[i, col]), max_distance)

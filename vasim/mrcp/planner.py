@@ -36,8 +36,10 @@ Each cycle a candidate's TCP moves by the guidance displacement
   same length straight away from the nearest body (``-|F| n``). Every fallback passes the
   same collision / margin test; when none does, the candidate stays. The fallbacks start
   only after ``stall_cycles`` consecutive rejected guidance steps (and stop at the next
-  accepted one): a rejection is usually transient (the holder or the task moves on), and
-  retreating at once set up a slide/retreat limit cycle in the laparoscopic scenario.
+  accepted one; when they fail too, the count starts again): a rejection is usually
+  transient (the holder or the task moves on), retreating at once set up a slide/retreat
+  limit cycle in the laparoscopic scenario, and trying them every cycle for a candidate
+  boxed in for good doubled the 4-robot cycle (bench/mrcp: 8.1 -> 14.7 ms).
 """
 
 from __future__ import annotations
@@ -244,6 +246,9 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
                            dt)
         if q_new is not None:
             return q_new
+    # Nothing moves it: wait another stall_cycles before trying again (a candidate boxed in
+    # for good would otherwise pay three IK + collision checks every cycle).
+    memory.stalled[robot] = 0
     return q
 
 
