@@ -213,3 +213,22 @@ def test_latin_square_cohorts_are_counterbalanced() -> None:
     assert len({s.session_seed for s in subjects}) == 2 * n_rows      # still distinct seeds
     plain = cohort_subjects(2 * n_rows, n_rows, seed=7)
     assert [s.code for s in plain] == [s.code for s in subjects]
+
+
+def test_a_cohort_of_another_size_does_not_mix_into_the_store(tmp_path: Path) -> None:
+    """The same seed with another cohort size makes other subjects surgeons: re-running into
+    the same database is refused instead of mixing the two cohorts' groups."""
+    from vasim.study.cohort import prepare_sessions
+
+    protocol = parse_protocol(TINY)
+    seed = next(s for s in range(100)
+                if [x.group for x in cohort_subjects(3, 2, seed=s)]
+                != [x.group for x in cohort_subjects(4, 3, seed=s)][:3])
+    with TrialStore(tmp_path / "c.sqlite") as st:
+        first = prepare_sessions(st, protocol, cohort_subjects(3, 2, seed=seed),
+                                 cohort_seed=seed)
+        again = prepare_sessions(st, protocol, cohort_subjects(3, 2, seed=seed),
+                                 cohort_seed=seed)
+        assert [sid for _, sid in again] == [sid for _, sid in first]   # same cohort: reused
+        with pytest.raises(ConfigError, match="cohort of another size"):
+            prepare_sessions(st, protocol, cohort_subjects(4, 3, seed=seed), cohort_seed=seed)

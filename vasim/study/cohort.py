@@ -428,6 +428,14 @@ def prepare_sessions(store: TrialStore, protocol: Protocol,
                     f"{protocol.name!r} from another cohort ({cohort or 'not simulated'}); "
                     f"use another database or the cohort seed {cohort.get('seed')!r}",
                     field="seed")
+            if cohort.get("group", subj.group) != subj.group:
+                # Which subjects are surgeons depends on the cohort size: the same seed with
+                # another --subjects/--surgeons would mix two cohorts' groups and profiles.
+                raise ConfigError(
+                    f"subject {subj.code} of {store.path} was simulated as a "
+                    f"{cohort['group']} in a cohort of another size or surgeon count (now a "
+                    f"{subj.group}); use the same --subjects and --surgeons as before, or "
+                    f"another database", field="subjects")
             out.append((subj, sid))
             continue
         settings = SessionSettings(
