@@ -65,6 +65,7 @@ from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
 from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
+from vasim.progress import progress_bar
 from vasim.study.metrics import evaluate_trial
 from vasim.study.protocol import TELEOPERATION_MODES, check_trial_time
 from vasim.study.samples import SampleBuffer
@@ -821,10 +822,8 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
             schedule_index=schedule_index, protocol=protocol))
     t0 = time.perf_counter()
     try:
-        bar = None
-        if progress:
-            from tqdm import tqdm
-            bar = tqdm(total=runner._n, unit="pt", desc=f"trial {config.schema}", leave=False)
+        bar = (progress_bar(runner._n, f"trial {config.schema}", "pt", leave=False)
+               if progress else None)
         chunk = 0.25
         last_i = 0
         while not runner.done:

@@ -34,7 +34,6 @@ abdomen's trainee and experimenter tabs.
 from __future__ import annotations
 
 import collections
-import functools
 import ipaddress
 import logging
 import queue
@@ -51,7 +50,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
-from vasim.errors import ConfigError, VasimError
+from vasim.errors import ConfigError
 from vasim.fixtures.mag import MagParams
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.device import BUTTON_2
@@ -65,6 +64,7 @@ from vasim.viewer.controller import (
     TrialInfo,
     schema_choices,
 )
+from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
 from vasim.viewer.views import (
     ArrowView,
@@ -199,7 +199,7 @@ class DragInput:
                     dev.push(time.perf_counter(), self._last_tip)
 
 
-class ViewerApp:
+class ViewerApp(ErrorReporter):
     """The viser server, its views and panels, and the controller and view threads.
 
     Args:
@@ -519,36 +519,6 @@ class ViewerApp:
 
         button.on_click(self._guard(toggle))
 
-    # -- errors --------------------------------------------------------------------------
-    def _report(self, message: str) -> None:
-        self.errors.append(message)
-        server = self.server
-        if server is None:
-            return
-        for client in server.get_clients().values():
-            try:
-                client.add_notification("vasim", message, color="red",
-                                        auto_close_seconds=8.0)
-            except Exception:  # a closing connection must not mask the original error
-                log.debug("notification to client %s failed", client.client_id,
-                          exc_info=True)
-
-    def _guard(self, fn: Callable[..., Any]) -> Callable[..., Any]:
-        """Wraps a callback: an exception is logged and notified, never raised."""
-
-        @functools.wraps(fn)
-        def wrapped(*args: Any, **kwargs: Any) -> Any:
-            try:
-                return fn(*args, **kwargs)
-            except VasimError as exc:
-                log.warning("viewer: %s", exc)
-                self._report(str(exc))
-            except Exception as exc:
-                log.exception("viewer callback %s failed", getattr(fn, "__name__", fn))
-                self._report(f"internal error: {type(exc).__name__}: {exc}")
-            return None
-
-        return wrapped
 
     # -- controller thread ---------------------------------------------------------------
     def _control_loop(self) -> None:

@@ -41,7 +41,6 @@ indices. Transfer-phase (TT) cycles are not evaluated: gaps in the plots, as in 
 from __future__ import annotations
 
 import collections
-import functools
 import html
 import logging
 import math
@@ -55,7 +54,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError, VasimError
+from vasim.errors import ConfigError
 from vasim.viewer.mrcp_view import (
     StationFrame,
     StationGeometry,
@@ -63,6 +62,7 @@ from vasim.viewer.mrcp_view import (
     station_frame,
     task_pose,
 )
+from vasim.viewer.notify import ErrorReporter
 
 log = logging.getLogger(__name__)
 
@@ -462,7 +462,7 @@ def station_camera(geometry: StationGeometry) -> tuple[FloatArray, FloatArray]:
     return centre + d * np.array([0.25, -0.85, 0.5]), centre
 
 
-class MrcpViewerApp:
+class MrcpViewerApp(ErrorReporter):
     """``vasim serve --scene mrcp:<scenario>``: a slave-station scenario in the browser.
 
     Args:
@@ -485,6 +485,8 @@ class MrcpViewerApp:
         >>> app = MrcpViewerApp(port=0, scenario="cube_rotation").start()  # doctest: +SKIP
         >>> print(app.url); app.stop()                                     # doctest: +SKIP
     """
+
+    notify_title = "vasim MRCP"
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8080,
                  scenario: Any = "cube_rotation", *, seed: int = 0, coarse: bool = False,
@@ -672,36 +674,6 @@ class MrcpViewerApp:
         rot = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
         self.live.operator.set_pose(np.asarray(position, float), rot)
 
-    # -- errors --------------------------------------------------------------------------
-    def _report(self, message: str) -> None:
-        self.errors.append(message)
-        server = self.server
-        if server is None:
-            return
-        for client in server.get_clients().values():
-            try:
-                client.add_notification("vasim MRCP", message, color="red",
-                                        auto_close_seconds=8.0)
-            except Exception:  # a closing connection must not mask the original error
-                log.debug("notification to client %s failed", client.client_id,
-                          exc_info=True)
-
-    def _guard(self, fn: Callable[..., Any]) -> Callable[..., Any]:
-        """Wraps a callback: an exception is logged and notified, never raised."""
-
-        @functools.wraps(fn)
-        def wrapped(*args: Any, **kwargs: Any) -> Any:
-            try:
-                return fn(*args, **kwargs)
-            except VasimError as exc:
-                log.warning("MRCP viewer: %s", exc)
-                self._report(str(exc))
-            except Exception as exc:
-                log.exception("MRCP viewer callback %s failed", getattr(fn, "__name__", fn))
-                self._report(f"internal error: {type(exc).__name__}: {exc}")
-            return None
-
-        return wrapped
 
     # -- view thread ---------------------------------------------------------------------
     def _view_loop(self) -> None:
