@@ -32,8 +32,8 @@ from vasim.fixtures import ag, ff, mag, ms, vg
 from vasim.fixtures.runtime import SchemaRuntime
 from vasim.fixtures.schema import load_schema
 from vasim.fixtures.types import TaskState
-from vasim.study.trial import TrialConfig, TrialRunner
 from vasim.tasks import trajectory_task
+from vasim.trials.vf import TrialConfig, TrialRunner
 
 
 def _states(n: int) -> list[TaskState]:

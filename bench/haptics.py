@@ -15,7 +15,7 @@ default switch interval (5 ms, ``switch_interval_s=None``) and with the loop's d
 0.5 ms; and the overshoot of ``time.sleep(0.5 ms)`` on this host (what the loop's final
 spin absorbs).
 
-Then the real-time trial (``vasim.haptics.realtime.RealtimeTrial``), ``TRIAL_SECONDS``
+Then the real-time trial (``vasim.trials.realtime.RealtimeTrial``), ``TRIAL_SECONDS``
 (30 s; ``--seconds`` sets every run's length) each: the scripted operator doing the
 trajectory task with the ``ff`` schema in the default abdomen, a browser-less viewer
 stream beside it (a thread reading ``frame()`` at 60 Hz and building what the viewer sends:
@@ -53,11 +53,11 @@ from vasim.fixtures.runtime import SchemaRuntime
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.coupling import PatchForce
 from vasim.haptics.devices.emulator import EmulatorDevice
-from vasim.haptics.realtime import DEFAULT_RT_PRIORITY, RealtimeTiming, RealtimeTrial
-from vasim.haptics.realtime_process import ProcessRealtimeTrial
 from vasim.haptics.servo import CoupledToolPlant, NullPlant, Plant, ServoLoop
 from vasim.haptics.timing import TimingStats
-from vasim.study.trial import TrialConfig
+from vasim.trials.realtime import DEFAULT_RT_PRIORITY, RealtimeTiming, RealtimeTrial
+from vasim.trials.realtime_process import ProcessRealtimeTrial
+from vasim.trials.vf import TrialConfig
 
 SECONDS = float(os.environ.get("VASIM_BENCH_HAPTICS_S", "10"))
 TRIAL_SECONDS = 30.0

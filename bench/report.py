@@ -38,10 +38,11 @@ import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_meta import TrialMeta
 from vasim.study.protocol import generate_schedule, load_protocol
-from vasim.study.samples import SampleBuffer
 from vasim.study.session import SessionSettings, record_answers, start_session
-from vasim.study.store import TrialMeta, TrialStore
+from vasim.study.store import TrialStore
 
 N_SUBJECTS = 46
 N_SURGEONS = 31
@@ -144,7 +145,7 @@ def main() -> None:
         t_build = time.perf_counter() - t0
         out = Path(tmp) / "report"
         t0 = time.perf_counter()
-        proc = subprocess.run([sys.executable, "-m", "vasim.cli", "report", "--db", str(db),
+        proc = subprocess.run([sys.executable, "-m", "vasim", "report", "--db", str(db),
                                "--out", str(out), "--no-progress"],
                               capture_output=True, text=True, check=False)
         wall = time.perf_counter() - t0

@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from vasim.study.metrics import evaluate_trial
-from vasim.study.samples import SampleBuffer
-from vasim.study.store import TrialMeta, TrialStore
+from vasim.records.point_metrics import evaluate_trial
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_meta import TrialMeta
+from vasim.study.store import TrialStore
 
 
 def _append_cost(n: int = 20_000, repeats: int = 5) -> float:

@@ -4,7 +4,7 @@ and the trial's loop rates with and without a browser attached.
 ``vasim serve``'s app (``ViewerApp``) on the default deforming abdomen with the
 ``trajectory_following`` schema, which draws every overlay (VG arrow, FF arrow, MS ghost,
 Mag camera, AG audio stream), a scripted operator playing the trial in real time (the
-1 kHz servo loop of ``vasim.haptics.realtime`` when present). Two runs of ``SECONDS``
+1 kHz servo loop of ``vasim.trials.realtime`` when present). Two runs of ``SECONDS``
 (8 s; ``--seconds`` or ``VASIM_BENCH_VIEWER_S`` override), each on a fresh trial:
 
 1. no browser: the views are updated all the same (40 Hz), nobody receives them;

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from vasim.progress import progress_bar
+from vasim.core.progress import progress_bar
 
 
 class Terminal(io.StringIO):

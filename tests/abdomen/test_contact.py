@@ -16,7 +16,7 @@ from vasim.abdomen.contact import (
     patch_force,
     sphere_offsets,
 )
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 
 def flat_patch(n: int = 21, size: float = 0.1) -> tuple[np.ndarray, np.ndarray]:

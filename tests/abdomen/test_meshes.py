@@ -14,7 +14,7 @@ import trimesh
 
 from vasim.abdomen import _kernels, meshes
 from vasim.abdomen.meshes import load_user_mesh, mesh_problems
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 
 def sphere(radius: float = 0.03, subdivisions: int = 2) -> trimesh.Trimesh:

@@ -18,7 +18,7 @@ from vasim.abdomen.model import (
     build_organ,
     select_anchors,
 )
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 
 def winding_number(mesh, points: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from vasim.abdomen.motion import (
     point_velocities,
 )
 from vasim.abdomen.scene import load_scene
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 MOTION = PhysioMotion(Breathing(0.25, (0.0, 0.012, 0.002), phase=0.3),
                       Heartbeat(1.2, (0.0, 0.0, 0.0015), (0.0, 0.17, 0.05), 0.08))

@@ -22,8 +22,8 @@ from vasim.abdomen.model import AnchorRule, OrganParams, build_organ
 from vasim.abdomen.runner import PhysicsThread
 from vasim.abdomen.scene import parse_scene
 from vasim.abdomen.world import MAX_EVENTS, Abdomen, settled_positions
-from vasim.errors import ConfigError
-from vasim.haptics.realtime import PhysicsLog, _ThreadFeed
+from vasim.core.errors import ConfigError
+from vasim.trials.realtime import PhysicsLog, _ThreadFeed
 
 LIVER = """
 [[organs.liver.anchors]]

@@ -20,7 +20,7 @@ from vasim.abdomen.scene import (
     procedural_names,
     with_organ,
 )
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 MINIMAL = """
 name = "mini"

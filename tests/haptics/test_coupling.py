@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.haptics.coupling import (
     CouplingParams,
     LinearForce,

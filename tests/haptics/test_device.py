@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.haptics.device import (
     OMNI_LIMITS,
     UNBOUNDED,
@@ -25,8 +25,8 @@ from vasim.haptics.devices.browser import BrowserDevice
 from vasim.haptics.devices.emulator import EmulatorDevice
 from vasim.haptics.devices.openhaptics import OpenHapticsDevice
 from vasim.haptics.devices.replay import ReplayDevice, StreamRecorder
-from vasim.haptics.devices.scripted import ScriptedDevice
-from vasim.haptics.scripted import OperatorProfile, ScriptedOperator
+from vasim.operator.device import ScriptedDevice
+from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.tasks import point_task
 
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.devices.browser import BrowserDevice, interpolate_stream
 from vasim.haptics.servo import ServoLoop
 

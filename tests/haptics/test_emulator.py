@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.device import OMNI_LIMITS
 from vasim.haptics.devices.emulator import EmulatorDevice, EmulatorParams, zoh_matrices
 

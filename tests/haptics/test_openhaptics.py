@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from vasim.cli import main
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.devices import openhaptics as oh
 from vasim.haptics.servo import ServoLoop
 
@@ -210,7 +210,7 @@ def test_missing_runtime_message(no_runtime: None) -> None:
 
 def test_nothing_imports_the_sdk_at_module_level() -> None:
     code = ("import sys, vasim.cli, vasim.haptics.servo, vasim.haptics.devices, "
-            "vasim.haptics.devices.openhaptics, vasim.haptics.cli; "
+            "vasim.haptics.devices.openhaptics, vasim.cli.haptics; "
             "vasim.cli.build_parser(); print('pyOpenHaptics' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)

@@ -16,11 +16,13 @@ import pytest
 import trimesh
 
 from vasim.abdomen.world import Abdomen
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.haptics.device import BUTTON_2, OMNI_LIMITS, DeviceLimits, DeviceSample
 from vasim.haptics.devices.emulator import EmulatorDevice
 from vasim.haptics.devices.replay import DeviceStream, ReplayDevice, stream_path
-from vasim.haptics.realtime import (
+from vasim.study.store import TrialStore
+from vasim.tasks import trajectory_task
+from vasim.trials.realtime import (
     PhysicsLog,
     RealtimeRecording,
     RealtimeTrial,
@@ -28,9 +30,7 @@ from vasim.haptics.realtime import (
     replay_trial,
     run_realtime_trial,
 )
-from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig
-from vasim.tasks import trajectory_task
+from vasim.trials.vf import TrialConfig
 
 # An Omni's forces and resolution in a box large enough for the task's travel (the task
 # starts ~5-9 cm from the organs; the real Omni would clutch, the emulator just reaches).
@@ -117,8 +117,8 @@ def test_physics_log_round_trips_through_arrays() -> None:
 
 
 def test_replay_without_recording_says_what_is_missing(tmp_path: Path) -> None:
-    from vasim.errors import DeviceError
-    from vasim.study.trial import run_trial
+    from vasim.core.errors import DeviceError
+    from vasim.trials.vf import run_trial
 
     db = tmp_path / "s.sqlite"
     with TrialStore(db) as store:
@@ -309,7 +309,7 @@ def test_cli_replay_needs_a_database(capsys) -> None:
 
 def test_a_device_failing_mid_trial_leaves_an_interrupted_trial_with_its_samples(
         tmp_path: Path) -> None:
-    from vasim.errors import DeviceError
+    from vasim.core.errors import DeviceError
 
     db = tmp_path / "s.sqlite"
     device = _stream(np.zeros((300, 3)))  # runs out of readings after 300 ticks

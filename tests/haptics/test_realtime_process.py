@@ -13,17 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.devices.replay import stream_path
-from vasim.haptics.realtime import (
+from vasim.study.store import TrialStore
+from vasim.trials.realtime import (
     RealtimeRecording,
     realtime_path,
     replay_trial,
     run_realtime_trial,
 )
-from vasim.haptics.realtime_process import ProcessRealtimeTrial
-from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig
+from vasim.trials.realtime_process import ProcessRealtimeTrial
+from vasim.trials.vf import TrialConfig
 
 
 def test_process_trial_is_stored_and_replays_exactly(tmp_path: Path) -> None:

@@ -15,20 +15,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.coupling import LinearForce
 from vasim.haptics.devices.emulator import EmulatorDevice
 from vasim.haptics.devices.replay import DeviceStream, stream_path
-from vasim.haptics.realtime import (
+from vasim.haptics.servo import CoupledToolPlant, ServoLoop
+from vasim.study.store import TrialStore
+from vasim.trials.realtime import (
     RealtimeRecording,
     realtime_path,
     replay_trial,
     run_realtime_trial,
 )
-from vasim.haptics.realtime_process import ProcessRealtimeTrial, _PoseBoard
-from vasim.haptics.servo import CoupledToolPlant, ServoLoop
-from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig, run_trial
+from vasim.trials.realtime_process import ProcessRealtimeTrial, _PoseBoard
+from vasim.trials.vf import TrialConfig, run_trial
 
 
 def _frame_threads() -> int:

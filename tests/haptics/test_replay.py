@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vasim.abdomen.contact import ContactPatch
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.coupling import PatchForce
 from vasim.haptics.device import BUTTON_2, OMNI_LIMITS, DeviceSample
 from vasim.haptics.devices.emulator import EmulatorDevice

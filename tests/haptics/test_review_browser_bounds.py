@@ -13,8 +13,8 @@ from vasim.haptics.devices.browser import (
     BROWSER_WORKSPACE_HALF_M,
     BrowserDevice,
 )
-from vasim.haptics.realtime import RealtimeTrial
-from vasim.study.trial import TrialConfig
+from vasim.trials.realtime import RealtimeTrial
+from vasim.trials.vf import TrialConfig
 
 H = BROWSER_WORKSPACE_HALF_M
 

@@ -15,11 +15,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import BUTTON_1, BUTTON_2, OMNI_LIMITS, DeviceLimits, DeviceSample
 from vasim.haptics.devices.emulator import EmulatorDevice
-from vasim.haptics.devices.scripted import ScriptedDevice
-from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
+from vasim.haptics.observation import OperatorObservation
 from vasim.haptics.servo import (
     ClutchState,
     CoupledToolPlant,
@@ -27,6 +26,8 @@ from vasim.haptics.servo import (
     ServoLoop,
     clutch_update,
 )
+from vasim.operator.device import ScriptedDevice
+from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.tasks import point_task
 
 

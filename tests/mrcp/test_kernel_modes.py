@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from vasim.errors import TransitionError
+from vasim.core.errors import TransitionError
 from vasim.mrcp.modes import (
     KERNEL_TRANSITIONS,
     SUTURE_SUBTASK_MODE,

@@ -17,8 +17,8 @@ import pytest
 pytest.importorskip("vasim.mrcp.backend")
 
 from vasim.cli import main
-from vasim.errors import ConfigError
-from vasim.mrcp.cli import format_events
+from vasim.cli.mrcp import format_events
+from vasim.core.errors import ConfigError
 from vasim.mrcp.kernel import CycleRecord
 from vasim.mrcp.modes import KernelState
 from vasim.mrcp.scenarios import SCENARIOS, get_scenario
@@ -104,7 +104,7 @@ def test_cli_run_prints_the_log_json_and_saves_the_plot(tmp_path: Path,
 
 
 def test_cli_text_log_names_transfer_and_cause(capsys: pytest.CaptureFixture[str]) -> None:
-    from vasim.mrcp.cli import cmd_run
+    from vasim.cli.mrcp import cmd_run
 
     class Args:
         scenario, plot, seed, duration, coarse, json = "cube_rotation", None, 0, 7.0, True, False

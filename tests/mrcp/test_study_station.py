@@ -10,11 +10,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasim.abdomen.anatomy import default_anatomy
-from vasim.errors import ConfigError
-from vasim.haptics.scripted import OperatorProfile
+from vasim.core.errors import ConfigError
 from vasim.mrcp.fulcrum import fulcrum_offset
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
-from vasim.mrcp.needle import (
+from vasim.mrcp.toolstation import (
+    CONE_HALF_ANGLE,
+    ToolPositioner,
+    build_station,
+    segment_closest_points,
+)
+from vasim.operator.needle import (
     NEEDLE_HALF,
     RING_CLEARANCE,
     classify_grasp,
@@ -24,12 +29,7 @@ from vasim.mrcp.needle import (
     needle_task,
     pregrasp_offset,
 )
-from vasim.mrcp.toolstation import (
-    CONE_HALF_ANGLE,
-    ToolPositioner,
-    build_station,
-    segment_closest_points,
-)
+from vasim.operator.scripted import OperatorProfile
 
 POS = ToolPositioner("p", np.array([0.1, -0.2, 0.3]))
 joints = st.tuples(*[st.floats(-0.25, 0.25)] * 3, st.floats(-1.2, 1.2), st.floats(-1.2, 1.2),

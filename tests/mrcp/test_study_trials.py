@@ -2,7 +2,7 @@
 
 One session of a one-repetition copy of ``mrcp_vs_stdt`` (StdT, MRCP, MRCP+Cam) is run with
 ``vasim study run`` into a temporary database; every check reads the stored rows back and
-recomputes from the stored samples with plain numpy (not ``vasim.study.trial_metrics``).
+recomputes from the stored samples with plain numpy (not ``vasim.records.trial_metrics``).
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.mrcp.needle import needle_task
-from vasim.mrcp.teleop import CYCLE_DT, TISSUE_METRICS, TeleopTrial
+from vasim.operator.needle import needle_task
 from vasim.study.protocol import load_protocol
 from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig, run_trial
+from vasim.trials.teleop import CYCLE_DT, TISSUE_METRICS, TeleopTrial
+from vasim.trials.vf import TrialConfig, run_trial
 
 SEED = 3
 
@@ -163,7 +163,7 @@ def test_run_trial_dispatches_a_mode_and_same_seed_same_trial() -> None:
 
 
 def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
-    from vasim.mrcp.teleop import FAULT_ACK_TIME, MAX_SAFETY_STOPS
+    from vasim.trials.teleop import FAULT_ACK_TIME, MAX_SAFETY_STOPS
 
     tr = TeleopTrial(TrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
                      n_rings=2)
@@ -218,10 +218,10 @@ def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
 
 
 def test_every_mode_follows_the_same_needle_route() -> None:
-    # the route rule (vasim.mrcp.needle.needle_route): the same waypoints in every mode,
+    # the route rule (vasim.operator.needle.needle_route): the same waypoints in every mode,
     # via points at the midline 1.5 cm above the higher ring between rings on different
     # sides; static rings (no tissue), so the waypoints themselves must agree exactly
-    from vasim.mrcp.needle import VIA_HEIGHT, handover_point, needle_route
+    from vasim.operator.needle import VIA_HEIGHT, handover_point, needle_route
 
     task = needle_task(3)
     points, kinds = needle_route(task.rings, task.sides)
@@ -265,7 +265,7 @@ def test_the_stored_trials_pass_the_via_points_in_every_mode(session) -> None:
     # rings at rest) moved at most by the rings' motion: the loops' breathing (at most 4 mm,
     # intestine_3/4/5 in protocols/scenes/default.toml) plus the trial's largest target
     # displacement by the instruments (and the event's 0.01 mm rounding)
-    from vasim.mrcp.needle import needle_route
+    from vasim.operator.needle import needle_route
 
     task = needle_task()
     rest, kinds = needle_route(task.rings, task.sides)

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.backend import PybulletArm
 from vasim.mrcp.controller import (
     DEFAULT_CYCLE,

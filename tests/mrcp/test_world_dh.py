@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp import dh
 from vasim.mrcp.dh import load_robot, parse_robot
 

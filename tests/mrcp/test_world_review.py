@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp import dh, urdf
 from vasim.mrcp.backend import (
     COMPILED_TOLERANCE,

@@ -27,9 +27,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vasim.study.metrics import evaluate_trial
-from vasim.study.samples import FRAME_COLUMNS, SampleBuffer
-from vasim.study.store import TrialMeta, TrialStore
+from vasim.records.point_metrics import evaluate_trial
+from vasim.records.samples import FRAME_COLUMNS, SampleBuffer
+from vasim.records.trial_meta import TrialMeta
+from vasim.study.store import TrialStore
 
 N_SAMPLES = 20_000
 N_POINTS = 8

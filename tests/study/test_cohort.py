@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.cohort import (
     DEMOGRAPHIC_MODEL,
     RATING_CENTRE,

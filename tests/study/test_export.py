@@ -11,14 +11,14 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
+from vasim.records.samples import FRAME_COLUMNS
+from vasim.records.trial_metrics import TRIAL_METRICS
 from vasim.study.export import EXPORT_TABLES, export_study, read_export, table_columns
 from vasim.study.protocol import parse_protocol
-from vasim.study.samples import FRAME_COLUMNS
 from vasim.study.session import SessionSettings, record_answers, run_session, start_session
 from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig, run_trial
-from vasim.study.trial_metrics import TRIAL_METRICS
+from vasim.trials.vf import TrialConfig, run_trial
 
 PROTOCOL = """
 name = "export_test"

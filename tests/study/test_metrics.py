@@ -1,4 +1,4 @@
-"""Tests of the per-point trial metrics (vasim/study/metrics.py, spec/study.md §2 eq. 6.5).
+"""Tests of the per-point trial metrics (vasim/records/point_metrics.py, spec/study.md §2 eq. 6.5).
 
 The reference trial ``tiny_trial`` is computed by hand in the comments below.
 """
@@ -14,8 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import vasim.study.metrics as metrics_mod
-from vasim.study.metrics import (
+import vasim.records.point_metrics as metrics_mod
+from vasim.records.point_metrics import (
     POINT_COLUMNS,
     SUMMARY_KEYS,
     evaluate_trial,

@@ -13,8 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError
-from vasim.paths import studies_dir
+from vasim.core.errors import ConfigError
+from vasim.core.resources import studies_dir
 from vasim.study.protocol import (
     available_protocols,
     block_order,
@@ -116,7 +116,7 @@ def test_mrcp_protocol_validates_and_runs() -> None:
     assert len(s) == 18 and Counter(t.condition for t in s) == {"stdt": 6, "mrcp": 6,
                                                                  "mrcp_cam": 6}
     assert all(t.schema is None for t in s)
-    p.check_runnable()  # the MRCP slave station exists (vasim.mrcp.teleop)
+    p.check_runnable()  # the MRCP slave station exists (vasim.trials.teleop)
 
 
 # ---------------------------------------------------------------------- validation

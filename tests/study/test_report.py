@@ -18,13 +18,14 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_meta import TrialMeta
 from vasim.study import stats
 from vasim.study.protocol import load_protocol, parse_protocol
 from vasim.study.report import FIXTURE_LABELS, build_report
-from vasim.study.samples import SampleBuffer
 from vasim.study.session import record_answers, start_session
-from vasim.study.store import TrialMeta, TrialStore
+from vasim.study.store import TrialStore
 
 SCRIPT = "<script>alert(1)</script>"
 N_POINTS = 5

@@ -17,12 +17,13 @@ import pandas as pd
 import pytest
 from scipy import stats as sps
 
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_meta import TrialMeta
 from vasim.study import stats
 from vasim.study.protocol import generate_schedule, load_protocol
 from vasim.study.report import build_report
-from vasim.study.samples import SampleBuffer
 from vasim.study.session import record_answers
-from vasim.study.store import SessionMeta, TrialMeta, TrialStore
+from vasim.study.store import SessionMeta, TrialStore
 
 MODES = ("stdt", "mrcp", "mrcp_cam")
 FACTOR = {"stdt": 1.0, "mrcp": 0.7, "mrcp_cam": 0.8}

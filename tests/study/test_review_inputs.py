@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vasim.errors import ConfigError, StoreError
+from vasim.core.errors import ConfigError, StoreError
 from vasim.fixtures.logistic import Logistic5, f5pl_derivative
 from vasim.fixtures.schema import parse_schema
 from vasim.study.stats._data import read_long_csv

@@ -17,9 +17,9 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.errors import ConfigError, StoreError
+from vasim.core.errors import ConfigError, StoreError
+from vasim.records.samples import FRAME_COLUMNS
 from vasim.study.protocol import generate_schedule, load_protocol
-from vasim.study.samples import FRAME_COLUMNS
 from vasim.study.session import (
     SessionSettings,
     find_session,
@@ -144,7 +144,7 @@ def test_resume_replays_the_stored_schedule_after_the_file_changes(
 
 
 def test_scheduled_trials_cannot_be_run_twice(tmp_path: Path, tiny: Path) -> None:
-    from vasim.study.store import TrialMeta
+    from vasim.records.trial_meta import TrialMeta
 
     with TrialStore(tmp_path / "s.db") as st:
         sid = start_session(st, load_protocol(tiny), "S03", seed=1)
@@ -186,7 +186,7 @@ def test_sigkill_mid_session_then_resume(tmp_path: Path, tiny: Path) -> None:
         run_session(st, sid, progress=False)
         reference = _by_index(st, sid)
     child = subprocess.Popen(
-        [sys.executable, "-m", "vasim.cli", "study", "run", "--protocol", str(tiny),
+        [sys.executable, "-m", "vasim", "study", "run", "--protocol", str(tiny),
          "--subject", "K01", "--db", str(db), "--seed", "11", "--max-time", max_time],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
@@ -340,7 +340,7 @@ def test_cli_run_checks_the_answers_file_before_starting(tmp_path: Path, tiny: P
 def test_a_failing_result_still_closes_the_trial(tmp_path: Path, monkeypatch) -> None:
     """The partial result itself fails (a metric error): the trial is still marked
     interrupted, with its raw samples, not left 'running'."""
-    import vasim.study.trial as trial_mod
+    import vasim.trials.vf as trial_mod
 
     def boom(*args: object, **kwargs: object) -> None:
         raise ValueError("metric failure")

@@ -1,4 +1,4 @@
-"""Tests of the sample buffer (vasim/study/samples.py) and the trial store (store.py)."""
+"""Tests of the sample buffer (vasim/records/samples.py) and the trial store (store.py)."""
 
 from __future__ import annotations
 
@@ -18,18 +18,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import vasim.study.samples as samples_mod
+import vasim.records.samples as samples_mod
 import vasim.study.store as store_mod
-from vasim.errors import ConfigError, StoreError
-from vasim.study.metrics import POINT_COLUMNS, evaluate_trial
-from vasim.study.samples import FRAME_COLUMNS, SampleBuffer
-from vasim.study.store import (
-    APPLICATION_ID,
-    SCHEMA_VERSION,
-    TRIAL_COLUMNS,
-    TrialMeta,
-    TrialStore,
-)
+from vasim.core.errors import ConfigError, StoreError
+from vasim.records.point_metrics import POINT_COLUMNS, evaluate_trial
+from vasim.records.samples import FRAME_COLUMNS, SampleBuffer
+from vasim.records.trial_meta import TrialMeta
+from vasim.study.store import APPLICATION_ID, SCHEMA_VERSION, TRIAL_COLUMNS, TrialStore
 
 CHILD = Path(__file__).with_name("_kill_child.py")
 

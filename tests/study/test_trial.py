@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.store import TrialStore
-from vasim.study.trial import TrialConfig, TrialRunner, run_trial
+from vasim.trials.vf import TrialConfig, TrialRunner, run_trial
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +131,7 @@ def test_cli_trial_stores_samples_and_metrics(tmp_path: Path, capsys) -> None:
 
 
 def test_cli_errors_are_one_line_exit_2(tmp_path: Path) -> None:
-    exe = [sys.executable, "-m", "vasim.cli"]
+    exe = [sys.executable, "-m", "vasim"]
     p = subprocess.run([*exe, "trial", "--schema", "nope"], capture_output=True, text=True)
     assert p.returncode == 2
     assert p.stderr.count("\n") == 1 and "nope" in p.stderr and "Traceback" not in p.stderr
@@ -150,7 +150,7 @@ def test_sigkill_mid_trial_leaves_earlier_trials_intact(tmp_path: Path) -> None:
         before = {int(i): store.samples(int(i)) for i in store.trials()["id"]}
     # A long trial in a child process, killed once its 'running' row is visible.
     child = subprocess.Popen(
-        [sys.executable, "-m", "vasim.cli", "trial", "--schema", "trajectory_following",
+        [sys.executable, "-m", "vasim", "trial", "--schema", "trajectory_following",
          "--skill", "novice", "--max-time", "600", "--seed", "3", "--db", str(db)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )
@@ -191,7 +191,7 @@ def _distance_to_path(x: np.ndarray, task, goal_index: np.ndarray) -> np.ndarray
 
 
 def test_fixtures_are_transparent_on_the_path() -> None:
-    # Decision in vasim/study/trial.py: trajectory fixtures act on the deviation from the
+    # Decision in vasim/trials/vf.py: trajectory fixtures act on the deviation from the
     # path. AG's dead zone is 0.15 D = 4.5 mm (D = 3 cm), so every sample within 1 mm of the
     # path is silent although the next POI is up to ~10 mm away.
     # A static task (no abdomen): the distance is measured to the task's fixed path.
@@ -222,7 +222,7 @@ def test_ff_force_grows_with_the_deviation_from_the_path() -> None:
 
 
 def test_interrupted_trial_keeps_its_partial_samples(tmp_path: Path, monkeypatch) -> None:
-    from vasim.haptics.scripted import ScriptedOperator
+    from vasim.operator.scripted import ScriptedOperator
 
     calls = {"n": 0}
     real = ScriptedOperator.step_floats

@@ -1,4 +1,4 @@
-"""Per-trial metrics (vasim/study/trial_metrics.py) against hand-computed values, and the
+"""Per-trial metrics (vasim/records/trial_metrics.py) against hand-computed values, and the
 trial runner's new sample columns (in_view)."""
 
 from __future__ import annotations
@@ -11,10 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.errors import ConfigError
-from vasim.study.metrics import path_lengths
-from vasim.study.trial import DEFAULT_ENDOSCOPE, TrialConfig, TrialRunner, in_view_cone
-from vasim.study.trial_metrics import (
+from vasim.core.errors import ConfigError
+from vasim.records.point_metrics import path_lengths
+from vasim.records.trial_metrics import (
     TRIAL_METRICS,
     MetricParams,
     accumulated_norm,
@@ -28,6 +27,7 @@ from vasim.study.trial_metrics import (
     trial_metrics,
 )
 from vasim.tasks import TRAJECTORY_VARIANTS, point_task, trajectory_task
+from vasim.trials.vf import DEFAULT_ENDOSCOPE, TrialConfig, TrialRunner, in_view_cone
 
 DT = 1e-3
 UNFILTERED = MetricParams(filter_cutoff_hz=None)

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.tasks import (
     DEFAULT_REACH_RADIUS,
     TRAJECTORY_VARIANTS,

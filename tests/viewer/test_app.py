@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from vasim.cli import main
+from vasim.cli import viewer as viewer_cli
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
-from vasim.viewer import cli as viewer_cli
 from vasim.viewer.views import (
     arrow_mesh,
     arrow_vertices,
@@ -404,7 +404,7 @@ def test_default_camera_sees_the_workspace() -> None:
     (["--host", "203.0.113.5"], "203.0.113.5"),
 ])
 def test_serve_rejects_a_bad_bind_address_in_one_line(args: list[str], needle: str) -> None:
-    p = subprocess.run([sys.executable, "-m", "vasim.cli", "serve", *args, "--duration", "1"],
+    p = subprocess.run([sys.executable, "-m", "vasim", "serve", *args, "--duration", "1"],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2
     err = [ln for ln in p.stderr.splitlines() if ln.startswith("vasim serve: error")]

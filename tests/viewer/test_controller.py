@@ -15,11 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import load_schema
 from vasim.study.store import TrialStore
-from vasim.study.trial import run_trial
+from vasim.trials.vf import run_trial
 from vasim.viewer.controller import Command, TrainingController, f5pl_fields, with_f5pl
 
 SPEED = 25.0
@@ -191,7 +191,7 @@ def test_browser_input_moves_the_tool_by_the_dragged_increment(
 
 
 def test_a_failing_trial_loop_is_stored_as_interrupted_and_reported(tmp_path: Path) -> None:
-    from vasim.errors import VasimError
+    from vasim.core.errors import VasimError
     from vasim.viewer.live import SimThreadTrial
 
     def factory(config, device=None, *, schema=None, speed=1.0):
@@ -226,7 +226,7 @@ def test_a_failing_trial_loop_is_stored_as_interrupted_and_reported(tmp_path: Pa
 
 def test_a_real_time_trial_keeps_its_recording_and_replays_identically(
         tmp_path: Path) -> None:
-    from vasim.haptics.realtime import replay_trial
+    from vasim.trials.realtime import replay_trial
 
     c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
     try:
@@ -247,7 +247,7 @@ def test_a_real_time_trial_keeps_its_recording_and_replays_identically(
 
 def test_a_stopped_real_time_trial_replays_identically(tmp_path: Path) -> None:
     """Stop mid-trial: the trial is interrupted, names its recording, and replays."""
-    from vasim.haptics.realtime import recorded_files, replay_trial
+    from vasim.trials.realtime import recorded_files, replay_trial
 
     c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
     try:

@@ -22,7 +22,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tests.browser.conftest import wait_for
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
 from vasim.mrcp.scenarios.runner import OperatorSwitch, run
 from vasim.viewer.mrcp_panel import MrcpViewerApp

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from tests.browser.conftest import wait_for
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
 from vasim.viewer import ViewerApp
 from vasim.viewer.mrcp_panel import (

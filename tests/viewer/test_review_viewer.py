@@ -14,7 +14,7 @@ import pytest
 import vasim.viewer.audio as audio
 import vasim.viewer.controller as controller_mod
 from vasim.cli import main
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import schema_path
 from vasim.fixtures.types import AudioCue
 from vasim.viewer.audio import AudioStream

@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.abdomen._contact_kernels import patch_tip_force, tool_contacts
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -1,7 +1,7 @@
 """User organ meshes: loading (OBJ, STL, PLY, OFF via trimesh) and validation.
 
 The spec (§1) lets organs come from user meshes ("generated from real patient data"). A mesh
-that the mass-spring model cannot use is refused with a :class:`vasim.errors.ConfigError`
+that the mass-spring model cannot use is refused with a :class:`vasim.core.errors.ConfigError`
 naming the file, the scene field and every problem found:
 
 * the file is missing, unreadable or of an unsupported format;
@@ -25,7 +25,7 @@ Example:
     >>> load_user_mesh(path)
     Traceback (most recent call last):
     ...
-    vasim.errors.ConfigError: ...ball.stl: extent 60 m looks like millimetres; pass units="mm"...
+    vasim.core.errors.ConfigError: ...extent 60 m looks like millimetres; pass units="mm"...
     >>> mesh = load_user_mesh(path, units="mm")
     >>> len(mesh.vertices), round(float(mesh.extents.max()), 3)
     (162, 0.06)
@@ -40,7 +40,7 @@ import numpy as np
 import trimesh
 
 from vasim.abdomen import _kernels
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 Units = Literal["m", "cm", "mm"]
 UNIT_SCALE: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}

@@ -61,7 +61,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from vasim.abdomen import _kernels
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vasim.abdomen.model import FloatArray, _number, _vec3
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 BREATHING_HZ = 0.25
 """Default breathing rate [Hz] (15 breaths per minute; spec: ~0.2–0.3 Hz)."""

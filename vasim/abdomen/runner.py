@@ -1,7 +1,7 @@
 """The abdomen physics at its own rate, in its own thread (real-time runs).
 
 A headless trial steps the abdomen inline, in simulated time, every ``dt_physics / dt``
-control steps (deterministic; :class:`vasim.study.trial.TrialRunner`). A real-time run (the
+control steps (deterministic; :class:`vasim.trials.vf.TrialRunner`). A real-time run (the
 viewer, the haptic servo loop) instead runs :class:`PhysicsThread`: it steps the
 :class:`~vasim.abdomen.world.Abdomen` every ``dt`` of wall-clock time with the latest tool
 pose it was given, and publishes each step's immutable snapshot by swapping one reference.

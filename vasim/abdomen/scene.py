@@ -97,8 +97,8 @@ from vasim.abdomen.motion import (
     PhysioMotion,
     PointMotion,
 )
-from vasim.errors import ConfigError
-from vasim.paths import read_data_file, scenes_dir
+from vasim.core.errors import ConfigError
+from vasim.core.resources import read_data_file, scenes_dir
 
 MAX_DT = 0.02
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""

@@ -86,7 +86,7 @@ from vasim.abdomen.model import OrganModel, OrganState
 from vasim.abdomen.motion import PhysioMotion, PointMotion, _sin_cos
 from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 

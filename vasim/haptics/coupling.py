@@ -57,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 

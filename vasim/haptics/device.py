@@ -31,8 +31,8 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vasim.errors import ConfigError
-from vasim.haptics.scripted import OperatorObservation
+from vasim.core.errors import ConfigError
+from vasim.haptics.observation import OperatorObservation
 
 FloatArray = NDArray[np.float64]
 

@@ -88,7 +88,7 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.coupling import (
     CouplingParams,
     LinearForce,
@@ -107,7 +107,7 @@ from vasim.haptics.device import (
     ScheduledDevice,
 )
 from vasim.haptics.guard import GuardLog, check_force, check_sample
-from vasim.haptics.scripted import OperatorObservation
+from vasim.haptics.observation import OperatorObservation
 from vasim.haptics.timing import TimingMode, TimingRecorder, TimingStats
 
 log = logging.getLogger(__name__)

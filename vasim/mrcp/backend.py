@@ -56,7 +56,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 from scipy.stats import qmc
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp import dh
 from vasim.mrcp._distance_kernels import swept_distances, swept_pair_bounds
 from vasim.mrcp.dh import RobotModel

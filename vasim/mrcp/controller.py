@@ -41,7 +41,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 #: the seed's controller cycle [s] (minimum communication cycle of the Stäubli controllers)

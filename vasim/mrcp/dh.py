@@ -69,8 +69,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError
-from vasim.paths import data_file, protocols_dir, read_data_file
+from vasim.core.errors import ConfigError
+from vasim.core.resources import data_file, protocols_dir, read_data_file
 
 FloatArray = NDArray[np.float64]
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 

@@ -2,7 +2,7 @@
 Fig. 5.34; suture subtasks in spec/study.md §5).
 
 Two layers, each an explicit transition table; an illegal transition raises
-:class:`~vasim.errors.TransitionError` naming the state and the event.
+:class:`~vasim.core.errors.TransitionError` naming the state and the event.
 
 1. :class:`KernelState` — the MRCP control loop. ``TOP`` (task-oriented teleoperation:
    evaluate -> NTT -> actions, master input applied) and the task-transfer phases
@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from enum import Enum
 
-from vasim.errors import TransitionError
+from vasim.core.errors import TransitionError
 
 
 class KernelState(Enum):

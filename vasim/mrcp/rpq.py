@@ -48,7 +48,7 @@ import trimesh
 from numba import njit
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp import dh
 from vasim.mrcp.backend import HULL_MARGIN, PybulletWorld
 from vasim.mrcp.dh import _chain_kernel

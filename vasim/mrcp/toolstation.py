@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.fulcrum import Fulcrum, LaparoscopicArm, LaparoscopicTool
 from vasim.mrcp.indices.cone import ConeSector, ToolCone
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray, Proximity

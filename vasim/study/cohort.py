@@ -68,13 +68,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vasim.errors import ConfigError, StoreError
+from vasim.core.errors import ConfigError, StoreError
+from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
-from vasim.haptics.scripted import OperatorProfile
-from vasim.progress import progress_bar
-from vasim.study.metrics import POINT_COLUMNS
+from vasim.operator.scripted import OperatorProfile
+from vasim.records.point_metrics import POINT_COLUMNS
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_metrics import MetricParams
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
-from vasim.study.samples import SampleBuffer
 from vasim.study.session import (
     Session,
     SessionSettings,
@@ -83,8 +84,7 @@ from vasim.study.session import (
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
-from vasim.study.trial import TrialConfig, TrialRunner, trial_meta
-from vasim.study.trial_metrics import MetricParams
+from vasim.trials.vf import TrialConfig, TrialRunner, trial_meta
 
 DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]]] = {
     "surgeon": {
@@ -370,7 +370,7 @@ def simulate_trial(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
         ``wall_time`` [s], ``sim_time`` [s].
     """
     if config.mode is not None:  # a teleoperation mode: the MRCP station's trial
-        from vasim.mrcp.teleop import simulate_teleop
+        from vasim.trials.teleop import simulate_teleop
 
         return simulate_teleop(config, params)
     t0 = time.perf_counter()
@@ -501,7 +501,7 @@ def simulate_cohort(
         n_subjects, n_surgeons: cohort size and surgeons among it (the rest residents).
         seed: cohort seed (subjects, profiles, schedules, answers).
         workers: worker processes (None: ``os.cpu_count()``; 0: run in this process).
-        progress: progress output over the cohort's trials (:mod:`vasim.progress`).
+        progress: progress output over the cohort's trials (:mod:`vasim.core.progress`).
         max_trial_time: trial time limit [s] (None: the protocol's).
         max_trials_per_subject: run at most this many (the first pending) trials of each
             subject (None: all); for tests and benchmarks.
@@ -564,7 +564,7 @@ _SCHEMAS: dict[str, Schema] = {}
 def _begin(store: TrialStore, job: _Job) -> int:
     cfg = job.config
     if cfg.mode is not None:  # a teleoperation mode: the needle task's trial row
-        from vasim.mrcp.teleop import teleop_meta
+        from vasim.trials.teleop import teleop_meta
 
         return store.begin_trial(teleop_meta(cfg, session_id=job.session.id,
                                              schedule_index=job.scheduled.index,

@@ -9,7 +9,7 @@ Tables (one row per ...):
 
 ``samples``
     logged step of every trial (completed and interrupted): ``trial_id`` then the flat
-    sample columns of ``vasim.study.samples.FRAME_COLUMNS`` (``k``, ``t`` [s], ``x_*`` [m],
+    sample columns of ``vasim.records.samples.FRAME_COLUMNS`` (``k``, ``t`` [s], ``x_*`` [m],
     ``g_*`` [m], ``goal_index``, ``f_*`` [N], ``ms_*``, ``zoom``, ``audio_*``, ``contact``,
     ``fc_*`` [N], ``tc_*`` [N m], ``delicate``, ``clutch``, ``in_view``). Written trial by
     trial (a cohort's samples do not fit in memory at once).
@@ -23,7 +23,7 @@ Tables (one row per ...):
     trial_index, block, block_index, trial_in_block, condition, schema, task, variant,
     probe, probe_index`` (the VF-free trial number 1..8 of the learning curve, NULL for
     assisted trials), ``repetition, attempt`` and one column per metric of
-    ``vasim.study.trial_metrics.TRIAL_METRICS`` (units there). Trials outside sessions have
+    ``vasim.records.trial_metrics.TRIAL_METRICS`` (units there). Trials outside sessions have
     NULL session columns and ``condition`` = their schema.
 ``point_metrics``
     trajectory point of a completed trial: ``trial_id, subject, session_id, trial_index,
@@ -72,11 +72,11 @@ import numpy as np
 import pandas as pd
 
 from vasim import __version__
-from vasim.errors import ConfigError
-from vasim.progress import progress_bar
-from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES
+from vasim.core.errors import ConfigError
+from vasim.core.progress import progress_bar
+from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES
+from vasim.records.trial_metrics import TRIAL_METRICS
 from vasim.study.store import TrialStore
-from vasim.study.trial_metrics import TRIAL_METRICS
 
 EXPORT_TABLES: tuple[str, ...] = ("samples", "trials", "trial_metrics", "point_metrics",
                                   "questionnaires", "subjects", "sessions", "schedule")
@@ -294,7 +294,8 @@ def export_study(
         out: output folder (created; files of the same names are replaced).
         formats: ``"csv"`` and/or ``"parquet"``.
         tables: a subset of ``EXPORT_TABLES``.
-        progress: progress output over the trials while writing samples (:mod:`vasim.progress`).
+        progress: progress output over the trials while writing samples
+            (``vasim.core.progress``).
 
     Returns:
         The output folder.

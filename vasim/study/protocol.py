@@ -102,15 +102,13 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.errors import ConfigError
-from vasim.paths import available_files, data_file, read_data_file, studies_dir
+from vasim.core.errors import ConfigError
+from vasim.core.resources import available_files, data_file, read_data_file, studies_dir
 from vasim.study.store import DEMOGRAPHIC_FIELDS, Demographics
+from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 
 TaskKind = Literal["trajectory", "point"]
 TASKS: tuple[str, ...] = ("trajectory", "point")
-TELEOPERATION_MODES: tuple[str, ...] = ("stdt", "mrcp", "mrcp_cam")
-"""Conditions of the MRCP vs standard-teleoperation protocols (spec/study.md §4): StdT
-(2 masters : 2 slaves), MRCP (1 master : 2 slaves, task oriented), MRCP+Cam."""
 BLOCK_ORDERS: tuple[str, ...] = ("fixed", "random", "latin_square")
 VARIANT_ORDERS: tuple[str, ...] = ("fixed", "random")
 ITEM_TYPES: tuple[str, ...] = ("choice", "text", "integer", "likert", "condition_choice",
@@ -152,19 +150,6 @@ def _check_choice(v: object, name: str, choices: Sequence[str]) -> None:
     if not isinstance(v, str) or v not in choices:
         raise ConfigError(f"must be one of {', '.join(map(repr, choices))}, got {v!r}",
                           field=name)
-
-
-MAX_TRIAL_TIME_S = 86_400.0
-"""Longest trial time limit accepted [s] (**decision**: a day; a trial's sample buffer and
-loop counters are sized from the limit, and 1e308 s overflowed them)."""
-
-
-def check_trial_time(v: object, name: str) -> None:
-    """A trial time limit: a finite number of seconds in (0, :data:`MAX_TRIAL_TIME_S`]."""
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
-            or not 0 < v <= MAX_TRIAL_TIME_S:
-        raise ConfigError(f"must be a number of seconds in (0, {MAX_TRIAL_TIME_S:g}], got "
-                          f"{v!r}", field=name)
 
 
 def _check_positive(v: object, name: str) -> None:
@@ -490,9 +475,9 @@ class Protocol:
         """The hook where a protocol this release cannot run would be refused.
 
         Nothing is refused now: every protocol that validates runs, fixture conditions
-        through the trial runner (``vasim.study.trial``) and teleoperation modes (StdT,
+        through the trial runner (``vasim.trials.vf``) and teleoperation modes (StdT,
         MRCP, MRCP+Cam) through the MRCP slave station's needle task
-        (``vasim.mrcp.teleop``), whatever the protocol's ``task`` names. The callers
+        (``vasim.trials.teleop``), whatever the protocol's ``task`` names. The callers
         (session, cohort, CLI) keep calling it before anything is started.
         """
 

@@ -80,10 +80,10 @@ import numpy as np
 import pandas as pd
 
 from vasim import __version__
-from vasim.errors import ConfigError
-from vasim.progress import progress_bar
+from vasim.core.errors import ConfigError
+from vasim.core.progress import progress_bar
 from vasim.study import stats
-from vasim.study.protocol import TELEOPERATION_MODES, Protocol, QuestionItem, parse_protocol
+from vasim.study.protocol import Protocol, QuestionItem, parse_protocol
 from vasim.study.report_html import (
     Block,
     FigureBlock,
@@ -114,6 +114,7 @@ from vasim.study.store import (
     SPECIALISATIONS,
     TrialStore,
 )
+from vasim.trials.kinds import TELEOPERATION_MODES
 
 T = TypeVar("T")
 
@@ -1496,7 +1497,7 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
         out: output folder (created; ``index.html`` and ``tables/`` inside are replaced,
             CSVs of an earlier report listed in its ``tables/manifest.json`` removed).
         protocol: the protocol to report, or None for the store's only protocol.
-        progress: progress output over the report's steps on stderr (:mod:`vasim.progress`).
+        progress: progress output over the report's steps on stderr (:mod:`vasim.core.progress`).
 
     Returns:
         :class:`ReportResult`.

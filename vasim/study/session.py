@@ -46,21 +46,21 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.errors import ConfigError, StoreError
-from vasim.haptics.scripted import OperatorProfile
-from vasim.progress import progress_bar
+from vasim.core.errors import ConfigError, StoreError
+from vasim.core.progress import progress_bar
+from vasim.operator.scripted import OperatorProfile
+from vasim.records.trial_meta import validate_subject_code
+from vasim.records.trial_metrics import MetricParams
 from vasim.study.protocol import (
-    TELEOPERATION_MODES,
     Protocol,
     ScheduledTrial,
-    check_trial_time,
     generate_schedule,
     parse_protocol,
     validate_answers,
 )
-from vasim.study.store import SessionMeta, TrialStore, validate_subject_code
-from vasim.study.trial import TrialConfig, make_profile, run_trial
-from vasim.study.trial_metrics import MetricParams
+from vasim.study.store import SessionMeta, TrialStore
+from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
+from vasim.trials.vf import TrialConfig, make_profile, run_trial
 
 OPERATORS: tuple[str, ...] = ("scripted",)
 """Input devices a session can be run with from the command line."""
@@ -188,7 +188,7 @@ class Session:
         if scheduled.schema is None:
             self.protocol.check_runnable()
         s = self.settings
-        # A teleoperation mode runs the MRCP station's needle task (vasim.mrcp.teleop).
+        # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
         return TrialConfig(
             task=scheduled.task,  # type: ignore[arg-type]

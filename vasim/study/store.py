@@ -66,7 +66,7 @@ version 2 added to version 1):
     torque (default 0), ``delicate`` INTEGER (0/1, contact with a delicate structure),
     ``clutch`` INTEGER (0/1), ``in_view`` INTEGER (1 tool tip in the camera's field of
     view, 0 outside, -1 not determined: the value every version-1 row reads). See
-    ``vasim.study.samples``.
+    ``vasim.records.samples``.
 ``point_metrics`` — WITHOUT ROWID, PK (trial_id, point); columns of
     ``metrics.POINT_COLUMNS``: ``point`` INTEGER, ``reached`` INTEGER (0/1), ``t_reached``
     REAL [s] NULL, ``error_l1`` REAL [m] NULL, ``latency`` REAL [s] NULL, ``path_l1``,
@@ -122,7 +122,7 @@ stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0.
 
 Example:
     >>> import tempfile, pathlib
-    >>> from vasim.study.samples import SampleBuffer
+    >>> from vasim.records.samples import SampleBuffer
     >>> with tempfile.TemporaryDirectory() as d, TrialStore(pathlib.Path(d) / "s.db") as st:
     ...     tid = st.begin_trial(TrialMeta(subject="S01", task="trajectory"))
     ...     buf = SampleBuffer()
@@ -139,12 +139,11 @@ import json
 import logging
 import math
 import os
-import re
 import socket
 import sqlite3
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, Literal
@@ -153,10 +152,11 @@ import numpy as np
 import pandas as pd
 
 from vasim import __version__
-from vasim.errors import ConfigError, StoreError
-from vasim.jsonio import dumps
-from vasim.study.metrics import POINT_COLUMNS
-from vasim.study.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
+from vasim.core.errors import ConfigError, StoreError
+from vasim.core.jsonio import dumps
+from vasim.records.point_metrics import POINT_COLUMNS
+from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
+from vasim.records.trial_meta import SUBJECT_CODE_PATTERN, TrialMeta, validate_subject_code
 
 log = logging.getLogger(__name__)
 
@@ -166,10 +166,6 @@ SCHEMA_VERSION = 2
 APPLICATION_ID = 0x76534D31  # b"vSM1"
 """``PRAGMA application_id`` of a vasim trial store."""
 
-SUBJECT_CODE_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
-"""Allowed subject codes: 1-32 letters, digits, '_' or '-' (a pseudonym, never a name)."""
-
-_SUBJECT_RE = re.compile(SUBJECT_CODE_PATTERN)
 
 TrialStatus = Literal["running", "completed", "interrupted"]
 TRIAL_STATUSES: tuple[str, ...] = ("running", "completed", "interrupted")
@@ -406,85 +402,8 @@ _MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2}
 """Script that takes a store from version v-1 to v (version 0 = empty file)."""
 
 
-def validate_subject_code(code: object) -> str:
-    """Returns ``code`` if it is a valid subject code, else raises ``ConfigError``.
-
-    Example:
-        >>> validate_subject_code("S01")
-        'S01'
-    """
-    if not isinstance(code, str) or not _SUBJECT_RE.fullmatch(code):
-        raise ConfigError(
-            f"invalid subject code {code!r}: use 1-32 letters, digits, '_' or '-' "
-            "(a pseudonymous code, never a name)",
-            field="subject",
-        )
-    return code
-
-
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="microseconds")
-
-
-@dataclass(frozen=True)
-class TrialMeta:
-    """What is known about a trial when it starts (the ``trials`` row).
-
-    Attributes:
-        subject: subject code (``SUBJECT_CODE_PATTERN``); registered on first use.
-        task: task kind, e.g. ``"trajectory"`` or ``"point"``.
-        variant: trajectory variant (0 = original), or None.
-        schema: fixture schema name, or None. operator: input device name, or None.
-        seed: random seed of the trial, or None. dt: control step [s], or None.
-        active_fixtures: active fixture names, e.g. ``"VG,FF"``; ``""`` for VF-free.
-        session_id: session id, or None. protocol: protocol name.
-        schedule_index: the scheduled trial of the session this trial is an attempt at, or
-            None (then ``session_id`` is only informative).
-        pid, host: the writing process (defaults: this process, this host).
-        config: the full trial configuration (JSON-serialisable mapping), or None.
-        schema_toml: the resolved fixture schema as TOML text, or None.
-    """
-
-    subject: str
-    task: str
-    variant: int | None = None
-    schema: str | None = None
-    operator: str | None = None
-    seed: int | None = None
-    dt: float | None = None
-    active_fixtures: str = ""
-    session_id: int | None = None
-    protocol: str | None = None
-    pid: int = field(default_factory=os.getpid)
-    host: str = field(default_factory=socket.gethostname)
-    config: Mapping[str, Any] | None = None
-    schema_toml: str | None = None
-    schedule_index: int | None = None
-
-    def __post_init__(self) -> None:
-        validate_subject_code(self.subject)
-        if not isinstance(self.task, str) or not self.task:
-            raise ConfigError(f"task must be a non-empty string, got {self.task!r}", field="task")
-        for name in ("variant", "seed", "session_id", "pid", "schedule_index"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
-                raise ConfigError(f"{name} must be an integer or None, got {v!r}", field=name)
-        if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
-            raise ConfigError(f"dt must be > 0 s, got {self.dt!r}", field="dt")
-        if not isinstance(self.active_fixtures, str):
-            raise ConfigError(f"active_fixtures must be a string, got {self.active_fixtures!r}",
-                              field="active_fixtures")
-        if self.schedule_index is not None and self.session_id is None:
-            raise ConfigError("a schedule_index needs its session_id", field="schedule_index")
-
-    @classmethod
-    def from_mapping(cls, meta: Mapping[str, Any]) -> TrialMeta:
-        """Builds a ``TrialMeta`` from a dict; unknown keys raise ``ConfigError``."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(meta) - known)
-        if unknown:
-            raise ConfigError(f"unknown trial meta field(s) {unknown} (known: {sorted(known)})")
-        return cls(**meta)
 
 
 @dataclass(frozen=True)
@@ -1500,7 +1419,7 @@ class TrialStore:
         df["value"] = df["value"].astype(np.float64)
         if not wide:
             return df
-        from vasim.study.trial_metrics import TRIAL_METRICS
+        from vasim.records.trial_metrics import TRIAL_METRICS
 
         w = df.pivot(index="trial_id", columns="metric", values="value")
         order = [m for m in TRIAL_METRICS if m in w.columns]

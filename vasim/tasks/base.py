@@ -18,7 +18,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.fixtures.types import TaskState, Vec3
 
 FloatArray = NDArray[np.float64]

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.tasks.base import DEFAULT_REACH_RADIUS, Task
 
 LIVER_POI = (-0.058, 0.0851, 0.0704)

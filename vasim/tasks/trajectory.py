@@ -36,7 +36,7 @@ from functools import lru_cache
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.tasks.base import DEFAULT_REACH_RADIUS, WORKSPACE_CENTRE, FloatArray, Task
 
 TRAJECTORY_VARIANTS = 7

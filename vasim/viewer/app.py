@@ -6,7 +6,7 @@ Threads and hand-offs (guides/architecture.md):
   (modes, sessions, the study store, the live trial): it drains the command queue and
   polls the controller (storing a finished trial, looping the demo, auto-advancing a
   protocol). The live trial runs on its own thread (the 1 kHz servo loop of
-  ``vasim.haptics.realtime`` when present, else the viewer's ``SimThreadTrial``): the viewer
+  ``vasim.trials.realtime`` when present, else the viewer's ``SimThreadTrial``): the viewer
   never slows the physics or the haptic loop, it only reads their latest frame.
 * The **view thread** (``view_hz``, 40 Hz: the issue asks for >= 30 scene updates/s in
   the browser, and a loaded host loses a few) reads ``controller.current()`` (the trial's
@@ -50,12 +50,12 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.fixtures.mag import MagParams
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.device import BUTTON_2
 from vasim.study.protocol import available_protocols
-from vasim.study.trial import TrialFrame, tool_trocar
+from vasim.trials.vf import TrialFrame, tool_trocar
 from vasim.viewer.audio import AudioStream
 from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,

@@ -49,13 +49,13 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError, StoreError, VasimError
+from vasim.core.errors import ConfigError, StoreError, VasimError
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, available_schemas, load_schema
 from vasim.haptics.device import Device
 from vasim.haptics.devices.browser import BrowserDevice
-from vasim.study.trial import TrialConfig, TrialFrame, make_profile, make_task, trial_meta
 from vasim.tasks import TRAJECTORY_VARIANTS
+from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, trial_meta
 from vasim.viewer.live import LiveTrial, make_live_trial
 
 log = logging.getLogger(__name__)
@@ -531,7 +531,7 @@ class TrainingController:
                                   field="input")
             self._publish(input=value)
         elif kind == "subject":
-            from vasim.study.store import validate_subject_code
+            from vasim.records.trial_meta import validate_subject_code
 
             code = validate_subject_code(str(value).strip())
             if self._running_stored():

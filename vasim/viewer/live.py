@@ -1,6 +1,6 @@
 """A trial running in real time for the viewer, with the shape of ``RealtimeTrial``.
 
-``vasim.haptics.realtime.RealtimeTrial`` is the servo loop driving a trial at 1 kHz on its
+``vasim.trials.realtime.RealtimeTrial`` is the servo loop driving a trial at 1 kHz on its
 own thread (physics on another). The viewer codes against its interface::
 
     RealtimeTrial(config, device=None, *, schema=None, physics=..., rate_hz=1000.0)
@@ -33,11 +33,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import BUTTON_2, Device
-from vasim.haptics.scripted import OperatorObservation
-from vasim.study.trial import TrialConfig, TrialFrame, TrialResult, TrialRunner
+from vasim.haptics.observation import OperatorObservation
+from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, TrialRunner
 
 log = logging.getLogger(__name__)
 
@@ -247,8 +247,8 @@ class SimThreadTrial:
 
 
 def realtime_available() -> bool:
-    """True when ``vasim.haptics.realtime`` (the 1 kHz servo-loop trial) is installed."""
-    return importlib.util.find_spec("vasim.haptics.realtime") is not None
+    """True when ``vasim.trials.realtime`` (the 1 kHz servo-loop trial) is installed."""
+    return importlib.util.find_spec("vasim.trials.realtime") is not None
 
 
 def make_live_trial(config: TrialConfig, device: Device | None = None, *,
@@ -257,7 +257,7 @@ def make_live_trial(config: TrialConfig, device: Device | None = None, *,
     started), else :class:`SimThreadTrial` (also for ``speed`` != 1, which the servo loop
     does not offer)."""
     if speed == 1.0 and realtime_available():
-        from vasim.haptics.realtime import RealtimeTrial  # type: ignore[import-not-found]
+        from vasim.trials.realtime import RealtimeTrial  # type: ignore[import-not-found]
 
         return RealtimeTrial(config, device, schema=schema)  # type: ignore[no-any-return]
     return SimThreadTrial(config, device, schema=schema, speed=speed)

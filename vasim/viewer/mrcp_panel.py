@@ -54,7 +54,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.viewer.mrcp_view import (
     StationFrame,
     StationGeometry,

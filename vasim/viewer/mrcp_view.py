@@ -30,7 +30,7 @@ import viser
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]

@@ -12,7 +12,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from vasim.errors import VasimError
+from vasim.core.errors import VasimError
 
 log = logging.getLogger(__name__)
 

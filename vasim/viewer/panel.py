@@ -27,7 +27,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.fixtures.logistic import Logistic5
-from vasim.study.trial import TrialFrame
+from vasim.trials.vf import TrialFrame
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
 
 FloatArray = NDArray[np.float64]

@@ -35,7 +35,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from statsmodels.stats.anova import AnovaRM
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import RM_ANOVA_COLUMNS, StatsWarning, read_long_csv, rm_anova
 
 DATA = Path(__file__).resolve().parents[2] / "data"

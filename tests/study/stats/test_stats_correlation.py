@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from scipy import stats
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import SPEARMAN_COLUMNS, StatsWarning, read_long_csv, spearman_items
 
 DATA = Path(__file__).resolve().parents[2] / "data"

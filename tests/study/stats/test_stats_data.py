@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
     cell_means,
     levels_of,

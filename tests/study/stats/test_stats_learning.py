@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 from scipy import optimize, stats
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import fit_learning_curves, fit_power_law, learning_curve_summary
 
 

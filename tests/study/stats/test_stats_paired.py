@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from scipy import integrate, stats
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import (
     PAIRED_COLUMNS,
     StatsWarning,

@@ -32,7 +32,7 @@ from hypothesis.extra import numpy as hnp
 from scipy import stats
 from statsmodels.stats.multicomp import pairwise_tukeyhsd
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import TUKEY_COLUMNS, read_long_csv, rm_anova, tukey_hsd, tukey_hsd_rm
 
 DATA = Path(__file__).resolve().parents[2] / "data"

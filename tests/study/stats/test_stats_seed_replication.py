@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats import SEED_LABEL, seed_per_sample_anova
 
 

@@ -101,7 +101,7 @@ def _probe_openhaptics() -> Availability:
     except OSError as exc:
         return Availability(False, (Missing("runtime library", oh.RUNTIME_LIBRARY,
                                             oh.RUNTIME_HINT),), detail=str(exc))
-    from vasim.errors import DeviceError
+    from vasim.core.errors import DeviceError
 
     try:
         handle = oh.open_device(sdk, "Default Device")
@@ -123,7 +123,7 @@ DEVICES = DeviceRegistry()
 DEVICES.add(DeviceInfo("emulator", "emulated Phantom Omni: stylus mass, hand impedance, "
                        "force limits (vasim.haptics.devices.emulator)", _always))
 DEVICES.add(DeviceInfo("scripted", "simulated operator moving along the task "
-                       "(vasim.haptics.devices.scripted)", _always))
+                       "(vasim.operator.device)", _always))
 DEVICES.add(DeviceInfo("browser", "pointer drags in the viewer, resampled to 1 kHz "
                        "(vasim.haptics.devices.browser)", _probe_browser))
 DEVICES.add(DeviceInfo("replay", "plays back a recorded device stream (.npz) exactly "

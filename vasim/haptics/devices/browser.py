@@ -57,7 +57,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_force
 
 BROWSER_WORKSPACE_HALF_M = 1.0

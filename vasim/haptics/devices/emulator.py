@@ -67,7 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import expm
 
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.device import (
     OMNI_LIMITS,
     DeviceLimits,

@@ -49,7 +49,7 @@ from types import ModuleType
 
 import numpy as np
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import (
     OMNI_LIMITS,
     DeviceLimits,

@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_force
 
 FORMAT = "vasim.device_stream"

@@ -7,7 +7,7 @@ MRCP kernel; ``vasim mrcp run NAME`` is the command line.
 
 from __future__ import annotations
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
 from vasim.mrcp.scenarios.cube_rotation import CubeRotation
 from vasim.mrcp.scenarios.cube_translation import CubeTranslation

@@ -231,7 +231,7 @@ class OperatorSwitch:
         Raises:
             ConfigError: for another mode.
         """
-        from vasim.errors import ConfigError
+        from vasim.core.errors import ConfigError
 
         if mode not in OPERATOR_MODES:
             raise ConfigError(f"operator mode must be one of {OPERATOR_MODES}, got {mode!r}",
@@ -245,7 +245,7 @@ class OperatorSwitch:
         Raises:
             ConfigError: for a non-finite or mis-shaped pose.
         """
-        from vasim.errors import ConfigError
+        from vasim.core.errors import ConfigError
 
         p = np.asarray(position, float)
         r = np.asarray(rotation, float)

@@ -4,7 +4,7 @@ Every function takes a long-format ``pandas.DataFrame`` (one row per observation
 dependent variable, subject and factor columns named by argument, as pingouin) and returns
 a tidy DataFrame with a fixed, documented column order (or a small result object). Input is
 validated first (:mod:`vasim.study.stats._data`): a missing column, a non-numeric value, an
-unbalanced design or too few subjects/levels raise :class:`vasim.errors.ConfigError` naming
+unbalanced design or too few subjects/levels raise :class:`vasim.core.errors.ConfigError` naming
 the file (``data.attrs["source"]``, set by :func:`read_long_csv`), the column and the cells.
 
 Primary analyses (spec §3 **decision**): :func:`rm_anova` on subject-level cell means, with

@@ -2,7 +2,7 @@
 
 Every statistic in :mod:`vasim.study.stats` takes a *long-format* ``pandas.DataFrame``
 (one row per observation, pingouin style) and validates it here before computing anything,
-so that bad input ends in one :class:`vasim.errors.ConfigError` naming the file, the column
+so that bad input ends in one :class:`vasim.core.errors.ConfigError` naming the file, the column
 and the offending values or cells, never in a traceback or in a silently wrong table.
 
 The file a frame came from is read from ``data.attrs["source"]`` (set by
@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.export import CSV_NA
 
 #: Maximum number of offending values or cells quoted in one error message.

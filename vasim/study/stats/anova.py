@@ -19,7 +19,7 @@ import pandas as pd
 from scipy import stats
 from scipy.linalg import helmert
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats._data import StatsWarning, cell_means, source_of
 
 #: Column order of :func:`rm_anova` (the JSON keys of ``vasim stats rm-anova`` are the same

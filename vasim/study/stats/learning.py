@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 from scipy import optimize, stats
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
     StatsWarning,
     factor_column,

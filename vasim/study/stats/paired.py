@@ -19,7 +19,7 @@ from scipy import optimize, stats
 from statsmodels.stats.multitest import multipletests
 from statsmodels.stats.power import TTestPower
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 from vasim.study.stats._data import StatsWarning, cell_means, finite_array
 
 #: Column order of :func:`pairwise_paired` (also the JSON keys of ``vasim stats paired``).

@@ -60,22 +60,24 @@ import pandas as pd
 
 from vasim.abdomen.anatomy import trocar_points
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
+from vasim.core.progress import progress_bar
 from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
 from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
-from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
-from vasim.progress import progress_bar
-from vasim.study.metrics import evaluate_trial
-from vasim.study.protocol import TELEOPERATION_MODES, check_trial_time
-from vasim.study.samples import SampleBuffer
-from vasim.study.trial_metrics import MetricParams, trial_metrics
+from vasim.haptics.observation import OperatorObservation
+from vasim.operator.scripted import OperatorProfile, ScriptedOperator
+from vasim.records.point_metrics import evaluate_trial
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
 from vasim.tasks.base import polyline_lookahead
+from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
+from vasim.trials.sink import TrialSink, check_sink
 
 if TYPE_CHECKING:
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
-    from vasim.study.store import TrialMeta
+    from vasim.records.trial_meta import TrialMeta
 
 TaskName = Literal["trajectory", "point"]
 
@@ -130,7 +132,7 @@ class TrialConfig:
             with no tissue (no breathing, no contact).
         mode: None for a trial of ``task`` under ``schema`` (this module's runner), or a
             teleoperation mode of the MRCP study (``"stdt"``, ``"mrcp"``, ``"mrcp_cam"``):
-            the needle task on the MRCP slave station (``vasim.mrcp.teleop``, 18 ms
+            the needle task on the MRCP slave station (``vasim.trials.teleop``, 18 ms
             control cycle), where ``task``, ``variant``, ``schema``, ``dt`` and
             ``velocity_cutoff_hz`` are not used.
     """
@@ -165,7 +167,7 @@ class TrialConfig:
                 0 <= self.seed < 2**63):
             raise ConfigError(f"seed must be an integer in [0, 2**63), got {self.seed!r}",
                               field="seed")
-        from vasim.study.store import validate_subject_code
+        from vasim.records.trial_meta import validate_subject_code
 
         validate_subject_code(self.subject)
         if self.operator != "scripted":
@@ -240,7 +242,7 @@ class TrialResult:
     events: list[tuple[float, str, str]]
     wall_time: float
     trial_metrics: dict[str, float] = field(default_factory=dict)
-    """``vasim.study.trial_metrics.trial_metrics`` of the trial (see ``TRIAL_METRICS``)."""
+    """``vasim.records.trial_metrics.trial_metrics`` of the trial (see ``TRIAL_METRICS``)."""
 
 
 @dataclass(frozen=True)
@@ -492,7 +494,7 @@ class TrialRunner:
         With a feed, every control step calls ``feed(k, pose)`` with the tool pose before
         the step's motion (the pose the inline step would use); a returned snapshot is
         applied as an inline step's would be (POIs, contact planes, torque, events), None
-        keeps the current one. The real-time trial (``vasim.haptics.realtime``) feeds the
+        keeps the current one. The real-time trial (``vasim.trials.realtime``) feeds the
         latest snapshot of a physics thread this way, and a replay feeds the recorded ones
         at the recorded steps. None restores inline stepping every ``abdomen.dt``.
         """
@@ -713,7 +715,7 @@ class TrialRunner:
     def result(self, wall_time: float = 0.0, *,
                metric_params: MetricParams | None = None) -> TrialResult:
         """The trial's samples, per-point metrics (spec/study.md §2), summary and trial
-        metrics (``vasim.study.trial_metrics``, with ``metric_params`` or the defaults).
+        metrics (``vasim.records.trial_metrics``, with ``metric_params`` or the defaults).
 
         Without Mag, the ``in_view`` column is filled here from the fixed endoscope.
         """
@@ -771,7 +773,7 @@ def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
         session_id, schedule_index: the scheduled trial this is an attempt at, if any.
         protocol: the protocol name, if any.
     """
-    from vasim.study.store import TrialMeta
+    from vasim.records.trial_meta import TrialMeta
 
     return TrialMeta(
         subject=config.subject, task=config.task, variant=config.variant,
@@ -783,7 +785,7 @@ def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
     )
 
 
-def run_trial(config: TrialConfig, store: object | None = None, *,
+def run_trial(config: TrialConfig, store: TrialSink | None = None, *,
               progress: bool = False, session_id: int | None = None,
               schedule_index: int | None = None, protocol: str | None = None,
               metric_params: MetricParams | None = None,
@@ -804,19 +806,16 @@ def run_trial(config: TrialConfig, store: object | None = None, *,
     Returns:
         (result, trial_id) — trial_id is None without a store.
     """
-    from vasim.study.store import TrialStore
-
     if config.mode is not None:  # a teleoperation mode: the MRCP slave station's trial
-        from vasim.mrcp.teleop import run_teleop_trial
+        from vasim.trials.teleop import run_teleop_trial
 
         return run_teleop_trial(config, store, session_id=session_id,
                                 schedule_index=schedule_index, protocol=protocol,
                                 metric_params=metric_params)
     runner = TrialRunner(config)
     trial_id: int | None = None
+    store = check_sink(store)
     if store is not None:
-        if not isinstance(store, TrialStore):
-            raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
         trial_id = store.begin_trial(trial_meta(
             config, runner.schema, runner.operator.profile, session_id=session_id,
             schedule_index=schedule_index, protocol=protocol))

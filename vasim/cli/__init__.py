@@ -13,18 +13,19 @@ import sys
 from collections.abc import Callable, Sequence
 
 from vasim import __version__
-from vasim.errors import VasimError
+from vasim.core.errors import VasimError
 
 Registrar = Callable[["argparse._SubParsersAction[argparse.ArgumentParser]"], None]
 
 
 def _registrars() -> list[Registrar]:
-    from vasim.fixtures import cli as fixtures_cli
-    from vasim.haptics import cli as haptics_cli
-    from vasim.mrcp import cli as mrcp_cli
-    from vasim.study import cli as study_cli
-    from vasim.study import report_cli, stats_cli
-    from vasim.viewer import cli as viewer_cli
+    from vasim.cli import fixtures as fixtures_cli
+    from vasim.cli import haptics as haptics_cli
+    from vasim.cli import mrcp as mrcp_cli
+    from vasim.cli import report as report_cli
+    from vasim.cli import stats as stats_cli
+    from vasim.cli import study as study_cli
+    from vasim.cli import viewer as viewer_cli
 
     return [study_cli.register, viewer_cli.register, fixtures_cli.register, stats_cli.register,
             haptics_cli.register, report_cli.register, mrcp_cli.register]

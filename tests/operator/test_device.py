@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vasim.errors import DeviceError
-from vasim.haptics.devices.scripted import ScriptedDevice
-from vasim.haptics.scripted import OperatorObservation, OperatorProfile, ScriptedOperator
+from vasim.core.errors import DeviceError
+from vasim.haptics.observation import OperatorObservation
 from vasim.haptics.servo import NullPlant, ServoLoop
+from vasim.operator.device import ScriptedDevice
+from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.tasks import point_task, trajectory_task
 
 

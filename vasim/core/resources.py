@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 
 def protocols_dir() -> Path:
@@ -18,7 +18,7 @@ def protocols_dir() -> Path:
     if env:
         p = Path(env)
     else:
-        p = Path(__file__).resolve().parent.parent / "protocols"
+        p = Path(__file__).resolve().parent.parent.parent / "protocols"
     if not p.is_dir():
         raise ConfigError(
             f"protocols folder not found at {p} (set VASIM_PROTOCOLS to the folder holding "

@@ -1,4 +1,4 @@
-"""Tests of the scripted operator (vasim/haptics/scripted.py).
+"""Tests of the scripted operator (vasim/operator/scripted.py).
 
 The closed loop is a tiny stand-in for the trial runner: ``tcp += dX_M / MS``, the goal
 advances when ``|tcp - p_i| <= r_reach``. Comparisons between conditions average over a few
@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.haptics.scripted import (
+from vasim.operator.scripted import (
     OperatorObservation,
     OperatorProfile,
     ScriptedOperator,

@@ -14,7 +14,7 @@ column          dtype     shape   meaning
 ``t``           float64   (n,)    time since trial start [s]
 ``x``           float64   (n,3)   tool centre point x(k) [m]
 ``g``           float64   (n,3)   current goal point g(k) [m] (after the step-k
-                                  goal-advance check, see ``vasim.study.metrics``)
+                                  goal-advance check, see ``vasim.records.point_metrics``)
 ``goal_index``  int32     (n,)    index i of the goal point, ``N`` once all N points
                                   are reached
 ``force``       float64   (n,3)   force rendered to the operator [N] (0 if none)

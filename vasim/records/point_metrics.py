@@ -2,7 +2,7 @@
 
 Pure functions of the logged samples; nothing here touches the store or the clock.
 
-Conventions (**decisions**, the seed leaves them open; they match ``vasim.study.trial``):
+Conventions (**decisions**, the seed leaves them open; they match ``vasim.trials.vf``):
 
 * **Logged goal.** Row j holds ``x(j)`` and the goal *in force when x(j) was compared with
   it*: ``goal_index[j] = i``, ``g(j) = p_i``. If ``|x(j) - p_i| <= r_reach`` the goal

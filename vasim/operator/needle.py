@@ -22,7 +22,7 @@ Geometry (world frame of the scene, metres):
 
 Skill model of a manual transfer (StdT, **decision**: the seed reports misaligned
 transfers and re-grasps without a rate model; the rates come from the scripted operator's
-own skill model, ``vasim.haptics.scripted`` §1). When the operator closes the receiving
+own skill model, ``vasim.operator.scripted`` §1). When the operator closes the receiving
 jaw, the jaw's placement error across the needle is the tool tip's offset from the grasp
 point (y and z: along the needle the jaw slides) plus the operator's perceptual
 misjudgement, a 2-D normal draw with
@@ -54,9 +54,9 @@ from typing import Literal
 
 import numpy as np
 
-from vasim.errors import ConfigError
-from vasim.haptics.scripted import SKILL_NOISE, OperatorProfile, power_law
+from vasim.core.errors import ConfigError
 from vasim.mrcp.interfaces import FloatArray
+from vasim.operator.scripted import SKILL_NOISE, OperatorProfile, power_law
 from vasim.tasks.base import Task
 
 Side = Literal["right", "left"]

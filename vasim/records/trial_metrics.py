@@ -63,8 +63,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
-from vasim.errors import ConfigError
-from vasim.study.samples import IN_VIEW_UNKNOWN
+from vasim.core.errors import ConfigError
+from vasim.records.samples import IN_VIEW_UNKNOWN
 
 FloatArray = NDArray[np.float64]
 

@@ -1,6 +1,6 @@
 r"""A trial in real time: the task and its fixtures in the 1 kHz servo loop, physics beside it.
 
-:class:`RealtimeTrial` runs the same :class:`~vasim.study.trial.TrialRunner` as a headless
+:class:`RealtimeTrial` runs the same :class:`~vasim.trials.vf.TrialRunner` as a headless
 trial, but one control step per tick of a :class:`~vasim.haptics.servo.ServoLoop` fed by a
 device (a haptic device, the browser, the emulator, or the scripted operator as a device),
 while the abdomen physics runs at its own rate (250 Hz for the default scene) in a
@@ -74,7 +74,7 @@ the servo thread alone (physics off, no viewer) max 4.6 ms (the host's floor); +
 the interpreter lock: a normally scheduled thread of the process (physics glue, viewer)
 preempted by another process while it holds the lock. On an unloaded machine that does not
 happen (6 s runs at load ~2: max 4.9-6.0 ms). So (**decision, measured**) the servo loop
-can also run in a process of its own, ``vasim.haptics.realtime_process``: 20 s runs with
+can also run in a process of its own, ``vasim.trials.realtime_process``: 20 s runs with
 every organ awake and the viewer stream, load average 5-6, alternating: threads 971-984 Hz,
 p99 1.9 ms, longest gap 49-101 ms; servo process 999.9 Hz, p99 1.000 ms, longest gap
 4.5-4.8 ms. ``vasim trial --realtime`` and ``run_realtime_trial(process=True)`` use it. This
@@ -93,7 +93,7 @@ same metrics. Stored trials keep two files next to the database: the device stre
 Example (deterministic, no tissue, the emulated Omni held still):
     >>> import numpy as np
     >>> from vasim.haptics.devices.emulator import EmulatorDevice
-    >>> from vasim.study.trial import TrialConfig
+    >>> from vasim.trials.vf import TrialConfig
     >>> trial = RealtimeTrial(TrialConfig(schema="none", scene="none", max_time=0.2),
     ...                       EmulatorDevice(hand=np.zeros(3)), physics="inline")
     >>> trial.run_ticks(100)
@@ -120,16 +120,18 @@ from numpy.typing import NDArray
 
 from vasim.abdomen.contact import ToolPose
 from vasim.abdomen.runner import PhysicsThread
-from vasim.errors import ConfigError, DeviceError
+from vasim.core.errors import ConfigError, DeviceError
 from vasim.fixtures.schema import Schema, parse_schema
 from vasim.haptics.coupling import CouplingParams, LinearForce
 from vasim.haptics.device import BUTTON_2, Device, FloatArray, ScheduledDevice
 from vasim.haptics.devices.replay import DeviceStream, ReplayDevice, stream_path
-from vasim.haptics.devices.scripted import ScriptedDevice
-from vasim.haptics.scripted import OperatorObservation, ScriptedOperator
+from vasim.haptics.observation import OperatorObservation
 from vasim.haptics.servo import CoupledToolPlant, ServoLoop
 from vasim.haptics.timing import TimingStats
-from vasim.study.trial import (
+from vasim.operator.device import ScriptedDevice
+from vasim.operator.scripted import ScriptedOperator
+from vasim.trials.sink import TrialSink, TrialSource, check_sink
+from vasim.trials.vf import (
     MasterIncrement,
     TrialConfig,
     TrialFrame,
@@ -753,7 +755,7 @@ class RealtimeRecording:
 # Stored runs
 
 
-def run_realtime_trial(config: TrialConfig, store: object | None = None,
+def run_realtime_trial(config: TrialConfig, store: TrialSink | None = None,
                        device: Device | None = None, *, schema: Schema | None = None,
                        physics: PhysicsMode = "thread", process: bool = False,
                        device_factory: Any = None, device_name: str | None = None,
@@ -774,7 +776,7 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
             (None: the scripted operator). schema: overrides ``config.schema``.
         physics: ``"thread"`` (real time) or ``"off"``.
         process: run the servo loop in its own process
-            (``vasim.haptics.realtime_process``: measured steadier on a loaded host); the
+            (``vasim.trials.realtime_process``: measured steadier on a loaded host); the
             device is then built there by ``device_factory`` (picklable; None: the
             scripted operator) and stored under ``device_name``.
         poll_s: how often the caller's thread checks for the end [s].
@@ -783,19 +785,16 @@ def run_realtime_trial(config: TrialConfig, store: object | None = None,
     Returns:
         (result, trial_id or None, timing).
     """
-    from vasim.study.store import TrialStore
-
     if physics == "inline":
         raise ConfigError("physics 'inline' cannot keep real time; use 'thread' or 'off'",
                           field="physics")
-    if store is not None and not isinstance(store, TrialStore):
-        raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
+    store = check_sink(store)
     trial: Any
     if process:
         if device is not None:
             raise ConfigError("a device object cannot move to the servo process: pass "
                               "device_factory (or process=False)", field="device")
-        from vasim.haptics.realtime_process import ProcessRealtimeTrial
+        from vasim.trials.realtime_process import ProcessRealtimeTrial
 
         trial = ProcessRealtimeTrial(config, device_factory, schema=schema, physics=physics)
         scripted = device_factory is None
@@ -933,10 +932,9 @@ def replay_trial(store: object, trial_id: int) -> ReplayReport:
     Raises:
         DeviceError: the trial has no recording. StoreError: unknown trial.
     """
-    from vasim.study.store import TrialStore
-
-    if not isinstance(store, TrialStore):
-        raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
+    if not isinstance(store, TrialSource):
+        raise TypeError(f"store must be a TrialSource (e.g. a TrialStore), got "
+                        f"{type(store).__name__}")
     row = store.trial(trial_id)
     files = recorded_files(store, row)
     if files is None:

@@ -15,9 +15,9 @@ import sys
 from pathlib import Path
 from typing import Any, TextIO
 
-from vasim.errors import ConfigError
-from vasim.jsonio import dumps
-from vasim.study.protocol import MAX_TRIAL_TIME_S
+from vasim.core.errors import ConfigError
+from vasim.core.jsonio import dumps
+from vasim.trials.kinds import MAX_TRIAL_TIME_S
 
 _EPILOG = """\
 examples:
@@ -90,10 +90,10 @@ def check_plot_path(path: Path) -> None:
     """Refuses a plot path whose format is unknown or whose folder does not exist.
 
     Example:
-        >>> check_plot_path(Path("run.txt"))
+        >>> check_plot_path(Path("run.txt"))  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        vasim.errors.ConfigError: field '--plot': run.txt: the suffix must be .png, .pdf or .svg
+        vasim.core.errors.ConfigError: ... run.txt: the suffix must be .png, .pdf or .svg
     """
     if path.suffix.lower() not in PLOT_SUFFIXES:
         raise ConfigError(f"{path}: the suffix must be .png, .pdf or .svg", field="--plot")

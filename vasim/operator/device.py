@@ -1,4 +1,4 @@
-"""The scripted operator (``vasim.haptics.scripted``) as a device.
+"""The scripted operator (``vasim.operator.scripted``) as a device.
 
 The simulated person moves the master by an increment dX_M per servo tick; the device's
 position is the integral of these increments, starting at ``start`` (the task's start, in
@@ -17,7 +17,7 @@ being the task's POI i, advanced when the position comes within ``task.reach_rad
 Time: t = k dt at the k-th read (k = 0 first), the operator's control step ``dt``.
 
 Example:
-    >>> from vasim.haptics.scripted import OperatorProfile, ScriptedOperator
+    >>> from vasim.operator.scripted import OperatorProfile, ScriptedOperator
     >>> from vasim.tasks import point_task
     >>> task = point_task()
     >>> dev = ScriptedDevice(ScriptedOperator(OperatorProfile.expert(), task, seed=1),
@@ -35,7 +35,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vasim.errors import DeviceError
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import (
     UNBOUNDED,
     DeviceLimits,
@@ -43,7 +43,8 @@ from vasim.haptics.device import (
     FloatArray,
     as_force,
 )
-from vasim.haptics.scripted import OperatorObservation, ScriptedOperator
+from vasim.haptics.observation import OperatorObservation
+from vasim.operator.scripted import ScriptedOperator
 
 SCRIPTED_LIMITS = DeviceLimits(workspace_min=UNBOUNDED[0], workspace_max=UNBOUNDED[1],
                                max_force_n=3.3, max_continuous_force_n=0.88)

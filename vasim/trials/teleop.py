@@ -1,14 +1,14 @@
 """Trials of the MRCP vs standard-teleoperation study (spec/study.md §4, spec/mrcp.md §8).
 
-One trial carries the needle of :mod:`vasim.mrcp.needle` through its rings in the virtual
+One trial carries the needle of :mod:`vasim.operator.needle` through its rings in the virtual
 abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes:
 
 * ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
   masters : 2 slaves). At every change of side the scripted operator transfers the needle
   itself: it carries the needle to the route's via point at the midline, the hand-over
-  point (:func:`~vasim.mrcp.needle.handover_point`), brings the other tool to the pre-grasp and
+  point (:func:`~vasim.operator.needle.handover_point`), brings the other tool to the pre-grasp and
   grasp points, closes that jaw, then opens the first one. Jaw placement errors, drawn
-  from the operator's skill model (:mod:`vasim.mrcp.needle`), cause re-grasps and
+  from the operator's skill model (:mod:`vasim.operator.needle`), cause re-grasps and
   misaligned transfers.
 * ``"mrcp"`` — task-oriented teleoperation (1 master : 2 slaves): the operator moves the
   needle only; the MRCP kernel (:class:`~vasim.mrcp.kernel.MRCPKernel` with the RJ, tool
@@ -18,20 +18,20 @@ abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of thr
   endoscope follows the needle (a narrower, closer view: ``CAMERA_ZOOM``), instead of the
   fixed wide-angle endoscope of the other modes.
 
-The operator is the study pipeline's scripted person (:mod:`vasim.haptics.scripted`, its
+The operator is the study pipeline's scripted person (:mod:`vasim.operator.scripted`, its
 profile, seed and practice from the session): minimum-jerk submovements aimed at what it
 sees, Fitts timing, motor and perceptual noise, tremor, learning. A hand runs
 ``OPERATOR_SUBSTEPS`` steps per control cycle; the station runs at the seed's 18 ms cycle
 (``CYCLE_DT``); the abdomen physics at its own rate (4 ms), with both instruments and the
 endoscope as its tools.
 
-Logged (one sample per control cycle, ``vasim.study.samples`` columns): ``x`` the needle
+Logged (one sample per control cycle, ``vasim.records.samples`` columns): ``x`` the needle
 centre (the task), ``g`` the ring it was compared with (its position that cycle: the rings
 ride on the tissue), ``goal_index`` that ring's index, the tissue
 contact flag (any instrument), the force and torque on the needle holder's instrument of
 the latest physics step, ``clutch`` (master decoupled),
 ``zoom`` and ``in_view`` (needle inside the camera's view cone). The trial metrics are the
-pipeline's (``vasim.study.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
+pipeline's (``vasim.records.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
 needle trajectory, spec/study.md §4 "length of the needle/tool trajectory"), Q =
 ``contact_time``, ``accumulated_force``, ``accumulated_torque`` and
 ``target_displacement_max``; with tissue, every Q metric is the abdomen's quality
@@ -42,7 +42,7 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
 
 **Decisions**:
 
-* One needle route in every mode (issue #7 §4; :func:`~vasim.mrcp.needle.needle_route`):
+* One needle route in every mode (issue #7 §4; :func:`~vasim.operator.needle.needle_route`):
   the operator aims at the same waypoints (the rings, and between rings on different
   sides the via point at the midline 1.5 cm above the higher ring), each reached within
   the ring radius, a ring counting only after its via point; the via point is computed
@@ -98,13 +98,13 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
   completed (seeds 1-11 and that one), none stopped.
 * Camera: in ``stdt`` and ``mrcp`` the endoscope stays aimed at the centroid of the rings
   with the 100 deg field of view of the study's fixed endoscope
-  (``vasim.study.trial.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
+  (``vasim.trials.vf.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
   above this task). The camera hand of ``mrcp_cam`` re-aims only when the needle leaves
   the central third of its 70 deg view (a dead zone), then follows it with a 0.4 s time
   constant; its path is the aim point's.
 
 Example:
-    >>> from vasim.study.trial import TrialConfig
+    >>> from vasim.trials.vf import TrialConfig
     >>> res = TeleopTrial(TrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
     ...                   n_rings=2).run()
     >>> res.summary["mode"], float(res.samples.view()["t"][0])
@@ -123,11 +123,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from vasim.errors import ConfigError
-from vasim.haptics.scripted import OperatorProfile, ScriptedOperator
+from vasim.core.errors import ConfigError
 from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 from vasim.mrcp.modes import KernelState
-from vasim.mrcp.needle import (
+from vasim.mrcp.planner import PlannerParams
+from vasim.mrcp.toolstation import CameraRobot, Station, build_station
+from vasim.operator.needle import (
     RING_RADIUS,
     RING_SITES,
     NeedleTask,
@@ -142,17 +143,17 @@ from vasim.mrcp.needle import (
     needs_via,
     pregrasp_offset,
 )
-from vasim.mrcp.planner import PlannerParams
-from vasim.mrcp.toolstation import CameraRobot, Station, build_station
-from vasim.study.metrics import evaluate_trial
-from vasim.study.samples import SampleBuffer
-from vasim.study.trial import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_view_cone
-from vasim.study.trial_metrics import MetricParams, trial_metrics
+from vasim.operator.scripted import OperatorProfile, ScriptedOperator
+from vasim.records.point_metrics import evaluate_trial
+from vasim.records.samples import SampleBuffer
+from vasim.records.trial_metrics import MetricParams, trial_metrics
+from vasim.trials.sink import TrialSink, check_sink
+from vasim.trials.vf import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_view_cone
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
-    from vasim.study.store import TrialMeta
+    from vasim.records.trial_meta import TrialMeta
 
 CYCLE_DT = 0.018
 """Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""
@@ -448,7 +449,7 @@ class TeleopTrial:
 
     def _finish_cycle(self) -> None:
         """Physics, the ring test, the camera hand, the sample (with the ring it was
-        compared with: the goal advances after the row, as in ``vasim.study.trial``)."""
+        compared with: the goal advances after the row, as in ``vasim.trials.vf``)."""
         self._physics()
         g, i = self._goal().copy(), self.i
         self._check_via()
@@ -689,8 +690,8 @@ def teleop_meta(config: TrialConfig, *, session_id: int | None = None,
                 schedule_index: int | None = None, protocol: str | None = None) -> TrialMeta:
     """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``)."""
     from vasim.fixtures.schema import dumps_schema, load_schema
-    from vasim.study.store import TrialMeta
-    from vasim.study.trial import config_record
+    from vasim.records.trial_meta import TrialMeta
+    from vasim.trials.vf import config_record
 
     profile = config.profile if config.profile is not None else _preset(config.skill)
     return TrialMeta(
@@ -718,24 +719,21 @@ def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]
             "sim_time": float(result.summary["sim_time"])}
 
 
-def run_teleop_trial(config: TrialConfig, store: object | None = None, *,
+def run_teleop_trial(config: TrialConfig, store: TrialSink | None = None, *,
                      session_id: int | None = None, schedule_index: int | None = None,
                      protocol: str | None = None, metric_params: MetricParams | None = None,
                      n_rings: int | None = None, abdomen: Abdomen | None = None,
                      ) -> tuple[TrialResult, int | None]:
-    """``vasim.study.trial.run_trial`` for a teleoperation mode: runs the trial headless and,
+    """``vasim.trials.vf.run_trial`` for a teleoperation mode: runs the trial headless and,
     with a ``TrialStore``, stores it the same way (row 'running' first, everything in one
     transaction at the end, 'interrupted' with the partial samples on any exception).
 
     ``n_rings`` and ``abdomen`` are passed to :class:`TeleopTrial` (shorter tasks, a shared
     abdomen in tests)."""
-    from vasim.study.store import TrialStore
-
     trial = TeleopTrial(config, n_rings=n_rings, abdomen=abdomen)
     trial_id: int | None = None
+    store = check_sink(store)
     if store is not None:
-        if not isinstance(store, TrialStore):
-            raise TypeError(f"store must be a TrialStore, got {type(store).__name__}")
         trial_id = store.begin_trial(teleop_meta(config, session_id=session_id,
                                                  schedule_index=schedule_index,
                                                  protocol=protocol))

@@ -19,7 +19,7 @@ from typing import Any, TextIO
 
 import pandas as pd
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 _EPILOG = """\
 Input is a long-format CSV: one row per observation, with the dependent variable, the

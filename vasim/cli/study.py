@@ -19,7 +19,7 @@ import math
 import sys
 from pathlib import Path
 
-from vasim.errors import ConfigError
+from vasim.core.errors import ConfigError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--points", action="store_true", help="print the per-point table")
     rt = p.add_argument_group(
         "real time", "run the trial in real time through the 1 kHz haptic servo loop "
-        "(vasim.haptics.realtime), or replay a recorded real-time trial exactly")
+        "(vasim.trials.realtime), or replay a recorded real-time trial exactly")
     rt.add_argument("--realtime", action="store_true",
                     help="run in real time (1 kHz servo loop in its own process, physics "
                          "thread beside it); prints the loop's "
@@ -77,7 +77,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def _cmd_trial(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
-    from vasim.study.trial import TrialConfig, run_trial
+    from vasim.trials.vf import TrialConfig, run_trial
 
     realtime_only = [flag for flag, given in (
         ("--device", getattr(args, "device", "scripted") != "scripted"),
@@ -134,9 +134,9 @@ def _realtime_device_factory(kind: str) -> object | None:
 
 
 def _cmd_realtime(args: argparse.Namespace) -> int:
-    from vasim.haptics.realtime import run_realtime_trial
     from vasim.study.store import TrialStore
-    from vasim.study.trial import TrialConfig
+    from vasim.trials.realtime import run_realtime_trial
+    from vasim.trials.vf import TrialConfig
 
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
@@ -171,7 +171,7 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
 
 def format_timing(timing: object) -> str:
     """The servo loop's (and the physics thread's) timing of a real-time trial."""
-    from vasim.haptics.realtime import RealtimeTiming
+    from vasim.trials.realtime import RealtimeTiming
 
     assert isinstance(timing, RealtimeTiming)
     s = timing.servo
@@ -197,8 +197,8 @@ def format_timing(timing: object) -> str:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from vasim.haptics.realtime import replay_trial
     from vasim.study.store import TrialStore
+    from vasim.trials.realtime import replay_trial
 
     if args.db is None:
         raise ConfigError("--replay needs --db (the database the trial is stored in)",
@@ -220,7 +220,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 def format_summary(result: object, trial_id: int | None, db: Path | None) -> str:
     """A fixed-width summary table of one trial."""
-    from vasim.study.trial import TrialResult
+    from vasim.trials.vf import TrialResult
 
     assert isinstance(result, TrialResult)
     s = result.summary
@@ -399,9 +399,10 @@ def _session_line(store: object, session_id: int) -> str:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from vasim.records.trial_meta import validate_subject_code
     from vasim.study.protocol import load_protocol
     from vasim.study.session import SessionSettings, run_session, start_session
-    from vasim.study.store import TrialStore, validate_subject_code
+    from vasim.study.store import TrialStore
 
     settings = SessionSettings(operator=args.operator, skill=args.skill,
                                max_trial_time=args.max_time)

@@ -1,0 +1,165 @@
+"""Behaviour-equivalence check across a refactoring: same commands, same stored rows.
+
+Runs, in the current tree and in a git revision (checked out into a temporary worktree and
+imported through ``PYTHONPATH``), the same fixed-seed commands:
+
+* one headless trial (``vasim trial --schema ff --seed 1``),
+* a 3-subject simulated cohort of ``vf_learning_curve`` (seed 7) and its report tables,
+* ``vasim mrcp run cube_rotation --json``,
+
+then compares every stored row of both databases (all tables; columns that hold wall-clock
+times, process ids, host names or the package version are left out), every CSV table of
+both reports, and the MRCP JSON. Exit status 0 when everything is identical, 1 otherwise
+with the first differences printed.
+
+Usage::
+
+    python -m bench.equivalence --ref <git revision>            # current tree vs revision
+    python -m bench.equivalence --capture DIR                   # only write this tree's outputs
+
+It is a script (minutes of simulation), not a unit test: the refactoring commit runs it
+against its parent and quotes the result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sqlite3
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+#: Columns whose value depends on when/where a command ran, not on what it computed.
+VOLATILE_COLUMNS = frozenset(
+    {"pid", "host", "proc_token", "timing_json", "vasim_version", "applied_at"}
+)
+
+RUN_CLI = "import sys; from vasim.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def _vasim(args: list[str], src: Path, cwd: Path) -> str:
+    env = dict(os.environ, PYTHONPATH=str(src), VASIM_PROTOCOLS=str(src / "protocols"))
+    proc = subprocess.run(
+        [sys.executable, "-c", RUN_CLI, *args, "--no-progress"]
+        if args[0] in {"study", "report"}
+        else [sys.executable, "-c", RUN_CLI, *args],
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if proc.returncode != 0:
+        raise SystemExit(f"vasim {' '.join(args)} failed in {src}:\n{proc.stderr[-2000:]}")
+    return proc.stdout
+
+
+def capture(src: Path, out: Path) -> None:
+    """Run the fixed-seed commands with the code of ``src``; write outputs under ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"[equivalence] {src}: one trial", file=sys.stderr)
+    _vasim(["trial", "--schema", "ff", "--seed", "1", "--db", str(out / "trial.sqlite")], src, out)
+    print(f"[equivalence] {src}: 3-subject cohort", file=sys.stderr)
+    _vasim(
+        ["study", "simulate", "--protocol", "vf_learning_curve", "--subjects", "3",
+         "--seed", "7", "--db", str(out / "cohort.sqlite")],
+        src, out,
+    )
+    print(f"[equivalence] {src}: report", file=sys.stderr)
+    _vasim(["report", "--db", str(out / "cohort.sqlite"), "--out", str(out / "report")], src, out)
+    print(f"[equivalence] {src}: mrcp cube_rotation", file=sys.stderr)
+    text = _vasim(["mrcp", "run", "cube_rotation", "--json"], src, out)
+    (out / "mrcp_cube_rotation.json").write_text(text)
+
+
+def _rows(db: Path) -> dict[str, list[tuple[object, ...]]]:
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    try:
+        tables = [r[0] for r in con.execute(
+            "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+        result: dict[str, list[tuple[object, ...]]] = {}
+        for table in tables:
+            cols = [r[1] for r in con.execute(f"PRAGMA table_info({table})")]
+            keep = [c for c in cols if c not in VOLATILE_COLUMNS and not c.endswith("_at")]
+            sel = ", ".join(f'"{c}"' for c in keep)
+            rows = con.execute(f'SELECT {sel} FROM "{table}" ORDER BY {sel}').fetchall()
+            result[table] = [tuple(keep), *rows]
+        return result
+    finally:
+        con.close()
+
+
+def compare(a: Path, b: Path) -> list[str]:
+    """Differences between two captured output folders (empty when identical)."""
+    diffs: list[str] = []
+    for name in ("trial.sqlite", "cohort.sqlite"):
+        ra, rb = _rows(a / name), _rows(b / name)
+        if sorted(ra) != sorted(rb):
+            diffs.append(f"{name}: tables differ {sorted(ra)} vs {sorted(rb)}")
+            continue
+        for table in ra:
+            if ra[table] != rb[table]:
+                n = sum(x != y for x, y in zip(ra[table], rb[table], strict=False))
+                diffs.append(f"{name}:{table}: {n} rows differ "
+                             f"({len(ra[table]) - 1} vs {len(rb[table]) - 1} rows)")
+            else:
+                print(f"  {name}:{table}: {len(ra[table]) - 1} rows identical")
+    ta = sorted(p.relative_to(a) for p in (a / "report").rglob("*.csv"))
+    tb = sorted(p.relative_to(b) for p in (b / "report").rglob("*.csv"))
+    if ta != tb:
+        diffs.append(f"report tables differ: {ta} vs {tb}")
+    for rel in ta:
+        if rel in tb and (a / rel).read_bytes() != (b / rel).read_bytes():
+            diffs.append(f"{rel}: contents differ")
+    print(f"  report: {len(ta)} CSV tables compared")
+    ja = json.loads((a / "mrcp_cube_rotation.json").read_text())
+    jb = json.loads((b / "mrcp_cube_rotation.json").read_text())
+    for volatile in ("elapsed_s", "wall_s", "cycle_ms"):
+        ja.pop(volatile, None)
+        jb.pop(volatile, None)
+    if ja != jb:
+        diffs.append("mrcp_cube_rotation.json differs")
+    else:
+        print("  mrcp cube_rotation JSON identical")
+    return diffs
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ref", help="git revision to compare the current tree against")
+    parser.add_argument("--capture", type=Path, help="only capture this tree's outputs here")
+    parser.add_argument("--keep", type=Path, help="keep both captures under this folder")
+    args = parser.parse_args(argv)
+    if args.capture:
+        capture(REPO, args.capture)
+        return 0
+    if not args.ref:
+        parser.error("--ref or --capture is required")
+    with tempfile.TemporaryDirectory(prefix="vasim-equiv-") as tmp:
+        root = args.keep or Path(tmp)
+        worktree = Path(tmp) / "ref"
+        subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(worktree),
+                        args.ref], check=True, capture_output=True)
+        try:
+            capture(worktree, root / "ref")
+            capture(REPO, root / "head")
+        finally:
+            subprocess.run(["git", "-C", str(REPO), "worktree", "remove", "--force",
+                            str(worktree)], check=False)
+        diffs = compare(root / "ref", root / "head")
+    if diffs:
+        print("NOT equivalent:")
+        for d in diffs[:40]:
+            print("  " + d)
+        return 1
+    print(f"equivalent: the current tree reproduces {args.ref} exactly")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

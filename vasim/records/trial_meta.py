@@ -1,0 +1,102 @@
+"""The identity of a stored trial: its subject code and what is known when it starts.
+
+``TrialMeta`` is the record a trial sink (``vasim.trials.sink``) receives when a trial
+begins; the study store (``vasim.study.store``) writes it as the ``trials`` row.
+Subjects are pseudonymous codes, never names.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import socket
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from vasim.core.errors import ConfigError
+
+SUBJECT_CODE_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
+"""Allowed subject codes: 1-32 letters, digits, '_' or '-' (a pseudonym, never a name)."""
+
+_SUBJECT_RE = re.compile(SUBJECT_CODE_PATTERN)
+
+
+def validate_subject_code(code: object) -> str:
+    """Returns ``code`` if it is a valid subject code, else raises ``ConfigError``.
+
+    Example:
+        >>> validate_subject_code("S01")
+        'S01'
+    """
+    if not isinstance(code, str) or not _SUBJECT_RE.fullmatch(code):
+        raise ConfigError(
+            f"invalid subject code {code!r}: use 1-32 letters, digits, '_' or '-' "
+            "(a pseudonymous code, never a name)",
+            field="subject",
+        )
+    return code
+
+
+@dataclass(frozen=True)
+class TrialMeta:
+    """What is known about a trial when it starts (the ``trials`` row).
+
+    Attributes:
+        subject: subject code (``SUBJECT_CODE_PATTERN``); registered on first use.
+        task: task kind, e.g. ``"trajectory"`` or ``"point"``.
+        variant: trajectory variant (0 = original), or None.
+        schema: fixture schema name, or None. operator: input device name, or None.
+        seed: random seed of the trial, or None. dt: control step [s], or None.
+        active_fixtures: active fixture names, e.g. ``"VG,FF"``; ``""`` for VF-free.
+        session_id: session id, or None. protocol: protocol name.
+        schedule_index: the scheduled trial of the session this trial is an attempt at, or
+            None (then ``session_id`` is only informative).
+        pid, host: the writing process (defaults: this process, this host).
+        config: the full trial configuration (JSON-serialisable mapping), or None.
+        schema_toml: the resolved fixture schema as TOML text, or None.
+    """
+
+    subject: str
+    task: str
+    variant: int | None = None
+    schema: str | None = None
+    operator: str | None = None
+    seed: int | None = None
+    dt: float | None = None
+    active_fixtures: str = ""
+    session_id: int | None = None
+    protocol: str | None = None
+    pid: int = field(default_factory=os.getpid)
+    host: str = field(default_factory=socket.gethostname)
+    config: Mapping[str, Any] | None = None
+    schema_toml: str | None = None
+    schedule_index: int | None = None
+
+    def __post_init__(self) -> None:
+        validate_subject_code(self.subject)
+        if not isinstance(self.task, str) or not self.task:
+            raise ConfigError(f"task must be a non-empty string, got {self.task!r}", field="task")
+        for name in ("variant", "seed", "session_id", "pid", "schedule_index"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
+                raise ConfigError(f"{name} must be an integer or None, got {v!r}", field=name)
+        if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
+            raise ConfigError(f"dt must be > 0 s, got {self.dt!r}", field="dt")
+        if not isinstance(self.active_fixtures, str):
+            raise ConfigError(f"active_fixtures must be a string, got {self.active_fixtures!r}",
+                              field="active_fixtures")
+        if self.schedule_index is not None and self.session_id is None:
+            raise ConfigError("a schedule_index needs its session_id", field="schedule_index")
+
+    @classmethod
+    def from_mapping(cls, meta: Mapping[str, Any]) -> TrialMeta:
+        """Builds a ``TrialMeta`` from a dict; unknown keys raise ``ConfigError``."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(meta) - known)
+        if unknown:
+            raise ConfigError(f"unknown trial meta field(s) {unknown} (known: {sorted(known)})")
+        return cls(**meta)
