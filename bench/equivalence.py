@@ -24,6 +24,7 @@ against its parent and quotes the result.
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import sqlite3
@@ -94,6 +95,16 @@ def _rows(db: Path) -> dict[str, list[tuple[object, ...]]]:
         con.close()
 
 
+def _table(path: Path) -> list[list[str]]:
+    """A CSV table's cells as text, without the wall-clock columns (``*_at``)."""
+    with path.open(newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows:
+        return rows
+    keep = [i for i, name in enumerate(rows[0]) if not name.endswith("_at")]
+    return [[row[i] for i in keep if i < len(row)] for row in rows]
+
+
 def compare(a: Path, b: Path) -> list[str]:
     """Differences between two captured output folders (empty when identical)."""
     diffs: list[str] = []
@@ -114,7 +125,7 @@ def compare(a: Path, b: Path) -> list[str]:
     if ta != tb:
         diffs.append(f"report tables differ: {ta} vs {tb}")
     for rel in ta:
-        if rel in tb and (a / rel).read_bytes() != (b / rel).read_bytes():
+        if rel in tb and _table(a / rel) != _table(b / rel):
             diffs.append(f"{rel}: contents differ")
     print(f"  report: {len(ta)} CSV tables compared")
     ja = json.loads((a / "mrcp_cube_rotation.json").read_text())
