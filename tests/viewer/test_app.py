@@ -19,6 +19,7 @@ import pytest
 
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
+from vasim.core.errors import ConfigError
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
 from vasim.viewer.views import (
@@ -204,17 +205,33 @@ def _serve_args(**kw) -> argparse.Namespace:
     return argparse.Namespace(**base)
 
 
-def test_cli_warns_when_binding_beyond_loopback(monkeypatch, capsys) -> None:
+def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(monkeypatch, capsys) -> None:
     monkeypatch.setattr("vasim.viewer.app.ViewerApp", _FakeApp)
-    assert viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080)) == 0
+    # Without --expose a public bind is refused before anything starts.
+    with pytest.raises(ConfigError, match="add --expose"):
+        viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080))
+    n_before = len(_FakeApp.instances)
+    assert main(["serve", "--host", "0.0.0.0", "--port", "8080", "--duration", "0"]) == 2
+    assert len(_FakeApp.instances) == n_before
+    capsys.readouterr()
+    # With --expose: the warning, and the app gets a fresh random token.
+    assert viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080, expose=True)) == 0
     err = capsys.readouterr().err
     assert "warning" in err and "0.0.0.0" in err and "every network interface" in err
     assert _FakeApp.instances[-1].host == "0.0.0.0" and _FakeApp.instances[-1].stopped
-    assert viewer_cli.serve(_serve_args(host="192.0.2.7")) == 0
-    assert "192.0.2.7" in capsys.readouterr().err
+    token = _FakeApp.instances[-1].kw["token"]
+    assert isinstance(token, str) and len(token) >= 20
+    viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080, expose=True))
+    assert _FakeApp.instances[-1].kw["token"] != token
+    capsys.readouterr()
+    # An address that is not this machine's is the error, without an exposure warning first.
+    with pytest.raises(ConfigError, match=r"cannot bind to host '999\.1\.1\.1'"):
+        viewer_cli.serve(_serve_args(host="999.1.1.1", expose=True))
+    assert "warning" not in capsys.readouterr().err
     for host in ("127.0.0.1", "localhost", "::1"):
         assert viewer_cli.serve(_serve_args(host=host)) == 0
         assert "warning" not in capsys.readouterr().err
+        assert _FakeApp.instances[-1].kw["token"] is None
     # --task point without --schema picks the point-targeting VFS.
     viewer_cli.serve(_serve_args(task="point"))
     assert _FakeApp.instances[-1].schema == "point_targeting"

@@ -15,6 +15,8 @@ import threading
 import time
 from typing import Any
 
+from vasim.core.errors import ConfigError
+
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Adds ``vasim serve`` to the ``vasim`` command line."""
@@ -31,7 +33,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("--host", default="127.0.0.1",
                    help="interface to bind (default 127.0.0.1: this machine only; any other "
-                        "address exposes the viewer, which has no authentication)")
+                        "address needs --expose)")
+    p.add_argument("--expose", action="store_true",
+                   help="allow a --host beyond this machine; every page (trainee and "
+                        "experimenter) then needs the access token printed with the URL")
     p.add_argument("--port", type=int, default=8080,
                    help="TCP port (default 8080; if busy, the next free port is used and "
                         "printed; 0 picks any free port)")
@@ -74,14 +79,14 @@ class _ServeHelpFormatter(argparse.HelpFormatter):
 
 def exposure_warning(host: str, port: int) -> str | None:
     """The warning printed for a non-loopback bind address, or None for loopback."""
-    from vasim.viewer.app import is_loopback
+    from vasim.viewer.access import is_loopback
 
     if is_loopback(host):
         return None
     where = "every network interface" if host in ("0.0.0.0", "::", "") else host
     return (f"warning: --host {host} exposes the viewer on {where} (port {port}): anyone who "
-            "can reach this machine can watch the trial and use its controls (there is no "
-            "authentication); use --host 127.0.0.1 unless you mean to")
+            "can reach this machine and has the URL with its token can watch the trial and "
+            "use its controls; use --host 127.0.0.1 unless you mean to")
 
 
 def serve(args: argparse.Namespace) -> int:
@@ -90,8 +95,17 @@ def serve(args: argparse.Namespace) -> int:
     Raises:
         VasimError: for a bad schema/task (the caller prints it as one line).
     """
-    from vasim.viewer.app import DEFAULT_SCHEMA_FOR_TASK, ViewerApp
+    from vasim.viewer.access import is_loopback, new_token
+    from vasim.viewer.app import DEFAULT_SCHEMA_FOR_TASK, ViewerApp, check_bind_address
 
+    check_bind_address(args.host, args.port)  # a bad address is the error, not a warning
+    token: str | None = None
+    if not is_loopback(args.host):
+        if not getattr(args, "expose", False):
+            raise ConfigError(f"--host {args.host} exposes the viewer beyond this machine; add "
+                              "--expose to confirm (every page then needs an access token)",
+                              field="--host")
+        token = new_token()
     warning = exposure_warning(args.host, args.port)
     if warning:
         print(warning, file=sys.stderr, flush=True)
@@ -105,13 +119,13 @@ def serve(args: argparse.Namespace) -> int:
             print(f"note: {', '.join(ignored)} do not apply to an MRCP scene (no trainee "
                   "trials): ignored", file=sys.stderr)
         app = MrcpViewerApp(args.host, args.port, scene, seed=args.seed,
-                            coarse=bool(getattr(args, "mrcp_coarse", False)))
+                            coarse=bool(getattr(args, "mrcp_coarse", False)), token=token)
         what = (f"MRCP scenario {app.scenario.name}, seed {args.seed}, "
                 f"{'36' if getattr(args, 'mrcp_coarse', False) else '18'} ms cycle, looping")
     else:
         schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
         app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
-                        scene=scene, db=getattr(args, "db", None))
+                        scene=scene, db=getattr(args, "db", None), token=token)
         db = getattr(args, "db", None)
         stored = f"trials stored in {db}" if db else "demo only: no --db"
         what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"

@@ -8,13 +8,13 @@ synth; ``app`` wires them together; ``cli`` registers ``vasim serve``.
 
 from __future__ import annotations
 
+from vasim.viewer.access import is_loopback as is_loopback
 from vasim.viewer.app import Command as Command
 from vasim.viewer.app import DragInput as DragInput
 from vasim.viewer.app import Snapshot as Snapshot
 from vasim.viewer.app import TrialInfo as TrialInfo
 from vasim.viewer.app import ViewerApp as ViewerApp
 from vasim.viewer.app import endoscope_pose as endoscope_pose
-from vasim.viewer.app import is_loopback as is_loopback
 from vasim.viewer.audio import AudioStream as AudioStream
 from vasim.viewer.controller import PanelState as PanelState
 from vasim.viewer.controller import TrainingController as TrainingController

@@ -34,7 +34,6 @@ abdomen's trainee and experimenter tabs.
 from __future__ import annotations
 
 import collections
-import ipaddress
 import logging
 import queue
 import socket
@@ -56,6 +55,7 @@ from vasim.fixtures.schema import load_schema
 from vasim.haptics.device import BUTTON_2
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
+from vasim.viewer.access import access_policy, guarded_server, viewer_url
 from vasim.viewer.audio import AudioStream
 from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,
@@ -98,16 +98,6 @@ def check_bind_address(host: str, port: int) -> None:
     except OSError as exc:
         raise ConfigError(f"cannot bind to host {host!r}: {exc.strerror or exc}",
                           field="host") from None
-
-
-def is_loopback(host: str) -> bool:
-    """True when ``host`` only accepts connections from this machine."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host.strip("[]")).is_loopback
-    except ValueError:
-        return False
 
 
 def endoscope_pose(look_at: tuple[float, float, float] = (0.0, 0.02, 0.085),
@@ -250,7 +240,9 @@ class ViewerApp(ErrorReporter):
         view_hz: float = 40.0,
         audio_hz: float = 20.0,
         trial_factory: Callable[..., Any] | None = None,
+        token: str | None = None,
     ):
+        self.access = access_policy(host, token)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
@@ -297,8 +289,7 @@ class ViewerApp(ErrorReporter):
             raise RuntimeError("ViewerApp.start() was already called")
         try:
             check_bind_address(self.host, self.requested_port)
-            self.server = viser.ViserServer(host=self.host, port=self.requested_port,
-                                            verbose=False)
+            self.server = guarded_server(self.host, self.requested_port, self.access)
             self.server.gui.configure_theme(control_width="large")
             self._build_scene()
             self._build_gui()
@@ -354,13 +345,9 @@ class ViewerApp(ErrorReporter):
 
     @property
     def url(self) -> str:
-        """Address to open in a browser (the wildcard hosts are shown as 127.0.0.1)."""
-        host = self.host
-        if host in ("0.0.0.0", "::", ""):
-            host = "127.0.0.1"
-        elif ":" in host and not host.startswith("["):
-            host = f"[{host}]"
-        return f"http://{host}:{self.port}/"
+        """Address to open in a browser (wildcard hosts shown as 127.0.0.1; the token of an
+        exposed viewer included)."""
+        return viewer_url(self.host, self.port, self.access.token)
 
     # -- API for callers (and tests): all go through the command queue -------------------
     @property
@@ -645,5 +632,4 @@ __all__ = [
     "check_bind_address",
     "default_schema",
     "endoscope_pose",
-    "is_loopback",
 ]

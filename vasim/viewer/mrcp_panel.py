@@ -55,6 +55,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
+from vasim.viewer.access import viewer_url
 from vasim.viewer.mrcp_view import (
     StationFrame,
     StationGeometry,
@@ -491,7 +492,11 @@ class MrcpViewerApp(ErrorReporter):
     def __init__(self, host: str = "127.0.0.1", port: int = 8080,
                  scenario: Any = "cube_rotation", *, seed: int = 0, coarse: bool = False,
                  speed: float = 1.0, duration: float | None = None, view_hz: float = 30.0,
-                 plot_hz: float = 4.0, history_s: float = 20.0, retry_s: float = 1.0):
+                 plot_hz: float = 4.0, history_s: float = 20.0, retry_s: float = 1.0,
+                 token: str | None = None):
+        from vasim.viewer.access import access_policy
+
+        self.access = access_policy(host, token)
         for name, v in (("speed", speed), ("view_hz", view_hz), ("plot_hz", plot_hz),
                         ("history_s", history_s)):
             if isinstance(v, bool) or not isinstance(v, int | float) or not (
@@ -530,6 +535,7 @@ class MrcpViewerApp(ErrorReporter):
     def start(self) -> MrcpViewerApp:
         """Builds the station, binds the server, builds the scene and the MRCP tab, starts
         the scenario and view threads; returns self."""
+        from vasim.viewer.access import guarded_server
         from vasim.viewer.app import check_bind_address
 
         if self.server is not None:
@@ -537,8 +543,7 @@ class MrcpViewerApp(ErrorReporter):
         try:
             check_bind_address(self.host, self.requested_port)
             geometry = self.live.prepare()
-            self.server = viser.ViserServer(host=self.host, port=self.requested_port,
-                                            verbose=False)
+            self.server = guarded_server(self.host, self.requested_port, self.access)
             s = self.server
             s.gui.configure_theme(control_width="large")
             s.scene.set_up_direction("+z")
@@ -599,12 +604,8 @@ class MrcpViewerApp(ErrorReporter):
 
     @property
     def url(self) -> str:
-        host = self.host
-        if host in ("0.0.0.0", "::", ""):
-            host = "127.0.0.1"
-        elif ":" in host and not host.startswith("["):
-            host = f"[{host}]"
-        return f"http://{host}:{self.port}/"
+        """Address to open in a browser (with the token of an exposed viewer)."""
+        return viewer_url(self.host, self.port, self.access.token)
 
     def scene_nodes(self) -> list[str]:
         """Names of the station's scene nodes (sorted)."""
