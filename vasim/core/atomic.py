@@ -1,0 +1,167 @@
+"""Outputs that are either complete or absent: files and folders written atomically.
+
+A process killed while writing an export, a report or a recording must never leave a
+truncated file beside a manifest that vouches for it. Two tools:
+
+* :func:`atomic_file` — one file: written under a temporary name in the same folder,
+  flushed and ``fsync``-ed, then renamed over the target (``os.replace`` is atomic on POSIX
+  and Windows), and the folder entry synced.
+* :func:`atomic_folder` — a set of files (an export, a report): written into a temporary
+  sibling folder, then swapped with the target folder in one step. On Linux the swap is
+  ``renameat2(RENAME_EXCHANGE)``, so at every instant the target path holds either the old
+  complete set or the new complete set; elsewhere two renames leave a window of microseconds
+  in which the target is absent (never mixed). The old set is deleted after the swap;
+  leftovers of a killed run (``.<name>.tmp-*`` / ``.<name>.old-*``) are removed by the next
+  run.
+
+**Decision**: a target folder may only hold what a previous run of the same writer put
+there (the files its ``owned`` test accepts); anything else makes :func:`atomic_folder`
+refuse with the file named, because swapping the folder would delete it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import ctypes.util
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import IO, Any
+
+from vasim.core.errors import ConfigError
+
+_RENAME_EXCHANGE = 2
+"""``renameat2`` flag: swap two existing paths atomically (Linux >= 3.15)."""
+_AT_FDCWD = -100
+
+
+def _fsync_dir(folder: Path) -> None:
+    if sys.platform.startswith("win"):
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike[str], mode: str = "wb",
+                **open_kwargs: Any) -> Iterator[IO[Any]]:
+    """Opens a temporary file that replaces ``path`` when the block ends without error.
+
+    Example:
+        >>> import tempfile, pathlib
+        >>> d = pathlib.Path(tempfile.mkdtemp())
+        >>> with atomic_file(d / "a.txt", "w") as fh:
+        ...     _ = fh.write("complete")
+        >>> (d / "a.txt").read_text()
+        'complete'
+    """
+    target = Path(path)
+    if "w" not in mode and "x" not in mode:
+        raise ValueError(f"atomic_file writes a new file: mode {mode!r} has no 'w'")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.tmp-", dir=target.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with open(tmp, mode.replace("x", "w"), **open_kwargs) as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+        _fsync_dir(target.parent)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _libc_renameat2() -> Callable[..., int] | None:
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return None
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
+                   ctypes.c_uint]
+    fn.restype = ctypes.c_int
+    return fn  # type: ignore[no-any-return]  # a ctypes function pointer
+
+
+def exchange(a: Path, b: Path) -> bool:
+    """Swaps two existing paths in one atomic step; False where the system cannot."""
+    fn = _libc_renameat2()
+    if fn is None:
+        return False
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (22, 38, 95):  # EINVAL, ENOSYS, EOPNOTSUPP: the file system cannot
+        return False
+    raise OSError(err, os.strerror(err), str(a))
+
+
+def _remove_leftovers(target: Path) -> None:
+    for stale in target.parent.glob(f".{target.name}.*-*"):
+        if stale.is_dir() and (".tmp-" in stale.name or ".old-" in stale.name):
+            shutil.rmtree(stale, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def atomic_folder(target: str | os.PathLike[str], *,
+                  owned: Callable[[Path], bool], what: str = "output") -> Iterator[Path]:
+    """Yields an empty temporary folder that becomes ``target`` when the block succeeds.
+
+    Args:
+        target: the folder to (re)write.
+        owned: tells whether a path inside an existing ``target`` (relative to it) was
+            written by this writer; any other file makes the call refuse.
+        what: what is written, for messages (``"export"``, ``"report"``).
+
+    Raises:
+        ConfigError: ``target`` is a file, or holds files the writer does not own.
+    """
+    out = Path(target)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"the {what} folder {out} is a file", field="--out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    _remove_leftovers(out)
+    if out.is_dir():
+        foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                         if p.is_file() and not owned(p.relative_to(out)))
+        if foreign:
+            raise ConfigError(
+                f"the {what} folder {out} holds files this {what} did not write "
+                f"({', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''}): replacing "
+                "the folder would delete them; choose an empty or new folder", field="--out")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        yield tmp
+        for p in sorted(tmp.rglob("*"), reverse=True):
+            if p.is_file():
+                with open(p, "rb") as fh:
+                    os.fsync(fh.fileno())
+        _fsync_dir(tmp)
+        if out.is_dir():
+            if exchange(tmp, out):
+                shutil.rmtree(tmp, ignore_errors=True)  # now the old set
+            else:
+                old = out.parent / f".{out.name}.old-{os.getpid()}"
+                os.replace(out, old)
+                os.replace(tmp, out)
+                shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+        _fsync_dir(out.parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+__all__ = ["atomic_file", "atomic_folder", "exchange"]
