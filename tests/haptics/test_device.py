@@ -108,7 +108,8 @@ def test_every_device_implements_the_protocol(tmp_path) -> None:
 
 
 def test_registry_names_and_duplicates() -> None:
-    assert list(DEVICES) == ["emulator", "scripted", "browser", "replay", "openhaptics"]
+    assert list(DEVICES) == ["emulator", "scripted", "browser", "laparoscopic", "replay",
+                             "openhaptics"]
     with pytest.raises(ValueError, match="already registered"):
         DEVICES.add(DeviceInfo("emulator", "again", lambda: None))  # type: ignore[arg-type]
     rows = dict((info.name, avail) for info, avail in probe_all())

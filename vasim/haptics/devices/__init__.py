@@ -11,7 +11,7 @@ importing this package costs nothing and never touches a device SDK.
 
 Example:
     >>> [info.name for info in DEVICES.values()]
-    ['emulator', 'scripted', 'browser', 'replay', 'openhaptics']
+    ['emulator', 'scripted', 'browser', 'laparoscopic', 'replay', 'openhaptics']
     >>> DEVICES["emulator"].probe().available
     True
 """
@@ -126,6 +126,9 @@ DEVICES.add(DeviceInfo("scripted", "simulated operator moving along the task "
                        "(vasim.operator.device)", _always))
 DEVICES.add(DeviceInfo("browser", "pointer drags in the viewer, resampled to 1 kHz "
                        "(vasim.haptics.devices.browser)", _probe_browser))
+DEVICES.add(DeviceInfo("laparoscopic", "an instrument pivoting about its trocar, moved with "
+                       "the mouse (pointer lock), keyboard or a gamepad in the viewer "
+                       "(vasim.haptics.devices.laparoscopic)", _probe_browser))
 DEVICES.add(DeviceInfo("replay", "plays back a recorded device stream (.npz) exactly "
                        "(vasim.haptics.devices.replay)", _always))
 DEVICES.add(DeviceInfo("openhaptics", "Phantom Omni / Geomagic Touch through OpenHaptics "
