@@ -48,6 +48,16 @@ def page(browser: Any, app: ViewerApp) -> Iterator[Any]:
     pg.close()
 
 
+@pytest.fixture(scope="module")
+def exp_page(browser: Any, app: ViewerApp) -> Iterator[Any]:
+    """The experimenter's page (a second address of the same server process)."""
+    pg = browser.new_page(viewport=VIEWPORT)
+    pg.goto(app.experimenter_url)
+    wait_ready(pg)
+    yield pg
+    pg.close()
+
+
 def node_state(page: Any, name: str) -> dict[str, Any] | None:
     """Visibility, position and first vertex of scene node ``name`` in the browser."""
     return page.evaluate("""(n) => {
@@ -141,9 +151,20 @@ def test_audio_synth_receives_ag_parameter_updates(app: ViewerApp, page: Any) ->
     page.wait_for_function("() => window.__vasimAudio.enabled", timeout=20_000)
 
 
-def test_experimenter_starts_a_trial_and_the_store_holds_it(app: ViewerApp, page: Any,
+def test_the_trainee_page_shows_no_experimenter_control(app: ViewerApp, page: Any,
+                                                        exp_page: Any) -> None:
+    wait_ready(page)
+    for name in ("Start trial", "Stop", "Set subject"):
+        assert page.get_by_role("button", name=name).count() == 0, name
+        assert exp_page.get_by_role("button", name=name).count() >= 1, name
+    text = page.inner_text("body")
+    assert "Subject code" not in text and "Experimenter" not in text
+    assert "Subject code" in exp_page.inner_text("body")
+
+
+def test_experimenter_starts_a_trial_and_the_store_holds_it(app: ViewerApp, exp_page: Any,
                                                             db: str) -> None:
-    page.get_by_role("tab", name="Experimenter").click(force=True)
+    page = exp_page
     choose(page, "Mode", "free")
     assert wait_for(lambda: app.panel.mode == "free"), app.errors[-3:]
     request(app, "task", "point", lambda: app.panel.task == "point")
@@ -187,10 +208,9 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
         # A second tab pressing Start mid-trial is refused (notification), not a duplicate.
         second = browser.new_page(viewport=VIEWPORT)
         try:
-            second.goto(app.url)
+            second.goto(app.experimenter_url)
             wait_ready(second)
             if not app.snapshot.frame.done:
-                second.get_by_role("tab", name="Experimenter").click(force=True)
                 errors = len(app.errors)
                 second.get_by_role("button", name="Start trial").click(force=True)
                 assert wait_for(lambda: len(app.errors) > errors or app.snapshot.frame.done)

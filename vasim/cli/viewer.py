@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--port", type=int, default=8080,
                    help="TCP port (default 8080; if busy, the next free port is used and "
                         "printed; 0 picks any free port)")
+    p.add_argument("--experimenter-port", type=int, default=None, metavar="PORT",
+                   help="TCP port of the experimenter's page (default: --port + 1; the "
+                        "trainee's page is on --port)")
     p.add_argument("--scene", default="default",
                    help="abdomen scene of every trial, a name in protocols/scenes or a file "
                         "(default: default; none: a static task without physics); or an "
@@ -125,7 +128,8 @@ def serve(args: argparse.Namespace) -> int:
     else:
         schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
         app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
-                        scene=scene, db=getattr(args, "db", None), token=token)
+                        scene=scene, db=getattr(args, "db", None), token=token,
+                        experimenter_port=getattr(args, "experimenter_port", None))
         db = getattr(args, "db", None)
         stored = f"trials stored in {db}" if db else "demo only: no --db"
         what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"
@@ -134,7 +138,9 @@ def serve(args: argparse.Namespace) -> int:
     try:
         if app.port != args.port and args.port != 0:
             print(f"port {args.port} is busy; using {app.port}", file=sys.stderr)
-        print(f"vasim viewer: {app.url}  ({what}; Ctrl-C stops)", flush=True)
+        exp_url = getattr(app, "experimenter_url", None)
+        pages = f"trainee {app.url}, experimenter {exp_url}" if exp_url else app.url
+        print(f"vasim viewer: {pages}  ({what}; Ctrl-C stops)", flush=True)
         t_end = None if args.duration is None else time.monotonic() + args.duration
         while t_end is None or time.monotonic() < t_end:
             time.sleep(0.2)

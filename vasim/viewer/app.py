@@ -189,6 +189,79 @@ class DragInput:
                     dev.push(time.perf_counter(), self._last_tip)
 
 
+class SceneViews:
+    """What one page draws of the training scene: the organs, the ports, the instrument,
+    the task, the fixtures' arrows and the MS ghost. Each page (trainee, experimenter) has
+    its own, on its own server; both are fed the same frames by the view thread.
+
+    Args:
+        server: the page's viser server.
+        organs: the organs to draw. trocars: (4, 3) port positions [m].
+        trocar: the instrument's port of the first trial.
+    """
+
+    def __init__(self, server: viser.ViserServer, organs: list[Organ], trocars: FloatArray,
+                 trocar: FloatArray):
+        server.scene.set_up_direction("+z")
+        self.server = server
+        self.organs = [OrganView(server, o) for o in organs]
+        ports = trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
+        server.scene.add_point_cloud("/trocars", ports.astype(np.float32), (40, 40, 40),
+                                     point_size=0.004, point_shape="circle",
+                                     precision="float32")
+        self.tool = ToolView(server, trocar)
+        self.trajectory = TrajectoryView(server)
+        self.arrows = ArrowView(server)
+        self.ghost = GhostView(server, trocar)
+        self._shown_physics = -1
+
+    def show_trial(self, info: TrialInfo) -> None:
+        """A new trial: its task, and the instrument through its port."""
+        self.trajectory.set_task(info.points, info.reach_radius, info.normals)
+        trocar = tool_trocar(info.config.task, info.start)
+        self.tool.set_trocar(trocar)
+        self.ghost.trocar = trocar
+
+    def show_physics(self, info: TrialInfo, frame: TrialFrame) -> None:
+        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
+        snap = frame.abdomen
+        if snap is None or snap.seq == self._shown_physics:
+            return
+        self._shown_physics = snap.seq
+        for view in self.organs:
+            try:
+                view.update(snap.organ(view.organ.name).surface)
+            except (KeyError, ValueError):  # an organ this scene does not simulate
+                continue
+        if len(snap.targets) == len(info.points):
+            self.trajectory.move(snap.targets, snap.target_normals
+                                 if frame.n_points == 1 else None)
+
+    def update(self, info: TrialInfo, frame: TrialFrame, *, new_trial: bool) -> None:
+        """Every view from one frame (call inside the server's ``atomic()``)."""
+        if new_trial:
+            self.show_trial(info)
+        self.show_physics(info, frame)
+        out = frame.outputs
+        self.tool.update(frame.tcp)
+        self.trajectory.update(frame.goal_index)
+        self.arrows.update(out.arrows)
+        self.ghost.update(out.ghost)
+
+    def node_names(self) -> list[str]:
+        names: list[str] = []
+        for v in (*self.organs, self.tool, self.trajectory, self.arrows, self.ghost):
+            names.extend(v.node_names())
+        return sorted(names)
+
+
+def third_person_pose() -> CameraPose:
+    """The experimenter's camera: the whole abdomen from above, cranial-left, wide angle."""
+    look_at = np.array([0.0, 0.02, 0.05])
+    return CameraPose(position=look_at + np.array([0.28, -0.30, 0.32]), look_at=look_at,
+                      up=np.array([0.0, 0.0, 1.0]), fov=float(np.radians(55.0)))
+
+
 class ViewerApp(ErrorReporter):
     """The viser server, its views and panels, and the controller and view threads.
 
@@ -241,6 +314,7 @@ class ViewerApp(ErrorReporter):
         audio_hz: float = 20.0,
         trial_factory: Callable[..., Any] | None = None,
         token: str | None = None,
+        experimenter_port: int | None = None,
     ):
         self.access = access_policy(host, token)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
@@ -256,6 +330,9 @@ class ViewerApp(ErrorReporter):
                               "mrcp:<scenario> starts it), not by ViewerApp", field="scene")
         self.host = host
         self.requested_port = int(port)
+        self.requested_experimenter_port = (
+            int(experimenter_port) if experimenter_port is not None
+            else (0 if int(port) == 0 else int(port) + 1))
         self.control_period = 1.0 / control_hz
         self.view_period = 1.0 / view_hz
         self.audio_hz = float(audio_hz)
@@ -275,9 +352,12 @@ class ViewerApp(ErrorReporter):
         self._t_started = 0.0
         self._shown: TrialInfo | None = None
         self._shown_frame: TrialFrame | None = None
-        self._shown_physics = -1
         self._snapshot = Snapshot(*self.controller.current())
         self.server: viser.ViserServer | None = None
+        """The trainee's page: the endoscope's view, the instrument, the fixtures' cues."""
+        self.exp_server: viser.ViserServer | None = None
+        """The experimenter's page (a second address): the controls, a third-person view
+        and the live metrics; nothing of it is reachable from the trainee's page."""
         self.mrcp_panel: Any = None
         """The MRCP panel (None: the scene has no slave station)."""
         self._stopped = False
@@ -290,11 +370,17 @@ class ViewerApp(ErrorReporter):
         try:
             check_bind_address(self.host, self.requested_port)
             self.server = guarded_server(self.host, self.requested_port, self.access)
-            self.server.gui.configure_theme(control_width="large")
+            exp_port = self.requested_experimenter_port
+            if exp_port != 0 and exp_port == self.server.get_port():
+                exp_port += 1
+            self.exp_server = guarded_server(self.host, exp_port, self.access)
+            self.server.gui.configure_theme(control_width="medium", show_logo=False)
+            self.exp_server.gui.configure_theme(control_width="large")
             self._build_scene()
             self._build_gui()
             self.mrcp_panel = self._build_mrcp_panel()
             self.server.on_client_connect(self._guard(self._on_connect))
+            self.exp_server.on_client_connect(self._guard(self.exp_camera.on_connect))
             self._t_started = time.perf_counter()
             for target, name in ((self._control_loop, "vasim-viewer-control"),
                                  (self._view_loop, "vasim-viewer-view")):
@@ -319,8 +405,9 @@ class ViewerApp(ErrorReporter):
                 log.error("viewer thread %s did not stop within %.1f s", t.name, timeout)
         if not self._threads:  # never started: close here (the store was never opened)
             self.controller.close()
-        if self.server is not None:
-            self.server.stop()
+        for server in (self.server, self.exp_server):
+            if server is not None:
+                server.stop()
 
     def __enter__(self) -> ViewerApp:
         return self.start()
@@ -344,8 +431,20 @@ class ViewerApp(ErrorReporter):
         return self.server.get_port()
 
     @property
+    def experimenter_port(self) -> int:
+        """The experimenter page's port (after ``start()``)."""
+        if self.exp_server is None:
+            raise RuntimeError("ViewerApp.start() has not been called")
+        return self.exp_server.get_port()
+
+    @property
+    def experimenter_url(self) -> str:
+        """Address of the experimenter's page (with the token of an exposed viewer)."""
+        return viewer_url(self.host, self.experimenter_port, self.access.token)
+
+    @property
     def url(self) -> str:
-        """Address to open in a browser (wildcard hosts shown as 127.0.0.1; the token of an
+        """Address of the trainee's page (wildcard hosts shown as 127.0.0.1; the token of an
         exposed viewer included)."""
         return viewer_url(self.host, self.port, self.access.token)
 
@@ -382,10 +481,28 @@ class ViewerApp(ErrorReporter):
 
     def scene_nodes(self) -> list[str]:
         """Names of the scene nodes the views own (sorted)."""
-        names: list[str] = []
-        for v in (*self.organs, self.tool, self.trajectory, self.arrows, self.ghost):
-            names.extend(v.node_names())
-        return sorted(names)
+        return self.views.node_names()
+
+    # The trainee page's views (what tests and benchmarks inspect).
+    @property
+    def organs(self) -> list[OrganView]:
+        return self.views.organs
+
+    @property
+    def tool(self) -> ToolView:
+        return self.views.tool
+
+    @property
+    def trajectory(self) -> TrajectoryView:
+        return self.views.trajectory
+
+    @property
+    def arrows(self) -> ArrowView:
+        return self.views.arrows
+
+    @property
+    def ghost(self) -> GhostView:
+        return self.views.ghost
 
     def stats(self) -> dict[str, float]:
         """Timing: CPU cost of one view update [ms] (mean, p95, max over the last 600;
@@ -416,23 +533,21 @@ class ViewerApp(ErrorReporter):
 
     # -- scene and GUI -------------------------------------------------------------------
     def _build_scene(self) -> None:
-        s = self.server
-        assert s is not None
-        s.scene.set_up_direction("+z")
-        self.organs = [OrganView(s, o) for o in self._organs()]
+        s, e = self.server, self.exp_server
+        assert s is not None and e is not None
+        organs = self._organs()
         self.trocars = trocar_points()
-        # The instrument ports (the camera port is where the default view looks through).
-        ports = self.trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
-        s.scene.add_point_cloud("/trocars", ports.astype(np.float32), (40, 40, 40),
-                                point_size=0.004, point_shape="circle", precision="float32")
         info = self._snapshot.info
         trocar = tool_trocar(info.config.task, info.start)
-        self.tool = ToolView(s, trocar)
-        self.trajectory = TrajectoryView(s)
-        self.arrows = ArrowView(s)
-        self.ghost = GhostView(s, trocar)
+        self.views = SceneViews(s, organs, self.trocars, trocar)
+        self.exp_views = SceneViews(e, organs, self.trocars, trocar)
+        # The trainee sees through the endoscope (Mag moves it when the condition has Mag);
+        # the experimenter orbits freely from a third-person view.
         self.camera = CameraController(s, endoscope_pose())
         self.camera.apply_initial()
+        self.exp_camera = CameraController(e, third_person_pose())
+        self.exp_camera.apply_initial()
+        self.exp_camera.follow = False
         self.drag = DragInput(s, lambda: self.controller.browser, self._guard)
         self.audio = AudioStream(s, rate_hz=self.audio_hz)
 
@@ -458,23 +573,16 @@ class ViewerApp(ErrorReporter):
                 for m in models]
 
     def _build_gui(self) -> None:
-        s = self.server
-        assert s is not None
-        gui = s.gui
+        s, e = self.server, self.exp_server
+        assert s is not None and e is not None
         p = self.controller.panel
-        tabs = gui.add_tab_group()
-        with tabs.add_tab("Trainee"):
-            self.hud = HudView(s)
-            self.follow_camera = gui.add_checkbox(
-                "Mag drives the camera", initial_value=True,
-                hint="Off: orbit freely even when the schema has Mag")
-            gui.add_markdown("*Input “browser”: drag the gizmo on the tool tip.*")
-        with tabs.add_tab("Experimenter"):
-            self.panel_view = ExperimenterPanel(
-                s, self.submit, self._guard, p, schema_choices(p.schema),
-                available_protocols())
-        self.follow_camera.on_update(self._guard(
-            lambda ev: setattr(self.camera, "follow", bool(ev.target.value))))
+        # The trainee's page: the view, the cues, a minimal status; no controls of the
+        # experimenter's (**decision**: not even the Mag camera switch — Mag is part of the
+        # condition, and the experimenter's page has its own free camera).
+        self.hud = HudView(s)
+        # The experimenter's page: today's controls beside a third-person view.
+        self.panel_view = ExperimenterPanel(
+            e, self.submit, self._guard, p, schema_choices(p.schema), available_protocols())
 
     def _build_mrcp_panel(self) -> Any:
         """Abdomen scenes carry no robots: slave stations are served as ``mrcp:<scenario>``
@@ -559,43 +667,19 @@ class ViewerApp(ErrorReporter):
         new_trial = info is not self._shown
         self._snapshot = Snapshot(info, frame)
         with server.atomic():
-            if new_trial:
-                self._show_trial(info)
-            self._show_physics(info, frame)
-            self.tool.update(frame.tcp)
-            self.trajectory.update(frame.goal_index)
-            self.arrows.update(out.arrows)
-            self.ghost.update(out.ghost)
+            self.views.update(info, frame, new_trial=new_trial)
             self.hud.update(self._hud_info(info, frame), force=new_trial or frame.done)
-            self.panel_view.show_live(info, frame, force=new_trial or frame.done)
             self.drag.update(frame.tcp, info.input == "browser" and not frame.done)
+        assert self.exp_server is not None
+        with self.exp_server.atomic():
+            self.exp_views.update(info, frame, new_trial=new_trial)
+            self.panel_view.show_live(info, frame, force=new_trial or frame.done)
         self.camera.update(out.camera)
         self.audio.update(out.audio)
         self._shown, self._shown_frame = info, frame
         self._view_costs.append(time.thread_time() - t0)
         self._view_updates += 1
         return True
-
-    def _show_trial(self, info: TrialInfo) -> None:
-        self.trajectory.set_task(info.points, info.reach_radius, info.normals)
-        trocar = tool_trocar(info.config.task, info.start)
-        self.tool.set_trocar(trocar)
-        self.ghost.trocar = trocar
-
-    def _show_physics(self, info: TrialInfo, frame: TrialFrame) -> None:
-        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
-        snap = frame.abdomen
-        if snap is None or snap.seq == self._shown_physics:
-            return
-        self._shown_physics = snap.seq
-        for view in self.organs:
-            try:
-                view.update(snap.organ(view.organ.name).surface)
-            except (KeyError, ValueError):  # an organ this scene does not simulate
-                continue
-        if len(snap.targets) == len(info.points):
-            self.trajectory.move(snap.targets, snap.target_normals
-                                 if frame.n_points == 1 else None)
 
     @staticmethod
     def _hud_info(info: TrialInfo, frame: TrialFrame) -> HudInfo:
