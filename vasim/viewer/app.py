@@ -53,6 +53,7 @@ from vasim.core.errors import ConfigError
 from vasim.fixtures.mag import MagParams
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.device import BUTTON_2
+from vasim.haptics.laparoscopic import InputMapping
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
 from vasim.viewer.access import access_policy, guarded_server, viewer_url
@@ -64,6 +65,7 @@ from vasim.viewer.controller import (
     TrialInfo,
     schema_choices,
 )
+from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
 from vasim.viewer.views import (
@@ -342,6 +344,8 @@ class ViewerApp(ErrorReporter):
             variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
             trial_factory=trial_factory)
         self.scene_name = scene
+        eye = endoscope_pose()
+        self.controller.screen = screen_axes(eye.position, eye.look_at, eye.up)
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.errors: list[str] = []
         """Messages of errors caught in callbacks and threads (newest last)."""
@@ -549,6 +553,8 @@ class ViewerApp(ErrorReporter):
         self.exp_camera.apply_initial()
         self.exp_camera.follow = False
         self.drag = DragInput(s, lambda: self.controller.browser, self._guard)
+        self.instrument_input = InstrumentInput(s, lambda: self.controller.instrument,
+                                                self._guard)
         self.audio = AudioStream(s, rate_hz=self.audio_hz)
 
     def _organs(self) -> list[Organ]:
@@ -580,9 +586,23 @@ class ViewerApp(ErrorReporter):
         # experimenter's (**decision**: not even the Mag camera switch — Mag is part of the
         # condition, and the experimenter's page has its own free camera).
         self.hud = HudView(s)
+        s.gui.add_markdown(CONTROLS_TEXT)
         # The experimenter's page: today's controls beside a third-person view.
         self.panel_view = ExperimenterPanel(
             e, self.submit, self._guard, p, schema_choices(p.schema), available_protocols())
+        with e.gui.add_folder("Trainee's instrument (input laparoscopic)"):
+            fulcrum = e.gui.add_checkbox(
+                "Fulcrum effect", initial_value=True,
+                hint="on: the tip moves opposite to the hand, as through a real port")
+            sensitivity = e.gui.add_slider("Sensitivity", min=0.1, max=5.0, step=0.1,
+                                           initial_value=1.0)
+
+        def mapping(_: Any) -> None:
+            self.submit(Command("input_mapping", InputMapping(
+                fulcrum_effect=bool(fulcrum.value), sensitivity=float(sensitivity.value))))
+
+        fulcrum.on_update(self._guard(mapping))
+        sensitivity.on_update(self._guard(mapping))
 
     def _build_mrcp_panel(self) -> Any:
         """Abdomen scenes carry no robots: slave stations are served as ``mrcp:<scenario>``
@@ -603,6 +623,7 @@ class ViewerApp(ErrorReporter):
     def _on_connect(self, client: viser.ClientHandle) -> None:
         self.camera.on_connect(client)
         self.audio.install(client)
+        self.instrument_input.install(client)
         enabled = [False]
         button = client.gui.add_button("Enable audio", icon=viser.Icon.VOLUME,
                                        hint="browsers play sound only after a click")

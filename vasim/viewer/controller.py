@@ -54,17 +54,30 @@ from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, available_schemas, load_schema
 from vasim.haptics.device import Device
 from vasim.haptics.devices.browser import BrowserDevice
+from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
+from vasim.haptics.laparoscopic import InputMapping
 from vasim.tasks import TRAJECTORY_VARIANTS
-from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, trial_meta
+from vasim.trials.vf import (
+    TrialConfig,
+    TrialFrame,
+    make_profile,
+    make_task,
+    tool_trocar,
+    trial_meta,
+)
+from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
 
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 Mode = Literal["demo", "free", "protocol"]
-InputKind = Literal["scripted", "browser"]
+InputKind = Literal["scripted", "browser", "laparoscopic"]
 MODES: tuple[str, ...] = ("demo", "free", "protocol")
-INPUTS: tuple[str, ...] = ("scripted", "browser")
+INPUTS: tuple[str, ...] = ("scripted", "browser", "laparoscopic")
+"""Who moves the tool: the scripted operator, the free gizmo on the tip (an experimenter's
+option), or the trainee's laparoscopic instrument (mouse, keyboard, gamepad; the trainee
+page's default input for a person)."""
 
 DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
     "trajectory": "trajectory_following",
@@ -245,6 +258,12 @@ class TrainingController:
         self._done_since: float | None = None
         self._stored_done = False
         self._closed = True
+        self.instrument: LaparoscopicDevice | None = None
+        """The trainee's instrument of a laparoscopic-input trial (replaced per trial)."""
+        self.input_mapping = InputMapping()
+        """Fulcrum effect and sensitivity of the trainee's instrument (experimenter's page)."""
+        self.screen: tuple[FloatArray, FloatArray] | None = None
+        """The trainee view's (right, up) axes the instrument's screen motion follows."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
         self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
@@ -306,6 +325,11 @@ class TrainingController:
         device: Device | None = None
         if input_kind == "browser":
             device = BrowserDevice()
+        elif input_kind == "laparoscopic":
+            task0 = make_task(config)
+            device = instrument_device(tool_trocar(config.task, np.asarray(task0.start)),
+                                       np.asarray(task0.start), self.input_mapping,
+                                       self.screen)
         trial = self._factory(config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
         task = make_task(config)
@@ -319,6 +343,10 @@ class TrainingController:
                 cfg = dict(meta.config or {})
                 cfg["operator"] = input_kind
                 cfg.pop("profile", None)  # no simulated person behind a device
+                if input_kind == "laparoscopic":  # what was in force, stored with the trial
+                    cfg["input_mapping"] = {
+                        "fulcrum_effect": self.input_mapping.fulcrum_effect,
+                        "sensitivity": self.input_mapping.sensitivity}
                 meta = replace(meta, operator=input_kind, config=cfg)
             trial_id = self.store().begin_trial(meta)
         self._number += 1
@@ -333,6 +361,7 @@ class TrainingController:
             condition=None if scheduled is None else scheduled.condition,
         )
         self.browser = device if isinstance(device, BrowserDevice) else None
+        self.instrument = device if isinstance(device, LaparoscopicDevice) else None
         self._trial = trial
         self._done_since = None
         self._stored_done = False
@@ -525,6 +554,13 @@ class TrainingController:
             self._set_schema(str(value))
         elif kind == "task":
             self._set_task(str(value))
+        elif kind == "input_mapping":
+            if not isinstance(value, InputMapping):
+                raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
+                                  field="input_mapping")
+            self.input_mapping = value
+            if self.instrument is not None:
+                self.instrument.set_mapping(value)
         elif kind == "input":
             if value not in INPUTS:
                 raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
