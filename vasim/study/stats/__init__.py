@@ -25,6 +25,8 @@ from vasim.study.stats.learning import PowerLawFit as PowerLawFit
 from vasim.study.stats.learning import fit_learning_curves as fit_learning_curves
 from vasim.study.stats.learning import fit_power_law as fit_power_law
 from vasim.study.stats.learning import learning_curve_summary as learning_curve_summary
+from vasim.study.stats.mixed import MIXED_ANOVA_COLUMNS as MIXED_ANOVA_COLUMNS
+from vasim.study.stats.mixed import mixed_anova as mixed_anova
 from vasim.study.stats.paired import PAIRED_COLUMNS as PAIRED_COLUMNS
 from vasim.study.stats.paired import gain as gain
 from vasim.study.stats.paired import min_n_for_power as min_n_for_power
@@ -39,6 +41,7 @@ from vasim.study.stats.seed_replication import SEED_LABEL as SEED_LABEL
 from vasim.study.stats.seed_replication import seed_per_sample_anova as seed_per_sample_anova
 
 __all__ = [
+    "MIXED_ANOVA_COLUMNS",
     "PAIRED_COLUMNS",
     "RM_ANOVA_COLUMNS",
     "SEED_LABEL",
@@ -52,6 +55,7 @@ __all__ = [
     "gain",
     "learning_curve_summary",
     "min_n_for_power",
+    "mixed_anova",
     "n_for_power",
     "paired_power",
     "pairwise_paired",
