@@ -27,6 +27,8 @@ from vasim.study.stats.learning import fit_power_law as fit_power_law
 from vasim.study.stats.learning import learning_curve_summary as learning_curve_summary
 from vasim.study.stats.mixed import MIXED_ANOVA_COLUMNS as MIXED_ANOVA_COLUMNS
 from vasim.study.stats.mixed import mixed_anova as mixed_anova
+from vasim.study.stats.mixed_model import MIXED_MODEL_COLUMNS as MIXED_MODEL_COLUMNS
+from vasim.study.stats.mixed_model import mixed_model as mixed_model
 from vasim.study.stats.paired import PAIRED_COLUMNS as PAIRED_COLUMNS
 from vasim.study.stats.paired import gain as gain
 from vasim.study.stats.paired import min_n_for_power as min_n_for_power
@@ -42,6 +44,7 @@ from vasim.study.stats.seed_replication import seed_per_sample_anova as seed_per
 
 __all__ = [
     "MIXED_ANOVA_COLUMNS",
+    "MIXED_MODEL_COLUMNS",
     "PAIRED_COLUMNS",
     "RM_ANOVA_COLUMNS",
     "SEED_LABEL",
@@ -56,6 +59,7 @@ __all__ = [
     "learning_curve_summary",
     "min_n_for_power",
     "mixed_anova",
+    "mixed_model",
     "n_for_power",
     "paired_power",
     "pairwise_paired",
