@@ -16,7 +16,7 @@ DATA = Path(__file__).resolve().parents[2] / "data"
 
 RM_KEYS = ["SS", "SS_error", "MS", "MS_error", "df1", "df2", "F", "p_unc", "eps_gg", "eps_hf",
            "eps_lb", "p_gg", "p_hf", "p_lb", "np2", "ges", "mauchly_W", "mauchly_chi2",
-           "mauchly_df", "mauchly_p"]
+           "mauchly_df", "mauchly_p", "mauchly_p_anderson"]
 TUKEY_ROW = ["group1", "group2", "mean1", "mean2", "diff", "se", "q", "lwr", "upr", "p_adj"]
 PAIRED_ROW = ["group1", "group2", "n", "mean_diff", "t", "df", "p", "ci_low", "ci_high",
               "cohen_dz", "power_observed", "n_power90", "n_power90_ceil", "p_holm", "p_bonf"]

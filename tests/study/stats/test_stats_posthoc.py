@@ -179,3 +179,11 @@ def test_tukey_groups_1_and_1_0_are_different(tmp_path: Path) -> None:
     assert pairs[0] == {"group1": "1", "group2": "1.0", "diff": 3.0}
     # one-way ANOVA error term: three groups of 3 with variance 1 -> MS_error 1, df 6
     assert res.ms_error == pytest.approx(1.0) and res.df_error == 6
+
+
+def test_tukey_round_off_error_term_refused() -> None:
+    # Subjects differ, the pattern over levels is the same up to rounding (SS_error 5.5e-30).
+    y = np.array([0.1, 1.1, 2.3, 5.7])[:, None] + np.array([0.3, 0.7, 1.9])[None, :]
+    df = pd.DataFrame([{"s": i, "c": f"c{j}", "y": y[i, j]} for i in range(4) for j in range(3)])
+    with pytest.raises(ConfigError, match="zero error variance"):
+        tukey_hsd_rm(df, dv="y", subject="s", within="c")

@@ -32,6 +32,43 @@ MAX_LISTED = 8
 CSV_NA = "\\N"
 
 
+#: Relative size (to the total sum of squares) below which an error sum of squares is zero.
+ZERO_SS_REL = 1e-12
+
+
+def error_ss_is_zero(ss_error: float, values: np.ndarray) -> bool:
+    """Whether an error sum of squares is zero within round-off of the data it comes from.
+
+    **Decision** (issue #16): an error SS counts as zero when
+
+    ``ss_error <= max(1e-12 * SS_total, N * (64 * eps * max|v|)^2)``
+
+    with ``SS_total`` the sum of squares of ``values`` about their mean, ``N`` their count
+    and ``eps`` the float64 machine epsilon. The first term is the relative test of
+    ``rm_anova``; the second is the round-off of the values themselves, so constant data
+    whose means differ only by rounding (``0.1`` averaged from ``0.1, 0.1, 0.1``) also
+    count as zero, where the relative test alone would compare two round-off residues.
+    A non-finite ``ss_error`` is not zero (the caller reports it as an overflow).
+
+    Args:
+        ss_error: the error sum of squares, in the dependent variable's unit squared.
+        values: the data (cell means) it was computed from, any shape.
+
+    >>> error_ss_is_zero(0.0, np.array([1.0, 2.0])), error_ss_is_zero(0.5, np.array([1.0, 2.0]))
+    (True, False)
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    if not math.isfinite(ss_error):
+        return False
+    if v.size == 0:
+        return ss_error <= 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        ss_total = float(((v - v.mean()) ** 2).sum())
+        roundoff = v.size * (64.0 * np.finfo(float).eps * float(np.abs(v).max())) ** 2
+    threshold = max(ZERO_SS_REL * ss_total if math.isfinite(ss_total) else 0.0, roundoff)
+    return not ss_error > threshold
+
+
 class StatsWarning(UserWarning):
     """A statistic is undefined or degenerate for this data (the value is NaN, see the note)."""
 

@@ -23,6 +23,7 @@ from vasim.study.stats._data import (
     StatsWarning,
     _py,
     cell_means,
+    error_ss_is_zero,
     factor_column,
     levels_of,
     require_columns,
@@ -41,9 +42,6 @@ MIXED_ANOVA_COLUMNS: tuple[str, ...] = (
 
 #: Name of the interaction row (pingouin's).
 INTERACTION = "Interaction"
-
-#: Relative size below which an error sum of squares counts as exactly zero.
-_ZERO_SS = 1e-12
 
 
 def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
@@ -113,8 +111,10 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
         ``eps = tr(S)^2 / (p tr(S^2))`` and Mauchly with ``nu = N - G``.
 
         Undefined values are NaN with a note, never a made-up number: a zero error sum of
-        squares (``SS_error <= 1e-12 x`` the total sum of squares of the cell means, e.g.
-        constant data) leaves F, p, eps and the effect sizes of that term undefined; a
+        squares (zero within round-off of the cell means,
+        :func:`vasim.study.stats._data.error_ss_is_zero`, e.g. constant data) leaves F, p,
+        eps and the effect sizes of that term undefined; overflowing sums of squares
+        (values near 1e154 and above) leave F, p and effect sizes undefined; a
         singular ``S`` (fewer residual df than contrasts) leaves Mauchly undefined.
         A :class:`StatsWarning` repeats each such note.
 
@@ -151,9 +151,6 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
     n_groups = len(groups)
     df_res = n - n_groups
 
-    grand = float(y.mean())
-    ss_total = float(((y - grand) ** 2).sum())
-    scale = max(ss_total, np.finfo(float).tiny)
     # between subjects
     m = y.mean(axis=1)
     m_g = np.bincount(gidx, weights=m) / n_g
@@ -173,12 +170,13 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
     ss_errors = ss_sb + ss_ws
 
     notes: dict[str, list[str]] = {between: [], within: [], INTERACTION: []}
-    eps, mauchly = _sphericity(sscp / df_res, df_res, k, ss_ws, scale, notes[within])
+    zero_b, zero_w = error_ss_is_zero(ss_sb, y), error_ss_is_zero(ss_ws, y)
+    eps, mauchly = _sphericity(sscp / df_res, df_res, k, zero_w, notes[within])
     rows = [
-        _row(between, ss_b, n_groups - 1, ss_sb, df_res, scale, ss_errors, math.nan,
+        _row(between, ss_b, n_groups - 1, ss_sb, df_res, zero_b, ss_errors, math.nan,
              notes[between]),
-        _row(within, ss_w, p, ss_ws, p * df_res, scale, ss_errors, eps, notes[within]),
-        _row(INTERACTION, ss_bw, p * (n_groups - 1), ss_ws, p * df_res, scale, ss_errors,
+        _row(within, ss_w, p, ss_ws, p * df_res, zero_w, ss_errors, eps, notes[within]),
+        _row(INTERACTION, ss_bw, p * (n_groups - 1), ss_ws, p * df_res, zero_w, ss_errors,
              eps, notes[INTERACTION]),
     ]
     rows[1]["W_spher"], rows[1]["p_spher"] = mauchly
@@ -214,7 +212,7 @@ def _group_of_subject(data: pd.DataFrame, subject: str, between: str,
     return [per_subject[s][0] for s in subjects]
 
 
-def _sphericity(cov: np.ndarray, df_res: int, k: int, ss_err: float, scale: float,
+def _sphericity(cov: np.ndarray, df_res: int, k: int, zero_error: bool,
                 notes: list[str]) -> tuple[float, tuple[float, float]]:
     """GG epsilon and (Mauchly W, p) of the pooled within-group contrast covariance."""
     nan = math.nan
@@ -222,7 +220,7 @@ def _sphericity(cov: np.ndarray, df_res: int, k: int, ss_err: float, scale: floa
     if p == 1:
         notes.append("2 levels: sphericity holds trivially, Mauchly's test undefined")
         return 1.0, (nan, nan)
-    if not ss_err > _ZERO_SS * scale:
+    if zero_error or not np.isfinite(cov).all():
         return nan, (nan, nan)
     eps = gg_epsilon(cov)
     rank = int(np.linalg.matrix_rank(cov))
@@ -234,14 +232,14 @@ def _sphericity(cov: np.ndarray, df_res: int, k: int, ss_err: float, scale: floa
     return eps, (res.W, res.p)
 
 
-def _row(source: str, ss: float, df1: int, ss_err: float, df2: int, scale: float,
+def _row(source: str, ss: float, df1: int, ss_err: float, df2: int, zero_error: bool,
          ss_errors: float, eps: float, notes: list[str]) -> dict[str, Any]:
     nan = math.nan
     f_val = p_unc = p_gg = np2 = ng2 = nan
     ms_err = ss_err / df2
     if not (math.isfinite(ss) and math.isfinite(ss_err)):
         notes.append("sums of squares overflow (not finite): F, p and effect sizes undefined")
-    elif not ss_err > _ZERO_SS * scale:
+    elif zero_error:
         notes.append("zero error variance: F, p, eps and effect sizes undefined")
         eps = nan
     else:
