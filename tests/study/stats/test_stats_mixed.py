@@ -187,6 +187,9 @@ def test_bad_designs_refused() -> None:
     with pytest.raises(ConfigError, match="unbalanced design"):
         mixed_anova(data.drop(index=data.index[3]), dv="Scores", within="Time",
                     between="Group", subject="Subject")
+    with pytest.raises(ConfigError, match="may not be named 'Interaction'"):
+        mixed_anova(data.rename(columns={"Group": "Interaction"}), dv="Scores",
+                    within="Time", between="Interaction", subject="Subject")
     tiny = _long(np.arange(6.0).reshape(2, 3), [0, 1])
     with pytest.raises(ConfigError, match="no error degrees of freedom"):
         mixed_anova(tiny, dv="y", within="t", between="g", subject="s")

@@ -134,6 +134,11 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
     data = require_frame(data)
     require_columns(data, [dv, within, between, subject])
     src = source_of(data)
+    for role, col in (("within", within), ("between", between)):
+        if col == INTERACTION:
+            raise ConfigError(f"the {role} factor column may not be named {INTERACTION!r} "
+                              f"(the name of the interaction row); rename the column",
+                              file=src, field=col)
     cm = cell_means(data, dv, subject, [within])
     y = cm.values
     n, k = y.shape
