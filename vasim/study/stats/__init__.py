@@ -10,7 +10,18 @@ the file (``data.attrs["source"]``, set by :func:`read_long_csv`), the column an
 Primary analyses (spec §3 **decision**): :func:`rm_anova` on subject-level cell means, with
 :func:`tukey_hsd_rm` (as in the seed) and Holm-corrected :func:`pairwise_paired` (within-
 subject-correct) as post hoc tests. :func:`seed_per_sample_anova` only replicates the
-seed's per-sample ANOVA and is labelled as such.
+seed's per-sample ANOVA and is labelled as such. Groups (surgeons vs residents) x a within
+factor: :func:`mixed_anova`; fixture effects adjusted for practice: :func:`mixed_model`
+(statsmodels ``MixedLM``, random intercept per subject).
+
+Statistics refuse what they cannot estimate (issue #16): a value that is undefined for the
+data (an effect size with zero error variance, Mauchly's test of a singular covariance, a
+fit that did not converge) is NaN with a ``note`` and a :class:`StatsWarning`, never a
+made-up number. Subject and factor labels are text when read from CSV (``01`` and ``1``
+are two subjects); a duplicated column name is refused.
+
+This package is a leaf: of vasim it imports only :mod:`vasim.core` (an import-linter
+contract in pyproject.toml; issue #14), so importing it loads neither the store nor tqdm.
 """
 
 from __future__ import annotations
