@@ -147,3 +147,14 @@ def test_duplicated_column_refused_naming_file_and_column(tmp_path: Path) -> Non
 def test_levels_of_numeric_text_order() -> None:
     assert levels_of(pd.Series(["10", "2", "01", "1", "1.0"])) == ["1", "01", "1.0", "2", "10"]
     assert levels_of(pd.Series(["b", "10", "a"])) == ["10", "a", "b"]  # not all numbers
+
+
+def test_text_columns_keep_na_and_none_as_labels(tmp_path: Path) -> None:
+    p = tmp_path / "labels.csv"
+    p.write_text("s,fixture,y\nNA,None,1\nNA,VG,NA\nAB,None,\\N\nAB,VG,4\n,VG,5\n")
+    df = read_long_csv(p, text_columns=["s", "fixture"])
+    assert df["s"].tolist()[:4] == ["NA", "NA", "AB", "AB"] and pd.isna(df["s"].iloc[4])
+    assert df["fixture"].tolist() == ["None", "VG", "None", "VG", "VG"]
+    assert df["y"].isna().tolist() == [False, True, True, False, False]  # value columns: NA
+    with pytest.raises(ConfigError, match="missing labels at line 6"):
+        cell_means(df.fillna({"y": 0.0}), "y", "s", ["fixture"])

@@ -7,6 +7,7 @@ statsmodels' ``MixedLM.from_formula(...).fit(reml=True)`` called directly.
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -14,7 +15,7 @@ import pytest
 import statsmodels.formula.api as smf
 
 from vasim.core.errors import ConfigError
-from vasim.study.stats import MIXED_MODEL_COLUMNS, StatsWarning, mixed_model
+from vasim.study.stats import MIXED_MODEL_COLUMNS, StatsWarning, mixed_model, read_long_csv
 
 FIX = "C(fixture, Treatment('none'))"
 FORMULA = f"error ~ {FIX} + trial"
@@ -114,3 +115,20 @@ def test_no_warning_leaks_on_a_clean_fit() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         mixed_model(_cohort(seed=11), FORMULA, groups="subject")
+
+
+def test_value_columns_left_as_text_are_numbers(tmp_path: Path) -> None:
+    # "10" and "10.0" in the response keep read_long_csv from converting it (labels never
+    # merge); in the formula it is still a number, not a categorical response.
+    data = _cohort(seed=5, n_subjects=6)
+    text = data.assign(error=[f"{v:.1f}" for v in data["error"].round(1)])
+    text.loc[0, "error"] = "10"  # the same number as "10.0" elsewhere would be
+    text.loc[1, "error"] = "10.0"
+    p = tmp_path / "mixed_text.csv"
+    text.to_csv(p, index=False)
+    read = read_long_csv(p, text_columns=["subject", "fixture"])
+    assert pd.api.types.is_string_dtype(read["error"])  # stayed text
+    fit = mixed_model(read, FORMULA, groups="subject")
+    numeric = text.assign(error=text["error"].astype(float))
+    ref = mixed_model(numeric, FORMULA, groups="subject")
+    np.testing.assert_allclose(fit["coef"], ref["coef"], rtol=1e-10)

@@ -78,7 +78,9 @@ def read_long_csv(path: str | Path, *, text_columns: Sequence[str] = ()) -> pd.D
 
     Every cell is read as text first. The columns named in ``text_columns`` (the subject
     and factor columns of the analysis) stay text, so ``01`` and ``1``, or ``1`` and
-    ``1.0``, are different subjects or levels. Every other column becomes numbers when all
+    ``1.0``, are different subjects or levels; in them only an empty cell or ``\\N`` is
+    missing (a subject ``NA`` or a fixture ``None`` is a label, where pandas' defaults
+    would read it as missing). Every other column becomes numbers when all
     its values are numbers **and** the conversion keeps distinct texts distinct; a column
     where two different texts would become the same number (``01`` and ``1``) stays text,
     so that labels never merge even when the caller names no column. The statistics
@@ -111,8 +113,15 @@ def read_long_csv(path: str | Path, *, text_columns: Sequence[str] = ()) -> pd.D
         raise ConfigError("is a directory, expected a CSV file", file=p)
     try:
         header = pd.read_csv(p, header=None, nrows=1, dtype=str, keep_default_na=False)
-        _check_header(p, [str(v) for v in header.iloc[0].tolist()])
+        names = [str(v) for v in header.iloc[0].tolist()]
+        _check_header(p, names)
         raw = pd.read_csv(p, dtype=str, na_values=[CSV_NA])  # also reads `study export` files
+        text = [c for c in names if c in set(text_columns)]
+        if text:  # labels: only an empty cell or \N is missing ("NA", "None" are labels)
+            labels = pd.read_csv(p, dtype=str, usecols=text, keep_default_na=False,
+                                 na_values=["", CSV_NA])
+            for c in text:
+                raw[c] = labels[c]
     except pd.errors.EmptyDataError:
         raise ConfigError("CSV file is empty (no header row)", file=p) from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
@@ -124,13 +133,12 @@ def read_long_csv(path: str | Path, *, text_columns: Sequence[str] = ()) -> pd.D
         raise ConfigError(f"cannot read CSV: {exc.strerror or exc}", file=p) from None
     if raw.empty:
         raise ConfigError("CSV file has a header but no data rows", file=p)
-    keep_text = set(text_columns)
-    df = pd.DataFrame({c: raw[c] if c in keep_text else _as_numbers_if_lossless(raw[c])
+    df = pd.DataFrame({c: raw[c] if c in text else _as_numbers_if_lossless(raw[c])
                        for c in raw.columns})
     df.index = pd.RangeIndex(2, 2 + len(df))
     df.attrs["source"] = str(p)
     df.attrs["line_index"] = True
-    df.attrs["text_columns"] = [c for c in raw.columns if c in keep_text]
+    df.attrs["text_columns"] = text
     return df
 
 

@@ -93,6 +93,7 @@ def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
         raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
                           f"{levels_of(g)!r}", file=src, field=groups)
     used = _formula_columns(data, formula)
+    data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
     for col in used:
         _check_column(data, col)
 
@@ -155,6 +156,31 @@ def _formula_columns(data: pd.DataFrame, formula: str) -> list[str]:
         raise ConfigError(f"formula {formula!r} names no column of the data", file=src,
                           field="formula")
     return names
+
+
+def _numbers_where_read_as_text(data: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """Value columns that :func:`read_long_csv` left as text become numbers.
+
+    **Decision**: ``read_long_csv`` keeps a column as text when its numbers would merge two
+    different texts (``2`` and ``2.0``); for a value column in a formula that would make
+    patsy treat the response or a covariate as categorical. A text column of the formula
+    whose every value is a number, and that the caller did not name as a label
+    (``data.attrs["text_columns"]``), is therefore converted to float; categorical use
+    stays explicit with ``C(column)`` or by naming the column as text when reading.
+    """
+    labels = set(data.attrs.get("text_columns", ()))
+    out = data
+    for col in columns:
+        s = data[col]
+        if col in labels or pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
+            continue
+        present = s.dropna()
+        nums = pd.to_numeric(present, errors="coerce")
+        if len(present) and nums.notna().all():
+            if out is data:
+                out = data.copy()
+            out[col] = pd.to_numeric(s, errors="coerce").astype("float64")
+    return out
 
 
 def _check_column(data: pd.DataFrame, col: str) -> None:
