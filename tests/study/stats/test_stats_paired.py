@@ -199,3 +199,13 @@ def test_differences_equal_up_to_rounding_give_nan_dz() -> None:
         r = pairwise_paired(df, dv="y", subject="s", within="c").iloc[0]
     assert math.isnan(r["cohen_dz"]) and math.isnan(r["t"]) and math.isnan(r["p_holm"])
     assert r["mean_diff"] == pytest.approx(-0.3)
+
+
+def test_overflowing_differences_named() -> None:
+    df = pd.DataFrame({"s": [0, 1, 2] * 2, "c": ["a"] * 3 + ["b"] * 3,
+                       "y": [1e308, -1e308, 0.0, -1e308, 1e308, 1.0]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.warns(StatsWarning, match="overflow"):
+            r = pairwise_paired(df, dv="y", subject="s", within="c").iloc[0]
+    assert math.isnan(r["cohen_dz"]) and math.isnan(r["t"])

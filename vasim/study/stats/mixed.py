@@ -213,7 +213,8 @@ def _group_of_subject(data: pd.DataFrame, subject: str, between: str,
         more = f" and {len(mixed) - MAX_LISTED} more" if len(mixed) > MAX_LISTED else ""
         raise ConfigError(f"between factor {between!r} must be constant per subject; "
                           f"{len(mixed)} subject(s) of {subject!r} appear in several groups: "
-                          f"{shown}{more}", file=source_of(data), field=between)
+                          f"{shown}{more} (subject codes must be unique across groups)",
+                          file=source_of(data), field=between)
     return [per_subject[s][0] for s in subjects]
 
 

@@ -197,8 +197,10 @@ def pairwise_paired(data: pd.DataFrame, dv: str, subject: str, within: str) -> p
                        power_observed=paired_power(dz, n), n_power90=n90,
                        n_power90_ceil=_smallest_n(dz, n90, 0.9, 0.05))
         else:
-            warnings.warn(f"pairwise_paired {levels[i]!r} vs {levels[j]!r}: all differences "
-                          f"are equal ({mean!r}), t-test undefined", StatsWarning, stacklevel=2)
+            why = (f"all differences are equal ({mean!r})" if math.isfinite(sd) else
+                   "the differences overflow (not finite)")
+            warnings.warn(f"pairwise_paired {levels[i]!r} vs {levels[j]!r}: {why}, t-test and "
+                          f"dz undefined", StatsWarning, stacklevel=2)
             row.update(t=math.nan, p=math.nan, ci_low=mean, ci_high=mean, cohen_dz=math.nan,
                        power_observed=math.nan, n_power90=math.nan, n_power90_ceil=None)
         rows.append(row)
