@@ -57,9 +57,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "stats",
         help="statistics of a study CSV: RM-ANOVA, mixed ANOVA/model, Tukey, paired, Spearman",
         description="Statistics of the user studies on a long-format CSV file: the "
-                    "subject-level repeated-measures ANOVA and its post hoc tests, paired "
-                    "t-tests with power analysis, and Spearman correlations of questionnaire "
-                    "items.",
+                    "subject-level repeated-measures ANOVA and its post hoc tests, the "
+                    "mixed-design ANOVA (groups x within factor), a linear mixed model with "
+                    "a random intercept per subject, paired t-tests with power analysis, "
+                    "and Spearman correlations of questionnaire items.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
