@@ -154,6 +154,38 @@ class SessionWriters(StoreConnection):
                         "notes = coalesce(?, notes) WHERE id = ?",
                         (status, now(), notes, sid))
 
+    def release_scheduled(self, session_id: int, trial_index: int, *, reason: str) -> int:
+        """Makes a scheduled trial pending again, so that it is run as a new attempt: its
+        completed trial stays stored (and keeps its outcome) but is no longer the scheduled
+        trial's ``trial_id``; a ``'repeated'`` event on that trial says why. One transaction.
+        For protocols that repeat timed-out trials (``vasim.study.session``).
+
+        Returns:
+            The id of the trial released.
+
+        Raises:
+            StoreError: unknown session or scheduled trial, session not running, or the
+                scheduled trial has no completed trial.
+        """
+        sid, idx = row_id(session_id, "session_id"), row_id(trial_index, "trial_index")
+        with self._transaction() as con:
+            srow = con.execute("SELECT status FROM sessions WHERE id = ?", (sid,)).fetchone()
+            if srow is None:
+                raise StoreError(f"trial store {self.path}: no session {sid}")
+            if srow[0] != "running":
+                raise StoreError(f"trial store {self.path}: session {sid} is {srow[0]!r}, "
+                                 "not 'running'")
+            row = con.execute("SELECT trial_id FROM scheduled_trials WHERE session_id = ? "
+                              "AND trial_index = ?", (sid, idx)).fetchone()
+            if row is None or row[0] is None:
+                raise StoreError(f"trial store {self.path}: scheduled trial {idx} of session "
+                                 f"{sid} has no completed trial to release")
+            con.execute("UPDATE scheduled_trials SET trial_id = NULL WHERE session_id = ? "
+                        "AND trial_index = ?", (sid, idx))
+            con.execute("INSERT INTO events (trial_id, t, kind, detail, created_at) "
+                        "VALUES (?, NULL, 'repeated', ?, ?)", (int(row[0]), reason, now()))
+        return int(row[0])
+
     def set_demographics(self, subject: str, demographics: Demographics, *,
                          session_id: int | None = None) -> None:
         """Stores (or replaces) a subject's demographics.
