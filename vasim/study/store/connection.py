@@ -40,6 +40,12 @@ def readonly_uri(path: Path, *, immutable: bool = False) -> str:
     return path.resolve().as_uri() + "?mode=ro" + ("&immutable=1" if immutable else "")
 
 
+def _is_readonly(exc: sqlite3.Error) -> bool:
+    """True for SQLite's "attempt to write a readonly database" family of errors."""
+    code = getattr(exc, "sqlite_errorcode", None) or 0
+    return (code & 0xFF) == sqlite3.SQLITE_READONLY or "readonly" in str(exc)
+
+
 class StoreConnection:
     """One SQLite connection to a vasim study database.
 
@@ -48,9 +54,9 @@ class StoreConnection:
             must exist.
         readonly: open for reading only: a ``mode=ro`` connection, no schema creation, no
             migration (a version-2 store is read as it is) and no interrupted-trial recovery;
-            for listing, export and reports. A read-only store still finds the 'running'
-            trials whose writer died (``stale``) and says once, on the log (stderr), that
-            it cannot mark them 'interrupted'.
+            for listing, export and reports. A read-only ``TrialStore`` still finds the
+            'running' trials whose writer died (``stale``) and says in one line on stderr
+            that it cannot mark them 'interrupted'.
 
     Raises:
         StoreError: naming the path, if the file is not a SQLite database, not a vasim
@@ -105,23 +111,31 @@ class StoreConnection:
         try:
             if not self.readonly:
                 return sqlite3.connect(self.path, isolation_level=None, timeout=timeout)
-            con = sqlite3.connect(readonly_uri(self.path), uri=True, isolation_level=None,
-                                  timeout=timeout)
             try:
-                con.execute("SELECT count(*) FROM sqlite_master").fetchone()
+                return self._connect_ro(timeout, immutable=False)
             except sqlite3.OperationalError:
                 # A WAL database in a folder we cannot write, without its -shm file: SQLite
                 # cannot create the shared memory. Nobody can be writing it then (a writer
                 # would need that folder too), so read it as immutable.
-                con.close()
                 if os.access(self.path.parent, os.W_OK):
                     raise
                 log.debug("%s: read as immutable (read-only folder)", self.path)
-                con = sqlite3.connect(readonly_uri(self.path, immutable=True), uri=True,
-                                      isolation_level=None, timeout=timeout)
-            return con
+                return self._connect_ro(timeout, immutable=True)
         except sqlite3.DatabaseError as e:
             raise StoreError(f"cannot open trial store {self.path}: {e}") from e
+
+    def _connect_ro(self, timeout: float, *, immutable: bool) -> sqlite3.Connection:
+        """A ``mode=ro`` connection, probed with a first read (SQLite opens lazily)."""
+        con = sqlite3.connect(readonly_uri(self.path, immutable=immutable), uri=True,
+                              isolation_level=None, timeout=timeout)
+        try:
+            con.execute("SELECT count(*) FROM sqlite_master").fetchone()
+        except sqlite3.OperationalError:
+            con.close()
+            raise
+        except sqlite3.DatabaseError:
+            pass  # not a database: _check_schema says so with the usual message
+        return con
 
     @property
     def con(self) -> sqlite3.Connection:
@@ -234,15 +248,17 @@ class StoreConnection:
         try:
             con.execute("BEGIN IMMEDIATE")
         except sqlite3.OperationalError as exc:      # e.g. another writer holds the lock
-            if "readonly" in str(exc) or "read-only" in str(exc):
-                raise StoreError(f"trial store {self.path} cannot be written ({exc})") from exc
+            if _is_readonly(exc):
+                raise self._readonly_error(exc) from exc
             raise StoreError(f"{self.path}: the database is busy or locked ({exc}); "
                              "another vasim process may be writing to it - try again") from exc
         try:
             yield con
-        except BaseException:
+        except BaseException as exc:
             if con.in_transaction:
                 con.execute("ROLLBACK")
+            if isinstance(exc, sqlite3.OperationalError) and _is_readonly(exc):
+                raise self._readonly_error(exc) from exc
             raise
         try:
             con.execute("COMMIT")
@@ -250,6 +266,10 @@ class StoreConnection:
             if con.in_transaction:
                 con.execute("ROLLBACK")
             raise StoreError(f"trial store {self.path}: the commit failed ({exc})") from exc
+
+    def _readonly_error(self, exc: sqlite3.Error) -> StoreError:
+        return StoreError(f"trial store {self.path} cannot be written ({exc}): the file or "
+                          "its folder is read-only")
 
     # ------------------------------------------------------------------ the shell
     def close(self) -> None:

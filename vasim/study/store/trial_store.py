@@ -22,8 +22,8 @@ Example:
 from __future__ import annotations
 
 import os
+import sys
 
-from vasim.study.store.connection import log
 from vasim.study.store.lifecycle import TrialLifecycle
 from vasim.study.store.readers import StoreReaders
 from vasim.study.store.sessions import SessionWriters
@@ -44,10 +44,9 @@ class TrialStore(TrialLifecycle, SessionWriters, StoreReaders):
             read-only) cannot be written.
 
     A writable open marks 'interrupted' the trials whose writer died (``recovered``); a
-    read-only open only finds them (``stale``) and says once on the log (stderr, one line)
-    that it cannot mark them. A store object belongs to the thread that opened it
-    (sqlite3's rule); use one per thread or process. ``with TrialStore(p) as st:`` closes
-    it at the end.
+    read-only open only finds them (``stale``) and says so in one line on stderr. A store
+    object belongs to the thread that opened it (sqlite3's rule); use one per thread or
+    process. ``with TrialStore(p) as st:`` closes it at the end.
     """
 
     def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False):
@@ -61,10 +60,12 @@ class TrialStore(TrialLifecycle, SessionWriters, StoreReaders):
             return
         self.stale = [tid for tid, _ in self.stale_trials()]
         if self.stale:
+            # **Decision**: printed, not logged: the notice must reach the person running
+            # `vasim study list/export` or `vasim report` whatever the logging setup, and
+            # those open the store inside library calls.
             ids = ", ".join(str(t) for t in self.stale)
-            log.warning("%s is read-only here: %d stale 'running' trial(s) (%s) whose writer "
-                        "has ended were not marked interrupted (open it writable to do so)",
-                        self.path, len(self.stale), ids)
-
+            print(f"note: {self.path} is open read-only: {len(self.stale)} stale 'running' "
+                  f"trial(s) ({ids}) whose writer has ended were not marked interrupted "
+                  "(open it writable, e.g. `vasim study resume`, to do so)", file=sys.stderr)
 
 __all__ = ["TrialStore"]
