@@ -1,4 +1,5 @@
-"""Tests of the sample buffer (vasim/records/samples.py) and the trial store (vasim/study/store/)."""
+"""Tests of the sample buffer (vasim/records/samples.py) and the trial store
+(vasim/study/store/)."""
 
 from __future__ import annotations
 
