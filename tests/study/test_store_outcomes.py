@@ -182,8 +182,10 @@ def test_an_unknown_outcome_is_refused_and_nothing_is_written(store):
 
 @pytest.mark.parametrize(("reason", "outcome"), [
     ("KeyboardInterrupt: ", "stopped"),
-    ("stopped by the experimenter", "stopped"),
+    ("stopped by the experimenter", "stopped"),   # the viewer's Stop
+    ("schema changed", "stopped"),                # the viewer closing it for a change
     ("DeviceError: the device went away", "failed"),
+    ("the trial loop failed: RuntimeError: boom", "failed"),
     ("", "failed"),
 ])
 def test_an_early_close_reads_its_outcome_from_the_reason(store, reason, outcome):

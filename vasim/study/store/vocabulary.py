@@ -121,24 +121,35 @@ def outcome_of_summary(summary: Mapping[str, Any] | None) -> str | None:
     return None
 
 
-_STOP_REASONS = ("KeyboardInterrupt", "stopped")
+_ERROR_RE = re.compile(r"\b[A-Z][A-Za-z0-9_]*: |\bfailed\b")
+"""An exception named as ``Type: message`` (how the runners and the viewer word an error),
+or the word "failed"."""
 
 
 def outcome_of_reason(reason: str) -> str:
     """The outcome of a trial closed early, from the reason it was closed with.
 
-    **Decision**: the runners close a failed trial with ``"<ExceptionType>: <message>"``
-    and the viewer with ``"stopped by the experimenter"``; the sink protocol has no outcome
-    argument (``vasim.trials.sink`` stays as it is), so the store reads it from the reason:
-    a ``KeyboardInterrupt`` (Ctrl-C at the experimenter's terminal) or a reason starting
-    with ``"stopped"`` is ``'stopped'``, anything else ``'failed'``. The recovery of a dead
-    writer passes ``'interrupted'`` explicitly.
+    **Decision**: the sink protocol has no outcome argument (``vasim.trials.sink`` stays as
+    it is), so the store reads it from the reason its callers already give: the runners
+    close a failed trial with ``"<ExceptionType>: <message>"``, the viewer a failed loop with
+    ``"the trial loop failed: ..."`` and a deliberate stop with a plain phrase (``"stopped
+    by the experimenter"``, ``"schema changed"``, ``"restarted"``). So: a
+    ``KeyboardInterrupt`` (Ctrl-C at the experimenter's terminal) is ``'stopped'``; a reason
+    naming an exception (``Type: ``) or saying "failed", or no reason at all, is
+    ``'failed'``; any other phrase is ``'stopped'``. The recovery of a dead writer passes
+    ``'interrupted'`` explicitly, and any caller may pass the outcome itself.
 
     Example:
-        >>> outcome_of_reason("KeyboardInterrupt: "), outcome_of_reason("DeviceError: x")
-        ('stopped', 'failed')
+        >>> [outcome_of_reason(r) for r in ("KeyboardInterrupt: ", "DeviceError: x",
+        ...                                 "schema changed", "")]
+        ['stopped', 'failed', 'stopped', 'failed']
     """
-    return "stopped" if reason.strip().startswith(_STOP_REASONS) else "failed"
+    text = reason.strip()
+    if text.startswith("KeyboardInterrupt"):
+        return "stopped"
+    if not text or _ERROR_RE.search(text):
+        return "failed"
+    return "stopped"
 
 
 @dataclass(frozen=True)
