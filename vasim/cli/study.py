@@ -44,7 +44,13 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--practice", type=int, default=0,
                    help="earlier trials of this subject (learning), default 0")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--subject", default="S00", help="subject code (not a name)")
+    p.add_argument("--subject", default=None,
+                   help="subject code (not a name); default: none (the trial is stored "
+                        "without a subject and left out of subject analyses)")
+    p.add_argument("--label", default=None,
+                   help="free-practice label of a trial (stored beside, never as, the "
+                        "subject; it must contain a space or ':', e.g. 'free: warm-up', so "
+                        "that it cannot be mistaken for a subject code)")
     p.add_argument("--max-time", type=float, default=180.0, help="time limit [s]")
     p.add_argument("--scene", default="default",
                    help="abdomen scene (protocols/scenes/NAME.toml or a TOML path), or 'none' "
@@ -99,7 +105,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
-        max_time=args.max_time, scene=args.scene,
+        max_time=args.max_time, scene=args.scene, label=_label(args),
     )
     store = None
     if args.db is not None:
@@ -115,6 +121,16 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     if args.points:
         print(result.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     return 0
+
+
+def _label(args: argparse.Namespace) -> str | None:
+    """``--label``, checked (``vasim.study.store.validate_label``), or None."""
+    label = getattr(args, "label", None)
+    if label is None:
+        return None
+    from vasim.study.store import validate_label
+
+    return validate_label(label)
 
 
 def _realtime_device_factory(kind: str) -> object | None:
@@ -141,7 +157,7 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
-        max_time=args.max_time, scene=args.scene,
+        max_time=args.max_time, scene=args.scene, label=_label(args),
     )
     factory = _realtime_device_factory(args.device)
     in_process = bool(getattr(args, "in_process", False))
@@ -234,8 +250,12 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
         ("task", f"{result.task.name} ({result.task.kind}, {len(m)} points)"),
         ("schema", f"{result.schema.name} [{s['active_fixtures'] or 'no fixtures'}]"),
         ("operator", f"{result.config.operator}/{result.config.skill}, seed {result.config.seed}"),
+        ("subject", result.config.subject or (
+            f"none ({result.config.label})" if result.config.label else "none")),
+        ("outcome", describe_outcome(s, reached, len(m))),
         ("points reached", f"{reached}/{len(m)}"),
-        ("completion time", f"{s['sim_time']:.2f} s"),
+        ("completion time" if s.get("outcome") == "reached_all" else "duration",
+         f"{s['sim_time']:.2f} s"),
         ("cumulative error", f"sum e_i = {m['error_l1'].sum():.2f} m over {n} samples "
                              f"(mean |x - g|_1 = {1000 * m['error_l1'].sum() / n:.1f} mm)"),
         ("mean e_i", f"{m['error_l1'].mean():.3f} m per point"),
@@ -252,6 +272,27 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
     if not math.isfinite(float(s["sim_time"])):
         lines.append("warning: non-finite time")
     return "\n".join(lines)
+
+
+_OUTCOME_WORDS = {"timed_out": "timed out", "stopped": "stopped", "failed": "failed",
+                  "interrupted": "interrupted"}
+
+
+def describe_outcome(summary: object, reached: int, n_points: int) -> str:
+    """How a trial ended, in words: ``"reached all 30 points in 12.30 s"``, ``"timed out
+    after 2.0 s with 3 of 30 points"`` (``summary["outcome"]``, ``summary["sim_time"]`` [s]).
+
+    Example:
+        >>> describe_outcome({"outcome": "timed_out", "sim_time": 2.0}, 3, 30)
+        'timed out after 2.0 s with 3 of 30 points'
+    """
+    assert isinstance(summary, dict)
+    outcome = summary.get("outcome")
+    t = float(summary.get("sim_time", math.nan))
+    if outcome == "reached_all":
+        return f"reached all {n_points} points in {t:.2f} s"
+    word = _OUTCOME_WORDS.get(str(outcome), str(outcome))
+    return f"{word} after {t:.1f} s with {reached} of {n_points} points"
 
 
 # ------------------------------------------------------------------------------ study
@@ -454,7 +495,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _cmd_list(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
 
-    with TrialStore(_existing_db(args.db)) as store:
+    with TrialStore(_existing_db(args.db), readonly=True) as store:
         df = store.sessions(subject=args.subject)
     if df.empty:
         print(f"no sessions in {args.db}")
@@ -482,6 +523,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
     manifest = json.loads((out / "manifest.json").read_text(encoding="utf-8"))
     for name, info in manifest["tables"].items():
         print(f"{name:<16} {info['rows']:>10} rows  {', '.join(info['files'].values())}")
+    n_free = manifest.get("trials_without_subject", 0)
+    if n_free:
+        print(f"{n_free} completed trial(s) without a subject: in trials/samples only, left "
+              "out of the subject analyses (trial_metrics, point_metrics)")
     print(f"written to {out}")
     return 0
 

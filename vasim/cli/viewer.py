@@ -13,6 +13,7 @@ import signal
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 from vasim.core.errors import ConfigError
@@ -127,6 +128,8 @@ def serve(args: argparse.Namespace) -> int:
                 f"{'36' if getattr(args, 'mrcp_coarse', False) else '18'} ms cycle, looping")
     else:
         schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
+        if getattr(args, "db", None):
+            check_db(Path(args.db))
         app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
                         scene=scene, db=getattr(args, "db", None), token=token,
                         experimenter_port=getattr(args, "experimenter_port", None))
@@ -157,6 +160,19 @@ def serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_db(path: Path) -> None:
+    """Opens the viewer's study database for writing once, before the server starts, so
+    that a garbage file, a newer vasim's store or a read-only file is refused at once (one
+    line naming the file) rather than at the first trial; a missing file is created.
+
+    Raises:
+        StoreError: the file cannot serve as a writable vasim store.
+    """
+    from vasim.study.store import TrialStore
+
+    TrialStore(path).close()
+
+
 def _stop_on_sigterm() -> Any:
     """Makes SIGTERM stop the server like Ctrl-C (main thread only); returns the old handler."""
     if threading.current_thread() is not threading.main_thread():
@@ -168,4 +184,4 @@ def _stop_on_sigterm() -> Any:
     return signal.signal(signal.SIGTERM, handler)
 
 
-__all__ = ["exposure_warning", "register", "serve"]
+__all__ = ["check_db", "exposure_warning", "register", "serve"]

@@ -46,7 +46,8 @@ class TrialMeta:
     """What is known about a trial when it starts (the ``trials`` row).
 
     Attributes:
-        subject: subject code (``SUBJECT_CODE_PATTERN``); registered on first use.
+        subject: subject code (``SUBJECT_CODE_PATTERN``; registered on first use), or None
+            for a trial without a subject (free practice): no code is invented for it.
         task: task kind, e.g. ``"trajectory"`` or ``"point"``.
         variant: trajectory variant (0 = original), or None.
         schema: fixture schema name, or None. operator: input device name, or None.
@@ -58,9 +59,12 @@ class TrialMeta:
         pid, host: the writing process (defaults: this process, this host).
         config: the full trial configuration (JSON-serialisable mapping), or None.
         schema_toml: the resolved fixture schema as TOML text, or None.
+        label: a free-practice label the experimenter chose, or None; it must not read as
+            a subject code (``vasim.study.store.vocabulary.validate_label``: at least one
+            character a code cannot have, e.g. ``"free: warm-up"``).
     """
 
-    subject: str
+    subject: str | None
     task: str
     variant: int | None = None
     schema: str | None = None
@@ -75,9 +79,18 @@ class TrialMeta:
     config: Mapping[str, Any] | None = None
     schema_toml: str | None = None
     schedule_index: int | None = None
+    label: str | None = None
 
     def __post_init__(self) -> None:
-        validate_subject_code(self.subject)
+        if self.subject is not None:
+            validate_subject_code(self.subject)
+        if self.label is not None and (
+                not isinstance(self.label, str) or not 1 <= len(self.label) <= 64
+                or _SUBJECT_RE.fullmatch(self.label)):
+            raise ConfigError(
+                f"trial label {self.label!r} must be 1-64 characters that cannot be mistaken "
+                "for a subject code (give one with a space or ':' in it, e.g. "
+                "'free: warm-up')", field="label")
         if not isinstance(self.task, str) or not self.task:
             raise ConfigError(f"task must be a non-empty string, got {self.task!r}", field="task")
         for name in ("variant", "seed", "session_id", "pid", "schedule_index"):

@@ -14,19 +14,22 @@ Tables (one row per ...):
     ``fc_*`` [N], ``tc_*`` [N m], ``delicate``, ``clutch``, ``in_view``). Written trial by
     trial (a cohort's samples do not fit in memory at once).
 ``trials``
-    trial row, every status (the audit table): ``trial_id, subject, session_id, protocol,
-    trial_index`` (schedule index, NULL outside sessions), ``attempt, status, task,
-    variant, schema, active_fixtures, operator, seed, dt`` [s], ``n_samples, started_at,
-    ended_at, vasim_version``.
+    trial row, every status (the audit table): ``trial_id, subject`` (NULL for a trial
+    without a subject), ``label`` (its free-practice label, if any), ``session_id, protocol,
+    trial_index`` (schedule index, NULL outside sessions), ``attempt, status, outcome``
+    (how the trial ended: ``vasim.study.store.TRIAL_OUTCOMES``; NULL while running or
+    unknown), ``task, variant, schema, active_fixtures, operator, seed, dt`` [s],
+    ``n_samples, started_at, ended_at, vasim_version``.
 ``trial_metrics``
-    **completed** trial: the context ``trial_id, subject, group, session_id, protocol,
-    trial_index, block, block_index, trial_in_block, condition, schema, task, variant,
-    probe, probe_index`` (the VF-free trial number 1..8 of the learning curve, NULL for
-    assisted trials), ``repetition, attempt`` and one column per metric of
+    **completed** trial of a subject: the context ``trial_id, subject, group, session_id,
+    protocol, trial_index, block, block_index, trial_in_block, condition, schema, task,
+    variant, probe, probe_index`` (the VF-free trial number 1..8 of the learning curve, NULL
+    for assisted trials), ``repetition, attempt, outcome`` and one column per metric of
     ``vasim.records.trial_metrics.TRIAL_METRICS`` (units there). Trials outside sessions have
     NULL session columns and ``condition`` = their schema.
 ``point_metrics``
-    trajectory point of a completed trial: ``trial_id, subject, session_id, trial_index,
+    trajectory point of a completed trial of a subject: ``trial_id, subject, session_id,
+    trial_index,
     condition, probe, probe_index`` and the columns of ``metrics.POINT_COLUMNS``.
 ``questionnaires``
     answer value: ``session_id, subject, protocol, questionnaire`` (pre/post), ``item,
@@ -41,6 +44,10 @@ Tables (one row per ...):
 ``schedule``
     scheduled trial: ``session_id, trial_index, block, block_index, trial_in_block,
     condition, schema, task, variant, probe, probe_index, repetition, trial_id, attempts``.
+
+Trials without a subject (free practice) are in ``samples`` and ``trials`` (the audit
+tables) but left out of the subject analyses (``trial_metrics``, ``point_metrics``);
+``manifest.json`` says how many (``trials_without_subject``: completed ones left out).
 
 CSV conventions (**decision**): UTF-8, comma-separated, a header row, floats written with
 the shortest repr that reads back to the same double, a missing value written ``\\N`` (so
@@ -90,17 +97,18 @@ _CONTEXT: dict[str, str] = {
     "protocol": "str", "trial_index": "Int64", "block": "str", "block_index": "Int64",
     "trial_in_block": "Int64", "condition": "str", "schema": "str", "task": "str",
     "variant": "Int64", "probe": "boolean", "probe_index": "Int64", "repetition": "Int64",
-    "attempt": "Int64",
+    "attempt": "Int64", "outcome": "str",
 }
 
 _SPECS: dict[str, dict[str, str]] = {
     "samples": {"trial_id": "int64",
                 **{c: ("float64" if FRAME_DTYPES[c] is np.float64 else "int64")
                    for c in FRAME_COLUMNS}},
-    "trials": {"trial_id": "int64", "subject": "str", "session_id": "Int64",
+    "trials": {"trial_id": "int64", "subject": "str", "label": "str", "session_id": "Int64",
                "protocol": "str", "trial_index": "Int64", "attempt": "Int64", "status": "str",
-               "task": "str", "variant": "Int64", "schema": "str", "active_fixtures": "str",
-               "operator": "str", "seed": "Int64", "dt": "float64", "n_samples": "Int64",
+               "outcome": "str", "task": "str", "variant": "Int64", "schema": "str",
+               "active_fixtures": "str", "operator": "str", "seed": "Int64", "dt": "float64",
+               "n_samples": "Int64",
                "started_at": "str", "ended_at": "str", "vasim_version": "str"},
     "trial_metrics": {**_CONTEXT, **dict.fromkeys(TRIAL_METRICS, "float64")},
     "point_metrics": {**{k: _CONTEXT[k] for k in ("trial_id", "subject", "session_id",
@@ -181,10 +189,11 @@ def _trials_table(store: TrialStore) -> pd.DataFrame:
 
 
 def _context(store: TrialStore, trials: pd.DataFrame) -> pd.DataFrame:
-    """Completed trials with their schedule context and the subject's group."""
-    done = trials[trials["status"] == "completed"][
+    """Completed trials of a subject with their schedule context and the subject's group
+    (trials without a subject are no subject's data: left out, counted in the manifest)."""
+    done = trials[(trials["status"] == "completed") & trials["subject"].notna()][
         ["trial_id", "subject", "session_id", "protocol", "trial_index", "attempt", "schema",
-         "task", "variant"]]
+         "task", "variant", "outcome"]]
     sched = _schedule_all(store).drop(columns=["trial_id", "attempts", "schema", "task",
                                                "variant"])
     ctx = done.merge(sched, how="left", on=["session_id", "trial_index"])
@@ -325,6 +334,8 @@ def export_study(
         manifest["schema_version"] = store.schema_version
         trials = _trials_table(store)
         ctx = _context(store, trials)
+        manifest["trials_without_subject"] = int(
+            ((trials["status"] == "completed") & trials["subject"].isna()).sum())
         builders = {
             "trials": lambda: trials,
             "trial_metrics": lambda: _trial_metrics_table(store, ctx),

@@ -18,6 +18,8 @@ TOML layout (every field is checked; defaults in brackets)::
     reach_radius_m = 0.005              # [0.005] r_reach: the goal advances at |x - p_i| <= r
     max_trial_time_s = 180.0            # [180] simulated time limit of one trial [s]
     excessive_force_n = 2.0             # [2.0] threshold of the excessive-force metrics [N]
+    repeat_timed_out = false            # [false] a trial that hits its time limit is run
+                                        # again (a new attempt) instead of counting as done
 
     [randomisation]
     block_order = "random"              # ["fixed"] | "random" | "latin_square"
@@ -335,6 +337,8 @@ class Protocol:
         name, description: as in the file. task: ``"trajectory"`` or ``"point"``.
         reach_radius: r_reach [m]. max_trial_time: time limit of one trial [s].
         excessive_force_n: threshold of the excessive-force metrics [N].
+        repeat_timed_out: a scheduled trial whose attempt timed out (outcome
+            ``'timed_out'``) is run again: ``vasim.study.session`` begins a new attempt.
         block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
         probe_condition: condition of probe trials (a fixture-free schema).
         probe_variant: variant of probe trials.
@@ -354,6 +358,7 @@ class Protocol:
     reach_radius: float = 0.005
     max_trial_time: float = 180.0
     excessive_force_n: float = 2.0
+    repeat_timed_out: bool = False
     block_order: str = "fixed"
     variant_order: str = "fixed"
     probe_condition: str = "none"
@@ -372,6 +377,7 @@ class Protocol:
         _check_positive(self.reach_radius, "reach_radius_m")
         check_trial_time(self.max_trial_time, "max_trial_time_s")
         _check_positive(self.excessive_force_n, "excessive_force_n")
+        _check_bool(self.repeat_timed_out, "repeat_timed_out")
         _check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         _check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
         if not isinstance(self.blocks, tuple) or not self.blocks:
@@ -523,7 +529,8 @@ def _check_condition(cond: object, task: str, name: str) -> None:
 
 # ------------------------------------------------------------------------- loading
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
-        "excessive_force_n", "randomisation", "probe", "blocks", "questionnaires")
+        "excessive_force_n", "repeat_timed_out", "randomisation", "probe", "blocks",
+        "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
           "probes_after")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
@@ -650,6 +657,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "reach_radius": data.get("reach_radius_m", 0.005),
         "max_trial_time": data.get("max_trial_time_s", 180.0),
         "excessive_force_n": data.get("excessive_force_n", 2.0),
+        "repeat_timed_out": data.get("repeat_timed_out", False),
         "block_order": rnd.get("block_order", "fixed"),
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),

@@ -21,6 +21,15 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   the same person even if the presets change.
 * A session is 'completed' once every scheduled trial has a completed trial; questionnaires
   are recorded separately (``record_answers``) and do not gate completion.
+* Timed-out trials (protocol ``repeat_timed_out = true``): a scheduled trial whose attempt
+  ran into the time limit (outcome ``'timed_out'``) is released (``TrialStore
+  .release_scheduled``: the attempt stays stored with a ``'repeated'`` event) and run again,
+  at most ``MAX_TIMED_OUT_REPEATS`` times; the last attempt then counts, timed out or not,
+  so that a trial the operator cannot finish never blocks the session. A repeat's operator
+  seed is ``trial_seed`` of the session seed, the index and the repeat number (the scripted
+  operator would otherwise time out identically); a crash re-run keeps the seed of the
+  attempt it replaces. ``run_session`` first releases any timed-out trial a crash left
+  linked between its finish and its release.
 
 Example:
     >>> import tempfile, pathlib
@@ -75,14 +84,22 @@ def new_seed() -> int:
     return secrets.randbelow(2**63)
 
 
-def trial_seed(session_seed: int, index: int) -> int:
-    """The operator seed of scheduled trial ``index`` (see the module's decisions).
+MAX_TIMED_OUT_REPEATS = 2
+"""A timed-out scheduled trial is repeated at most this often (``repeat_timed_out``)."""
+
+
+def trial_seed(session_seed: int, index: int, repeat: int = 0) -> int:
+    """The operator seed of scheduled trial ``index`` (see the module's decisions);
+    ``repeat`` > 0: of its repeat after that many timed-out attempts.
 
     Example:
         >>> trial_seed(7, 0) == trial_seed(7, 0) != trial_seed(7, 1)
         True
+        >>> trial_seed(7, 0, 1) != trial_seed(7, 0)
+        True
     """
-    a, b = np.random.SeedSequence([int(session_seed), 3, int(index)]).generate_state(2)
+    key = [int(session_seed), 3, int(index)] + ([int(repeat)] if repeat else [])
+    a, b = np.random.SeedSequence(key).generate_state(2)
     return ((int(a) << 32) | int(b)) & (2**63 - 1)
 
 
@@ -183,8 +200,9 @@ class Session:
         """Scheduled trials without a completed trial, in schedule order."""
         return [t for t, tid in zip(self.schedule, self.completed, strict=True) if tid is None]
 
-    def trial_config(self, scheduled: ScheduledTrial) -> TrialConfig:
-        """The trial configuration of one scheduled trial (see the module's decisions)."""
+    def trial_config(self, scheduled: ScheduledTrial, repeat: int = 0) -> TrialConfig:
+        """The trial configuration of one scheduled trial (see the module's decisions);
+        ``repeat``: how many timed-out attempts it had before."""
         if scheduled.schema is None:
             self.protocol.check_runnable()
         s = self.settings
@@ -195,7 +213,7 @@ class Session:
             variant=scheduled.variant,
             schema="none" if mode is not None else str(scheduled.schema), mode=mode,
             operator=s.operator,
-            skill=s.skill, seed=trial_seed(self.seed, scheduled.index),
+            skill=s.skill, seed=trial_seed(self.seed, scheduled.index, repeat),
             practice=scheduled.index, dt=s.dt,
             max_time=s.max_trial_time if s.max_trial_time is not None
             else self.protocol.max_trial_time,
@@ -320,6 +338,8 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
         raise StoreError(f"session {session.id} is being run: trial {int(busy['id'].iloc[0])} "
                          f"is 'running' (process {busy['pid'].iloc[0]} on "
                          f"{busy['host'].iloc[0]})")
+    if _release_timed_out(store, session):
+        session = load_session(store, session.id)
     pending = session.pending
     if max_trials is not None:
         pending = pending[:max_trials]
@@ -331,16 +351,52 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
         for st in pending:
             bar.set_postfix_str(f"trial {st.index + 1}/{n_total} {st.condition}"
                                 f"{' (VF-free)' if st.probe else ''} v{st.variant}")
-            run_trial(session.trial_config(st), store, session_id=session.id,
-                      schedule_index=st.index, protocol=session.protocol.name,
-                      metric_params=session.metric_params)
-            done += 1
+            while True:
+                repeat = _timed_out_attempts(store, session.id, st.index)
+                run_trial(session.trial_config(st, repeat), store, session_id=session.id,
+                          schedule_index=st.index, protocol=session.protocol.name,
+                          metric_params=session.metric_params)
+                done += 1
+                if not _release_timed_out(store, session, st.index):
+                    break
             bar.update(1)
     finally:
         bar.close()
     if not load_session(store, session.id).pending:
         store.set_session_status(session.id, "completed")
     return done
+
+
+def _timed_out_attempts(store: TrialStore, session_id: int, index: int) -> int:
+    """Completed attempts at a scheduled trial whose outcome was 'timed_out'."""
+    t = store.trials("completed", outcome="timed_out")
+    return int(((t["session_id"] == session_id) & (t["schedule_index"] == index)).sum())
+
+
+def _release_timed_out(store: TrialStore, session: Session, index: int | None = None,
+                       ) -> list[int]:
+    """Releases the scheduled trials (one ``index``, or all) whose linked trial timed out,
+    when the protocol repeats timed-out trials and repeats are left; returns their indices.
+    """
+    if not session.protocol.repeat_timed_out:
+        return []
+    sched = store.schedule(session.id)
+    linked = sched[sched["trial_id"].notna()]
+    if index is not None:
+        linked = linked[linked["trial_index"] == index]
+    if linked.empty:
+        return []
+    timed_out = store.trials("completed", outcome="timed_out")
+    timed_out = timed_out[timed_out["session_id"] == session.id]
+    released = []
+    for idx, tid in zip(linked["trial_index"], linked["trial_id"], strict=True):
+        n = int((timed_out["schedule_index"] == idx).sum())
+        if int(tid) in set(timed_out["id"]) and n <= MAX_TIMED_OUT_REPEATS:
+            store.release_scheduled(session.id, int(idx), reason=(
+                f"timed out; repeated (protocol repeat_timed_out, repeat {n} of at most "
+                f"{MAX_TIMED_OUT_REPEATS})"))
+            released.append(int(idx))
+    return released
 
 
 def abort_session(store: TrialStore, session_id: int, reason: str) -> None:

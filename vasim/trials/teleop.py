@@ -655,6 +655,10 @@ class TeleopTrial:
             t_reached=self.reach_times + [math.nan] * (n - len(self.reach_times)))
         summary.update({
             "finished": bool(self.i >= n), "sim_time": self.t, "steps": self.k + 1,
+            # how it ended (TRIAL_OUTCOMES): an abort for repeated safety stops failed it
+            "outcome": ("reached_all" if self.i >= n else "failed"
+                        if any(e[1] == "aborted" for e in self.events) else "timed_out"
+                        if self.t >= self.config.max_time - 1e-12 else "stopped"),
             "schema": "none", "active_fixtures": "", "nonfinite_inputs": 0,
             "scene": self.config.scene, "mode": self.mode, "task": "needle",
             "n_rings": n, "n_transfers_needed": self.task.n_transfers,

@@ -123,7 +123,8 @@ class TrialConfig:
         practice: number of earlier trials of this subject (learning).
         dt: control step [s] (1 ms: the haptic rate).
         max_time: simulated time limit [s]; the trial ends there even if points remain.
-        subject: subject code (never a name).
+        subject: subject code (never a name), or None for a trial without a subject.
+        label: a free-practice label (``TrialMeta.label``), or None.
         velocity_cutoff_hz: low-pass cutoff of the TCP velocity FF's damping uses [Hz].
         reach_radius: r_reach [m] (a protocol parameter); None: the task's default (5 mm).
         profile: the operator profile; None: the ``skill`` preset.
@@ -146,12 +147,13 @@ class TrialConfig:
     practice: int = 0
     dt: float = 1e-3
     max_time: float = 180.0
-    subject: str = "S00"
+    subject: str | None = None
     velocity_cutoff_hz: float = 30.0
     profile: OperatorProfile | None = field(default=None, compare=False)
     reach_radius: float | None = None
     scene: str = "default"
     mode: str | None = None
+    label: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode is not None and self.mode not in TELEOPERATION_MODES:
@@ -169,7 +171,8 @@ class TrialConfig:
                               field="seed")
         from vasim.records.trial_meta import validate_subject_code
 
-        validate_subject_code(self.subject)
+        if self.subject is not None:
+            validate_subject_code(self.subject)
         if self.operator != "scripted":
             raise ConfigError(f"unknown operator {self.operator!r} (available: 'scripted')",
                               field="operator")
@@ -731,6 +734,10 @@ class TrialRunner:
         )
         summary.update({
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
+            # how the trial ended (vasim.study.store.vocabulary.TRIAL_OUTCOMES); "stopped":
+            # a result taken before the end (the store overrides it when closing early)
+            "outcome": ("reached_all" if self._i >= self._n else "timed_out"
+                        if self._t >= self.config.max_time - 1e-12 else "stopped"),
             "schema": self.schema.name, "active_fixtures": ",".join(self.schema.fixture_names),
             "nonfinite_inputs": self._n_bad_input,
             "scene": self.config.scene,
@@ -757,8 +764,9 @@ _MAX_PREALLOCATED = 1_000_000
 
 def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
     """The trial configuration as plain JSON-able data (stored with the trial)."""
+    # mode and label only when set: the records of other trials stay as they were
     rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name == "mode" and config.mode is None)}  # as before MRCP trials
+           and not (f.name in ("mode", "label") and getattr(config, f.name) is None)}
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
     return rec
 
@@ -782,6 +790,7 @@ def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
         pid=os.getpid(), host=socket.gethostname(),
         config=config_record(config, profile), schema_toml=dumps_schema(schema),
         session_id=session_id, schedule_index=schedule_index, protocol=protocol,
+        label=config.label,
     )
 
 
