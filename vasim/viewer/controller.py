@@ -451,8 +451,11 @@ class TrainingController:
         if p.mode == "protocol" and p.session_id is not None:
             ids = [int(i) for i in st.schedule(p.session_id)["trial_id"].dropna()]
         else:
-            df = st.trials("completed", subject=p.subject or self._base.subject)
-            ids = [int(i) for i in df[df["session_id"].isna()]["id"]]
+            df = st.trials("completed")
+            subject = p.subject or self._base.subject
+            # The subject's free trials; without a subject, the free trials without one.
+            mine = df["subject"] == subject if subject else df["subject"].isna()
+            ids = [int(i) for i in df[mine & df["session_id"].isna()]["id"]]
         if not ids:
             return ()
         wide = st.trial_metrics(wide=True)
