@@ -79,6 +79,7 @@ import numpy as np
 import pandas as pd
 
 from vasim import __version__
+from vasim.core.atomic import atomic_folder
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES
@@ -300,7 +301,10 @@ def export_study(
     Args:
         db: the study database (opened read-only; a version-1 store must be opened
             writable once, e.g. by ``vasim study list``, to migrate it).
-        out: output folder (created; files of the same names are replaced).
+        out: output folder, written atomically (``vasim.core.atomic.atomic_folder``): the
+            new set of files replaces a previous export as a whole, so a killed export
+            leaves the old complete set or the new one, never a truncated table beside an
+            old manifest; a folder holding files no export writes is refused, not deleted.
         formats: ``"csv"`` and/or ``"parquet"``.
         tables: a subset of ``EXPORT_TABLES``.
         progress: progress output over the trials while writing samples
@@ -323,7 +327,21 @@ def export_study(
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
         raise ConfigError(f"--out {out_dir} exists and is not a folder", field="out")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out_dir, owned=_export_file, what="export") as tmp:
+        _export_into(db, tmp, fmts, names, progress)
+    return out_dir
+
+
+def _export_file(rel: Path) -> bool:
+    """True for a file an export writes (``manifest.json``, ``<table>.<format>``)."""
+    if len(rel.parts) != 1:
+        return False
+    return rel.name == "manifest.json" or (
+        rel.suffix[1:] in FORMATS and rel.stem in EXPORT_TABLES)
+
+
+def _export_into(db: str | os.PathLike[str], out_dir: Path, fmts: list[str], names: list[str],
+                 progress: bool) -> None:
     manifest: dict[str, Any] = {
         "vasim_version": __version__, "exported_at": datetime.now(UTC).isoformat(),
         "database": str(Path(db).resolve()),
@@ -364,7 +382,6 @@ def export_study(
             }
     (out_dir / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n",
                                            encoding="utf-8")
-    return out_dir
 
 
 def _write_samples(store: TrialStore, trials: pd.DataFrame, w: _Writer,
