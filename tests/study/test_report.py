@@ -1,4 +1,4 @@
-"""``vasim report`` on small synthetic VF studies (vasim/study/report.py).
+"""``vasim report`` on small synthetic VF studies (vasim/study/report/).
 
 The stores are written through the store and session API (no trial is simulated: each
 trial gets a handful of per-point metric rows drawn from a seeded model, no samples). The

@@ -21,7 +21,15 @@ from vasim.study.report import (
     ordered_conditions,
     vf_trial_outcomes,
 )
-from vasim.study.report_html import (
+from vasim.study.report.figures import (
+    box_figure,
+    choice_rating_figure,
+    counts_figure,
+    demographics_figure,
+    figure_png,
+    learning_curve_figure,
+)
+from vasim.study.report.html_page import (
     FigureBlock,
     Notes,
     Paragraph,
@@ -32,14 +40,6 @@ from vasim.study.report_html import (
     esc,
     format_value,
     render_html,
-)
-from vasim.study.report_plots import (
-    box_figure,
-    choice_rating_figure,
-    counts_figure,
-    demographics_figure,
-    figure_png,
-    learning_curve_figure,
 )
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
