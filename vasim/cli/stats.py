@@ -1,10 +1,11 @@
 """``vasim stats``: run the study statistics on a long-format CSV file.
 
-``register(subparsers)`` adds ``vasim stats {rm-anova,tukey,paired,spearman}``. Each prints a
-readable table, or with ``--json`` a strict JSON object (undefined values ``null``, numbers
-unrounded) with a fixed set of keys. Bad input (missing file or column, non-numeric values,
-unbalanced design) raises ``ConfigError``, which ``vasim.cli`` prints as one line with exit
-code 2.
+``register(subparsers)`` adds ``vasim stats {rm-anova,mixed-anova,mixed-model,tukey,paired,
+spearman}``. Each prints a readable table, or with ``--json`` a strict JSON object
+(undefined values ``null``, numbers unrounded) with a fixed set of keys. Bad input (missing
+file or column, a duplicated column name, non-numeric values, unbalanced design) raises
+``ConfigError``, which ``vasim.cli`` prints as one line with exit code 2. Subject, factor,
+group and item columns are read as text (``01`` and ``1`` are two subjects).
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ per sample) are averaged into one cell mean per subject before the repeated-meas
 analyses (spec/study.md section 3):
   rm-anova   primary analysis: subject-level repeated-measures ANOVA, Mauchly's test,
              Greenhouse-Geisser / Huynh-Feldt corrections, partial and generalised eta^2
+  mixed-anova  between-subjects group x within factor (mixed design), GG-corrected
+  mixed-model  linear mixed model, random intercept per subject (statsmodels MixedLM, REML)
   tukey      Tukey HSD post hoc (the seed's): between groups (Tukey-Kramer), or repeated
              measures with the RM-ANOVA error term (assumes sphericity)
   paired     paired t-tests for all pairs, Holm/Bonferroni adjusted (the within-subject-
@@ -37,6 +40,10 @@ analyses (spec/study.md section 3):
 
 examples:
   vasim stats rm-anova --csv trials.csv --dv error --subject subject --within fixture,trial
+  vasim stats mixed-anova --csv probes.csv --dv error --subject subject --within trial \
+      --between group
+  vasim stats mixed-model --csv trials.csv --formula "error ~ C(fixture) + trial" \
+      --groups subject --factors fixture
   vasim stats tukey --csv trials.csv --dv error --subject subject --within fixture
   vasim stats tukey --csv plants.csv --dv weight --between group
   vasim stats paired --csv modes.csv --dv ET --subject subject --within mode --json
@@ -45,14 +52,15 @@ examples:
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Adds ``vasim stats {rm-anova,tukey,paired,spearman}`` to the ``vasim`` parser."""
+    """Adds ``vasim stats {rm-anova,mixed-anova,mixed-model,tukey,paired,spearman}``."""
     p = subparsers.add_parser(
         "stats",
-        help="statistics of a study CSV: RM-ANOVA, Tukey HSD, paired t-tests, Spearman",
+        help="statistics of a study CSV: RM-ANOVA, mixed ANOVA/model, Tukey, paired, Spearman",
         description="Statistics of the user studies on a long-format CSV file: the "
-                    "subject-level repeated-measures ANOVA and its post hoc tests, paired "
-                    "t-tests with power analysis, and Spearman correlations of questionnaire "
-                    "items.",
+                    "subject-level repeated-measures ANOVA and its post hoc tests, the "
+                    "mixed-design ANOVA (groups x within factor), a linear mixed model with "
+                    "a random intercept per subject, paired t-tests with power analysis, "
+                    "and Spearman correlations of questionnaire items.",
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -66,6 +74,33 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     q.add_argument("--within", required=True, metavar="A[,B]",
                    help="one within factor column, or two separated by a comma")
     q.set_defaults(func=cmd_rm_anova)
+
+    q = sub.add_parser("mixed-anova", help="mixed-design ANOVA: one between x one within factor",
+                       description="Mixed-design (split-plot) ANOVA on subject-level cell "
+                                   "means: between-subjects factor, within factor and their "
+                                   "interaction, Greenhouse-Geisser correction and Mauchly's "
+                                   "test on the within terms, partial and generalised eta^2.")
+    _common(q, dv=True)
+    q.add_argument("--subject", required=True, metavar="COL", help="subject-identifier column")
+    q.add_argument("--within", required=True, metavar="COL", help="within factor column")
+    q.add_argument("--between", required=True, metavar="COL",
+                   help="between-subjects factor column (one group per subject)")
+    q.set_defaults(func=cmd_mixed_anova)
+
+    q = sub.add_parser("mixed-model", help="linear mixed model, random intercept per subject",
+                       description="Linear mixed model fitted by REML (statsmodels MixedLM) "
+                                   "with one random intercept per level of --groups; fixed "
+                                   "effects with Wald 95 % CI. Fit warnings (non-convergence, "
+                                   "boundary) are printed as notes.")
+    _common(q, dv=False)
+    q.add_argument("--formula", required=True, metavar="F",
+                   help='fixed effects, patsy syntax, e.g. "error ~ C(fixture) + trial"')
+    q.add_argument("--groups", required=True, metavar="COL",
+                   help="column with one random intercept per level (the subject column)")
+    q.add_argument("--factors", default="", metavar="A[,B...]",
+                   help="columns to read as text labels (categorical in the formula); other "
+                        "columns of numbers are numeric")
+    q.set_defaults(func=cmd_mixed_model)
 
     q = sub.add_parser("tukey", help="Tukey HSD: --between G, or --subject S --within A",
                        description="Tukey HSD post hoc comparisons. With --between: "
@@ -123,7 +158,7 @@ def cmd_rm_anova(args: argparse.Namespace) -> int:
     if not 1 <= len(within) <= 2 or not all(within):
         raise ConfigError(f"--within takes one factor or two separated by a comma, got "
                           f"{args.within!r}")
-    data = read_long_csv(args.csv)
+    data = read_long_csv(args.csv, text_columns=[args.subject, *within])
     aov, notes = _run(lambda: rm_anova(data, args.dv, args.subject, within))
     out = sys.stdout
     if args.json:
@@ -154,6 +189,73 @@ def cmd_rm_anova(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_mixed_anova(args: argparse.Namespace) -> int:
+    """``vasim stats mixed-anova``."""
+    from vasim.study.stats import MIXED_ANOVA_COLUMNS, mixed_anova, read_long_csv
+
+    data = read_long_csv(args.csv, text_columns=[args.subject, args.within, args.between])
+    aov, notes = _run(lambda: mixed_anova(data, args.dv, args.within, args.between,
+                                          args.subject))
+    out = sys.stdout
+    if args.json:
+        keys = [c for c in MIXED_ANOVA_COLUMNS if c not in ("Source", "note")]
+        body = {str(r["Source"]): {k: _json_value(r[k]) for k in keys}
+                for r in aov.to_dict("records")}
+        _print_json({"mixed_anova": body}, out)
+        _print_notes(notes, sys.stderr)
+        return 0
+    sizes = ", ".join(f"{g} {n}" for g, n in aov.attrs["group_sizes"].items())
+    print("Mixed-design ANOVA on subject-level cell means (between x within)", file=out)
+    print(f"data: {args.csv}; dv {args.dv!r}, subject {args.subject!r}, within "
+          f"{args.within!r}, between {args.between!r}; {aov.attrs['n_subjects']} subjects "
+          f"({sizes})", file=out)
+    print(file=out)
+    _print_table(aov, ["Source", "DF1", "DF2", "SS", "MS", "F", "p_unc", "np2", "ng2"], out)
+    print(file=out)
+    print("Sphericity of the within terms (Mauchly, R's mauchly.test) and GG correction",
+          file=out)
+    _print_table(aov.iloc[1:], ["Source", "W_spher", "p_spher", "eps", "p_GG_corr"], out)
+    _print_notes([f"{r['Source']}: {r['note']}" for r in aov.to_dict("records") if r["note"]],
+                 out)
+    return 0
+
+
+def cmd_mixed_model(args: argparse.Namespace) -> int:
+    """``vasim stats mixed-model``."""
+    from vasim.study.stats import MIXED_MODEL_COLUMNS, mixed_model, read_long_csv
+
+    factors = [f.strip() for f in str(args.factors).split(",") if f.strip()]
+    data = read_long_csv(args.csv, text_columns=[args.groups, *factors])
+    fit, notes = _run(lambda: mixed_model(data, args.formula, args.groups))
+    out = sys.stdout
+    attrs = fit.attrs
+    if args.json:
+        keys = [c for c in MIXED_MODEL_COLUMNS if c not in ("term", "note")]
+        body = {
+            "formula": args.formula, "groups": args.groups, "n_obs": attrs["n_obs"],
+            "n_groups": attrs["n_groups"], "group_var": _json_value(attrs["group_var"]),
+            "resid_var": _json_value(attrs["resid_var"]), "converged": attrs["converged"],
+            "llf": _json_value(attrs["llf"]),
+            "fixed": {str(r["term"]): {k: _json_value(r[k]) for k in keys}
+                      for r in fit.to_dict("records")},
+            "note": str(fit["note"].iloc[0]),
+        }
+        _print_json({"mixed_model": body}, out)
+        _print_notes(notes, sys.stderr)
+        return 0
+    print("Linear mixed model, random intercept per group (statsmodels MixedLM, REML)",
+          file=out)
+    print(f"data: {args.csv}; {args.formula}; groups {args.groups!r}: {attrs['n_groups']} "
+          f"groups, {attrs['n_obs']} observations", file=out)
+    print(f"random-intercept variance {_num(attrs['group_var'])}, residual variance "
+          f"{_num(attrs['resid_var'])}, converged {attrs['converged']}", file=out)
+    print(file=out)
+    _print_table(fit, ["term", "coef", "se", "z", "p", "ci_low", "ci_high"], out)
+    # The StatsWarning repeats the note column, which is printed instead.
+    _print_notes([str(fit["note"].iloc[0])] if fit["note"].iloc[0] else [], out)
+    return 0
+
+
 def cmd_tukey(args: argparse.Namespace) -> int:
     """``vasim stats tukey``."""
     from vasim.study.stats import TUKEY_COLUMNS, read_long_csv, tukey_hsd, tukey_hsd_rm
@@ -164,7 +266,8 @@ def cmd_tukey(args: argparse.Namespace) -> int:
                           "--within COL (repeated measures), not both")
     if args.between is None and (args.subject is None or args.within is None):
         raise ConfigError("tukey needs --between COL, or both --subject COL and --within COL")
-    data = read_long_csv(args.csv)
+    labels = [args.between] if args.between is not None else [args.subject, args.within]
+    data = read_long_csv(args.csv, text_columns=labels)
     if args.between is not None:
         res, notes = _run(lambda: tukey_hsd(data, args.dv, args.between))
         title = ("Tukey HSD, independent groups (Tukey-Kramer for unequal n), pooled "
@@ -194,7 +297,7 @@ def cmd_paired(args: argparse.Namespace) -> int:
     """``vasim stats paired``."""
     from vasim.study.stats import PAIRED_COLUMNS, pairwise_paired, read_long_csv
 
-    data = read_long_csv(args.csv)
+    data = read_long_csv(args.csv, text_columns=[args.subject, args.within])
     res, notes = _run(lambda: pairwise_paired(data, args.dv, args.subject, args.within))
     out = sys.stdout
     if args.json:
@@ -221,7 +324,7 @@ def cmd_spearman(args: argparse.Namespace) -> int:
     """``vasim stats spearman``."""
     from vasim.study.stats import SPEARMAN_COLUMNS, read_long_csv, spearman_items
 
-    data = read_long_csv(args.csv)
+    data = read_long_csv(args.csv, text_columns=[args.subject, args.item])
     res, notes = _run(lambda: spearman_items(data, args.subject, args.item, args.value))
     out = sys.stdout
     if args.json:

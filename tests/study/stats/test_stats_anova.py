@@ -71,9 +71,12 @@ def test_bushtucker_matches_spss_and_jasp() -> None:
     assert round(r["mauchly_p"], 3) == 0.047
     assert r["p_unc"] < 0.05 < r["p_gg"]
     # JASP reports p = 0.04684581 through R's mauchly.test, which writes the number of
-    # cells (4) instead of p = 3 in the 3p term of Anderson's w2; with p throughout the
-    # published formula gives 0.046773. The difference is that term only.
-    assert r["mauchly_p"] == pytest.approx(0.046773, abs=2e-6)
+    # cells (4) instead of p = 3 in the 3p term of Anderson's w2: mauchly_p is R's.
+    assert r["mauchly_p"] == pytest.approx(0.04684581, abs=5e-9)
+    # With p throughout, Anderson's published formula gives 0.046773 (kept as
+    # mauchly_p_anderson; SPSS prints .047 for both). The difference is that term only.
+    assert r["mauchly_p_anderson"] == pytest.approx(0.046773, abs=2e-6)
+    assert round(r["mauchly_p_anderson"], 3) == 0.047
     assert r["note"] == ""
 
 
@@ -326,3 +329,60 @@ def test_missing_factor_label_named() -> None:
     data.loc[3, "food"] = np.nan
     with pytest.raises(ConfigError, match="column 'food' has missing labels at line 3"):
         rm_anova(data, "retch", "celebrity", "food")
+
+
+# --- statistics refuse what they cannot estimate (issue #16 item 2) ---------------------
+
+
+def test_zero_error_variance_effect_sizes_are_nan_with_note() -> None:
+    pattern = np.array([1.0, 2.0, 4.0])
+    y = np.stack([pattern + s for s in range(4)])
+    with pytest.warns(StatsWarning, match="effect sizes undefined"):
+        r = rm_anova(_long(y), dv="y", subject="s", within="A").iloc[0]
+    assert math.isnan(r["np2"]) and math.isnan(r["ges"])  # were 1.0 and 0.93
+    assert "zero error variance" in r["note"]
+
+
+@pytest.mark.parametrize("y", [
+    np.full((4, 3), 0.1),                                      # constant dv (issue #16)
+    np.array([0.1, 1.1, 2.3, 5.7])[:, None] + np.array([0.3, 0.7, 1.9])[None, :],  # round-off
+])
+def test_zero_error_within_round_off_is_zero(y: np.ndarray) -> None:
+    # The second design has SS_error = 5.5e-30 from rounding alone; it must not give an F of
+    # 1e30 or an eta squared of 1.
+    with pytest.warns(StatsWarning, match="zero error variance"):
+        r = rm_anova(_long(y), dv="y", subject="s", within="A").iloc[0]
+    for col in ("F", "p_unc", "np2", "ges", "eps_gg", "p_gg"):
+        assert math.isnan(r[col]), col
+
+
+def test_two_way_zero_error_only_where_zero() -> None:
+    # A: every subject the same +1 step (zero A x S error); B: noisy.
+    rng = np.random.default_rng(5)
+    y = rng.normal(size=(5, 1, 3)) + np.array([0.0, 1.0])[None, :, None]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", StatsWarning)
+        aov = rm_anova(_long(y, ("A", "B")), dv="y", subject="s", within=["A", "B"])
+    a, b, ab = (aov.iloc[i] for i in range(3))
+    assert math.isnan(a["np2"]) and math.isnan(a["F"]) and "zero error" in a["note"]
+    # A is additive, so A x B has no error either; B keeps its noise
+    assert math.isnan(ab["np2"]) and "zero error" in ab["note"]
+    assert 0 < b["np2"] < 1 and "zero error" not in b["note"]
+    assert sorted(str(w.message).split("'")[1] for w in caught) == ["A", "A:B"]
+
+
+def test_overflowing_sums_of_squares_are_nan_with_note() -> None:
+    y = np.array([[1e200, -1e200], [-1e200, 1e200], [3e200, 2e200]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.warns(StatsWarning, match="overflow"):
+            r = rm_anova(_long(y), dv="y", subject="s", within="A").iloc[0]
+    assert math.isnan(r["np2"]) and math.isnan(r["F"]) and "overflow" in r["note"]
+
+
+def test_mauchly_r_and_anderson_agree_up_to_three_levels() -> None:
+    # w2 has the factor (p - 2): with 3 levels (p = 2) R's cells-for-p term cannot matter.
+    data = read_long_csv(DATA / "reference_rm_anova2.csv")
+    aov = rm_anova(data, dv="Performance", subject="Subject", within=["Time", "Metric"])
+    for r in aov.iloc[1:].to_dict("records"):
+        assert r["mauchly_p"] == r["mauchly_p_anderson"]

@@ -99,3 +99,62 @@ def test_nan_to_none() -> None:
     assert nan_to_none(float("nan")) is None
     assert nan_to_none(np.float64(2.5)) == 2.5 and type(nan_to_none(np.int64(3))) is int
     assert nan_to_none(pd.NA) is None and nan_to_none(float("inf")) is None
+
+
+# --- labels are text (issue #16 item 2) ---------------------------------------------
+
+
+def test_subject_codes_01_and_1_stay_different(tmp_path: Path) -> None:
+    p = tmp_path / "codes.csv"
+    p.write_text("s,c,y\n01,a,1\n01,b,2\n1,a,3\n1,b,5\n1.0,a,2\n1.0,b,2.5\n")
+    for df in (read_long_csv(p), read_long_csv(p, text_columns=["s", "c"])):
+        assert df["s"].tolist() == ["01", "01", "1", "1", "1.0", "1.0"]
+        cm = cell_means(df, "y", "s", ["c"])
+        assert cm.subjects == ["1", "01", "1.0"]  # three subjects, natural order
+        np.testing.assert_array_equal(cm.values, [[3.0, 5.0], [1.0, 2.0], [2.0, 2.5]])
+        assert (cm.n_obs == 1).all()
+
+
+def test_named_text_columns_stay_text_lossless_columns_become_numbers(tmp_path: Path) -> None:
+    p = tmp_path / "t.csv"
+    p.write_text("s,trial,y,note\n1,2,1.5,\n2,10,2.0,\n")
+    df = read_long_csv(p, text_columns=["s", "trial", "absent"])
+    assert df["s"].tolist() == ["1", "2"] and df["trial"].tolist() == ["2", "10"]
+    assert df["y"].dtype == np.float64 and df["y"].tolist() == [1.5, 2.0]
+    assert df["note"].isna().all()
+    assert df.attrs["text_columns"] == ["s", "trial"]
+    inferred = read_long_csv(p)
+    assert inferred["s"].tolist() == [1, 2] and inferred["trial"].dtype == np.int64
+    assert levels_of(df["trial"]) == ["2", "10"]  # numeric-looking text: natural order
+
+
+def test_export_missing_marker_is_missing(tmp_path: Path) -> None:
+    p = tmp_path / "e.csv"
+    p.write_text("s,y\nA,\\N\nB,2\n")
+    df = read_long_csv(p, text_columns=["s"])
+    assert df["y"].isna().tolist() == [True, False] and df["y"].dtype == np.float64
+
+
+def test_duplicated_column_refused_naming_file_and_column(tmp_path: Path) -> None:
+    p = tmp_path / "dup.csv"
+    p.write_text("s,y,c,y\n1,2.0,a,3.0\n")
+    with pytest.raises(ConfigError, match=r"column 'y' appears 2 times in the header "
+                                          r"\(columns 2, 4\)") as err:
+        read_long_csv(p)
+    assert err.value.file == str(p) and err.value.field == "y"
+
+
+def test_levels_of_numeric_text_order() -> None:
+    assert levels_of(pd.Series(["10", "2", "01", "1", "1.0"])) == ["1", "01", "1.0", "2", "10"]
+    assert levels_of(pd.Series(["b", "10", "a"])) == ["10", "a", "b"]  # not all numbers
+
+
+def test_text_columns_keep_na_and_none_as_labels(tmp_path: Path) -> None:
+    p = tmp_path / "labels.csv"
+    p.write_text("s,fixture,y\nNA,None,1\nNA,VG,NA\nAB,None,\\N\nAB,VG,4\n,VG,5\n")
+    df = read_long_csv(p, text_columns=["s", "fixture"])
+    assert df["s"].tolist()[:4] == ["NA", "NA", "AB", "AB"] and pd.isna(df["s"].iloc[4])
+    assert df["fixture"].tolist() == ["None", "VG", "None", "VG", "VG"]
+    assert df["y"].isna().tolist() == [False, True, True, False, False]  # value columns: NA
+    with pytest.raises(ConfigError, match="missing labels at line 6"):
+        cell_means(df.fillna({"y": 0.0}), "y", "s", ["fixture"])

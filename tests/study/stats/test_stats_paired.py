@@ -188,3 +188,24 @@ def test_bad_input() -> None:
     assert "ID=4 x group=1" in str(err.value)
     with pytest.raises(ConfigError, match="at least 2 subjects"):
         pairwise_paired(data[data["ID"] == 1], dv="extra", subject="ID", within="group")
+
+
+def test_differences_equal_up_to_rounding_give_nan_dz() -> None:
+    # b = a + 0.3 in floating point: sd(d) = 1.3e-16, which gave dz = -2.3e15.
+    a = np.array([0.1, 1.1, 2.3, 5.7])
+    df = pd.DataFrame({"s": list(range(4)) * 2, "c": ["a"] * 4 + ["b"] * 4,
+                       "y": np.concatenate([a, a + 0.3])})
+    with pytest.warns(StatsWarning, match="all differences are equal"):
+        r = pairwise_paired(df, dv="y", subject="s", within="c").iloc[0]
+    assert math.isnan(r["cohen_dz"]) and math.isnan(r["t"]) and math.isnan(r["p_holm"])
+    assert r["mean_diff"] == pytest.approx(-0.3)
+
+
+def test_overflowing_differences_named() -> None:
+    df = pd.DataFrame({"s": [0, 1, 2] * 2, "c": ["a"] * 3 + ["b"] * 3,
+                       "y": [1e308, -1e308, 0.0, -1e308, 1e308, 1.0]})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.warns(StatsWarning, match="overflow"):
+            r = pairwise_paired(df, dv="y", subject="s", within="c").iloc[0]
+    assert math.isnan(r["cohen_dz"]) and math.isnan(r["t"])

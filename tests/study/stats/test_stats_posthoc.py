@@ -165,3 +165,25 @@ def test_bad_input() -> None:
     bush = read_long_csv(DATA / "reference_bushtucker.csv")
     with pytest.raises(ConfigError, match="unbalanced"):
         tukey_hsd_rm(bush.iloc[1:], dv="retch", subject="celebrity", within="food")
+
+
+def test_tukey_groups_1_and_1_0_are_different(tmp_path: Path) -> None:
+    # Issue #16: group labels "1" and "1.0" merged into one group through pandas inference.
+    p = tmp_path / "groups.csv"
+    p.write_text("g,y\n" + "".join(f"{g},{y}\n" for g, ys in
+                                  (("1", (1, 2, 3)), ("1.0", (4, 5, 6)), ("2", (7, 8, 9)))
+                                  for y in ys))
+    res = tukey_hsd(read_long_csv(p, text_columns=["g"]), "y", "g")
+    assert res.k == 3
+    pairs = res.comparisons[["group1", "group2", "diff"]].to_dict("records")
+    assert pairs[0] == {"group1": "1", "group2": "1.0", "diff": 3.0}
+    # one-way ANOVA error term: three groups of 3 with variance 1 -> MS_error 1, df 6
+    assert res.ms_error == pytest.approx(1.0) and res.df_error == 6
+
+
+def test_tukey_round_off_error_term_refused() -> None:
+    # Subjects differ, the pattern over levels is the same up to rounding (SS_error 5.5e-30).
+    y = np.array([0.1, 1.1, 2.3, 5.7])[:, None] + np.array([0.3, 0.7, 1.9])[None, :]
+    df = pd.DataFrame([{"s": i, "c": f"c{j}", "y": y[i, j]} for i in range(4) for j in range(3)])
+    with pytest.raises(ConfigError, match="zero error variance"):
+        tukey_hsd_rm(df, dv="y", subject="s", within="c")

@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 from vasim.core.errors import ConfigError
-from vasim.study.stats import SEED_LABEL, seed_per_sample_anova
+from vasim.study.stats import SEED_LABEL, StatsWarning, seed_per_sample_anova
 
 
 def _samples(seed: int = 3, reps: int = 25) -> pd.DataFrame:
@@ -65,3 +65,17 @@ def test_bad_input() -> None:
         seed_per_sample_anova(holes, dv="error", interaction=True)
     with pytest.raises(ConfigError, match="column 'latency' not found"):
         seed_per_sample_anova(df, dv="latency")
+
+
+def test_zero_residual_gives_nan_f_not_huge() -> None:
+    # Additive data with values that round: the OLS residual is ~1e-30, F would be ~1e30.
+    fx = {"none": 0.1, "VG": 0.7}
+    tr = {1: 0.3, 2: 1.1, 3: 2.9}
+    df = pd.DataFrame([{"fixture": f, "trial": t, "e": fx[f] + tr[t]}
+                       for f in fx for t in tr for _ in range(2)])
+    with pytest.warns(StatsWarning, match="zero residual variance"):
+        r = seed_per_sample_anova(df, dv="e")
+    assert r["F"].isna().all() and r["p"].isna().all()
+    # type II SS stay defined: 12 (0.6/2)^2 and 4 sum_j (t_j - mean t)^2
+    t = np.array([0.3, 1.1, 2.9])
+    assert r["SS"].tolist() == pytest.approx([12 * 0.3**2, 4 * ((t - t.mean()) ** 2).sum()])

@@ -10,7 +10,18 @@ the file (``data.attrs["source"]``, set by :func:`read_long_csv`), the column an
 Primary analyses (spec §3 **decision**): :func:`rm_anova` on subject-level cell means, with
 :func:`tukey_hsd_rm` (as in the seed) and Holm-corrected :func:`pairwise_paired` (within-
 subject-correct) as post hoc tests. :func:`seed_per_sample_anova` only replicates the
-seed's per-sample ANOVA and is labelled as such.
+seed's per-sample ANOVA and is labelled as such. Groups (surgeons vs residents) x a within
+factor: :func:`mixed_anova`; fixture effects adjusted for practice: :func:`mixed_model`
+(statsmodels ``MixedLM``, random intercept per subject).
+
+Statistics refuse what they cannot estimate (issue #16): a value that is undefined for the
+data (an effect size with zero error variance, Mauchly's test of a singular covariance, a
+fit that did not converge) is NaN with a ``note`` and a :class:`StatsWarning`, never a
+made-up number. Subject and factor labels are text when read from CSV (``01`` and ``1``
+are two subjects); a duplicated column name is refused.
+
+This package is a leaf: of vasim it imports only :mod:`vasim.core` (an import-linter
+contract in pyproject.toml; issue #14), so importing it loads neither the store nor tqdm.
 """
 
 from __future__ import annotations
@@ -25,6 +36,10 @@ from vasim.study.stats.learning import PowerLawFit as PowerLawFit
 from vasim.study.stats.learning import fit_learning_curves as fit_learning_curves
 from vasim.study.stats.learning import fit_power_law as fit_power_law
 from vasim.study.stats.learning import learning_curve_summary as learning_curve_summary
+from vasim.study.stats.mixed import MIXED_ANOVA_COLUMNS as MIXED_ANOVA_COLUMNS
+from vasim.study.stats.mixed import mixed_anova as mixed_anova
+from vasim.study.stats.mixed_model import MIXED_MODEL_COLUMNS as MIXED_MODEL_COLUMNS
+from vasim.study.stats.mixed_model import mixed_model as mixed_model
 from vasim.study.stats.paired import PAIRED_COLUMNS as PAIRED_COLUMNS
 from vasim.study.stats.paired import gain as gain
 from vasim.study.stats.paired import min_n_for_power as min_n_for_power
@@ -39,6 +54,8 @@ from vasim.study.stats.seed_replication import SEED_LABEL as SEED_LABEL
 from vasim.study.stats.seed_replication import seed_per_sample_anova as seed_per_sample_anova
 
 __all__ = [
+    "MIXED_ANOVA_COLUMNS",
+    "MIXED_MODEL_COLUMNS",
     "PAIRED_COLUMNS",
     "RM_ANOVA_COLUMNS",
     "SEED_LABEL",
@@ -52,6 +69,8 @@ __all__ = [
     "gain",
     "learning_curve_summary",
     "min_n_for_power",
+    "mixed_anova",
+    "mixed_model",
     "n_for_power",
     "paired_power",
     "pairwise_paired",

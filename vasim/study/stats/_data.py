@@ -22,21 +22,80 @@ import numpy as np
 import pandas as pd
 
 from vasim.core.errors import ConfigError
-from vasim.study.export import CSV_NA
 
 #: Maximum number of offending values or cells quoted in one error message.
 MAX_LISTED = 8
+
+#: The missing-value marker of ``vasim study export`` CSV files (``vasim.study.export.CSV_NA``;
+#: a test checks they agree). Written here, not imported: the statistics import nothing of
+#: the store or the export (issue #14; an import-linter contract in pyproject.toml).
+CSV_NA = "\\N"
+
+
+#: Relative size (to the total sum of squares) below which an error sum of squares is zero.
+ZERO_SS_REL = 1e-12
+
+
+def error_ss_is_zero(ss_error: float, values: np.ndarray) -> bool:
+    """Whether an error sum of squares is zero within round-off of the data it comes from.
+
+    **Decision** (issue #16): an error SS counts as zero when
+
+    ``ss_error <= max(1e-12 * SS_total, N * (64 * eps * max|v|)^2)``
+
+    with ``SS_total`` the sum of squares of ``values`` about their mean, ``N`` their count
+    and ``eps`` the float64 machine epsilon. The first term is the relative test of
+    ``rm_anova``; the second is the round-off of the values themselves, so constant data
+    whose means differ only by rounding (``0.1`` averaged from ``0.1, 0.1, 0.1``) also
+    count as zero, where the relative test alone would compare two round-off residues.
+    A non-finite ``ss_error`` is not zero (the caller reports it as an overflow).
+
+    Args:
+        ss_error: the error sum of squares, in the dependent variable's unit squared.
+        values: the data (cell means) it was computed from, any shape.
+
+    >>> error_ss_is_zero(0.0, np.array([1.0, 2.0])), error_ss_is_zero(0.5, np.array([1.0, 2.0]))
+    (True, False)
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    if not math.isfinite(ss_error):
+        return False
+    if v.size == 0:
+        return ss_error <= 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        ss_total = float(((v - v.mean()) ** 2).sum())
+        roundoff = v.size * (64.0 * np.finfo(float).eps * float(np.abs(v).max())) ** 2
+    threshold = max(ZERO_SS_REL * ss_total if math.isfinite(ss_total) else 0.0, roundoff)
+    return not ss_error > threshold
 
 
 class StatsWarning(UserWarning):
     """A statistic is undefined or degenerate for this data (the value is NaN, see the note)."""
 
 
-def read_long_csv(path: str | Path) -> pd.DataFrame:
+def read_long_csv(path: str | Path, *, text_columns: Sequence[str] = ()) -> pd.DataFrame:
     """Reads a long-format CSV file for the statistics functions.
 
+    Every cell is read as text first. The columns named in ``text_columns`` (the subject
+    and factor columns of the analysis) stay text, so ``01`` and ``1``, or ``1`` and
+    ``1.0``, are different subjects or levels; in them only an empty cell or ``\\N`` is
+    missing (a subject ``NA`` or a fixture ``None`` is a label, where pandas' defaults
+    would read it as missing). Every other column becomes numbers when all
+    its values are numbers **and** the conversion keeps distinct texts distinct; a column
+    where two different texts would become the same number (``01`` and ``1``) stays text,
+    so that labels never merge even when the caller names no column. The statistics
+    convert their dependent variable themselves (:func:`numeric_column`), so a value
+    column that stayed text is still analysed correctly.
+
+    **Decision**: labels are compared as written (``"1"`` and ``"1.0"`` differ) because a
+    subject code is an identifier, not a quantity; pandas' default inference, which merged
+    them (issue #16), is not used for label columns.
+
     Args:
-        path: CSV file with a header row.
+        path: CSV file with a header row; empty cells and ``\\N`` (``vasim study export``)
+            are missing values.
+        text_columns: columns always kept as text (names absent from the file are ignored;
+            the statistic then names the missing column).
 
     Returns:
         The table; ``attrs["source"]`` holds the path and the index holds the CSV line
@@ -44,7 +103,8 @@ def read_long_csv(path: str | Path) -> pd.DataFrame:
         quoted line breaks), so validation errors can name both.
 
     Raises:
-        ConfigError: the file is missing, is a directory, is empty or cannot be parsed.
+        ConfigError: the file is missing, is a directory, is empty, cannot be parsed, or
+            its header names a column twice (pandas would silently rename the second).
     """
     p = Path(path)
     if not p.exists():
@@ -52,20 +112,57 @@ def read_long_csv(path: str | Path) -> pd.DataFrame:
     if p.is_dir():
         raise ConfigError("is a directory, expected a CSV file", file=p)
     try:
-        df = pd.read_csv(p, na_values=[CSV_NA])   # also reads `vasim study export` files
+        header = pd.read_csv(p, header=None, nrows=1, dtype=str, keep_default_na=False)
+        names = [str(v) for v in header.iloc[0].tolist()]
+        _check_header(p, names)
+        raw = pd.read_csv(p, dtype=str, na_values=[CSV_NA])  # also reads `study export` files
+        text = [c for c in names if c in set(text_columns)]
+        if text:  # labels: only an empty cell or \N is missing ("NA", "None" are labels)
+            labels = pd.read_csv(p, dtype=str, usecols=text, keep_default_na=False,
+                                 na_values=["", CSV_NA])
+            for c in text:
+                raw[c] = labels[c]
     except pd.errors.EmptyDataError:
         raise ConfigError("CSV file is empty (no header row)", file=p) from None
     except (pd.errors.ParserError, UnicodeDecodeError, ValueError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ConfigError(f"cannot parse CSV: {first}", file=p) from None
     except OSError as exc:
         raise ConfigError(f"cannot read CSV: {exc.strerror or exc}", file=p) from None
-    if df.empty:
+    if raw.empty:
         raise ConfigError("CSV file has a header but no data rows", file=p)
+    df = pd.DataFrame({c: raw[c] if c in text else _as_numbers_if_lossless(raw[c])
+                       for c in raw.columns})
     df.index = pd.RangeIndex(2, 2 + len(df))
     df.attrs["source"] = str(p)
     df.attrs["line_index"] = True
+    df.attrs["text_columns"] = text
     return df
+
+
+def _check_header(path: Path, names: list[str]) -> None:
+    """Refuses a header that names a column twice (1-based positions in the message)."""
+    seen: dict[str, list[int]] = {}
+    for i, name in enumerate(names, start=1):
+        seen.setdefault(name, []).append(i)
+    for name, positions in seen.items():
+        if len(positions) > 1:
+            raise ConfigError(f"column {name!r} appears {len(positions)} times in the header "
+                              f"(columns {', '.join(map(str, positions))}); column names must "
+                              f"be unique", file=path, field=name)
+
+
+def _as_numbers_if_lossless(col: pd.Series) -> pd.Series:
+    """A text column as numbers when every value is one and distinct texts stay distinct."""
+    present = col.dropna()
+    if present.empty:
+        return pd.to_numeric(col, errors="coerce")
+    nums = pd.to_numeric(present, errors="coerce")
+    if nums.isna().any() or nums.nunique() != present.nunique():
+        return col
+    return pd.to_numeric(col)
 
 
 def source_of(data: pd.DataFrame) -> str | None:
@@ -173,17 +270,25 @@ def levels_of(col: pd.Series) -> list[Any]:
     """The levels of a factor column in a stable, documented order.
 
     A categorical column keeps its category order (unobserved categories dropped); any
-    other column is sorted (numbers numerically, text alphabetically). Labels that cannot
-    be compared with each other keep their order of first appearance.
+    other column is sorted: numbers numerically, text alphabetically except that text
+    labels which all read as numbers (``"2"``, ``"10"``, ``"01"``) are ordered by that
+    number, then by their text (``"1" < "01" < "1.0" < "2" < "10"``), so trials and
+    subjects read as text keep their natural order. Labels that cannot be compared with
+    each other keep their order of first appearance.
     """
     if isinstance(col.dtype, pd.CategoricalDtype):
         present = set(col.dropna().unique().tolist())
         return [_py(c) for c in col.cat.categories if c in present]
-    uniq = pd.unique(col.dropna())
+    uniq = [_py(v) for v in pd.unique(col.dropna()).tolist()]
+    if uniq and all(isinstance(v, str) for v in uniq):
+        nums = pd.to_numeric(pd.Series(uniq, dtype=object), errors="coerce")
+        if nums.notna().all() and np.isfinite(nums.to_numpy(dtype=float)).all():
+            return [v for _, v in sorted(zip(nums.tolist(), uniq, strict=True),
+                                         key=lambda t: (t[0], len(t[1]), t[1]))]
     try:
-        return [_py(v) for v in sorted(uniq.tolist())]
+        return sorted(uniq)
     except TypeError:
-        return [_py(v) for v in uniq.tolist()]
+        return uniq
 
 
 def _py(value: Any) -> Any:

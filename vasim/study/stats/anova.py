@@ -20,18 +20,16 @@ from scipy import stats
 from scipy.linalg import helmert
 
 from vasim.core.errors import ConfigError
-from vasim.study.stats._data import StatsWarning, cell_means, source_of
+from vasim.study.stats._data import StatsWarning, cell_means, error_ss_is_zero, source_of
+from vasim.study.stats.sphericity import gg_epsilon, mauchly_test
 
 #: Column order of :func:`rm_anova` (the JSON keys of ``vasim stats rm-anova`` are the same
 #: minus ``effect``, which keys the object, and ``note``).
 RM_ANOVA_COLUMNS: tuple[str, ...] = (
     "effect", "SS", "SS_error", "MS", "MS_error", "df1", "df2", "F", "p_unc",
     "eps_gg", "eps_hf", "eps_lb", "p_gg", "p_hf", "p_lb", "np2", "ges",
-    "mauchly_W", "mauchly_chi2", "mauchly_df", "mauchly_p", "note",
+    "mauchly_W", "mauchly_chi2", "mauchly_df", "mauchly_p", "mauchly_p_anderson", "note",
 )
-
-#: Relative size below which an error sum of squares counts as exactly zero.
-_ZERO_SS = 1e-12
 
 _TWO_LEVELS = "2 levels: sphericity holds trivially, Mauchly's test undefined"
 
@@ -82,9 +80,15 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
         - ``ges``: generalised eta squared (Olejnik & Algina 2003; Bakeman 2005) for an
           all-within design, ``SS/(SS + SS_subjects + sum of all SS_error)``.
         - ``mauchly_W``, ``mauchly_chi2``, ``mauchly_df``, ``mauchly_p``: Mauchly's test of
-          sphericity; NaN where undefined (see Notes).
+          sphericity, p exactly as R's ``mauchly.test`` / ``car`` / JASP
+          (:func:`vasim.study.stats.sphericity.mauchly_test`); NaN where undefined (see
+          Notes).
+        - ``mauchly_p_anderson``: the same test's p with Anderson's (1958) formula as
+          published (the number of contrasts throughout; R puts the number of cells in one
+          term), which SPSS's printed 3 decimals also match; equal to ``mauchly_p`` when
+          the effect has at most 3 levels.
         - ``note``: empty, or why a value is NaN (2 levels, singular covariance, zero
-          error variance).
+          error variance, overflow).
 
         ``result.attrs`` holds ``n_subjects``, ``levels`` (per factor) and ``n_obs_per_cell``
         (min and max number of raw rows averaged into a cell).
@@ -115,11 +119,12 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
           for a single group Lecoutre's and Huynh & Feldt's (1976) formulas coincide.
         - Mauchly: ``W = det(S) / (tr(S)/p)^p``,
           ``chi2 = -(n - 1 - (2p^2 + p + 2)/(6p)) ln W`` with ``p(p+1)/2 - 1`` df, and the
-          p-value with Anderson's (1958) second-order term, as SPSS and R
-          ``mauchly.test``: ``P(X2_f > chi2) + w2 (P(X2_{f+4} > chi2) - P(X2_f > chi2))``,
-          ``w2 = (p+2)(p-1)(p-2)(2p^3+6p^2+3p+2) / (288 ((n-1) p rho)^2)``,
-          ``rho = 1 - (2p^2+p+2)/(6p(n-1))``. R's ``mauchly.test`` writes the number of
-          cells instead of p in the ``3p`` term, which moves p in the 4th decimal.
+          p-value with Anderson's (1958) second-order term, as R ``mauchly.test``:
+          ``P(X2_f > chi2) + w2 (P(X2_{f+4} > chi2) - P(X2_f > chi2))``,
+          ``w2 = (p+2)(p-1)(p-2)(2p^3+6p^2+3c+2) / (288 ((n-1) p rho)^2)``,
+          ``rho = 1 - (2p^2+p+2)/(6p(n-1))``, where R's source has ``c`` = the number of
+          within cells of the design (``mauchly_p``) and Anderson ``c = p``
+          (``mauchly_p_anderson``); they differ in the 4th decimal at most.
 
         Undefined values are NaN, never a made-up number:
 
@@ -129,7 +134,14 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
           are linearly dependent in the data): W = 0 carries no test, so Mauchly is NaN and
           a :class:`StatsWarning` is issued. GG is still defined (needs only ``tr(S) > 0``);
           HF is defined when ``n - 1 - p eps_gg > 0`` and NaN otherwise.
-        - Zero error variance: F, p-values and epsilons are NaN.
+        - Zero error variance (``SS_error`` zero within round-off, see
+          :func:`vasim.study.stats._data.error_ss_is_zero`; e.g. a constant dependent
+          variable): F, p-values, epsilons and the effect sizes ``np2`` and ``ges`` are NaN.
+          **Decision**: ``ges`` is NaN too although its denominator may be positive,
+          because an effect measured without error variance is degenerate data, and an
+          effect size of a degenerate effect would be read as a finding (issue #16).
+        - Sums of squares that overflow (values near 1e154 and above): F, p and effect
+          sizes are NaN with a note.
 
     Examples:
         >>> df = pd.DataFrame({
@@ -152,7 +164,6 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
     sizes = [len(lev) for lev in cm.levels]
     grand = float(y.mean())
     ss_subjects = float(y.shape[1] * ((y.mean(axis=1) - grand) ** 2).sum())
-    ss_total = float(((y - grand) ** 2).sum())
 
     effects: list[tuple[str, np.ndarray]] = []
     if len(factors) == 1:
@@ -167,10 +178,11 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
 
     parts = [_effect_sums(y @ c) for _, c in effects]
     ss_error_sum = sum(p[1] for p in parts)
+    n_cells = y.shape[1]
     rows = []
     for (name, c), (ss, ss_err, cov) in zip(effects, parts, strict=True):
-        row = _effect_row(name, ss, ss_err, cov, n, c.shape[1], ss_total,
-                          ss + ss_subjects + ss_error_sum)
+        row = _effect_row(name, ss, ss_err, cov, n, c.shape[1], error_ss_is_zero(ss_err, y),
+                          ss + ss_subjects + ss_error_sum, n_cells)
         undefined = [t for t in str(row["note"]).split("; ") if t and t != _TWO_LEVELS]
         if undefined:  # a value is NaN for this data (not merely the 2-level case)
             warnings.warn(f"rm_anova effect {name!r}: {'; '.join(undefined)}", StatsWarning,
@@ -196,30 +208,33 @@ def _effect_sums(z: np.ndarray) -> tuple[float, float, np.ndarray]:
 
 
 def _effect_row(name: str, ss: float, ss_err: float, cov: np.ndarray, n: int, p: int,
-                ss_total: float, ges_denominator: float) -> dict[str, object]:
+                zero_error: bool, ges_denominator: float, n_cells: int) -> dict[str, object]:
     df1, df2 = p, p * (n - 1)
     notes: list[str] = []
     nan = math.nan
-    zero_error = ss_err <= _ZERO_SS * max(ss_total, np.finfo(float).tiny)
-    if zero_error:
-        notes.append("zero error variance: F, p and epsilons undefined")
-        f_val = p_unc = nan
+    overflow = not (math.isfinite(ss) and math.isfinite(ss_err))
+    f_val = p_unc = np2 = ges = nan
+    ms_err = ss_err / df2
+    if overflow:
+        notes.append("sums of squares overflow (not finite): F, p and effect sizes undefined")
+    elif zero_error:
+        notes.append("zero error variance: F, p, epsilons and effect sizes undefined")
         ms_err = 0.0
     else:
-        ms_err = ss_err / df2
         f_val = (ss / df1) / ms_err
         p_unc = float(stats.f.sf(f_val, df1, df2))
+        np2 = ss / (ss + ss_err)
+        ges = ss / ges_denominator
 
     eps_lb = 1.0 / p
-    mauchly = (nan, nan, nan, nan)
+    mauchly = (nan, nan, nan, nan, nan)
     if p == 1:
         eps_gg = eps_hf = 1.0
         notes.append(_TWO_LEVELS)
-    elif zero_error:
+    elif zero_error or overflow:
         eps_gg = eps_hf = nan
     else:
-        tr = float(np.trace(cov))
-        eps_gg = tr * tr / (p * float(np.trace(cov @ cov)))
+        eps_gg = gg_epsilon(cov)
         denom = n - 1 - p * eps_gg
         if denom > 1e-9 * (n - 1):  # exactly 0 for n = 2 (rank 1), up to rounding
             eps_hf = min(1.0, (n * p * eps_gg - 2.0) / (p * denom))
@@ -231,15 +246,14 @@ def _effect_row(name: str, ss: float, ss_err: float, cov: np.ndarray, n: int, p:
             notes.append(f"singular covariance of the {p} contrasts (rank {rank}, n-1 = "
                          f"{n - 1}): Mauchly's test undefined, GG still valid")
         else:
-            mauchly = _mauchly(cov, n, p)
+            m = mauchly_test(cov, n - 1, n_cells)
+            mauchly = (m.W, m.chi2, m.df, m.p, m.p_anderson)
 
     def corrected(eps: float) -> float:
         if math.isnan(eps) or math.isnan(f_val):
             return nan
         return float(stats.f.sf(f_val, df1 * eps, df2 * eps))
 
-    np2 = ss / (ss + ss_err) if ss + ss_err > 0 else nan
-    ges = ss / ges_denominator if ges_denominator > 0 else nan
     return {
         "effect": name, "SS": ss, "SS_error": ss_err, "MS": ss / df1, "MS_error": ms_err,
         "df1": df1, "df2": df2, "F": f_val, "p_unc": p_unc,
@@ -247,23 +261,5 @@ def _effect_row(name: str, ss: float, ss_err: float, cov: np.ndarray, n: int, p:
         "p_gg": corrected(eps_gg), "p_hf": corrected(eps_hf), "p_lb": corrected(eps_lb),
         "np2": np2, "ges": ges,
         "mauchly_W": mauchly[0], "mauchly_chi2": mauchly[1], "mauchly_df": mauchly[2],
-        "mauchly_p": mauchly[3], "note": "; ".join(notes),
+        "mauchly_p": mauchly[3], "mauchly_p_anderson": mauchly[4], "note": "; ".join(notes),
     }
-
-
-def _mauchly(cov: np.ndarray, n: int, p: int) -> tuple[float, float, float, float]:
-    """Mauchly's W, chi-square, df and p-value (Anderson's second-order approximation)."""
-    sign, logdet = np.linalg.slogdet(cov)
-    tr = float(np.trace(cov))
-    log_w = logdet - p * math.log(tr / p)
-    w = math.exp(log_w) if sign > 0 else 0.0
-    nu = n - 1
-    rho = 1.0 - (2 * p * p + p + 2) / (6.0 * p * nu)
-    chi2 = -nu * rho * log_w
-    f = p * (p + 1) / 2 - 1
-    w2 = ((p + 2) * (p - 1) * (p - 2) * (2 * p**3 + 6 * p**2 + 3 * p + 2)
-          / (288.0 * (nu * p * rho) ** 2))
-    pr1 = float(stats.chi2.sf(chi2, f))
-    pr2 = float(stats.chi2.sf(chi2, f + 4))
-    pval = min(1.0, max(0.0, pr1 + w2 * (pr2 - pr1)))
-    return w, chi2, float(f), pval

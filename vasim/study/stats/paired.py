@@ -20,7 +20,7 @@ from statsmodels.stats.multitest import multipletests
 from statsmodels.stats.power import TTestPower
 
 from vasim.core.errors import ConfigError
-from vasim.study.stats._data import StatsWarning, cell_means, finite_array
+from vasim.study.stats._data import StatsWarning, cell_means, error_ss_is_zero, finite_array
 
 #: Column order of :func:`pairwise_paired` (also the JSON keys of ``vasim stats paired``).
 PAIRED_COLUMNS: tuple[str, ...] = (
@@ -162,7 +162,10 @@ def pairwise_paired(data: pd.DataFrame, dv: str, subject: str, within: str) -> p
     Notes:
         A pair whose differences are all equal has ``sd(d) = 0``: t, p, dz and power are
         NaN (a :class:`StatsWarning` is issued) and the pair is left out of the Holm and
-        Bonferroni family.
+        Bonferroni family. "Equal" is within round-off
+        (:func:`vasim.study.stats._data.error_ss_is_zero` of ``sum (d - mean d)^2`` against
+        the pair's cell means), so differences equal up to float rounding do not produce a
+        dz of 1e15.
 
     Examples:
         >>> df = pd.DataFrame({"s": [1, 2, 3, 4] * 2, "c": ["a"] * 4 + ["b"] * 4,
@@ -183,7 +186,8 @@ def pairwise_paired(data: pd.DataFrame, dv: str, subject: str, within: str) -> p
         sd = float(d.std(ddof=1))
         row: dict[str, Any] = {"group1": levels[i], "group2": levels[j], "n": n,
                                "mean_diff": mean, "df": n - 1}
-        if sd > 0 and math.isfinite(sd):
+        ss_d = sd * sd * (n - 1)
+        if math.isfinite(sd) and not error_ss_is_zero(ss_d, y[:, [i, j]]):
             se = sd / math.sqrt(n)
             t = mean / se
             dz = mean / sd
@@ -193,8 +197,10 @@ def pairwise_paired(data: pd.DataFrame, dv: str, subject: str, within: str) -> p
                        power_observed=paired_power(dz, n), n_power90=n90,
                        n_power90_ceil=_smallest_n(dz, n90, 0.9, 0.05))
         else:
-            warnings.warn(f"pairwise_paired {levels[i]!r} vs {levels[j]!r}: all differences "
-                          f"are equal ({mean!r}), t-test undefined", StatsWarning, stacklevel=2)
+            why = (f"all differences are equal ({mean!r})" if math.isfinite(sd) else
+                   "the differences overflow (not finite)")
+            warnings.warn(f"pairwise_paired {levels[i]!r} vs {levels[j]!r}: {why}, t-test and "
+                          f"dz undefined", StatsWarning, stacklevel=2)
             row.update(t=math.nan, p=math.nan, ci_low=mean, ci_high=mean, cohen_dz=math.nan,
                        power_observed=math.nan, n_power90=math.nan, n_power90_ceil=None)
         rows.append(row)

@@ -21,6 +21,7 @@ from scipy import stats
 from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
     cell_means,
+    error_ss_is_zero,
     factor_column,
     levels_of,
     nan_to_none,
@@ -138,7 +139,7 @@ def tukey_hsd(data: pd.DataFrame, dv: str, between: str, *, alpha: float = 0.05)
                           file=src, field=dv)
     ss_within = float(sum(((v - v.mean()) ** 2).sum() for v in groups))
     ms_error = ss_within / df_error
-    _check_positive(ms_error, dv, src)
+    _check_positive(ss_within, ms_error, y.to_numpy(dtype=float), dv, src)
     pairs = list(itertools.combinations(range(k), 2))
     se = np.array([math.sqrt(ms_error / 2.0 * (1 / sizes[i] + 1 / sizes[j])) for i, j in pairs])
     return _family("between", between, levels, means, pairs, se, ms_error, df_error, alpha)
@@ -183,16 +184,19 @@ def tukey_hsd_rm(data: pd.DataFrame, dv: str, subject: str, within: str, *,
     n, k = y.shape
     resid = y - y.mean(axis=1, keepdims=True) - y.mean(axis=0, keepdims=True) + y.mean()
     df_error = (k - 1) * (n - 1)
-    ms_error = float((resid**2).sum()) / df_error
-    _check_positive(ms_error, dv, source_of(data))
+    ss_error = float((resid**2).sum())
+    ms_error = ss_error / df_error
+    _check_positive(ss_error, ms_error, y, dv, source_of(data))
     pairs = list(itertools.combinations(range(k), 2))
     se = np.full(len(pairs), math.sqrt(ms_error / n))
     return _family("within", within, cm.levels[0], y.mean(axis=0), pairs, se, ms_error,
                    df_error, alpha)
 
 
-def _check_positive(ms_error: float, dv: str, src: str | None) -> None:
-    if not ms_error > 0 or not math.isfinite(ms_error):
+def _check_positive(ss_error: float, ms_error: float, values: np.ndarray, dv: str,
+                    src: str | None) -> None:
+    """Refuses an error term that is zero within round-off of ``values`` or not finite."""
+    if not math.isfinite(ms_error) or not ms_error > 0 or error_ss_is_zero(ss_error, values):
         raise ConfigError(f"zero error variance in {dv!r}: the Tukey statistics are undefined",
                           file=src, field=dv)
 

@@ -13,6 +13,7 @@ carries the label :data:`SEED_LABEL`.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,6 +23,8 @@ from statsmodels.stats.anova import anova_lm
 
 from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
+    StatsWarning,
+    error_ss_is_zero,
     factor_column,
     levels_of,
     numeric_column,
@@ -59,7 +62,9 @@ def seed_per_sample_anova(data: pd.DataFrame, dv: str,
     Returns:
         One row per model term (factor A, factor B[, A:B]) with columns
         :data:`SEED_ANOVA_COLUMNS`: ``effect``, ``SS`` (type II sum of squares), ``df1``,
-        ``df2`` (residual df, the same for every term), ``F`` and ``p``.
+        ``df2`` (residual df, the same for every term), ``F`` and ``p`` (NaN, with a
+        :class:`StatsWarning`, when the residual sum of squares is zero within round-off,
+        :func:`vasim.study.stats._data.error_ss_is_zero`).
         ``result.attrs["label"]`` is :data:`SEED_LABEL`.
 
     Raises:
@@ -107,7 +112,13 @@ def seed_per_sample_anova(data: pd.DataFrame, dv: str,
     if not df_resid >= 1:
         raise ConfigError(f"no residual degrees of freedom ({len(frame)} rows)", file=src,
                           field=dv)
-    table = anova_lm(model, typ=2)
+    zero_error = error_ss_is_zero(float(model.ssr), frame["y"].to_numpy())
+    if zero_error:
+        warnings.warn(f"seed_per_sample_anova {dv!r}: zero residual variance (within "
+                      f"round-off): F and p undefined", StatsWarning, stacklevel=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # 0/0 of a zero residual
+        table = anova_lm(model, typ=2)
     names = {"C(f0)": factors[0], "C(f1)": factors[1],
              "C(f0):C(f1)": f"{factors[0]}:{factors[1]}"}
     rows = []
@@ -115,7 +126,7 @@ def seed_per_sample_anova(data: pd.DataFrame, dv: str,
         if term not in table.index:
             continue
         r = table.loc[term]
-        f_val = float(r["F"])
+        f_val = math.nan if zero_error else float(r["F"])
         rows.append({"effect": name, "SS": float(r["sum_sq"]), "df1": round(float(r["df"])),
                      "df2": round(df_resid), "F": f_val,
                      "p": float(r["PR(>F)"]) if math.isfinite(f_val) else math.nan})

@@ -1,0 +1,206 @@
+"""Linear mixed model with a random intercept per subject (statsmodels ``MixedLM``, REML).
+
+guides/study-science.md: the fixture effects adjusted for practice (trial index as a
+covariate), with one random intercept per subject. This is a thin, validated wrapper: the
+data are checked first (every column of the formula present, finite, no missing values),
+the fit is statsmodels' own, and every warning the fit raises (non-convergence, a boundary
+estimate, a singular Hessian) becomes a ``note`` on the result and a
+:class:`~vasim.study.stats._data.StatsWarning`, never a silent number.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import statsmodels.formula.api as smf
+from patsy import PatsyError
+
+from vasim.core.errors import ConfigError
+from vasim.study.stats._data import (
+    MAX_LISTED,
+    StatsWarning,
+    _where,
+    factor_column,
+    levels_of,
+    require_columns,
+    require_frame,
+    source_of,
+)
+
+#: Column order of :func:`mixed_model`.
+MIXED_MODEL_COLUMNS: tuple[str, ...] = (
+    "term", "coef", "se", "z", "p", "ci_low", "ci_high", "note",
+)
+
+_NAME = re.compile(r"Q\(\s*['\"]([^'\"]+)['\"]\s*\)|[A-Za-z_][A-Za-z0-9_.]*")
+
+
+def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
+    """Fits ``formula`` with a random intercept per ``groups`` level by REML.
+
+    Equivalent to ``statsmodels.formula.api.mixedlm(formula, data,
+    groups=data[groups]).fit(reml=True)``, after validation.
+
+    Args:
+        data: long-format table, one row per observation.
+        formula: patsy formula of the fixed effects, e.g. ``"error ~ C(fixture) + trial"``
+            (columns named in it must exist; text columns enter through ``C(...)`` or as
+            categorical automatically).
+        groups: column whose levels get one random intercept each (the subject column).
+
+    Returns:
+        One row per fixed-effect term (statsmodels' names, e.g. ``Intercept``,
+        ``C(fixture)[T.ff]``, ``trial``), columns :data:`MIXED_MODEL_COLUMNS`:
+
+        - ``coef``: the REML estimate, in the unit of the response per unit of the term.
+        - ``se``: its standard error; ``z = coef / se``; ``p``: two-sided normal p-value.
+        - ``ci_low``, ``ci_high``: 95 % Wald interval ``coef -+ 1.96 se``.
+        - ``note``: empty, or every warning of the fit ("did not converge", "MLE on the
+          boundary", "Hessian not positive definite", ...) joined by ``"; "`` (the same on
+          every row: it concerns the whole fit).
+
+        ``result.attrs`` holds ``n_obs``, ``n_groups``, ``group_var`` (random-intercept
+        variance, response unit squared), ``resid_var`` (residual variance), ``converged``,
+        ``llf`` (REML log-likelihood) and ``formula``.
+
+    Raises:
+        ConfigError: ``formula`` is not a string with ``~``, names no column or a column
+            that does not exist, a column of the formula has missing or non-finite values,
+            ``groups`` is missing, has missing labels or fewer than 2 levels, or patsy /
+            statsmodels refuse the model (message quoted).
+
+    Examples:
+        >>> rng = np.random.default_rng(0)
+        >>> subj = np.repeat([f"S{i}" for i in range(12)], 6)
+        >>> x = np.tile(np.arange(6.0), 12)
+        >>> y = 1.0 + 0.5 * x + np.repeat(rng.normal(0, 1, 12), 6) + rng.normal(0, .2, 72)
+        >>> fit = mixed_model(pd.DataFrame({"s": subj, "x": x, "y": y}), "y ~ x", "s")
+        >>> fit["term"].tolist(), round(float(fit.loc[1, "coef"]), 1)
+        (['Intercept', 'x'], 0.5)
+    """
+    data = require_frame(data)
+    src = source_of(data)
+    if not isinstance(formula, str) or "~" not in formula:
+        raise ConfigError(f"formula must be a string 'response ~ terms', got {formula!r}",
+                          file=src, field="formula")
+    require_columns(data, [groups])
+    g = factor_column(data, groups)
+    if len(levels_of(g)) < 2:
+        raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
+                          f"{levels_of(g)!r}", file=src, field=groups)
+    used = _formula_columns(data, formula)
+    data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
+    for col in used:
+        _check_column(data, col)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            model = smf.mixedlm(formula, data, groups=data[groups])
+            result = model.fit(reml=True)
+        except PatsyError as exc:
+            raise ConfigError(f"cannot build the model of formula {formula!r}: "
+                              f"{str(exc).splitlines()[0]}", file=src, field="formula") from None
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise ConfigError(f"statsmodels cannot fit formula {formula!r}: {exc}", file=src,
+                              field="formula") from None
+    notes = list(dict.fromkeys(_warning_text(w) for w in caught
+                               if not issubclass(w.category, DeprecationWarning)))
+    if not result.converged and not any("converge" in n for n in notes):
+        notes.insert(0, "the REML fit did not converge")
+    note = "; ".join(notes)
+    if note:
+        warnings.warn(f"mixed_model {formula!r}: {note}", StatsWarning, stacklevel=2)
+
+    fe = result.fe_params.index
+    ci = result.conf_int().loc[fe]
+    out = pd.DataFrame({
+        "term": [str(t) for t in fe],
+        "coef": result.fe_params.to_numpy(dtype=float),
+        "se": result.bse_fe.to_numpy(dtype=float),
+        "z": result.tvalues.loc[fe].to_numpy(dtype=float),
+        "p": result.pvalues.loc[fe].to_numpy(dtype=float),
+        "ci_low": ci.iloc[:, 0].to_numpy(dtype=float),
+        "ci_high": ci.iloc[:, 1].to_numpy(dtype=float),
+        "note": note,
+    }, columns=list(MIXED_MODEL_COLUMNS))
+    out.attrs.update({
+        "n_obs": int(result.nobs), "n_groups": len(model.group_labels),
+        "group_var": float(np.asarray(result.cov_re)[0, 0]), "resid_var": float(result.scale),
+        "converged": bool(result.converged), "llf": float(result.llf), "formula": formula,
+    })
+    return out
+
+
+def _formula_columns(data: pd.DataFrame, formula: str) -> list[str]:
+    """The data columns a formula names (identifiers and ``Q("...")``); at least one."""
+    src = source_of(data)
+    names: list[str] = []
+    for m in _NAME.finditer(formula):
+        name = m.group(1) or m.group(0)
+        if name in data.columns and name not in names:
+            names.append(name)
+    lhs = formula.split("~", 1)[0].strip()
+    if not lhs:
+        raise ConfigError(f"formula {formula!r} has no response left of '~'", file=src,
+                          field="formula")
+    if lhs.isidentifier() and lhs not in data.columns:
+        avail = ", ".join(repr(str(c)) for c in data.columns)
+        raise ConfigError(f"response column {lhs!r} of formula {formula!r} not found; "
+                          f"available columns: {avail}", file=src, field=lhs)
+    if not names:
+        raise ConfigError(f"formula {formula!r} names no column of the data", file=src,
+                          field="formula")
+    return names
+
+
+def _numbers_where_read_as_text(data: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """Value columns that :func:`read_long_csv` left as text become numbers.
+
+    **Decision**: ``read_long_csv`` keeps a column as text when its numbers would merge two
+    different texts (``2`` and ``2.0``); for a value column in a formula that would make
+    patsy treat the response or a covariate as categorical. A text column of the formula
+    whose every value is a number, and that the caller did not name as a label
+    (``data.attrs["text_columns"]``), is therefore converted to float; categorical use
+    stays explicit with ``C(column)`` or by naming the column as text when reading.
+    """
+    labels = set(data.attrs.get("text_columns", ()))
+    out = data
+    for col in columns:
+        s = data[col]
+        if col in labels or pd.api.types.is_numeric_dtype(s) or pd.api.types.is_bool_dtype(s):
+            continue
+        present = s.dropna()
+        nums = pd.to_numeric(present, errors="coerce")
+        if len(present) and nums.notna().all():
+            if out is data:
+                out = data.copy()
+            out[col] = pd.to_numeric(s, errors="coerce").astype("float64")
+    return out
+
+
+def _check_column(data: pd.DataFrame, col: str) -> None:
+    """No missing values; numeric columns finite (positions and values named)."""
+    src = source_of(data)
+    s = data[col]
+    missing = s.isna().to_numpy()
+    if missing.any():
+        raise ConfigError(f"column {col!r} has missing (NaN/empty) values at "
+                          f"{_where(data, list(s.index[missing]))}", file=src, field=col)
+    if pd.api.types.is_numeric_dtype(s) and not pd.api.types.is_bool_dtype(s):
+        bad = ~np.isfinite(s.to_numpy(dtype=float))
+        if bad.any():
+            vals = ", ".join(repr(v) for v in s[bad].tolist()[:MAX_LISTED])
+            raise ConfigError(f"column {col!r} has non-finite values at "
+                              f"{_where(data, list(s.index[bad]))}: {vals}", file=src,
+                              field=col)
+
+
+def _warning_text(w: Any) -> str:
+    """One line: the warning's category and the first line of its message."""
+    first = str(w.message).strip().splitlines()[0] if str(w.message).strip() else ""
+    return f"{w.category.__name__}: {first}"
