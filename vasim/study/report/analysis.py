@@ -11,6 +11,9 @@ import pandas as pd
 
 from vasim.study.report.common import (
     FIXTURE_ORDER,
+    PATH_DEV_DV,
+    PATH_DEV_METRIC,
+    VF_DVS,
     fixture_label,
     ids_text,
     ordered_conditions,
@@ -26,15 +29,23 @@ class VfAnalysis:
 
     Attributes:
         trials: one row per analysed trial of a fixture condition or a probe (columns
-            ``trial_id, subject, session_id, trial_index, block, condition, fixture, probe,
-            probe_index, stage, n_points, points_reached, completed, cum_error, latency``).
+            ``trial_id, subject, session_id, trial_index, practice, block, condition,
+            fixture, probe, probe_index, baseline, stage, n_points, points_reached,
+            completed, cum_error, latency`` [+ ``path_deviation`` when stored]).
         excluded: trials left out (``trial_id, subject, condition, reason``).
         fixture_cells: ``subject, fixture, n_trials, cum_error, latency, trial_ids``: per
-            subject and fixture the mean over its trials (every subject).
-        trial_cells: ``subject, trial, trial_id, cum_error, latency``: the probe trials.
+            subject and fixture the mean over its trials (every subject); the level
+            ``none`` averages the probe trials that follow the blocks, never the baseline
+            probes (**Decision** of issue #15: the baseline trials always come first, so
+            pooling them would mix practice into the fixture factor).
+        trial_cells: ``subject, trial, practice, trial_id, cum_error, latency``: the probe
+            trials; ``trial`` = probe number, ``practice`` = the trial's position in the
+            session (1-based: probe 4 is the 10th trial).
         fixture_levels: fixture labels present, in report order.
         trial_levels: probe numbers present.
         n_baseline: probe trials before the first assisted trial (3 in the VF protocol).
+        dvs: the outcomes analysed, ``(column, name, unit)``: :data:`VF_DVS` and, when the
+            store holds it, the path deviation (:data:`PATH_DEV_DV`).
     """
 
     trials: pd.DataFrame
@@ -44,6 +55,7 @@ class VfAnalysis:
     fixture_levels: tuple[str, ...]
     trial_levels: tuple[int, ...]
     n_baseline: int
+    dvs: tuple[tuple[str, str, str], ...] = VF_DVS
 
 
 def vf_trial_outcomes(analysed: pd.DataFrame, points: pd.DataFrame) -> pd.DataFrame:
@@ -88,6 +100,9 @@ def vf_trial_outcomes(analysed: pd.DataFrame, points: pd.DataFrame) -> pd.DataFr
 def analyse_vf(data: StudyData) -> VfAnalysis:
     """Builds :class:`VfAnalysis` from the store's data (see the module decisions)."""
     vf = vf_trial_outcomes(data.analysed, data.points)
+    vf["practice"] = (vf["trial_index"].astype(np.int64) + 1) if len(vf) else \
+        pd.Series(dtype=np.int64)
+    vf["baseline"] = baseline_flags(vf) if len(vf) else pd.Series(dtype=bool)
     bad = vf["cum_error"].isna() | vf["latency"].isna()
     reasons = np.where(vf["n_points"].isna(), "no per-point metrics stored",
                        np.where(vf["latency"].isna(), "no trajectory point reached",
@@ -95,40 +110,65 @@ def analyse_vf(data: StudyData) -> VfAnalysis:
     excluded = vf.loc[bad, ["trial_id", "subject", "condition"]].assign(
         reason=reasons[bad.to_numpy()]).reset_index(drop=True)
     ok = vf[~bad]
+    dvs = VF_DVS
+    if PATH_DEV_METRIC in data.metrics.columns:
+        pdev = data.metrics[PATH_DEV_METRIC].astype(float)
+        ok = ok.assign(path_deviation=ok["trial_id"].map(pdev).astype(float))
+        if ok["path_deviation"].notna().any():
+            dvs = (*VF_DVS, PATH_DEV_DV)
+        else:
+            ok = ok.drop(columns="path_deviation")
+    dv_cols = [dv for dv, _, _ in dvs]
     cond_order = ordered_conditions(ok["condition"], FIXTURE_ORDER)
     fixture_levels = tuple(fixture_label(c) for c in cond_order)
-    cells = (ok.groupby(["subject", "condition"], sort=False)
-             .agg(n_trials=("trial_id", "size"), cum_error=("cum_error", "mean"),
-                  latency=("latency", "mean"), trial_ids=("trial_id", ids_text))
+    # fixture cells: never the baseline probes (they precede every block: practice, not
+    # the VF-free level); the VF-free level is the probes that follow the blocks
+    cells = (ok[~ok["baseline"]].groupby(["subject", "condition"], sort=False)
+             .agg(n_trials=("trial_id", "size"),
+                  **{dv: (dv, "mean") for dv in dv_cols},
+                  trial_ids=("trial_id", ids_text))
              .reset_index())
     cells["fixture"] = pd.Categorical(cells["condition"].map(fixture_label),
                                       categories=list(fixture_levels))
     cells = cells.sort_values(["subject", "fixture"]).reset_index(drop=True)
-    cells = cells[["subject", "fixture", "condition", "n_trials", "cum_error", "latency",
-                   "trial_ids"]]
+    cells = cells[["subject", "fixture", "condition", "n_trials", *dv_cols, "trial_ids"]]
     probes = ok[ok["probe"].astype(bool) & ok["probe_index"].notna()]
-    tcells = probes[["subject", "probe_index", "trial_id", "cum_error", "latency"]].rename(
+    tcells = probes[["subject", "probe_index", "practice", "trial_id", *dv_cols]].rename(
         columns={"probe_index": "trial"})
     tcells["trial"] = tcells["trial"].astype(np.int64)
+    tcells["practice"] = tcells["practice"].astype(np.int64)
     tcells = tcells.sort_values(["subject", "trial"]).reset_index(drop=True)
     trial_levels = tuple(int(t) for t in sorted(tcells["trial"].unique()))
-    # baseline: probe trials before the first assisted trial of a session (the mode)
-    sched = data.schedule
-    n_base = 0
-    if len(sched):
-        firsts = []
-        for _, g in sched.groupby("session_id"):
-            assisted = g[~g["probe"].astype(bool)]
-            first = int(assisted["trial_index"].min()) if len(assisted) else None
-            firsts.append(int(g["probe"].astype(bool).sum()) if first is None
-                          else int((g["probe"].astype(bool) & (g["trial_index"] < first)).sum()))
-        n_base = int(pd.Series(firsts).mode().iloc[0])
-    cols = ["trial_id", "subject", "session_id", "trial_index", "block", "condition",
-            "fixture", "probe", "probe_index", "stage", "n_points", "points_reached",
-            "completed", "cum_error", "latency"]
-    return VfAnalysis(trials=vf[cols], excluded=excluded, fixture_cells=cells,
-                      trial_cells=tcells, fixture_levels=fixture_levels,
-                      trial_levels=trial_levels, n_baseline=n_base)
+    n_base = int(ok.loc[ok["baseline"]].groupby("session_id").size().mode().iloc[0]) \
+        if ok["baseline"].any() else 0
+    cols = ["trial_id", "subject", "session_id", "trial_index", "practice", "block",
+            "condition", "fixture", "probe", "probe_index", "baseline", "stage", "n_points",
+            "points_reached", "completed", *dv_cols]
+    return VfAnalysis(trials=ok[cols].reset_index(drop=True), excluded=excluded,
+                      fixture_cells=cells, trial_cells=tcells, fixture_levels=fixture_levels,
+                      trial_levels=trial_levels, n_baseline=n_base, dvs=dvs)
+
+
+def baseline_flags(trials: pd.DataFrame) -> pd.Series:
+    """Marks the baseline probes: probe trials before the first assisted trial of their
+    session (the 3 VF-free trials that open the VF protocol).
+
+    Args:
+        trials: ``session_id, trial_index, probe`` per trial (trial_index 0-based).
+
+    Returns:
+        A boolean Series aligned with ``trials``.
+
+    Example:
+        >>> t = pd.DataFrame({"session_id": [1] * 5, "trial_index": [0, 1, 2, 3, 4],
+        ...                   "probe": [True, True, False, True, False]})
+        >>> baseline_flags(t).tolist()
+        [True, True, False, False, False]
+    """
+    probe = trials["probe"].astype(bool)
+    first = trials.loc[~probe].groupby("session_id")["trial_index"].min()
+    limit = trials["session_id"].map(first).astype(float).fillna(np.inf)
+    return (probe & (trials["trial_index"].astype(float) < limit)).astype(bool)
 
 
 def complete_subjects(cells: pd.DataFrame, factor: str, levels: Sequence[Any],

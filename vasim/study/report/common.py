@@ -36,7 +36,16 @@ VF_DVS: tuple[tuple[str, str, str], ...] = (
     ("latency", "latency Σl_i", "s"),
 )
 """Per-trial outcomes of the VF study: (column, name, unit)."""
-PLOT_NAMES: dict[str, str] = {"cum_error": r"cumulative error $\Sigma_i\, e_i$",
+PATH_DEV_METRIC = "path_dev_mean_mm"
+"""The per-trial metric (``trial_metrics``) read as the VF study's path deviation."""
+PATH_DEV_DV: tuple[str, str, str] = ("path_deviation", "mean path deviation", "mm")
+"""The path deviation as a VF outcome: mean distance of the tool tip to the planned
+polyline over the trial's samples [mm] (analysed when the store holds it)."""
+PATH_DEV_ABSENT = (f"path deviation ({PATH_DEV_METRIC}): not stored in this database (older "
+                   "store or trials recorded before the metric existed): not analysed")
+"""The note of a report whose store holds no path deviation."""
+PLOT_NAMES: dict[str, str] = {"path_deviation": "mean path deviation",
+                              "cum_error": r"cumulative error $\Sigma_i\, e_i$",
                                "latency": r"latency $\Sigma_i\, l_i$"}
 """The outcomes' names in figures (matplotlib mathtext)."""
 FIXTURE_COLORS: dict[str, str] = {FIXTURE_LABELS[c]: PALETTE[i]

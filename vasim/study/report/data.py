@@ -16,10 +16,15 @@ from vasim.study.store import (
     SCHEDULE_COLUMNS,
     TrialStore,
 )
-from vasim.trials.kinds import TELEOPERATION_MODES
-
 
 # ------------------------------------------------------------------------------ data
+SCRIPTED_OPERATOR = "scripted"
+"""``sessions.operator`` of a simulated session (:mod:`vasim.study.cohort`)."""
+SYNTHETIC_LABEL = ("synthetic data: scripted operator calibrated to the seed; not "
+                   "evidence")
+"""The label of every figure and table of a simulated cohort."""
+
+
 @dataclass(frozen=True)
 class StudyData:
     """What the report reads from a store, for one protocol (pure data, no connection).
@@ -57,6 +62,23 @@ class StudyData:
     answers: pd.DataFrame = field(repr=False)
     protocols_present: tuple[str, ...]
     schema_version: int | None
+
+    @property
+    def synthetic(self) -> bool:
+        """Whether the cohort is simulated: a session's stored ``operator`` is the scripted
+        operator (``vasim study simulate``).
+
+        **Decision**: one scripted session makes the whole report synthetic because its
+        numbers then mix simulated trials into every pooled statistic.
+        """
+        return bool(len(self.sessions)) and bool(
+            (self.sessions["operator"].astype(str) == SCRIPTED_OPERATOR).any())
+
+    @property
+    def data_label(self) -> str:
+        """The label every figure and table carries: :data:`SYNTHETIC_LABEL` for a simulated
+        cohort, ``""`` otherwise (the only use of :attr:`synthetic` in the report)."""
+        return SYNTHETIC_LABEL if self.synthetic else ""
 
     @property
     def analysed(self) -> pd.DataFrame:
@@ -179,11 +201,9 @@ def _read_store(store: TrialStore, protocol: str | None) -> StudyData:
                             "error_l1": np.float64, "latency": np.float64})
     points["reached"] = points["reached"].astype(bool)
     done_ids = set(int(t) for t in sched["trial_id"].dropna())
-    if sched["condition"].isin(TELEOPERATION_MODES).any():  # only the MRCP section uses them
-        metrics = store.trial_metrics(wide=True)
-        metrics = metrics[metrics.index.isin(done_ids)]
-    else:
-        metrics = pd.DataFrame(index=pd.Index([], name="trial_id", dtype=np.int64))
+    # the MRCP section and the VF study's path deviation (``PATH_DEV_METRIC``) read them
+    metrics = store.trial_metrics(wide=True)
+    metrics = metrics[metrics.index.isin(done_ids)]
     demo = store.demographics()
     demo = demo[demo["subject"].isin(set(sessions["subject"]))].reset_index(drop=True)
     answers = store.answers()

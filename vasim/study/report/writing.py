@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -19,6 +19,7 @@ from vasim.study.report.data import StudyData
 from vasim.study.report.html_page import (
     TableBlock,
 )
+from vasim.study.report.summary import write_summary
 
 
 def page_meta(data: StudyData) -> tuple[tuple[str, str], ...]:
@@ -33,12 +34,14 @@ def page_meta(data: StudyData) -> tuple[tuple[str, str], ...]:
         ("subjects / sessions", f"{s['subject'].nunique() if len(s) else 0} / {len(s)}"),
         ("generated", datetime.now(UTC).isoformat(timespec="seconds")),
         ("vasim", __version__),
+        ("data", data.data_label or "recorded sessions (no scripted operator)"),
         ("tables", "tables/*.csv beside this file; tables/provenance.csv traces the tests"),
     )
 
 
 def write_files(out_dir: Path, data: StudyData, tables: Sequence[TableBlock],
-           prov: Sequence[dict[str, str]], page: str) -> tuple[str, ...]:
+           prov: Sequence[dict[str, str]], page: str,
+           summary: Mapping[str, Any] | None = None) -> tuple[str, ...]:
     tdir = out_dir / "tables"
     tdir.mkdir(parents=True, exist_ok=True)
     manifest = tdir / "manifest.json"
@@ -66,7 +69,10 @@ def write_files(out_dir: Path, data: StudyData, tables: Sequence[TableBlock],
                           "columns": list(PROVENANCE_COLUMNS)}
     manifest.write_text(json.dumps({
         "vasim_version": __version__, "database": str(data.db),
-        "protocol": data.protocol_name, "tables": info}, indent=1), encoding="utf-8")
+        "protocol": data.protocol_name, "synthetic": data.synthetic,
+        "data_label": data.data_label, "tables": info}, indent=1), encoding="utf-8")
+    if summary is not None:
+        write_summary(out_dir / "summary.json", summary)
     (out_dir / "index.html").write_text(page, encoding="utf-8")
     return tuple(info)
 

@@ -6,7 +6,6 @@ from vasim.study.report.analysis import VfAnalysis
 from vasim.study.report.common import (
     FIXTURE_COLORS,
     PLOT_NAMES,
-    VF_DVS,
     SectionOut,
 )
 from vasim.study.report.figures import (
@@ -23,7 +22,7 @@ from vasim.study.report.html_page import (
 def box_plot_section(vf: VfAnalysis) -> tuple[Section, list[dict[str, str]]]:
     """Box plots of the subject-level cells per fixture and per VF-free trial."""
     out = SectionOut()
-    values = [(dv, f"{PLOT_NAMES[dv]} [{unit}]") for dv, _, unit in VF_DVS]
+    values = [(dv, f"{PLOT_NAMES[dv]} [{unit}]") for dv, _, unit in vf.dvs]
     fc = vf.fixture_cells
     if fc.empty:
         out.notes.append("no analysed VF trial: no box plots")

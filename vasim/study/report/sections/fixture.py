@@ -16,6 +16,7 @@ from vasim.study.report.analysis import VfAnalysis, complete_subjects, excluded_
 from vasim.study.report.common import (
     LABEL_PAIRED,
     LABEL_TUKEY,
+    PATH_DEV_DV,
     VF_DVS,
     SectionOut,
     captured,
@@ -30,6 +31,7 @@ from vasim.study.report.html_page import (
     TableBlock,
     TextList,
 )
+from vasim.study.report.models import fixture_mixed_model
 
 SEED_REPORTED: dict[tuple[str, str], str] = {
     ("cum_error", "fixture"): "F(5, 98131) = 35.030", ("cum_error", "trial"):
@@ -41,7 +43,8 @@ SEED_REPORTED: dict[tuple[str, str], str] = {
 
 
 def _rm_block(cells: pd.DataFrame, factor: str, levels: Sequence[Any], out: SectionOut,
-              cells_text: str, table_names: Sequence[str], trial_col: str
+              cells_text: str, table_names: Sequence[str], trial_col: str,
+              dvs: Sequence[tuple[str, str, str]]
               ) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame],
                          list[dict[str, str]]]:
     """RM-ANOVA and both post hoc families of one factor, for every VF dv."""
@@ -70,7 +73,7 @@ def _rm_block(cells: pd.DataFrame, factor: str, levels: Sequence[Any], out: Sect
         ids = ids.split() if isinstance(ids, str) else [ids]
         for t in table_names:
             prov.append(prov_row(t, f"{factor}={getattr(r, factor)}", r.subject, trial_ids=ids))
-    for dv, _name, unit in VF_DVS:
+    for dv, _name, unit in dvs:
         head = {"dv": dv, "unit": unit, "factor": factor}
         try:
             aov, msgs = captured(stats.rm_anova, data, dv=dv, subject="subject",
@@ -122,7 +125,7 @@ def _p_text(p: float) -> str:
 
 def _anova_sentence(r: dict[str, Any]) -> str:
     """One RM-ANOVA row in the usual reporting form."""
-    name = dict((dv, n) for dv, n, _ in VF_DVS).get(r["dv"], r["dv"])
+    name = dict((dv, n) for dv, n, _ in (*VF_DVS, PATH_DEV_DV)).get(r["dv"], r["dv"])
     gg = (f"; Greenhouse-Geisser eps = {r['eps_gg']:.3f}, {_p_text(r['p_gg'])}"
           if r["df1"] > 1 and not math.isnan(r["eps_gg"]) else "")
     return (f"{name} by {r['factor']} (n = {r['n_subjects']} subjects): "
@@ -136,16 +139,28 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
     out = SectionOut()
     cells_fix = ("per subject: mean of the trial outcome over the subject's analysed trials "
                  "of that condition (the assisted trials of a fixture, 6 in the VF protocol; "
-                 "'none' = the VF-free probe trials, baseline included)")
+                 "'none' = the VF-free probe trials that follow the fixture blocks; the "
+                 "baseline probes, which precede every block, never enter it)")
     cells_trial = "per subject: the probe trial of that number (one trial per cell)"
     intro: list[Block] = [Paragraph(
-        "Primary analysis (spec §3 decision): one-way repeated-measures ANOVAs on "
+        "Methods. Primary analysis (spec §3 decision): one-way repeated-measures ANOVAs on "
         "subject-level cell means, one for the factor fixture (" + cells_fix + ") and one "
         "for the factor trial (" + cells_trial + "); the two factors are not crossed "
         "(assisted trials have no VF-free trial number), so no interaction is tested. "
         "Mauchly's test, Greenhouse-Geisser (p_gg) and Huynh-Feldt (p_hf) corrections and "
         "partial eta squared (np2) are given. Post hoc: " + LABEL_TUKEY + "; and "
-        + LABEL_PAIRED + ". Only subjects with every cell of a factor enter its tests.")]
+        + LABEL_PAIRED + ". Only subjects with every cell of a factor enter its tests. "
+        "Mauchly's p is R's mauchly.test. "
+        "The 3 baseline trials always come first, so pooling them with the conditions "
+        "would mix practice into the fixture factor: the VF-free level is the probe trials "
+        "that follow the blocks. In addition, a linear mixed model (statsmodels MixedLM, "
+        "REML: measure ~ fixture + log(practice), random intercept per subject, every "
+        "analysed trial, practice = the trial's position in the session) gives the "
+        "fixture effects (difference from 'none') adjusted for practice. The RM-ANOVA is "
+        "primary because it is the pre-specified analysis (spec §3), needs no assumption "
+        "on the shape of the practice curve and tests at the level of subjects; the mixed "
+        "model is the practice-adjusted sensitivity analysis (it assumes a log-linear "
+        "practice effect shared by all subjects and fixtures, and one random intercept).")]
     if vf.trials.empty:
         out.notes.append("no analysed trial of a fixture condition or a VF-free probe in the "
                          "sessions of this protocol: no fixture analysis")
@@ -157,10 +172,10 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
     prov: list[dict[str, str]] = []
     names = ("vf_rm_anova", "vf_posthoc_tukey", "vf_posthoc_paired")
     a1, t1, p1, pr1 = _rm_block(vf.fixture_cells, "fixture", vf.fixture_levels, out,
-                                cells_fix, names, "trial_ids")
+                                cells_fix, names, "trial_ids", vf.dvs)
     tc = vf.trial_cells
     a2, t2, p2, pr2 = _rm_block(tc, "trial", vf.trial_levels, out, cells_trial, names,
-                                "trial_id") if len(tc) else ([], [], [], [])
+                                "trial_id", vf.dvs) if len(tc) else ([], [], [], [])
     if not len(tc):
         out.notes.append("no VF-free probe trial: the trial factor is not analysed")
     prov += pr1 + pr2
@@ -169,7 +184,8 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
         out.blocks.append(TableBlock(
             "vf_rm_anova", "Subject-level RM-ANOVA (primary result)", anova,
             "df1, df2: degrees of freedom (p and p(n-1)); F and uncorrected p_unc; eps_gg, "
-            "p_gg: Greenhouse-Geisser; mauchly_p: Mauchly's test of sphericity; np2: "
+            "p_gg: Greenhouse-Geisser; mauchly_p: Mauchly's test of sphericity (p as R's "
+            "mauchly.test); np2: "
             "partial eta squared. Cells: see the 'cells' column; provenance.csv lists the "
             "trial ids of every subject x level cell.",
             columns=("dv", "factor", "n_subjects", "df1", "df2", "F", "p_unc", "eps_gg",
@@ -193,6 +209,7 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
             "for power 0.9.", display="details",
             columns=("dv", "factor", "group1", "group2", "n", "mean_diff", "t", "p", "p_holm",
                      "cohen_dz")))
+    prov += _mixed_model_block(vf, out)
     rep, rprov = _seed_replication(data, vf, out)
     prov += rprov
     if rep is not None:
@@ -240,3 +257,34 @@ def _seed_replication(data: StudyData, vf: VfAnalysis, out: SectionOut
     return pd.concat(parts, ignore_index=True), prov
 
 
+
+
+def _mixed_model_block(vf: VfAnalysis, out: SectionOut) -> list[dict[str, str]]:
+    """The practice-adjusted mixed model of every dv: table ``vf_mixed_model``."""
+    parts = []
+    for dv, _name, unit in vf.dvs:
+        try:
+            fit, msgs = captured(fixture_mixed_model, vf.trials, dv)
+        except ConfigError as exc:
+            out.notes.append(f"mixed model of {dv} not computed: {exc.reason}")
+            continue
+        out.notes.extend(f"{dv}, mixed model: {m}" for m in msgs)
+        fit.insert(0, "dv", dv)
+        fit.insert(1, "unit", unit)
+        fit["reference"] = fit.attrs["reference"]
+        fit["n_obs"] = fit.attrs["n_obs"]
+        fit["n_subjects"] = fit.attrs["n_groups"]
+        parts.append(fit)
+    if not parts:
+        return []
+    out.blocks.append(TableBlock(
+        "vf_mixed_model", "Fixture effects adjusted for practice (linear mixed model)",
+        pd.concat(parts, ignore_index=True),
+        "dv ~ C(fixture) + log_practice, random intercept per subject (REML). coef of "
+        "C(fixture)[T.x]: mean difference fixture x - 'none' (unit of the dv) at equal "
+        "practice; log_practice: change per e-fold of the practice count; se, z, p (Wald, "
+        "two-sided), 95 % interval. Every analysed VF trial enters (vf_trials.csv).",
+        columns=("dv", "term", "coef", "se", "z", "p", "ci_low", "ci_high", "n_obs",
+                 "n_subjects")))
+    return [prov_row("vf_mixed_model", "all analysed VF trials", s, trial_ids=g["trial_id"])
+            for s, g in vf.trials.groupby("subject")]
