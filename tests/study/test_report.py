@@ -407,7 +407,8 @@ def test_cli_writes_report_and_replaces_stale_tables(tmp_path: Path, capsys) -> 
     (out / "tables").mkdir(parents=True)
     (out / "tables" / "mine.csv").write_text("a\n1\n")  # not the report's: kept
     assert main(["report", "--db", str(db), "--out", str(out), "--no-progress"]) == 0
-    assert "wrote" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and "summary.json" in printed
     assert (out / "tables" / "vf_rm_anova.csv").is_file()
     empty = tmp_path / "empty.sqlite"
     TrialStore(empty).close()

@@ -5,16 +5,22 @@
 * ``report/index.html``: one self-contained page (figures embedded as PNG, no script;
   :mod:`vasim.study.report.html_page`), and
 * ``report/tables/*.csv``: every table of the page at full precision, ``provenance.csv`` and
-  ``manifest.json`` (the tables written, their rows and columns).
+  ``manifest.json`` (the tables written, their rows and columns, whether the data are
+  synthetic), and
+* ``report/summary.json``: the headline results, machine-readable
+  (:mod:`vasim.study.report.summary` gives the schema).
 
 Sections (spec/study.md §3-4): cohort; learning curves over the VF-free probe trials;
 effect of fixture (subject-level RM-ANOVA, post hoc tests, the seed's per-sample ANOVA as a
-labelled replication); box plots; questionnaires; the MRCP vs standard-teleoperation
+labelled replication, the practice-adjusted mixed model); box plots; surgeons vs residents
+(mixed ANOVA group x probe trial); questionnaires; the MRCP vs standard-teleoperation
 comparison; traceability. A section whose data are missing says what is missing and which
 subjects or trials it leaves out; it never fails the report.
 
 The package, one job per module: :mod:`~vasim.study.report.data` (reading the store),
 :mod:`~vasim.study.report.analysis` (per-trial outcomes and cells of the VF study),
+:mod:`~vasim.study.report.models` (mixed model and mixed ANOVA of the VF study),
+:mod:`~vasim.study.report.summary` (``summary.json``),
 :mod:`~vasim.study.report.sections` (one module per section),
 :mod:`~vasim.study.report.html_page` (the HTML content model and renderer),
 :mod:`~vasim.study.report.figures` (matplotlib figures),
@@ -40,11 +46,21 @@ per-trial metrics are computed from the samples when a trial closes and stored w
   reached point has no latency and is excluded (listed).
 * Fixture factor (6 levels none, VG, AG, MS, Mag, FF): the cell of a subject and fixture is
   the mean of E (or L) over the subject's analysed trials of that condition (6 assisted
-  trials; "none" = the 8 VF-free probe trials, baseline included). Trial factor (8 levels):
+  trials; "none" = the 5 VF-free probe trials that follow the blocks: the 3 baseline
+  probes always come first and would mix practice into the factor, issue #15). A linear
+  mixed model ``measure ~ fixture + log(practice)`` (random intercept per subject, every
+  analysed trial) reports the fixture effects adjusted for practice as a secondary,
+  sensitivity analysis. Trial factor (8 levels):
   the probe trials 1..8, one trial per cell. The two factors are not crossed (assisted
   trials have no probe number), so each gets its own one-way subject-level RM-ANOVA
   (spec §3 decision: the primary result) over the subjects with every cell (the others
   are listed as excluded).
+* Learning curves are plotted against the practice count: the trial's 1-based position in
+  the session (probe 4 is the 10th trial), not the probe number.
+* Synthetic data: a store whose sessions were run by the scripted operator gets
+  :data:`~vasim.study.report.data.SYNTHETIC_LABEL` on every figure (a band under the
+  image) and table (title and caption), in ``manifest.json`` and ``summary.json``; no
+  analysis depends on it.
 * The seed's per-sample ANOVA (replication only, ``stats.seed_per_sample_anova``): one row
   per trajectory point of every analysed trial (e_i or l_i), factors fixture and "trial";
   an assisted trial's "trial" level is the probe number of the VF-free trial that closes
@@ -92,7 +108,7 @@ from vasim.study.report.common import (
     ids_text,
     ordered_conditions,
 )
-from vasim.study.report.data import StudyData, load_study
+from vasim.study.report.data import SYNTHETIC_LABEL, StudyData, load_study
 from vasim.study.report.sections.mrcp import MRCP_METRICS, MrcpMetric
 
 write_report = build_report
@@ -108,6 +124,7 @@ __all__ = [
     "MRCP_METRICS",
     "PROVENANCE_COLUMNS",
     "STEPS",
+    "SYNTHETIC_LABEL",
     "MrcpMetric",
     "ReportResult",
     "StudyData",
