@@ -49,7 +49,7 @@ def _points(rng: np.random.Generator, level: float) -> pd.DataFrame:
 
 
 def _session(store: TrialStore, code: str, seed: int, group_bonus: float,
-             pre: dict | None, post: dict | None) -> None:
+             pre: dict | None, post: dict | None, *, path_dev: bool = False) -> None:
     protocol = load_protocol("vf_learning_curve")
     sid = start_session(store, protocol, code, seed=seed)
     if pre is not None:
@@ -63,7 +63,10 @@ def _session(store: TrialStore, code: str, seed: int, group_bonus: float,
         meta = TrialMeta(subject=code, task="trajectory", session_id=sid,
                          schedule_index=int(row.trial_index), protocol=protocol.name)
         tid = store.begin_trial(meta)
-        store.finish_trial(tid, SampleBuffer(), _points(rng, level), None)
+        metrics = {"path_dev_mean_mm": 2.0 * level * math.exp(rng.normal(0.0, 0.2))} \
+            if path_dev else None
+        store.finish_trial(tid, SampleBuffer(), _points(rng, level), None,
+                           trial_metrics=metrics)
     store.set_session_status(sid, "completed")
     if post is not None:
         record_answers(store, sid, "post", post)
@@ -300,3 +303,33 @@ def test_synthetic_label_on_every_figure_and_table(study: tuple[Path, Path],
     for name in ("vf_rm_anova", "vf_mixed_model", "vf_group_anova", "vf_learning_curve"):
         a = (out / "tables" / f"{name}.csv").read_bytes()
         assert a == (tmp_path / "rep" / "tables" / f"{name}.csv").read_bytes(), name
+
+
+# ----------------------------------------------------------------------- path deviation
+def test_path_deviation_is_analysed_when_stored(tmp_path: Path) -> None:
+    db = tmp_path / "pd.sqlite"
+    with TrialStore(db) as st:
+        st.con.execute("PRAGMA synchronous = OFF")
+        for i in range(1, 6):
+            _session(st, f"P{i}", 200 + i, 1.0 if i <= 3 else 1.3,
+                     DEMO if i <= 3 else RESIDENT, None, path_dev=True)
+    out = tmp_path / "rep"
+    build_report(db, out)
+    t = _trials_sql(db)
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    pdev = dict(con.execute("SELECT trial_id, value FROM trial_metrics "
+                            "WHERE metric = 'path_dev_mean_mm'").fetchall())
+    con.close()
+    t["D"] = t["trial_id"].map(pdev)
+    cells = t[t["baseline"] == 0].groupby(["subject", "condition"])["D"].mean().reset_index()
+    ref = stats.rm_anova(cells, dv="D", subject="subject", within="condition")
+    aov = _csv(out, "vf_rm_anova")
+    row = aov[(aov["dv"] == "path_deviation") & (aov["factor"] == "fixture")].iloc[0]
+    assert row["unit"] == "mm"
+    assert row["F"] == pytest.approx(float(ref.loc[0, "F"]), rel=1e-9)
+    s = json.loads((out / "summary.json").read_text())["measures"]["path_deviation"]
+    assert s["fixture"]["F"] == pytest.approx(float(ref.loc[0, "F"]), rel=1e-9)
+    _check_test(s["practice"], null=False)
+    _check_test(s["group"], null=False)
+    assert all(set(v) == {"coef", "p"} for v in s["mixed_model"].values())
+    assert "not stored in this database" not in (out / "index.html").read_text()
