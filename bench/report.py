@@ -158,7 +158,7 @@ def main() -> None:
     print(f"{'vasim report (subprocess, imports included)':<52} {wall:8.2f} s")
     print(f"{'  goal':<52} {GOAL_S:8.2f} s  ({wall / GOAL_S:.2f} of the goal)")
     print(f"{'  index.html, tables':<52} {size / 1e6:8.2f} MB, {n_csv} CSV files")
-    m = re.search(r"(\d+) figures\) in ([0-9.]+) s", proc.stdout)
+    m = re.search(r"(\d+) figures, [^)]*\) in ([0-9.]+) s", proc.stdout)
     if m:
         print(f"{'  of which build_report (after imports)':<52} {float(m.group(2)):8.2f} s, "
               f"{m.group(1)} figures")

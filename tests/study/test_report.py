@@ -1,4 +1,4 @@
-"""``vasim report`` on small synthetic VF studies (vasim/study/report.py).
+"""``vasim report`` on small synthetic VF studies (vasim/study/report/).
 
 The stores are written through the store and session API (no trial is simulated: each
 trial gets a handful of per-point metric rows drawn from a seeded model, no samples). The
@@ -152,7 +152,10 @@ def _sql_cells(db: Path) -> pd.DataFrame:
     SELECT s.subject, q.condition, q.probe, q.probe_index, q.trial_id,
            (SELECT sum(error_l1) FROM point_metrics p WHERE p.trial_id = q.trial_id) AS E,
            (SELECT sum(latency) FROM point_metrics p WHERE p.trial_id = q.trial_id
-                                                      AND p.reached = 1) AS L
+                                                      AND p.reached = 1) AS L,
+           q.probe = 1 AND q.trial_index < (SELECT min(r.trial_index) FROM scheduled_trials r
+                                            WHERE r.session_id = q.session_id
+                                              AND r.probe = 0) AS baseline
     FROM scheduled_trials q JOIN sessions s ON s.id = q.session_id
     WHERE q.trial_id IS NOT NULL"""
     df = pd.read_sql_query(q, con)
@@ -181,9 +184,11 @@ def test_rm_anova_equals_independent_recomputation(vf_study: tuple[Path, Path]) 
     db, out = vf_study
     t = _sql_cells(db)
     aov = _csv(out, "vf_rm_anova")
-    # fixture factor: cell = mean over the subject's trials of the condition; subjects with
-    # every one of the 6 cells only (S4 stopped early)
-    cells = t.groupby(["subject", "condition"])[["E", "L"]].mean().reset_index()
+    # fixture factor: cell = mean over the subject's trials of the condition, the baseline
+    # probes excluded ('none' = the probes after the blocks); subjects with every one of the
+    # 6 cells only (S4 stopped early)
+    cells = t[t["baseline"] == 0].groupby(["subject", "condition"])[["E", "L"]].mean()
+    cells = cells.reset_index()
     full = cells.groupby("subject")["condition"].nunique()
     keep = full[full == 6].index
     assert sorted(keep) == sorted(f"S{i}" for i in range(1, 12) if i != 4)
@@ -209,7 +214,7 @@ def test_rm_anova_equals_independent_recomputation(vf_study: tuple[Path, Path]) 
 def test_post_hoc_equals_direct_calls(vf_study: tuple[Path, Path]) -> None:
     db, out = vf_study
     t = _sql_cells(db)
-    t = t[t["subject"] != "S4"]
+    t = t[(t["subject"] != "S4") & (t["baseline"] == 0)]  # 'none' = probes after the blocks
     t["fixture"] = pd.Categorical(t["condition"].map(FIXTURE_LABELS),
                                   categories=["none", "VG", "AG", "MS", "Mag", "FF"])
     pp = stats.pairwise_paired(t, dv="E", subject="subject", within="fixture")
@@ -249,7 +254,8 @@ def test_learning_curve_is_mean_and_iqr_of_probe_trials(vf_study: tuple[Path, Pa
     t = _sql_cells(db)
     lc = _csv(out, "vf_learning_curve")
     p3 = t[(t["probe"] == 1) & (t["probe_index"] == 3)]
-    row = lc[(lc["dv"] == "latency") & (lc["trial"] == 3)].iloc[0]
+    row = lc[(lc["dv"] == "latency") & (lc["probe"] == 3)].iloc[0]
+    assert row["practice"] == 3  # the third trial of the session
     assert row["n"] == len(p3) == 11
     assert row["mean"] == pytest.approx(p3["L"].mean(), rel=1e-12)
     assert row["q25"] == pytest.approx(np.percentile(p3["L"], 25), rel=1e-12)
@@ -401,7 +407,8 @@ def test_cli_writes_report_and_replaces_stale_tables(tmp_path: Path, capsys) -> 
     (out / "tables").mkdir(parents=True)
     (out / "tables" / "mine.csv").write_text("a\n1\n")  # not the report's: kept
     assert main(["report", "--db", str(db), "--out", str(out), "--no-progress"]) == 0
-    assert "wrote" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "wrote" in printed and "summary.json" in printed
     assert (out / "tables" / "vf_rm_anova.csv").is_file()
     empty = tmp_path / "empty.sqlite"
     TrialStore(empty).close()

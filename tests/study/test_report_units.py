@@ -21,7 +21,17 @@ from vasim.study.report import (
     ordered_conditions,
     vf_trial_outcomes,
 )
-from vasim.study.report_html import (
+from vasim.study.report.figures import (
+    box_figure,
+    choice_rating_figure,
+    clipped_error_bars,
+    counts_figure,
+    demographics_figure,
+    figure_png,
+    label_png,
+    learning_curve_figure,
+)
+from vasim.study.report.html_page import (
     FigureBlock,
     Notes,
     Paragraph,
@@ -32,14 +42,6 @@ from vasim.study.report_html import (
     esc,
     format_value,
     render_html,
-)
-from vasim.study.report_plots import (
-    box_figure,
-    choice_rating_figure,
-    counts_figure,
-    demographics_figure,
-    figure_png,
-    learning_curve_figure,
 )
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -233,7 +235,15 @@ def test_choice_rating_and_count_figures() -> None:
     fig = choice_rating_figure(pct, pct, rat, order=["vg", "ff"],
                                labels={"vg": "VG", "ff": "FF"})
     assert [ax.get_title() for ax in fig.axes] == [
-        "chosen as best VF", "chosen as worst VF", "rating of each VF (mean ± sd)"]
+        "chosen as best VF", "chosen as worst VF",
+        "rating of each VF (mean ± sd, clipped to the scale)"]
+    # ratings stay within their 0-10 scale: the whisker of 9.0 ± 2.5 stops at 10
+    rat = pd.DataFrame({"condition": ["vg", "ff"], "mean": [9.0, 0.5], "sd": [2.5, 2.0]})
+    ax = choice_rating_figure(None, None, rat, order=["vg", "ff"]).axes[0]
+    assert ax.get_ylim()[1] <= 10.2 + 1e-9 and ax.get_ylim()[0] == 0.0
+    ys = np.concatenate([np.asarray(seg)[:, 1] for coll in ax.collections
+                         for seg in coll.get_segments()])
+    assert ys.max() == pytest.approx(10.0) and ys.min() == pytest.approx(0.0)
     fig = choice_rating_figure(pct, None, None, order=["vg", "ff"], noun="mode")
     assert [ax.get_title() for ax in fig.axes] == ["chosen as best mode"]
     counts = pd.DataFrame({"schema": ["AG+Mag", "Mag+FF"], "count": [8, 7]})
@@ -251,3 +261,25 @@ def test_demographics_figure_stacks_groups() -> None:
     widths = sorted(round(p.get_width()) for p in ax.patches)
     assert widths == [0, 1, 2, 3]
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["surgeon", "resident"]
+
+
+@given(st.lists(st.tuples(st.floats(0, 10), st.floats(0, 20)), min_size=1, max_size=6))
+def test_clipped_error_bars_stay_in_scale(ms: list[tuple[float, float]]) -> None:
+    m = np.array([a for a, _ in ms])
+    sd = np.array([b for _, b in ms])
+    err = clipped_error_bars(m, sd, (0.0, 10.0))
+    assert (err >= 0).all() and (err <= sd + 1e-12).all()
+    assert (m - err[0] >= -1e-12).all() and (m + err[1] <= 10.0 + 1e-12).all()
+    inside = (m - sd >= 0) & (m + sd <= 10)
+    assert np.allclose(err[:, inside], np.vstack([sd, sd])[:, inside])
+
+
+def test_label_png_adds_a_band_and_keeps_width() -> None:
+    fig = counts_figure(pd.DataFrame({"schema": ["a"], "count": [1]}), label="schema",
+                        title="t")
+    png = figure_png(fig)
+    w, h = _png_size(png)
+    out = label_png(png, "synthetic data: test")
+    w2, h2 = _png_size(out)
+    assert w2 == w and h2 > h
+    assert label_png(png, "") == png

@@ -52,7 +52,7 @@ def cmd_report(args: argparse.Namespace) -> int:
     res = build_report(args.db, args.out, protocol=args.protocol,
                        progress=not args.no_progress)
     print(f"wrote {res.index} ({len(res.tables)} tables in {res.out / 'tables'}, "
-          f"{res.n_figures} figures) in {res.seconds:.1f} s")
+          f"{res.n_figures} figures, {res.out / 'summary.json'}) in {res.seconds:.1f} s")
     return 0
 
 

@@ -335,20 +335,73 @@ def choice_rating_figure(
             ax.set_ylabel("respondents [%]")
             ax.set_ylim(0, min(112.0, max(10.0, float(pct.max()) * 1.15)))
             continue
-        ax.set_title(f"rating of each {noun} (mean ± sd)")
+        ax.set_title(f"rating of each {noun} (mean ± sd, clipped to the scale)")
         r = table.set_index("condition").reindex(list(order))
         m = r["mean"].to_numpy(dtype=float)
         sd = np.nan_to_num(r["sd"].to_numpy(dtype=float))
-        bars = ax.bar(x, np.nan_to_num(m), yerr=sd, capsize=4, color=cols,
-                      error_kw={"linewidth": 1.0})
+        bars = ax.bar(x, np.nan_to_num(m), yerr=clipped_error_bars(m, sd, rating_range),
+                      capsize=4, color=cols, error_kw={"linewidth": 1.0})
         ax.bar_label(bars, labels=["" if math.isnan(v) else f"{v:.2f}" for v in m],
                      fontsize=8, label_type="center")
         ax.set_ylabel(f"rating [{rating_range[0]:g}-{rating_range[1]:g}]")
         span = rating_range[1] - rating_range[0]
-        top = max(rating_range[1], float(np.nanmax(np.nan_to_num(m) + sd)) + 0.05 * span)
-        ax.set_ylim(rating_range[0], top)
+        ax.set_ylim(rating_range[0], rating_range[1] + 0.02 * span)
         ax.axhline(rating_range[1], color="0.5", linewidth=0.8, linestyle=":")
     return fig
+
+
+def clipped_error_bars(mean: np.ndarray, sd: np.ndarray, scale: tuple[float, float]
+                       ) -> np.ndarray:
+    """Error bars mean ± sd clipped to a rating scale, as matplotlib's ``yerr`` (2, n).
+
+    **Decision** (issue #15): ratings are shown within their scale, so the whiskers of
+    mean ± 1 sd (the seed's Fig. 6.19 form) stop at the scale's ends instead of switching to
+    an IQR, which would not be centred on the mean the bar shows. A NaN mean gets no bar.
+
+    Args:
+        mean: mean rating per condition. sd: its standard deviation (same unit).
+        scale: (lowest, highest) value of the rating scale.
+
+    Returns:
+        ``[[lower lengths], [upper lengths]]`` (both >= 0).
+
+    Example:
+        >>> clipped_error_bars(np.array([9.0, 5.0]), np.array([2.0, 1.0]), (0.0, 10.0))
+        array([[2., 1.],
+               [1., 1.]])
+    """
+    m = np.nan_to_num(np.asarray(mean, dtype=float))
+    s = np.nan_to_num(np.asarray(sd, dtype=float))
+    lo = np.clip(m - s, scale[0], scale[1])
+    hi = np.clip(m + s, scale[0], scale[1])
+    return np.vstack([np.maximum(m - lo, 0.0), np.maximum(hi - m, 0.0)])
+
+
+def label_png(png: bytes, label: str, *, dpi: int = _DPI) -> bytes:
+    """Adds a text band under a PNG figure (the *synthetic* label of a simulated cohort).
+
+    Args:
+        png: a PNG image (``figure_png``'s output). label: the text; ``""`` returns
+            ``png`` unchanged.
+
+    Returns:
+        A PNG as wide as ``png`` and a band taller, the label in dark red in the band.
+    """
+    if not label:
+        return png
+    from matplotlib.image import imread
+
+    img = imread(io.BytesIO(png), format="png")
+    h, w = img.shape[:2]
+    band = round(0.28 * dpi)
+    fig = Figure(figsize=(w / dpi, (h + band) / dpi), dpi=dpi)
+    fig.figimage(img, xo=0, yo=band)
+    fig.text(0.01, band / 2 / (h + band), label, color="#8b0000", fontsize=9,
+             va="center", ha="left", style="italic")
+    buf = io.BytesIO()
+    FigureCanvasAgg(fig)
+    fig.savefig(buf, format="png", dpi=dpi, facecolor="white")
+    return buf.getvalue()
 
 
 def counts_figure(

@@ -1,0 +1,148 @@
+"""Assembling the report: reads the store, builds every section, writes the files."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from vasim.core.errors import ConfigError
+from vasim.core.progress import progress_bar
+from vasim.study.report.analysis import analyse_vf
+from vasim.study.report.data import load_study
+from vasim.study.report.figures import label_png
+from vasim.study.report.html_page import (
+    Block,
+    FigureBlock,
+    ReportDoc,
+    Section,
+    TableBlock,
+    render_html,
+)
+from vasim.study.report.sections.boxplots import box_plot_section
+from vasim.study.report.sections.cohort import cohort_section
+from vasim.study.report.sections.fixture import fixture_effect_section
+from vasim.study.report.sections.groups import group_section
+from vasim.study.report.sections.learning import learning_curve_section
+from vasim.study.report.sections.mrcp import mrcp_section
+from vasim.study.report.sections.questionnaires import questionnaire_section
+from vasim.study.report.sections.traceability import traceability_section
+from vasim.study.report.summary import build_summary
+from vasim.study.report.writing import page_meta, write_files
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """What :func:`build_report` wrote.
+
+    Attributes:
+        out: the output folder. index: ``out/index.html``.
+        tables: CSV stems written under ``out/tables/`` (``provenance`` included).
+        n_figures: figures embedded in the page. seconds: wall time of the build [s].
+        protocol: the protocol reported (None: the store has no session).
+    """
+
+    out: Path
+    index: Path
+    tables: tuple[str, ...]
+    n_figures: int
+    seconds: float
+    protocol: str | None
+
+
+
+# ------------------------------------------------------------------------------- assembly
+STEPS: tuple[str, ...] = ("read store", "cohort", "learning curves", "fixture effect",
+                          "box plots", "groups", "questionnaires", "MRCP", "write")
+"""The progress-bar steps of :func:`build_report`."""
+
+
+def labelled(section: Section, label: str) -> Section:
+    """The section with ``label`` on every figure (a band under the image) and table (its
+    title and caption); unchanged when ``label`` is ``""`` (real data).
+
+    The label (:attr:`StudyData.data_label`) is the report's only use of whether the
+    cohort is synthetic: no analysis depends on it.
+    """
+    if not label:
+        return section
+    blocks: list[Block] = []
+    for b in section.blocks:
+        if isinstance(b, FigureBlock):
+            b = replace(b, png=label_png(b.png, label), title=f"{b.title} [{label}]",
+                        caption=f"{label}. {b.caption}")
+        elif isinstance(b, TableBlock):
+            b = replace(b, title=f"{b.title} [{label}]", caption=f"{label}. {b.caption}")
+        blocks.append(b)
+    return replace(section, blocks=tuple(blocks))
+
+
+def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
+                 protocol: str | None = None, progress: bool = False) -> ReportResult:
+    """Writes the study report of ``db`` into the folder ``out``.
+
+    Args:
+        db: the SQLite study store (opened read-only).
+        out: output folder (created; ``index.html`` and ``tables/`` inside are replaced,
+            CSVs of an earlier report listed in its ``tables/manifest.json`` removed).
+        protocol: the protocol to report, or None for the store's only protocol.
+        progress: progress output over the report's steps on stderr (:mod:`vasim.core.progress`).
+
+    Returns:
+        :class:`ReportResult`.
+
+    Raises:
+        ConfigError: ``db`` missing, ``out`` is a file, protocol ambiguous or unknown.
+        StoreError: ``db`` is not a vasim study store.
+    """
+    t0 = time.perf_counter()
+    out_dir = Path(out)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ConfigError("exists and is not a folder", file=out_dir, field="--out")
+    with progress_bar(len(STEPS), "vasim report", "step", enabled=progress,
+                      leave=False) as bar:
+        def step(name: str) -> None:
+            bar.set_postfix_str(name)
+
+        step(STEPS[0])
+        data = load_study(db, protocol)
+        bar.update()
+        prov: list[dict[str, str]] = []
+        sections: list[Section] = []
+
+        def run(name: str, build: Callable[[], tuple[Section, list[dict[str, str]]]]
+                ) -> None:
+            step(name)  # shown while the section is built
+            section, rows = build()
+            sections.append(section)
+            prov.extend(rows)
+            bar.update()
+
+        run(STEPS[1], lambda: cohort_section(data))
+        vf = analyse_vf(data)
+        run(STEPS[2], lambda: learning_curve_section(data, vf))
+        run(STEPS[3], lambda: fixture_effect_section(data, vf))
+        run(STEPS[4], lambda: box_plot_section(vf))
+        run(STEPS[5], lambda: group_section(data, vf))
+        run(STEPS[6], lambda: questionnaire_section(data))
+        run(STEPS[7], lambda: mrcp_section(data))
+        step(STEPS[8])
+        sections.append(traceability_section(
+            [b for s in sections for b in s.blocks if isinstance(b, TableBlock) and b.name]))
+        sections = [labelled(s, data.data_label) for s in sections]
+        tables = [b for s in sections for b in s.blocks
+                  if isinstance(b, TableBlock) and b.name]
+        n_fig = sum(isinstance(b, FigureBlock) for s in sections for b in s.blocks)
+        doc = ReportDoc(title=f"vasim study report: {data.protocol_name or 'no sessions'}",
+                        meta=page_meta(data), sections=tuple(sections))
+        summary = build_summary({t.name: t.data for t in tables}, synthetic=data.synthetic,
+                                n_subjects=int(data.sessions["subject"].nunique()))
+        names = write_files(out_dir, data, tables, prov, render_html(doc), summary)
+        bar.update()
+    return ReportResult(out=out_dir, index=out_dir / "index.html", tables=names,
+                        n_figures=n_fig, seconds=time.perf_counter() - t0,
+                        protocol=data.protocol_name)
+
+

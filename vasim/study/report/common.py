@@ -1,0 +1,150 @@
+"""Constants and small helpers shared by the report's modules: condition order and
+labels, outcome names, colours, id lists and the section builder :class:`SectionOut`."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+import pandas as pd
+
+from vasim.study.report.figures import (
+    PALETTE,
+)
+from vasim.study.report.html_page import (
+    Block,
+    Notes,
+    Section,
+)
+
+T = TypeVar("T")
+
+FIXTURE_ORDER: tuple[str, ...] = ("none", "vg", "ag", "ms", "mag", "ff")
+"""Conditions of the VF study in report order (none first, then the seed's order)."""
+FIXTURE_LABELS: dict[str, str] = {"none": "none", "vg": "VG", "ag": "AG", "ms": "MS",
+                                  "mag": "Mag", "ff": "FF"}
+"""Display names of the fixture conditions (other conditions show their own name)."""
+MODE_ORDER: tuple[str, ...] = ("stdt", "mrcp", "mrcp_cam")
+"""Teleoperation modes in report order; StdT is the reference of the gains."""
+MODE_LABELS: dict[str, str] = {"stdt": "StdT", "mrcp": "MRCP", "mrcp_cam": "MRCP+Cam"}
+"""Display names of the teleoperation modes."""
+
+VF_DVS: tuple[tuple[str, str, str], ...] = (
+    ("cum_error", "cumulative error Σe_i", "m"),
+    ("latency", "latency Σl_i", "s"),
+)
+"""Per-trial outcomes of the VF study: (column, name, unit)."""
+PATH_DEV_METRIC = "path_dev_mean_mm"
+"""The per-trial metric (``trial_metrics``) read as the VF study's path deviation."""
+PATH_DEV_DV: tuple[str, str, str] = ("path_deviation", "mean path deviation", "mm")
+"""The path deviation as a VF outcome: mean distance of the tool tip to the planned
+polyline over the trial's samples [mm] (analysed when the store holds it)."""
+PATH_DEV_ABSENT = (f"path deviation ({PATH_DEV_METRIC}): not stored in this database (older "
+                   "store or trials recorded before the metric existed): not analysed")
+"""The note of a report whose store holds no path deviation."""
+PLOT_NAMES: dict[str, str] = {"path_deviation": "mean path deviation",
+                              "cum_error": r"cumulative error $\Sigma_i\, e_i$",
+                               "latency": r"latency $\Sigma_i\, l_i$"}
+"""The outcomes' names in figures (matplotlib mathtext)."""
+FIXTURE_COLORS: dict[str, str] = {FIXTURE_LABELS[c]: PALETTE[i]
+                                  for i, c in enumerate(FIXTURE_ORDER)}
+"""One colour per fixture in every figure (keyed by display name)."""
+MODE_COLORS: dict[str, str] = {"StdT": PALETTE[0], "MRCP": PALETTE[1], "MRCP+Cam": PALETTE[2]}
+"""One colour per teleoperation mode (keyed by display name)."""
+
+
+
+PROVENANCE_COLUMNS: tuple[str, ...] = ("table", "group", "subject", "session_ids", "trial_ids")
+"""Columns of ``tables/provenance.csv``: per table cell/group, the ids it comes from."""
+
+LABEL_TUKEY = "Tukey HSD with the RM-ANOVA error term, as in the seed (assumes sphericity)"
+LABEL_PAIRED = "paired t-tests, Holm-corrected: the within-subject-correct alternative"
+
+
+
+# ---------------------------------------------------------------------------- helpers
+def ids_text(values: Iterable[Any]) -> str:
+    """Sorted distinct integer ids joined by spaces (the CSV form of an id list).
+
+    >>> ids_text([12, 3, 3, 7])
+    '3 7 12'
+    """
+    return " ".join(str(v) for v in sorted({int(v) for v in values if not pd.isna(v)}))
+
+
+def fixture_label(condition: str) -> str:
+    """Display name of a condition: ``"mag"`` -> ``"Mag"``, modes ``"mrcp_cam"`` ->
+    ``"MRCP+Cam"``; unknown names are returned unchanged.
+
+    >>> fixture_label("mag"), fixture_label("mrcp_cam"), fixture_label("custom")
+    ('Mag', 'MRCP+Cam', 'custom')
+    """
+    return FIXTURE_LABELS.get(condition, MODE_LABELS.get(condition, condition))
+
+
+def ordered_conditions(present: Iterable[str], order: Sequence[str]) -> list[str]:
+    """The present conditions in ``order``, unknown ones after it, sorted.
+
+    >>> ordered_conditions(["ff", "x", "none", "vg"], FIXTURE_ORDER)
+    ['none', 'vg', 'ff', 'x']
+    """
+    seen = set(present)
+    return [c for c in order if c in seen] + sorted(seen - set(order))
+
+
+def subjects_text(subjects: Iterable[str], limit: int = 40) -> str:
+    s = sorted(set(subjects))
+    shown = ", ".join(s[:limit])
+    return shown + (f" and {len(s) - limit} more" if len(s) > limit else "")
+
+
+def captured(fn: Callable[..., T], *args: Any, **kwargs: Any) -> tuple[T, list[str]]:
+    """Calls ``fn`` and returns its result with the messages of the warnings it issued."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = fn(*args, **kwargs)
+    msgs = []
+    for w in caught:
+        text = str(w.message)
+        if text not in msgs:
+            msgs.append(text)
+    return out, msgs
+
+
+def prov_row(table: str, group: str, subject: str | None = None, *,
+          session_ids: Iterable[Any] = (), trial_ids: Iterable[Any] = ()) -> dict[str, str]:
+    return {"table": table, "group": group, "subject": subject or "",
+            "session_ids": ids_text(session_ids), "trial_ids": ids_text(trial_ids)}
+
+
+
+# ---------------------------------------------------------------------------- results
+@dataclass
+class SectionOut:
+    """A section under construction: its blocks and its notes (what is missing)."""
+
+    blocks: list[Block] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    def section(self, key: str, title: str, intro: Sequence[Block] = ()) -> Section:
+        head: list[Block] = list(intro)
+        if self.notes:
+            head.append(Notes(tuple(dict.fromkeys(self.notes))))  # each note once
+        return Section(key, title, tuple(head + self.blocks))
+
+
+
+def note_excluded(out: SectionOut, excluded: pd.DataFrame, *, probe_only: bool,
+                   trials: pd.DataFrame) -> None:
+    ex = excluded
+    if probe_only:
+        probe_ids = set(trials.loc[trials["probe"].astype(bool), "trial_id"])
+        ex = ex[ex["trial_id"].isin(probe_ids)]
+    for reason, g in ex.groupby("reason"):
+        out.notes.append(f"{len(g)} trial(s) excluded ({reason}): trial ids "
+                         f"{ids_text(g['trial_id'])} of subject(s) "
+                         f"{subjects_text(g['subject'])}")
+
+

@@ -1,0 +1,256 @@
+"""The MRCP vs standard-teleoperation section (spec §4)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from vasim.core.errors import ConfigError
+from vasim.study import stats
+from vasim.study.report.analysis import complete_subjects, excluded_text
+from vasim.study.report.common import (
+    MODE_COLORS,
+    MODE_ORDER,
+    SectionOut,
+    captured,
+    fixture_label,
+    ids_text,
+    ordered_conditions,
+    prov_row,
+)
+from vasim.study.report.data import StudyData
+from vasim.study.report.figures import (
+    box_figure,
+    figure_png,
+    learning_curve_figure,
+)
+from vasim.study.report.html_page import (
+    Block,
+    FigureBlock,
+    Paragraph,
+    Section,
+    TableBlock,
+)
+from vasim.trials.kinds import TELEOPERATION_MODES
+
+
+@dataclass(frozen=True)
+class MrcpMetric:
+    """One per-trial metric of the MRCP comparison (spec §4).
+
+    Attributes:
+        key: column name in the report tables. metric: name in ``trial_metrics``.
+        family: ``"ET"``, ``"EM"`` (economy of movement) or ``"Q"`` (quality).
+        label: what it measures. unit: its unit.
+    """
+
+    key: str
+    metric: str
+    family: str
+    label: str
+    unit: str
+
+
+MRCP_METRICS: tuple[MrcpMetric, ...] = (
+    MrcpMetric("ET", "completion_time", "ET", "execution time", "s"),
+    MrcpMetric("EM", "path_l2", "EM", "tool path length", "m"),
+    MrcpMetric("Q_target_displacement", "target_displacement_max", "Q",
+               "largest target displacement", "m"),
+    MrcpMetric("Q_contact_time", "contact_time", "Q", "accumulated contact time", "s"),
+    MrcpMetric("Q_force", "accumulated_force", "Q", "accumulated force on tissue", "N s"),
+    MrcpMetric("Q_torque", "accumulated_torque", "Q", "accumulated torque on tissue", "N m s"),
+)
+"""The MRCP metrics, in report order (those with no stored value are left out)."""
+
+
+# ---------------------------------------------------------------------------------- MRCP
+def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
+    """MRCP vs standard teleoperation (spec §4; seed Tables 5.1-5.5)."""
+    out = SectionOut()
+    prov: list[dict[str, str]] = []
+    intro: list[Block] = [Paragraph(
+        "Per trial: ET = execution time (completion_time) [s]; EM = economy of movement, "
+        "the Euclidean length of the tool path (path_l2) [m]; Q = quality: target "
+        "displacement [m] (when stored), accumulated contact time [s], force [N s] and "
+        "torque [N m s] on tissue. Per subject and mode the cell is the mean over the "
+        "mode's trials; mean and sd per mode, paired Student t-tests per pair of modes "
+        "(with observed power and the minimum n for power 0.9) and the seed's gain "
+        "mean(StdT)/mean(mode) use the subjects with every mode. Learning curves: mean and "
+        "interquartile range per trial number within the mode (1..6). Likert items: see "
+        "the Questionnaires section.")]
+    done = data.analysed
+    mt = done[done["condition"].isin(TELEOPERATION_MODES)].copy()
+    if mt.empty:
+        out.notes.append("no analysed trial of the teleoperation modes (stdt, mrcp, "
+                         "mrcp_cam) in the sessions of this protocol: not an MRCP study, "
+                         "section not applicable")
+        return out.section("mrcp", "MRCP vs standard teleoperation", intro), prov
+    modes = ordered_conditions(mt["condition"], MODE_ORDER)
+    labels = [fixture_label(m) for m in modes]
+    mt["mode"] = mt["condition"].map(fixture_label)
+    mt["trial_number"] = (mt.groupby(["session_id", "condition"])["trial_index"]
+                          .rank(method="first").astype(np.int64))
+    metrics = [m for m in MRCP_METRICS if m.metric in data.metrics.columns
+               and data.metrics.loc[data.metrics.index.isin(set(mt["trial_id"])),
+                                    m.metric].notna().any()]
+    absent = [m.metric for m in MRCP_METRICS if m not in metrics]
+    if absent:
+        out.notes.append(f"metrics not stored for these trials (left out): {', '.join(absent)}")
+    if not metrics:
+        out.notes.append("no MRCP metric is stored for the teleoperation trials")
+        return out.section("mrcp", "MRCP vs standard teleoperation", intro), prov
+    wide = mt.merge(data.metrics[[m.metric for m in metrics]], how="left",
+                    left_on="trial_id", right_index=True)
+    wide = wide.rename(columns={m.metric: m.key for m in metrics})
+    trials_tab = wide[["trial_id", "subject", "session_id", "trial_index", "condition", "mode",
+                       "trial_number", *[m.key for m in metrics]]]
+    desc, paired, gains, curves, fits = [], [], [], [], []
+    excl: dict[str, list[str]] = {}  # exclusion note -> the metrics it applies to
+    curve_figs: list[FigureBlock] = []
+    for m in metrics:
+        d = wide[["trial_id", "subject", "condition", "mode", "trial_number", m.key]].rename(
+            columns={m.key: "value"})
+        bad = d[d["value"].isna()]
+        if len(bad):
+            out.notes.append(f"{m.key}: {len(bad)} trial(s) without a value (e.g. not "
+                             f"completed) left out: trial ids {ids_text(bad['trial_id'])}")
+        d = d[d["value"].notna()]
+        cells = (d.groupby(["subject", "condition"]).agg(
+            value=("value", "mean"), n_trials=("trial_id", "size"),
+            trial_ids=("trial_id", ids_text)).reset_index())
+        cells["mode"] = cells["condition"].map(fixture_label)
+        kept, missing = complete_subjects(cells, "condition", modes)
+        if missing:
+            excl.setdefault(excluded_text("mode", {
+                s: [fixture_label(x) for x in v] for s, v in missing.items()},
+                "means, sds, paired tests and gains"), []).append(m.key)
+        n = kept["subject"].nunique()
+        for cond in modes:
+            part = kept[kept["condition"] == cond]
+            desc.append({"metric": m.key, "family": m.family, "unit": m.unit, "mode":
+                         fixture_label(cond), "n_subjects": len(part),
+                         "n_trials": int(part["n_trials"].sum()),
+                         "mean": float(part["value"].mean()) if len(part) else math.nan,
+                         "sd": float(part["value"].std(ddof=1)) if len(part) > 1 else math.nan,
+                         "trial_ids": ids_text(" ".join(part["trial_ids"]).split())})
+        for r in kept.itertuples(index=False):
+            for t in ("mrcp_paired", "mrcp_gains"):
+                prov.append(prov_row(t, f"{m.key}|mode={r.mode}", r.subject,
+                                  trial_ids=str(r.trial_ids).split()))
+        if n >= 2 and len(modes) >= 2:
+            k = kept.copy()
+            k["mode"] = pd.Categorical(k["mode"], categories=labels)
+            try:
+                pp, msgs = captured(stats.pairwise_paired, k, dv="value", subject="subject",
+                                     within="mode")
+                out.notes.extend(f"{m.key}: {x}" for x in msgs)
+                pp.insert(0, "metric", m.key)
+                pp.insert(1, "unit", m.unit)
+                paired.append(pp)
+            except ConfigError as exc:
+                out.notes.append(f"{m.key}: paired t-tests not computed: {exc.reason}")
+            if "stdt" in modes:
+                ref = kept[kept["condition"] == "stdt"].set_index("subject")["value"]
+                for cond in modes:
+                    if cond == "stdt":
+                        continue
+                    cmp_ = kept[kept["condition"] == cond].set_index("subject")["value"]
+                    cmp_ = cmp_.reindex(ref.index)
+                    try:
+                        g = stats.gain(ref.to_numpy(), cmp_.to_numpy())
+                    except ConfigError as exc:
+                        out.notes.append(f"{m.key}: gain StdT/{fixture_label(cond)} not "
+                                         f"computed: {exc.reason}")
+                        continue
+                    gains.append({"metric": m.key, "family": m.family, "unit": m.unit,
+                                  "reference": "StdT", "mode": fixture_label(cond),
+                                  "n_subjects": n, "mean_reference": float(ref.mean()),
+                                  "mean_mode": float(cmp_.mean()), "gain": g})
+        elif n < 2:
+            out.notes.append(f"{m.key}: {n} subject(s) with every mode; paired tests and "
+                             "gains need at least 2")
+        summ, msgs = captured(stats.learning_curve_summary, d, dv="value", subject="subject",
+                               trial="trial_number", condition="mode")
+        out.notes.extend(msgs)
+        ids = d.groupby(["mode", "trial_number"])["trial_id"].agg(ids_text)
+        summ["trial_ids"] = [ids.get((r["mode"], r["trial"]), "")
+                             for r in summ.to_dict("records")]
+        summ.insert(0, "metric", m.key)
+        summ.insert(1, "unit", m.unit)
+        curves.append(summ)
+        bands = {}
+        for lab in labels:
+            part = d[d["mode"] == lab]
+            try:
+                pf, _ = captured(stats.fit_power_law, part["trial_number"].to_numpy(float),
+                                  part["value"].to_numpy(float))
+            except ConfigError as exc:
+                out.notes.append(f"{m.key}, {lab}: learning-curve fit not computed: "
+                                 f"{exc.reason}")
+                continue
+            bands[lab] = pf.band(np.linspace(1, float(part["trial_number"].max()), 40))
+            fits.append({"metric": m.key, "unit": m.unit, "mode": lab, "model": "a*n^(-b)",
+                         "n_obs": pf.n_obs, "a": pf.a, "b": pf.b, "se_a": pf.se_a,
+                         "se_b": pf.se_b, "rss": pf.rss, "dof": pf.dof})
+            for r in part.itertuples(index=False):
+                prov.append(prov_row("mrcp_learning_fit", f"{m.key}|mode={lab}", r.subject,
+                                  trial_ids=[r.trial_id]))
+        fig = learning_curve_figure(
+            summ, ylabel=f"{m.family}: {m.label} [{m.unit}]",
+            title=f"Learning curve: {m.key} ({m.label})",
+            xlabel="trial number within the mode", condition="mode", order=labels,
+            labels=None, bands=bands, colors=MODE_COLORS)
+        curve_figs.append(FigureBlock(
+            f"mrcp_learning_{m.key}", f"Learning curve: {m.key} ({m.label})", figure_png(fig),
+            "Mean (line) and interquartile range (shaded) over subjects per trial number, "
+            "one colour per mode; dashed: power-law fit per mode. Numbers: "
+            f"tables/mrcp_learning_curve.csv (metric = {m.key})."))
+    out.notes.extend(f"{', '.join(keys)}: {text}" for text, keys in excl.items())
+    fig = box_figure(wide, group="mode", colors=MODE_COLORS,
+                     values=[(m.key, f"{m.family}: {m.label} [{m.unit}]") for m in metrics],
+                     order=labels,
+                     xlabel="mode", title="Per mode: every trial")
+    out.blocks.append(TableBlock(
+        "mrcp_descriptives", "Mean and sd per mode (as the seed's Tables 5.1-5.5)",
+        pd.DataFrame(desc), "Over the subject means (subjects with every mode); trial_ids: "
+        "the trials averaged.", columns=("metric", "unit", "mode", "n_subjects", "n_trials",
+                                         "mean", "sd")))
+    if gains:
+        out.blocks.append(TableBlock(
+            "mrcp_gains", "Gains mean(StdT) / mean(mode)", pd.DataFrame(gains),
+            "gain > 1: the mode has the smaller mean (shorter, more economical, fewer "
+            "contacts). provenance.csv lists the trials of every subject x mode cell."))
+    if paired:
+        out.blocks.append(TableBlock(
+            "mrcp_paired", "Paired t-tests per pair of modes", pd.concat(paired,
+                                                                     ignore_index=True),
+            "mean_diff = mean(group1 - group2); p two-sided; p_holm over the pairs of a "
+            "metric; power_observed: power at this n; n_power90_ceil: minimum n for power "
+            "0.9 at the observed effect cohen_dz.",
+            columns=("metric", "group1", "group2", "n", "mean_diff", "t", "p", "p_holm",
+                     "cohen_dz", "power_observed", "n_power90_ceil")))
+    out.blocks.append(FigureBlock(
+        "mrcp_box", "Per mode", figure_png(fig),
+        "Every trial of every subject (one dot per trial); box = quartiles, line = median, "
+        "diamond = mean. Numbers: tables/mrcp_trials.csv."))
+    out.blocks.extend(curve_figs)
+    if curves:
+        out.blocks.append(TableBlock(
+            "mrcp_learning_curve", "Learning curves per mode", pd.concat(curves,
+                                                                     ignore_index=True),
+            "Per metric, mode and trial number: n subjects, mean, quartiles; trial_ids.",
+            display="details",
+            columns=("metric", "mode", "trial", "n", "mean", "q25", "q75")))
+    if fits:
+        out.blocks.append(TableBlock(
+            "mrcp_learning_fit", "Power-law fits per mode", pd.DataFrame(fits),
+            "y = a·n^(-b) on the trials of every subject.", display="details"))
+    out.blocks.append(TableBlock(
+        "mrcp_trials", "Analysed teleoperation trials", trials_tab,
+        "One row per analysed trial with its metrics.", display="csv"))
+    return out.section("mrcp", "MRCP vs standard teleoperation", intro), prov
+
+
