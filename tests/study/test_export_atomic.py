@@ -63,7 +63,12 @@ def test_a_sigkilled_re_export_leaves_a_complete_set(db: Path, tmp_path: Path) -
 
 
 def test_an_export_never_deletes_files_it_did_not_write(db: Path, tmp_path: Path) -> None:
-    (tmp_path / "notes.txt").write_text("mine")
-    with pytest.raises(ConfigError, match=r"notes\.txt"):
-        export_study(db, tmp_path)
-    assert (tmp_path / "notes.txt").read_text() == "mine"
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    (out / "trials.csv").write_text("an old export's table")
+    export_study(db, out)
+    assert (out / "notes.txt").read_text() == "mine"                   # kept
+    assert (out / "trials.csv").read_text() != "an old export's table"  # replaced
+    with pytest.raises(ConfigError, match="is not a folder"):
+        export_study(db, out / "notes.txt")

@@ -14,9 +14,10 @@ truncated file beside a manifest that vouches for it. Two tools:
   leftovers of a killed run (``.<name>.tmp-*`` / ``.<name>.old-*``) are removed by the next
   run.
 
-**Decision**: a target folder may only hold what a previous run of the same writer put
-there (the files its ``owned`` test accepts); anything else makes :func:`atomic_folder`
-refuse with the file named, because swapping the folder would delete it.
+**Decision**: files in the target folder that the writer does not own (its ``owned`` test
+says which are its own) are carried into the new folder before the swap — hard-linked,
+which is instant and takes no space, or copied where links are impossible — so swapping
+the folder never deletes anything a user put there.
 """
 
 from __future__ import annotations
@@ -121,28 +122,33 @@ def atomic_folder(target: str | os.PathLike[str], *,
     Args:
         target: the folder to (re)write.
         owned: tells whether a path inside an existing ``target`` (relative to it) was
-            written by this writer; any other file makes the call refuse.
+            written by this writer (replaced); any other file is carried over.
         what: what is written, for messages (``"export"``, ``"report"``).
 
     Raises:
-        ConfigError: ``target`` is a file, or holds files the writer does not own.
+        ConfigError: ``target`` is a file.
     """
     out = Path(target)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"the {what} folder {out} is a file", field="--out")
     out.parent.mkdir(parents=True, exist_ok=True)
     _remove_leftovers(out)
-    if out.is_dir():
-        foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                         if p.is_file() and not owned(p.relative_to(out)))
-        if foreign:
-            raise ConfigError(
-                f"the {what} folder {out} holds files this {what} did not write "
-                f"({', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''}): replacing "
-                "the folder would delete them; choose an empty or new folder", field="--out")
+    foreign = [] if not out.is_dir() else sorted(
+        p.relative_to(out) for p in out.rglob("*")
+        if (p.is_file() or p.is_symlink()) and not owned(p.relative_to(out)))
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
     try:
         yield tmp
+        for rel in foreign:  # the user's files survive the swap
+            dst = tmp / rel
+            if dst.exists():
+                raise ConfigError(f"the {what} would overwrite {out / rel}, which it did not "
+                                  "write; move that file away", field="--out")
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                os.link(out / rel, dst, follow_symlinks=False)
+            except OSError:
+                shutil.copy2(out / rel, dst, follow_symlinks=False)
         for p in sorted(tmp.rglob("*"), reverse=True):
             if p.is_file():
                 with open(p, "rb") as fh:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from vasim.core.atomic import atomic_folder
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.study.report.analysis import analyse_vf
@@ -79,14 +81,36 @@ def labelled(section: Section, label: str) -> Section:
     return replace(section, blocks=tuple(blocks))
 
 
+def report_files(out_dir: Path) -> Callable[[Path], bool]:
+    """Which files of ``out_dir`` an earlier report wrote (relative paths): ``index.html``,
+    ``summary.json`` and the ``tables/`` its ``tables/manifest.json`` lists; anything else
+    (a user's own files) is kept when the report is replaced."""
+    names: set[str] = {"manifest", "provenance"}
+    try:
+        old = json.loads((out_dir / "tables" / "manifest.json").read_text(encoding="utf-8"))
+        names |= {n for n in old.get("tables", {}) if isinstance(n, str)}
+    except (OSError, ValueError, AttributeError):
+        pass
+
+    def owned(rel: Path) -> bool:
+        if len(rel.parts) == 1:
+            return rel.name in ("index.html", "summary.json")
+        return (len(rel.parts) == 2 and rel.parts[0] == "tables"
+                and rel.suffix in (".csv", ".json") and rel.stem in names)
+
+    return owned
+
+
 def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
                  protocol: str | None = None, progress: bool = False) -> ReportResult:
     """Writes the study report of ``db`` into the folder ``out``.
 
     Args:
         db: the SQLite study store (opened read-only).
-        out: output folder (created; ``index.html`` and ``tables/`` inside are replaced,
-            CSVs of an earlier report listed in its ``tables/manifest.json`` removed).
+        out: output folder, replaced as a whole and atomically (``index.html``,
+            ``summary.json``, ``tables/``: ``vasim.core.atomic.atomic_folder``), so a killed
+            report leaves the previous complete report or the new one; files in it that no
+            report wrote are kept.
         protocol: the protocol to report, or None for the store's only protocol.
         progress: progress output over the report's steps on stderr (:mod:`vasim.core.progress`).
 
@@ -139,7 +163,8 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
                         meta=page_meta(data), sections=tuple(sections))
         summary = build_summary({t.name: t.data for t in tables}, synthetic=data.synthetic,
                                 n_subjects=int(data.sessions["subject"].nunique()))
-        names = write_files(out_dir, data, tables, prov, render_html(doc), summary)
+        with atomic_folder(out_dir, owned=report_files(out_dir), what="report") as tmp:
+            names = write_files(tmp, data, tables, prov, render_html(doc), summary)
         bar.update()
     return ReportResult(out=out_dir, index=out_dir / "index.html", tables=names,
                         n_figures=n_fig, seconds=time.perf_counter() - t0,

@@ -164,6 +164,9 @@ def _read_store(store: TrialStore, protocol: str | None) -> StudyData:
         return replace(_empty_data(path, name, (), version), n_outside=n_outside)
     sessions = sessions_all[sessions_all["protocol"] == name].reset_index(drop=True)
     notes: list[str] = []
+    n_free = len(store.trials().query("subject.isna()"))
+    if n_free:  # no subject's data (free practice): never in a subject analysis
+        notes.append(f"{n_free} trial(s) without a subject left out of the subject analyses")
     latest = int(sessions["id"].max())
     text = store.session(latest)["protocol_toml"]
     parsed: Protocol | None

@@ -44,16 +44,7 @@ def write_files(out_dir: Path, data: StudyData, tables: Sequence[TableBlock],
            summary: Mapping[str, Any] | None = None) -> tuple[str, ...]:
     tdir = out_dir / "tables"
     tdir.mkdir(parents=True, exist_ok=True)
-    manifest = tdir / "manifest.json"
-    if manifest.is_file():
-        try:
-            old = json.loads(manifest.read_text(encoding="utf-8")).get("tables", {})
-        except (OSError, ValueError):
-            old = {}
-        for name in old:
-            p = tdir / f"{name}.csv"
-            if isinstance(name, str) and "/" not in name and p.is_file():
-                p.unlink()
+    manifest = tdir / "manifest.json"  # out_dir is a fresh folder (atomic_folder)
     seen: set[str] = set()
     info: dict[str, Any] = {}
     for t in tables:
