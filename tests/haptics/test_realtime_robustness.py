@@ -28,7 +28,8 @@ from vasim.trials.realtime import (
     run_realtime_trial,
 )
 from vasim.trials.realtime_process import ProcessRealtimeTrial, _PoseBoard
-from vasim.trials.vf import TrialConfig, run_trial
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig
 
 
 def _frame_threads() -> int:

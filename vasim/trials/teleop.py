@@ -147,12 +147,14 @@ from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
-from vasim.trials.sink import TrialSink, check_sink
+from vasim.trials.lifecycle import stored_trial
+from vasim.trials.sink import TrialSink
 from vasim.trials.vf import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_view_cone
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+    from vasim.fixtures.schema import Schema
     from vasim.records.trial_meta import TrialMeta
 
 CYCLE_DT = 0.018
@@ -686,9 +688,12 @@ def _preset(skill: str) -> OperatorProfile:
 
 
 # ---------------------------------------------------------------------------- storing
-def teleop_meta(config: TrialConfig, *, session_id: int | None = None,
-                schedule_index: int | None = None, protocol: str | None = None) -> TrialMeta:
-    """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``)."""
+def teleop_meta(config: TrialConfig, *, schema: Schema | None = None,
+                session_id: int | None = None, schedule_index: int | None = None,
+                protocol: str | None = None) -> TrialMeta:
+    """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``, schema
+    ``"none"``: a ``schema`` argument is ignored; it is there for the trial-kind registry's
+    common signature)."""
     from vasim.fixtures.schema import dumps_schema, load_schema
     from vasim.records.trial_meta import TrialMeta
     from vasim.trials.vf import config_record
@@ -719,42 +724,41 @@ def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]
             "sim_time": float(result.summary["sim_time"])}
 
 
-def run_teleop_trial(config: TrialConfig, store: TrialSink | None = None, *,
-                     session_id: int | None = None, schedule_index: int | None = None,
+def run_teleop_trial(config: TrialConfig, sink: TrialSink | None = None, *,
+                     progress: bool = False, session_id: int | None = None,
+                     schedule_index: int | None = None,
                      protocol: str | None = None, metric_params: MetricParams | None = None,
                      n_rings: int | None = None, abdomen: Abdomen | None = None,
                      ) -> tuple[TrialResult, int | None]:
-    """``vasim.trials.vf.run_trial`` for a teleoperation mode: runs the trial headless and,
-    with a ``TrialStore``, stores it the same way (row 'running' first, everything in one
+    """``vasim.trials.vf.run_vf_trial`` for a teleoperation mode (the ``"stdt"``,
+    ``"mrcp"`` and ``"mrcp_cam"`` kinds of ``vasim.trials.registry``): runs the trial
+    headless and, with a sink, stores it the same way (row 'running' first, everything in one
     transaction at the end, 'interrupted' with the partial samples on any exception).
 
     ``n_rings`` and ``abdomen`` are passed to :class:`TeleopTrial` (shorter tasks, a shared
-    abdomen in tests)."""
+    abdomen in tests). ``progress`` is accepted for the registry's common signature and
+    ignored (a teleoperation trial shows no progress bar, as before)."""
     trial = TeleopTrial(config, n_rings=n_rings, abdomen=abdomen)
-    trial_id: int | None = None
-    store = check_sink(store)
-    if store is not None:
-        trial_id = store.begin_trial(teleop_meta(config, session_id=session_id,
-                                                 schedule_index=schedule_index,
-                                                 protocol=protocol))
     t0 = time.perf_counter()
+
+    def partial() -> TrialResult:
+        return trial.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
+
+    def meta() -> TrialMeta:  # built only with a sink
+        return teleop_meta(config, session_id=session_id, schedule_index=schedule_index,
+                           protocol=protocol)
+
     try:
-        for _ in trial.cycles():
-            pass
-        result = trial.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
-        if store is not None and trial_id is not None:
-            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
-                               events=result.events, trial_metrics=result.trial_metrics)
-    except BaseException as exc:
-        if store is not None and trial_id is not None:
-            store.keep_interrupted(
-                trial_id, f"{type(exc).__name__}: {exc}",
-                lambda: trial.result(wall_time=time.perf_counter() - t0,
-                                     metric_params=metric_params))
-        raise
+        with stored_trial(sink, meta, partial=partial) as rec:
+            t0 = time.perf_counter()
+            for _ in trial.cycles():
+                pass
+            result = trial.result(wall_time=time.perf_counter() - t0,
+                                  metric_params=metric_params)
+            rec.finish(result)
     finally:
         trial.station.close()
-    return result, trial_id
+    return result, rec.trial_id
 
 
 __all__ = [

@@ -53,7 +53,7 @@ import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -73,7 +73,8 @@ from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
 from vasim.tasks.base import polyline_lookahead
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
-from vasim.trials.sink import TrialSink, check_sink
+from vasim.trials.lifecycle import stored_trial
+from vasim.trials.sink import TrialSink
 
 if TYPE_CHECKING:
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
@@ -785,42 +786,42 @@ def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
     )
 
 
-def run_trial(config: TrialConfig, store: TrialSink | None = None, *,
-              progress: bool = False, session_id: int | None = None,
-              schedule_index: int | None = None, protocol: str | None = None,
-              metric_params: MetricParams | None = None,
-              ) -> tuple[TrialResult, int | None]:
-    """Runs a whole trial headless, as fast as the machine allows.
+def run_vf_trial(config: TrialConfig, sink: TrialSink | None = None, *,
+                 progress: bool = False, session_id: int | None = None,
+                 schedule_index: int | None = None, protocol: str | None = None,
+                 metric_params: MetricParams | None = None,
+                 ) -> tuple[TrialResult, int | None]:
+    """Runs a whole virtual-fixture trial headless, as fast as the machine allows (the
+    ``"vf"`` kind of ``vasim.trials.registry``; call ``registry.run_trial``).
 
-    With a ``TrialStore``, the trial row is created as 'running' before the first step and
-    made durable (samples + per-point metrics + trial metrics + status 'completed') in one
+    With a sink, the trial row is created as 'running' before the first step and made
+    durable (samples + per-point metrics + trial metrics + status 'completed') in one
     transaction at the end; any exception or Ctrl-C marks it 'interrupted' (keeping the
-    partial samples) and re-raises.
+    partial samples) and re-raises (``vasim.trials.lifecycle.stored_trial``).
 
     Args:
-        config: the trial. store: a ``TrialStore`` or None. progress: a tqdm bar over POIs.
+        config: the trial. sink: a ``TrialSink`` (e.g. a ``TrialStore``) or None.
+        progress: a tqdm bar over POIs.
         session_id, schedule_index, protocol: the scheduled trial of a session this run is
             an attempt at (see ``TrialStore.begin_trial``).
         metric_params: constants of the trial metrics (default ``MetricParams()``).
 
     Returns:
-        (result, trial_id) — trial_id is None without a store.
+        (result, trial_id) — trial_id is None without a sink.
     """
-    if config.mode is not None:  # a teleoperation mode: the MRCP slave station's trial
-        from vasim.trials.teleop import run_teleop_trial
-
-        return run_teleop_trial(config, store, session_id=session_id,
-                                schedule_index=schedule_index, protocol=protocol,
-                                metric_params=metric_params)
     runner = TrialRunner(config)
-    trial_id: int | None = None
-    store = check_sink(store)
-    if store is not None:
-        trial_id = store.begin_trial(trial_meta(
-            config, runner.schema, runner.operator.profile, session_id=session_id,
-            schedule_index=schedule_index, protocol=protocol))
     t0 = time.perf_counter()
-    try:
+
+    def partial() -> TrialResult:
+        return runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
+
+    def meta() -> TrialMeta:  # built only with a sink
+        return trial_meta(config, runner.schema, runner.operator.profile,
+                          session_id=session_id, schedule_index=schedule_index,
+                          protocol=protocol)
+
+    with stored_trial(sink, meta, partial=partial, samples=runner.samples) as rec:
+        t0 = time.perf_counter()
         bar = (progress_bar(runner._n, f"trial {config.schema}", "pt", leave=False)
                if progress else None)
         chunk = 0.25
@@ -833,20 +834,40 @@ def run_trial(config: TrialConfig, store: TrialSink | None = None, *,
         if bar is not None:
             bar.close()
         result = runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
-        if store is not None and trial_id is not None:
-            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
-                               events=result.events, trial_metrics=result.trial_metrics)
-    except BaseException as exc:
-        if store is not None and trial_id is not None:
-            # Keep what was recorded: the partial samples and metrics, marked interrupted
-            # (less if those cannot be computed; never left 'running').
-            store.keep_interrupted(
-                trial_id, f"{type(exc).__name__}: {exc}",
-                lambda: runner.result(wall_time=time.perf_counter() - t0,
-                                      metric_params=metric_params),
-                samples=runner.samples)
-        raise
-    return result, trial_id
+        rec.finish(result)
+    return result, rec.trial_id
+
+
+def vf_meta(config: TrialConfig, *, schema: Schema | None = None,
+            session_id: int | None = None, schedule_index: int | None = None,
+            protocol: str | None = None) -> TrialMeta:
+    """The ``"vf"`` kind's ``TrialMeta`` builder (``vasim.trials.registry``): ``trial_meta``
+    with ``config.schema`` loaded unless ``schema`` is given and the operator's profile
+    of ``make_profile``."""
+    sch = schema if schema is not None else load_schema(config.schema)
+    return trial_meta(config, sch, make_profile(config), session_id=session_id,
+                      schedule_index=schedule_index, protocol=protocol)
+
+
+def simulate_vf(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
+    """Runs one virtual-fixture trial without a sink (a cohort worker's job); returns what
+    the writer stores (``vasim.study.cohort.simulate_trial``).
+
+    Returns:
+        dict with ``columns`` (flat sample columns, copies), ``active_fixtures``,
+        ``metrics`` (per-point frame), ``summary``, ``events``, ``trial_metrics``,
+        ``wall_time`` [s], ``sim_time`` [s].
+    """
+    t0 = time.perf_counter()
+    runner = TrialRunner(config)
+    while not runner.done:
+        runner.advance(1.0)
+    result = runner.result(wall_time=time.perf_counter() - t0, metric_params=params)
+    cols = {k: np.array(v) for k, v in result.samples.columns().items()}
+    return {"columns": cols, "active_fixtures": result.samples.active_fixtures,
+            "metrics": result.metrics, "summary": result.summary, "events": result.events,
+            "trial_metrics": result.trial_metrics, "wall_time": result.wall_time,
+            "sim_time": float(result.summary["sim_time"])}
 
 
 __all__ = [
@@ -860,8 +881,10 @@ __all__ = [
     "TrialRunner",
     "in_view_cone",
     "make_task",
-    "run_trial",
+    "run_vf_trial",
+    "simulate_vf",
     "trial_meta",
+    "vf_meta",
 ]
 
 
