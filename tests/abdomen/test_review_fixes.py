@@ -23,7 +23,8 @@ from vasim.abdomen.runner import PhysicsThread
 from vasim.abdomen.scene import parse_scene
 from vasim.abdomen.world import MAX_EVENTS, Abdomen, settled_positions
 from vasim.core.errors import ConfigError
-from vasim.trials.realtime import PhysicsLog, _ThreadFeed
+from vasim.trials.realtime import PhysicsLog
+from vasim.trials.realtime.plant import _ThreadFeed
 
 LIVER = """
 [[organs.liver.anchors]]

@@ -25,7 +25,7 @@ here.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, Protocol
 
@@ -55,7 +55,7 @@ class ResultLike(Protocol):
     def summary(self) -> Mapping[str, Any]: ...
 
     @property
-    def events(self) -> list[Event]: ...
+    def events(self) -> Sequence[Event]: ...
 
     @property
     def trial_metrics(self) -> Mapping[str, float]: ...
