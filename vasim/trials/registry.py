@@ -29,8 +29,9 @@ from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.sink import TrialSink
-from vasim.trials.teleop import run_teleop_trial, simulate_teleop, teleop_meta
-from vasim.trials.vf import TrialConfig, TrialResult, run_vf_trial, simulate_vf, vf_meta
+from vasim.trials.teleop_run import run_teleop_trial, simulate_teleop, teleop_meta
+from vasim.trials.vf import TrialConfig, TrialResult
+from vasim.trials.vf_run import run_vf_trial, simulate_vf, vf_meta
 
 
 class TrialRun(Protocol):

@@ -56,7 +56,8 @@ from vasim.haptics.device import Device
 from vasim.haptics.devices.browser import BrowserDevice
 from vasim.tasks import TRAJECTORY_VARIANTS
 from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
-from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, trial_meta
+from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task
+from vasim.trials.vf_run import trial_meta
 from vasim.viewer.live import LiveTrial, make_live_trial
 
 log = logging.getLogger(__name__)

@@ -19,12 +19,8 @@ from vasim.trials.realtime.plant import PhysicsMode
 from vasim.trials.realtime.process import ProcessRealtimeTrial
 from vasim.trials.realtime.timing import RealtimeTiming
 from vasim.trials.sink import Event, TrialSink, check_sink
-from vasim.trials.vf import (
-    TrialConfig,
-    TrialResult,
-    make_profile,
-    trial_meta,
-)
+from vasim.trials.vf import TrialConfig, TrialResult, make_profile
+from vasim.trials.vf_run import trial_meta
 
 log = logging.getLogger(__name__)
 
