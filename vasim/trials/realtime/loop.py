@@ -1,10 +1,10 @@
 """The threaded real-time trial: the runner in the 1 kHz servo loop, physics in a thread
 beside it (scheduling and the measurements behind it: the package docstring,
 ``vasim.trials.realtime``)."""
+
 from __future__ import annotations
 
 import gc
-import logging
 import math
 import time
 from dataclasses import asdict
@@ -20,12 +20,12 @@ from vasim.operator.device import ScriptedDevice
 from vasim.operator.scripted import ScriptedOperator
 from vasim.trials.realtime.plant import (
     DEFAULT_BLEND_S,
+    InlineFeed,
     PhysicsMode,
+    RecordingWorld,
+    ReplayFeed,
+    ThreadFeed,
     TrialPlant,
-    _InlineFeed,
-    _RecordingWorld,
-    _ReplayFeed,
-    _ThreadFeed,
 )
 from vasim.trials.realtime.recording import PhysicsLog, RealtimeRecording
 from vasim.trials.realtime.timing import RealtimeTiming
@@ -35,8 +35,6 @@ from vasim.trials.vf import (
     TrialResult,
     TrialRunner,
 )
-
-log = logging.getLogger(__name__)
 
 DEFAULT_RT_PRIORITY = 40
 """``SCHED_FIFO`` priority the servo thread asks for (module docstring): above every
@@ -96,24 +94,24 @@ class RealtimeTrial:
         self.physics_mode = "replay" if isinstance(physics, PhysicsLog) else str(physics)
         self.physics_log: PhysicsLog | None = None
         self.physics_thread: PhysicsThread | None = None
-        self._world: _RecordingWorld | None = None
-        self._replay: _ReplayFeed | None = None
+        self._world: RecordingWorld | None = None
+        self._replay: ReplayFeed | None = None
         abdomen = self.runner.abdomen
         if abdomen is not None:
             if isinstance(physics, PhysicsLog):
-                self._replay = _ReplayFeed(abdomen, physics)
+                self._replay = ReplayFeed(abdomen, physics)
                 self.runner.set_physics_feed(self._replay)
             elif physics == "thread":
                 self.physics_log = PhysicsLog()
-                self._world = _RecordingWorld(abdomen, self.physics_log)
+                self._world = RecordingWorld(abdomen, self.physics_log)
                 self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]
-                self.runner.set_physics_feed(_ThreadFeed(self.physics_thread,
+                self.runner.set_physics_feed(ThreadFeed(self.physics_thread,
                                                          self.physics_log))
                 self.plant.on_done.append(self._world.freeze)
             elif physics == "inline":
                 self.physics_log = PhysicsLog()
                 every = max(1, round(abdomen.dt / config.dt))
-                self.runner.set_physics_feed(_InlineFeed(abdomen, every, self.physics_log))
+                self.runner.set_physics_feed(InlineFeed(abdomen, every, self.physics_log))
             else:  # "off": the abdomen is never stepped
                 self.runner.set_physics_feed(lambda k, pose: None)
         self.loop = ServoLoop(device, self.plant, rate_hz=rate_hz,

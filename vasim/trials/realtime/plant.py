@@ -1,9 +1,9 @@
 """The plant the servo loop drives: the trial runner coupled to the tool, and the physics
 hand-off (feeds) beside it (the per-tick steps and the force blending: the package
 docstring, ``vasim.trials.realtime``)."""
+
 from __future__ import annotations
 
-import logging
 import math
 import threading
 from dataclasses import replace
@@ -24,8 +24,6 @@ from vasim.trials.vf import (
     TrialRunner,
 )
 
-log = logging.getLogger(__name__)
-
 PhysicsMode = Literal["thread", "inline", "off"]
 """``thread``: real-time physics thread; ``inline``: stepped inside the control step every
 ``abdomen.dt`` (deterministic; for tests and ``run_ticks``); ``off``: the abdomen stays as
@@ -39,7 +37,7 @@ DEFAULT_BLEND_S = 0.02
 docstring): 5 physics periods of the default scene."""
 
 
-class _RecordingWorld:
+class RecordingWorld:
     """An ``Abdomen`` as the physics thread sees it: every step's pose is logged; once
     frozen (the trial is over) steps do nothing, so the log and the tissue statistics end
     with the trial. The lock lets a reader wait for a step in flight."""
@@ -67,7 +65,7 @@ class _RecordingWorld:
             self.frozen = True
 
 
-class _ThreadFeed:
+class ThreadFeed:
     """Posts the tool pose to the physics thread and hands over its newest snapshot."""
 
     def __init__(self, physics: PhysicsThread, log: PhysicsLog):
@@ -93,7 +91,7 @@ class _ThreadFeed:
         return None
 
 
-class _InlineFeed:
+class InlineFeed:
     """Steps the abdomen inside the control step every ``every`` steps (as headless)."""
 
     def __init__(self, abdomen: Any, every: int, log: PhysicsLog):
@@ -110,7 +108,7 @@ class _InlineFeed:
         return snap
 
 
-class _ReplayFeed:
+class ReplayFeed:
     """Re-steps a fresh abdomen with the recorded poses; hands each recorded snapshot over
     at the recorded control step; ``finish`` runs the steps left after the last one."""
 

@@ -6,6 +6,7 @@ step, which snapshot the runner took. Stored trials keep two files next to the d
 the device stream (``stream_path``) and ``<db stem>_trial<id>_realtime.npz`` (physics log +
 loop settings, :func:`realtime_path`); the trial names them (:func:`recorded_files`).
 """
+
 from __future__ import annotations
 
 import json

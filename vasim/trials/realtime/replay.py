@@ -1,6 +1,7 @@
 """Replaying a stored real-time trial from its recording, bit for bit: the recorded device
 readings through the same loop in simulated time, the abdomen re-stepped with the recorded
 tool poses (``vasim trial --replay ID``)."""
+
 from __future__ import annotations
 
 import math

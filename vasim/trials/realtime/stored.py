@@ -1,5 +1,6 @@
 """A stored real-time trial: the loop (threaded or in its own process) run to its end and
 written through a sink with its timing and its recording."""
+
 from __future__ import annotations
 
 import json

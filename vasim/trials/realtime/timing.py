@@ -1,5 +1,6 @@
 """The timing of a real-time run: the servo loop's statistics and the physics thread's
 (shared by the threaded trial and the servo process)."""
+
 from __future__ import annotations
 
 import math
