@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 
 from vasim.core.geometry import (
     QUAT_ORDER,
@@ -19,6 +20,9 @@ from vasim.core.geometry import (
     matrix_z_to,
     quat_from_matrix,
     quat_z_to,
+    rot_x,
+    rot_y,
+    rot_z,
     rotation,
     rotation_angle,
     rotvec_from_matrix,
@@ -152,3 +156,15 @@ def test_bad_quaternions_are_refused() -> None:
         matrix_from_quat([math.nan, 0.0, 0.0, 1.0])
     with pytest.raises(ValueError, match="3 x 3"):
         quat_from_matrix(np.eye(4))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(min_value=-10.0, max_value=10.0, allow_nan=False))
+def test_elementary_rotations_are_scipys(a: float) -> None:
+    for axis, fn in (("x", rot_x), ("y", rot_y), ("z", rot_z)):
+        np.testing.assert_allclose(fn(a), Rotation.from_euler(axis, a).as_matrix(),
+                                   atol=1e-12)
+    # a quarter turn about z takes x to y, about x takes y to z, about y takes z to x
+    np.testing.assert_allclose(rot_z(math.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+    np.testing.assert_allclose(rot_x(math.pi / 2) @ [0, 1, 0], [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(rot_y(math.pi / 2) @ [0, 0, 1], [1, 0, 0], atol=1e-15)

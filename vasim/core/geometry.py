@@ -107,6 +107,30 @@ def matrix_from_rotvec(v: ArrayLike) -> FloatArray:
                       ).reshape(*a.shape[:-1], 3, 3)
 
 
+def rot_x(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about x by ``angle`` [rad].
+
+    **Decision**: the elementary rotations are the closed form (cos/sin), not
+    ``Rotation.from_euler``, because the DH kinematics and the tool station's Jacobian
+    build several per control cycle and a scipy object costs tens of microseconds each;
+    the tests check them against scipy.
+    """
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about y by ``angle`` [rad] (:func:`rot_x`)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about z by ``angle`` [rad] (:func:`rot_x`)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
 def rotation_angle(r0: ArrayLike, r1: ArrayLike) -> float:
     """The angle [rad, in [0, pi]] of the rotation taking matrix ``r0`` to ``r1``."""
     return float(Rotation.from_matrix(np.asarray(r0, dtype=np.float64).T
@@ -161,6 +185,9 @@ __all__ = [
     "quat_from_matrix",
     "quat_of",
     "quat_z_to",
+    "rot_x",
+    "rot_y",
+    "rot_z",
     "rotation",
     "rotation_angle",
     "rotvec_from_matrix",

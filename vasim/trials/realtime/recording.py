@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from vasim.abdomen.contact import ToolPose
 from vasim.core.errors import DeviceError
 from vasim.haptics.devices.replay import DeviceStream, stream_path
+from vasim.trials.sink import TrialSource
 
 REALTIME_FORMAT = "vasim.realtime_recording"
 REALTIME_VERSION = 1
@@ -139,7 +140,7 @@ class RealtimeRecording:
 # ---------------------------------------------------------------------------------------
 
 
-def recorded_files(store: Any, row: dict[str, Any]) -> dict[str, str] | None:
+def recorded_files(store: TrialSource, row: dict[str, Any]) -> dict[str, str] | None:
     """The recording files a stored trial names: ``timing["recording"]`` of a completed
     trial, the ``recording`` event of an interrupted one; None when it names none.
 

@@ -54,7 +54,7 @@ def stored_config(row: dict[str, Any]) -> TrialConfig:
     return TrialConfig(**{k: v for k, v in rec.items() if k in names})  # type: ignore[arg-type]
 
 
-def replay_trial(store: object, trial_id: int) -> ReplayReport:
+def replay_trial(store: TrialSource, trial_id: int) -> ReplayReport:
     """Re-runs a stored real-time trial from its recording and compares it.
 
     The recorded device readings are replayed through the same loop, plant and runner in
