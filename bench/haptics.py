@@ -26,7 +26,7 @@ every organ's vertices as float32 bytes, tool, goal), and
 2. physics on, every organ awake (the worst case: the solver works every step);
 3. physics on, normal scheduling (``rt_priority=None``): what the real-time priority buys;
 4. physics off;
-5. and 6. the servo loop in its own process (``realtime_process``), physics on (default
+5. and 6. the servo loop in its own process (``vasim.trials.realtime.process``), physics on (default
    stepping, then every organ awake) in this process beside the viewer stream.
 
 The targets of the haptics issue (median 1.00 ms, rate >= 990 Hz, p99 <= 2 ms, no gap
@@ -55,8 +55,12 @@ from vasim.haptics.coupling import PatchForce
 from vasim.haptics.devices.emulator import EmulatorDevice
 from vasim.haptics.servo import CoupledToolPlant, NullPlant, Plant, ServoLoop
 from vasim.haptics.timing import TimingStats
-from vasim.trials.realtime import DEFAULT_RT_PRIORITY, RealtimeTiming, RealtimeTrial
-from vasim.trials.realtime_process import ProcessRealtimeTrial
+from vasim.trials.realtime import (
+    DEFAULT_RT_PRIORITY,
+    ProcessRealtimeTrial,
+    RealtimeTiming,
+    RealtimeTrial,
+)
 from vasim.trials.vf import TrialConfig
 
 SECONDS = float(os.environ.get("VASIM_BENCH_HAPTICS_S", "10"))

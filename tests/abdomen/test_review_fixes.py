@@ -23,7 +23,8 @@ from vasim.abdomen.runner import PhysicsThread
 from vasim.abdomen.scene import parse_scene
 from vasim.abdomen.world import MAX_EVENTS, Abdomen, settled_positions
 from vasim.core.errors import ConfigError
-from vasim.trials.realtime import PhysicsLog, _ThreadFeed
+from vasim.trials.realtime import PhysicsLog
+from vasim.trials.realtime.plant import ThreadFeed
 
 LIVER = """
 [[organs.liver.anchors]]
@@ -259,7 +260,7 @@ class _FakePhysics:
 
 def test_the_thread_feed_hands_over_the_events_of_skipped_snapshots() -> None:
     physics = _FakePhysics()
-    feed = _ThreadFeed(physics, PhysicsLog())  # type: ignore[arg-type]
+    feed = ThreadFeed(physics, PhysicsLog())  # type: ignore[arg-type]
     pose = ToolPose(np.zeros(3), np.array([0.0, 0.0, -0.1]))
     # steps 1-3 reset (snapshots 1 and 2 skipped); step 4's event was queued after the
     # feed read snapshot 3: it waits for snapshot 4

@@ -9,7 +9,8 @@ import pytest
 pytest.importorskip("vasim.mrcp.backend")
 
 from tests.mrcp.test_scen_common import joint_margins, scenario_run
-from vasim.mrcp.scenarios.base import cube_points, rot_z
+from vasim.core.geometry import rot_z
+from vasim.mrcp.scenarios.base import cube_points
 from vasim.mrcp.scenarios.cube_rotation import RATE
 
 

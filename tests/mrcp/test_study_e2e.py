@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from tests.mrcp.test_study_trials import short_protocol
+from tests.trials.test_teleop import short_protocol
 from vasim.cli import main
 from vasim.study.store import TrialStore
 

@@ -18,7 +18,8 @@ from vasim.study.export import EXPORT_TABLES, export_study, read_export, table_c
 from vasim.study.protocol import parse_protocol
 from vasim.study.session import SessionSettings, record_answers, run_session, start_session
 from vasim.study.store import SCHEMA_VERSION, TrialStore
-from vasim.trials.vf import TrialConfig, run_trial
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig
 
 PROTOCOL = """
 name = "export_test"

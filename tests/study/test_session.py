@@ -341,6 +341,7 @@ def test_a_failing_result_still_closes_the_trial(tmp_path: Path, monkeypatch) ->
     """The partial result itself fails (a metric error): the trial is still marked
     interrupted, with its raw samples, not left 'running'."""
     import vasim.trials.vf as trial_mod
+    from vasim.trials.registry import run_trial
 
     def boom(*args: object, **kwargs: object) -> None:
         raise ValueError("metric failure")
@@ -348,8 +349,8 @@ def test_a_failing_result_still_closes_the_trial(tmp_path: Path, monkeypatch) ->
     monkeypatch.setattr(trial_mod, "trial_metrics", boom)
     with TrialStore(tmp_path / "s.db") as st:
         with pytest.raises(ValueError, match="metric failure"):
-            trial_mod.run_trial(trial_mod.TrialConfig(schema="none", scene="none", seed=1,
-                                                      max_time=1.0), st)
+            run_trial(trial_mod.TrialConfig(schema="none", scene="none", seed=1, max_time=1.0),
+                      st)
         rows = st.trials()
         assert rows["status"].tolist() == ["interrupted"]
         assert int(rows["n_samples"].iloc[0]) > 0

@@ -27,7 +27,8 @@ from vasim.records.trial_metrics import (
     trial_metrics,
 )
 from vasim.tasks import TRAJECTORY_VARIANTS, point_task, trajectory_task
-from vasim.trials.vf import DEFAULT_ENDOSCOPE, TrialConfig, TrialRunner, in_view_cone
+from vasim.trials.endoscope import DEFAULT_ENDOSCOPE, in_view_cone
+from vasim.trials.vf import TrialConfig, TrialRunner
 
 DT = 1e-3
 UNFILTERED = MetricParams(filter_cutoff_hz=None)

@@ -20,6 +20,7 @@ import pytest
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError
+from vasim.core.geometry import matrix_z_to, quat_z_to
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
 from vasim.viewer.views import (
@@ -27,8 +28,6 @@ from vasim.viewer.views import (
     arrow_vertices,
     audio_text,
     hud_markdown,
-    quat_from_z,
-    rotation_from_z,
 )
 
 
@@ -320,10 +319,10 @@ def test_camera_controller_follows_mag_rate_limited_and_falls_back() -> None:
 @pytest.mark.parametrize("d", [(0, 0, 1), (0, 0, -1), (1, 0, 0), (0.3, -0.4, 0.2)])
 def test_rotation_from_z_maps_z_onto_the_direction(d) -> None:
     d = np.array(d, dtype=float)
-    R = rotation_from_z(d)
+    R = matrix_z_to(d)
     np.testing.assert_allclose(R @ [0, 0, 1], d / np.linalg.norm(d), atol=1e-12)
     np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
-    assert abs(np.linalg.norm(quat_from_z(d)) - 1.0) < 1e-12
+    assert abs(np.linalg.norm(quat_z_to(d)) - 1.0) < 1e-12
 
 
 def test_arrow_vertices_span_start_to_end() -> None:

@@ -19,7 +19,7 @@ from vasim.core.errors import ConfigError
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import load_schema
 from vasim.study.store import TrialStore
-from vasim.trials.vf import run_trial
+from vasim.trials.registry import run_trial
 from vasim.viewer.controller import Command, TrainingController, f5pl_fields, with_f5pl
 
 SPEED = 25.0

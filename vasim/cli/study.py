@@ -83,7 +83,8 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
 
 def _cmd_trial(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
-    from vasim.trials.vf import TrialConfig, run_trial
+    from vasim.trials.registry import run_trial
+    from vasim.trials.vf import TrialConfig
 
     realtime_only = [flag for flag, given in (
         ("--device", getattr(args, "device", "scripted") != "scripted"),

@@ -9,7 +9,8 @@ external thing: the SDKs live in ``vasim.haptics.devices``).
 Frames and units: positions [m] and forces [N] are in the *device frame* (for the Omni:
 x right, y up, z toward the user, origin at the centre of the usable workspace); the plant
 (the trial, the physics) maps that frame to the scene. Orientations are unit quaternions
-``(w, x, y, z)`` of the stylus in the device frame (R_device<-stylus). Times are seconds on
+``(w, x, y, z)`` (the project order, ``vasim.core.geometry``) of the stylus in the device
+frame (R_device<-stylus). Times are seconds on
 the device's own clock, monotonic.
 
 Example:
@@ -222,36 +223,6 @@ class ScheduledDevice(Protocol):
     def set_servo_hook(self, hook: Callable[[], None] | None) -> None: ...
 
 
-def quat_from_matrix(r: ArrayLike) -> FloatArray:
-    """Unit quaternion (w, x, y, z) of a (3, 3) rotation matrix (Shepperd's method).
-
-    The sign is chosen with w >= 0.
-
-    >>> quat_from_matrix(np.eye(3)).tolist()
-    [1.0, 0.0, 0.0, 0.0]
-    >>> q = quat_from_matrix([[0, -1, 0], [1, 0, 0], [0, 0, 1]])   # 90 deg about z
-    >>> np.round(q, 6).tolist()
-    [0.707107, 0.0, 0.0, 0.707107]
-    """
-    m = np.asarray(r, dtype=np.float64).reshape(3, 3)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    out = np.array(q)
-    out /= np.linalg.norm(out)
-    return -out if out[0] < 0 else out
-
-
 def as_force(force: ArrayLike) -> FloatArray:
     """``force`` as a new float64 (3,) array [N]; raises ``ValueError`` for another shape."""
     f = np.array(force, dtype=np.float64).reshape(-1)
@@ -273,5 +244,4 @@ __all__ = [
     "ObservingDevice",
     "ScheduledDevice",
     "as_force",
-    "quat_from_matrix",
 ]

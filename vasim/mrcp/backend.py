@@ -53,9 +53,9 @@ import numpy as np
 import pybullet as pb
 import trimesh
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 from scipy.stats import qmc
 
+from vasim.core import geometry
 from vasim.core.errors import ConfigError
 from vasim.mrcp import dh
 from vasim.mrcp._distance_kernels import swept_distances, swept_pair_bounds
@@ -122,11 +122,11 @@ def pose_matrix(position: FloatArray | None = None, rotation: FloatArray | None 
 
 
 def _quat(rotation: FloatArray) -> list[float]:
-    return [float(v) for v in Rotation.from_matrix(rotation).as_quat()]   # x, y, z, w
+    return [float(v) for v in geometry.to_xyzw(geometry.quat_from_matrix(rotation))]  # xyzw
 
 
 def _rot(quat: Sequence[float]) -> FloatArray:
-    return Rotation.from_quat(quat).as_matrix()
+    return geometry.matrix_from_quat(geometry.from_xyzw(quat))
 
 
 def _load_robot(client: int, robot: RobotModel, base: FloatArray) -> int:
@@ -149,7 +149,7 @@ def rotation_error(current: FloatArray, target: FloatArray) -> FloatArray:
     if c > -0.99:
         angle = math.atan2(s, c)
         return w * (0.5 if s < 1e-12 else angle / (2.0 * s))
-    return Rotation.from_matrix(r).as_rotvec()   # near pi: the robust (slower) route
+    return geometry.rotvec_from_matrix(r)   # near pi: the robust (slower) route
 
 
 class PybulletArm:

@@ -70,6 +70,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
+from vasim.core.geometry import rot_x, rot_z
 from vasim.core.resources import data_file, protocols_dir, read_data_file
 
 FloatArray = NDArray[np.float64]
@@ -247,16 +248,6 @@ class RobotModel:
                 pts.append(np.array(self.tcp, dtype=float))
         pts.extend(np.array(p, dtype=float) for p in geom.points)
         return np.array(pts, dtype=float).reshape(-1, 3)
-
-
-def rot_x(angle: float) -> FloatArray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_z(angle: float) -> FloatArray:
-    c, s = math.cos(angle), math.sin(angle)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def joint_origin(joint: DHJoint) -> FloatArray:

@@ -91,8 +91,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
+from vasim.core.geometry import rotvec_from_matrix
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.modes import KernelEvent, KernelState, next_state
@@ -273,7 +273,7 @@ def _linear_step(arm: ArmKinematics, q: FloatArray, dp: FloatArray,
     if r0 is None or r1 is None:
         dq = np.linalg.pinv(jac[:3], rcond=1e-6) @ dp
     else:
-        dw = Rotation.from_matrix(r1 @ r0.T).as_rotvec()
+        dw = rotvec_from_matrix(r1 @ r0.T)
         dq = np.linalg.pinv(jac, rcond=1e-6) @ np.concatenate([dp, dw])
     out = q + dq
     if np.any(out < arm.joint_lower) or np.any(out > arm.joint_upper):

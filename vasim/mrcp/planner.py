@@ -49,8 +49,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation, Slerp
 
+from vasim.core.geometry import rotation_angle, slerp_matrix
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 
 FloatArray = NDArray[np.float64]
@@ -152,13 +152,10 @@ def guidance(f_attr: FloatArray, f_reps: Iterable[FloatArray], p: PlannerParams,
 
 
 def _limit_rotation(current: FloatArray, goal: FloatArray, rot_max: float) -> FloatArray:
-    r0 = Rotation.from_matrix(current)
-    r1 = Rotation.from_matrix(goal)
-    angle = float((r0.inv() * r1).magnitude())
+    angle = rotation_angle(current, goal)
     if angle <= rot_max:
         return np.asarray(goal, dtype=np.float64)
-    slerp = Slerp([0.0, 1.0], Rotation.concatenate([r0, r1]))
-    return slerp([rot_max / angle]).as_matrix()[0]
+    return slerp_matrix(current, goal, rot_max / angle)
 
 
 @dataclass

@@ -26,8 +26,9 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 from scipy.stats import t as student_t
+
+from vasim.core.geometry import matrix_from_rotvec, rotvec_from_matrix
 
 FloatArray = NDArray[np.float64]
 
@@ -161,8 +162,8 @@ def predict_rotations(times: FloatArray, rotations: FloatArray, future_times: Fl
         future_times: ``(K,)`` times to predict at [s].
         predictor: the predictor used for the three rotation-vector components.
     """
-    rot = Rotation.from_matrix(np.asarray(rotations, dtype=np.float64))
+    rot = np.asarray(rotations, dtype=np.float64)
     last = rot[-1]
-    rel = (last.inv() * rot).as_rotvec()
+    rel = rotvec_from_matrix(last.T @ rot)  # each rotation relative to the last
     pred = predictor.predict(times, rel, future_times)
-    return (last * Rotation.from_rotvec(pred.mean)).as_matrix()
+    return last @ matrix_from_rotvec(pred.mean)

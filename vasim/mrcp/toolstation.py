@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vasim.core.errors import ConfigError
+from vasim.core.geometry import rot_x, rot_y, rot_z
 from vasim.mrcp.fulcrum import Fulcrum, LaparoscopicArm, LaparoscopicTool
 from vasim.mrcp.indices.cone import ConeSector, ToolCone
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray, Proximity
@@ -68,21 +69,6 @@ MOUNT_HEIGHT = 0.20
 
 _R0 = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 """Rx(pi): the positioner's wrist frame at zero, tool z axis pointing down."""
-
-
-def _rx(a: float) -> FloatArray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def _ry(a: float) -> FloatArray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def _rz(a: float) -> FloatArray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 class ToolPositioner:
@@ -131,7 +117,7 @@ class ToolPositioner:
 
     def rotation(self, q: FloatArray) -> FloatArray:
         """``(3, 3)`` mount rotation at ``q``."""
-        return _R0 @ _rx(float(q[3])) @ _ry(float(q[4])) @ _rz(float(q[5]))
+        return _R0 @ rot_x(float(q[3])) @ rot_y(float(q[4])) @ rot_z(float(q[5]))
 
     def tcp_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         q = np.asarray(q, dtype=float)
@@ -141,10 +127,10 @@ class ToolPositioner:
         q = np.asarray(q, dtype=float)
         jac = np.zeros((6, 6))
         jac[:3, :3] = np.eye(3)
-        r1 = _R0 @ _rx(float(q[3]))
+        r1 = _R0 @ rot_x(float(q[3]))
         jac[3:, 3] = _R0[:, 0]
         jac[3:, 4] = r1[:, 1]
-        jac[3:, 5] = (r1 @ _ry(float(q[4])))[:, 2]
+        jac[3:, 5] = (r1 @ rot_y(float(q[4])))[:, 2]
         return jac
 
     def ik(self, position: FloatArray, rotation: FloatArray | None = None,
@@ -369,7 +355,7 @@ def build_station(start_tips: Mapping[str, FloatArray] | None = None, *,
             from vasim.mrcp.backend import PybulletArm, pose_matrix
             from vasim.mrcp.dh import load_robot
 
-            rot = _rz(yaw)
+            rot = rot_z(yaw)
             base = PybulletArm(load_robot("rx60b"),
                                pose_matrix(port - rot @ np.array([0.31, 0.049, 0.2]), rot),
                                name=name)

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from scipy.spatial.transform import Rotation
 
+from vasim.core.geometry import euler_xyz_from_matrix
 from vasim.mrcp.dh import RobotModel, joint_origin
 
 _SPHERE = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
@@ -93,7 +93,7 @@ def model_key(robot: RobotModel) -> str:
 
 
 def _origin_xml(t: np.ndarray) -> str:
-    rpy = Rotation.from_matrix(t[:3, :3]).as_euler("xyz")
+    rpy = euler_xyz_from_matrix(t[:3, :3])
     xyz = " ".join(repr(float(v)) for v in t[:3, 3])
     return f'<origin xyz="{xyz}" rpy="{" ".join(repr(float(v)) for v in rpy)}"/>'
 

@@ -74,6 +74,7 @@ from vasim.fixtures.schema import Schema, load_schema
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
+from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
 from vasim.study.session import (
@@ -84,7 +85,14 @@ from vasim.study.session import (
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
-from vasim.trials.vf import TrialConfig, TrialRunner, trial_meta
+from vasim.trials.lifecycle import (
+    StoredTrial,
+    begin_stored_trial,
+    interruption_reason,
+    stored_trial,
+)
+from vasim.trials.registry import TRIAL_KINDS
+from vasim.trials.vf import TrialConfig
 
 DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]]] = {
     "surgeon": {
@@ -362,36 +370,34 @@ def _record_post(store: TrialStore, session: Session, subject: SimulatedSubject)
 
 # ------------------------------------------------------------------------------ workers
 def simulate_trial(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
-    """Runs one trial without a store (a worker's job); returns what the writer stores.
+    """Runs one trial without a store (a worker's job; its kind's ``simulate``,
+    ``vasim.trials.registry``); returns what the writer stores.
 
     Returns:
         dict with ``columns`` (flat sample columns, copies), ``active_fixtures``,
         ``metrics`` (per-point frame), ``summary``, ``events``, ``trial_metrics``,
         ``wall_time`` [s], ``sim_time`` [s].
     """
-    if config.mode is not None:  # a teleoperation mode: the MRCP station's trial
-        from vasim.trials.teleop import simulate_teleop
-
-        return simulate_teleop(config, params)
-    t0 = time.perf_counter()
-    runner = TrialRunner(config)
-    while not runner.done:
-        runner.advance(1.0)
-    result = runner.result(wall_time=time.perf_counter() - t0, metric_params=params)
-    cols = {k: np.array(v) for k, v in result.samples.columns().items()}
-    return {"columns": cols, "active_fixtures": result.samples.active_fixtures,
-            "metrics": result.metrics, "summary": result.summary, "events": result.events,
-            "trial_metrics": result.trial_metrics, "wall_time": result.wall_time,
-            "sim_time": float(result.summary["sim_time"])}
+    return TRIAL_KINDS.of(config).simulate(config, params)
 
 
-def _store_outcome(store: TrialStore, trial_id: int, out: Mapping[str, Any]) -> None:
+@dataclass(frozen=True, eq=False)
+class _Outcome:
+    """A worker's dict as the ``ResultLike`` the life cycle stores."""
+
+    samples: SampleBuffer
+    metrics: pd.DataFrame
+    summary: Mapping[str, Any]
+    events: list[Any]
+    trial_metrics: Mapping[str, float]
+
+
+def _store_outcome(rec: StoredTrial, out: Mapping[str, Any]) -> None:
     buf = SampleBuffer.from_columns(out["columns"], active_fixtures=out["active_fixtures"])
     metrics = out["metrics"]
     if list(metrics.columns) != list(POINT_COLUMNS):
         raise StoreError(f"worker returned point metrics with columns {list(metrics.columns)}")
-    store.finish_trial(trial_id, buf, metrics, out["summary"], events=out["events"],
-                       trial_metrics=out["trial_metrics"])
+    rec.finish(_Outcome(buf, metrics, out["summary"], out["events"], out["trial_metrics"]))
 
 
 @dataclass(frozen=True)
@@ -561,33 +567,26 @@ def simulate_cohort(
 _SCHEMAS: dict[str, Schema] = {}
 
 
-def _begin(store: TrialStore, job: _Job) -> int:
+def _meta(job: _Job) -> TrialMeta:
+    """The trial row of ``job``, built by its kind (schemas loaded once per process)."""
     cfg = job.config
-    if cfg.mode is not None:  # a teleoperation mode: the needle task's trial row
-        from vasim.trials.teleop import teleop_meta
-
-        return store.begin_trial(teleop_meta(cfg, session_id=job.session.id,
-                                             schedule_index=job.scheduled.index,
-                                             protocol=job.session.protocol.name))
-    schema = _SCHEMAS.get(cfg.schema)
-    if schema is None:
-        schema = _SCHEMAS[cfg.schema] = load_schema(cfg.schema)
-    assert cfg.profile is not None
-    return store.begin_trial(trial_meta(cfg, schema, cfg.profile, session_id=job.session.id,
-                                        schedule_index=job.scheduled.index,
-                                        protocol=job.session.protocol.name))
+    schema = None
+    if cfg.mode is None:
+        schema = _SCHEMAS.get(cfg.schema)
+        if schema is None:
+            schema = _SCHEMAS[cfg.schema] = load_schema(cfg.schema)
+        assert cfg.profile is not None
+    return TRIAL_KINDS.of(cfg).meta(cfg, schema=schema, session_id=job.session.id,
+                                    schedule_index=job.scheduled.index,
+                                    protocol=job.session.protocol.name)
 
 
 def _run_in_process(store: TrialStore, jobs: Sequence[_Job],
                     n_workers: int) -> Iterator[tuple[_Job, dict[str, Any]]]:
     for job in jobs:
-        tid = _begin(store, job)
-        try:
+        with stored_trial(store, _meta(job)) as rec:
             out = simulate_trial(job.config, job.session.metric_params)
-            _store_outcome(store, tid, out)
-        except BaseException as exc:
-            store.mark_interrupted(tid, reason=f"{type(exc).__name__}: {exc}")
-            raise
+            _store_outcome(rec, out)
         yield job, out
 
 
@@ -595,7 +594,7 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
                  n_workers: int) -> Iterator[tuple[_Job, dict[str, Any]]]:
     """Workers compute, this process writes; at most 2 trials in flight per worker."""
     ctx = multiprocessing.get_context("spawn")
-    pending: dict[Future[dict[str, Any]], tuple[_Job, int]] = {}
+    pending: dict[Future[dict[str, Any]], tuple[_Job, StoredTrial]] = {}
     queue = list(jobs)
     window = 2 * n_workers
     pool = ProcessPoolExecutor(max_workers=n_workers, mp_context=ctx)
@@ -603,28 +602,27 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
         while queue or pending:
             while queue and len(pending) < window:
                 job = queue.pop(0)
-                tid = _begin(store, job)
+                rec = begin_stored_trial(store, _meta(job))  # finished when its worker is
                 try:
                     fut = pool.submit(simulate_trial, job.config, job.session.metric_params)
                 except BaseException as exc:
-                    store.mark_interrupted(tid, reason=f"{type(exc).__name__}: {exc}")
+                    rec.interrupt(interruption_reason(exc))
                     raise
-                pending[fut] = (job, tid)
+                pending[fut] = (job, rec)
             done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
             # store in submission order among the finished ones (deterministic ids per run)
             for fut in [f for f in pending if f in done]:
-                job, tid = pending.pop(fut)
+                job, rec = pending.pop(fut)
                 try:
                     out = fut.result()
                 except BaseException as exc:
-                    store.mark_interrupted(tid, reason=f"worker failed: "
-                                                       f"{type(exc).__name__}: {exc}")
+                    rec.interrupt(f"worker failed: {interruption_reason(exc)}")
                     raise
-                _store_outcome(store, tid, out)
+                _store_outcome(rec, out)
                 yield job, out
     except BaseException as exc:
-        for _, tid in pending.values():
-            store.mark_interrupted(tid, reason=f"cohort run stopped: {type(exc).__name__}")
+        for _, rec in pending.values():
+            rec.interrupt(f"cohort run stopped: {type(exc).__name__}")
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     pool.shutdown(wait=True)

@@ -69,7 +69,8 @@ from vasim.study.protocol import (
 )
 from vasim.study.store import SessionMeta, TrialStore
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
-from vasim.trials.vf import TrialConfig, make_profile, run_trial
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig, make_profile
 
 OPERATORS: tuple[str, ...] = ("scripted",)
 """Input devices a session can be run with from the command line."""

@@ -98,7 +98,7 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
   completed (seeds 1-11 and that one), none stopped.
 * Camera: in ``stdt`` and ``mrcp`` the endoscope stays aimed at the centroid of the rings
   with the 100 deg field of view of the study's fixed endoscope
-  (``vasim.trials.vf.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
+  (``vasim.trials.endoscope.DEFAULT_ENDOSCOPE``, whose own aim, the trajectory workspace, lies
   above this task). The camera hand of ``mrcp_cam`` re-aims only when the needle leaves
   the central third of its 70 deg view (a dead zone), then follows it with a 0.4 s time
   constant; its path is the aim point's.
@@ -114,12 +114,10 @@ Example:
 from __future__ import annotations
 
 import math
-import os
-import socket
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -147,13 +145,12 @@ from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
-from vasim.trials.sink import TrialSink, check_sink
-from vasim.trials.vf import DEFAULT_ENDOSCOPE, TrialConfig, TrialResult, in_view_cone
+from vasim.trials.endoscope import DEFAULT_ENDOSCOPE, in_view_cone
+from vasim.trials.vf import TrialConfig, TrialResult
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
-    from vasim.records.trial_meta import TrialMeta
 
 CYCLE_DT = 0.018
 """Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""
@@ -689,78 +686,6 @@ def _preset(skill: str) -> OperatorProfile:
         skill, OperatorProfile.intermediate)()
 
 
-# ---------------------------------------------------------------------------- storing
-def teleop_meta(config: TrialConfig, *, session_id: int | None = None,
-                schedule_index: int | None = None, protocol: str | None = None) -> TrialMeta:
-    """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``)."""
-    from vasim.fixtures.schema import dumps_schema, load_schema
-    from vasim.records.trial_meta import TrialMeta
-    from vasim.trials.vf import config_record
-
-    profile = config.profile if config.profile is not None else _preset(config.skill)
-    return TrialMeta(
-        subject=config.subject, task="needle", variant=0, schema="none",
-        operator=config.operator, seed=config.seed, dt=CYCLE_DT, active_fixtures="",
-        pid=os.getpid(), host=socket.gethostname(), config=config_record(config, profile),
-        schema_toml=dumps_schema(load_schema("none")), session_id=session_id,
-        schedule_index=schedule_index, protocol=protocol)
-
-
-def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
-    """``vasim.study.cohort.simulate_trial`` for a teleoperation trial (same dict)."""
-    t0 = time.perf_counter()
-    trial = TeleopTrial(config)
-    try:
-        for _ in trial.cycles():
-            pass
-        result = trial.result(wall_time=time.perf_counter() - t0, metric_params=params)
-    finally:
-        trial.station.close()
-    cols = {k: np.array(v) for k, v in result.samples.columns().items()}
-    return {"columns": cols, "active_fixtures": "", "metrics": result.metrics,
-            "summary": result.summary, "events": result.events,
-            "trial_metrics": result.trial_metrics, "wall_time": result.wall_time,
-            "sim_time": float(result.summary["sim_time"])}
-
-
-def run_teleop_trial(config: TrialConfig, store: TrialSink | None = None, *,
-                     session_id: int | None = None, schedule_index: int | None = None,
-                     protocol: str | None = None, metric_params: MetricParams | None = None,
-                     n_rings: int | None = None, abdomen: Abdomen | None = None,
-                     ) -> tuple[TrialResult, int | None]:
-    """``vasim.trials.vf.run_trial`` for a teleoperation mode: runs the trial headless and,
-    with a ``TrialStore``, stores it the same way (row 'running' first, everything in one
-    transaction at the end, 'interrupted' with the partial samples on any exception).
-
-    ``n_rings`` and ``abdomen`` are passed to :class:`TeleopTrial` (shorter tasks, a shared
-    abdomen in tests)."""
-    trial = TeleopTrial(config, n_rings=n_rings, abdomen=abdomen)
-    trial_id: int | None = None
-    store = check_sink(store)
-    if store is not None:
-        trial_id = store.begin_trial(teleop_meta(config, session_id=session_id,
-                                                 schedule_index=schedule_index,
-                                                 protocol=protocol))
-    t0 = time.perf_counter()
-    try:
-        for _ in trial.cycles():
-            pass
-        result = trial.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
-        if store is not None and trial_id is not None:
-            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
-                               events=result.events, trial_metrics=result.trial_metrics)
-    except BaseException as exc:
-        if store is not None and trial_id is not None:
-            store.keep_interrupted(
-                trial_id, f"{type(exc).__name__}: {exc}",
-                lambda: trial.result(wall_time=time.perf_counter() - t0,
-                                     metric_params=metric_params))
-        raise
-    finally:
-        trial.station.close()
-    return result, trial_id
-
-
 __all__ = [
     "CAMERA_FOV_DEG",
     "CAMERA_ZOOM",
@@ -772,7 +697,4 @@ __all__ = [
     "TeleopTrial",
     "kernel_config",
     "needle_points",
-    "run_teleop_trial",
-    "simulate_teleop",
-    "teleop_meta",
 ]

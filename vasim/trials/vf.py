@@ -48,11 +48,8 @@ tremor-laden hand would make the damping force buzz.
 from __future__ import annotations
 
 import math
-import os
-import socket
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -61,23 +58,21 @@ import pandas as pd
 from vasim.abdomen.anatomy import trocar_points
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
 from vasim.core.errors import ConfigError
-from vasim.core.progress import progress_bar
 from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
-from vasim.fixtures.schema import Schema, dumps_schema, load_schema
+from vasim.fixtures.schema import Schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.observation import OperatorObservation
 from vasim.operator.scripted import OperatorProfile, ScriptedOperator
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
-from vasim.tasks import WORKSPACE_CENTRE, Task, point_task, trajectory_task
+from vasim.tasks import Task, point_task, trajectory_task
 from vasim.tasks.base import polyline_lookahead
+from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
-from vasim.trials.sink import TrialSink, check_sink
 
 if TYPE_CHECKING:
     from vasim.abdomen.world import Abdomen, AbdomenSnapshot
-    from vasim.records.trial_meta import TrialMeta
 
 TaskName = Literal["trajectory", "point"]
 
@@ -246,77 +241,6 @@ class TrialResult:
     wall_time: float
     trial_metrics: dict[str, float] = field(default_factory=dict)
     """``vasim.records.trial_metrics.trial_metrics`` of the trial (see ``TRIAL_METRICS``)."""
-
-
-@dataclass(frozen=True)
-class EndoscopeView:
-    """A fixed endoscope camera: lens position, aim point, full field of view.
-
-    Attributes:
-        position: (3,) lens position [m], world frame. look_at: (3,) aim point [m].
-        fov_deg: full (cone) field of view [deg], in (0, 180).
-    """
-
-    position: tuple[float, float, float]
-    look_at: tuple[float, float, float]
-    fov_deg: float
-
-    def __post_init__(self) -> None:
-        d = np.subtract(self.look_at, self.position)
-        if not (np.all(np.isfinite(d)) and float(np.linalg.norm(d)) > 0):
-            raise ConfigError(f"look_at must differ from position, got {self.look_at!r}",
-                              field="look_at")
-        if not (0 < self.fov_deg < 180):
-            raise ConfigError(f"fov_deg must be in (0, 180), got {self.fov_deg!r}",
-                              field="fov_deg")
-
-    def contains(self, points: np.ndarray) -> np.ndarray:
-        """Whether each of the (n, 3) points [m] is inside the view cone; (n,) bool."""
-        return in_view_cone(points, self.position, self.look_at, math.radians(self.fov_deg))
-
-
-def in_view_cone(points: np.ndarray, position: object, look_at: object,
-                 fov: float) -> np.ndarray:
-    """Whether points lie inside a camera's circular field of view (a cone).
-
-    Args:
-        points: (n, 3) positions [m], world frame. position: (3,) lens [m].
-        look_at: (3,) aim point [m]. fov: full field of view [rad].
-
-    Returns:
-        (n,) bool: angle between the optical axis and the lens->point direction <= fov/2
-        (a point at the lens counts as inside).
-
-    Example:
-        >>> in_view_cone(np.array([[0, 0, 1.0], [1.0, 0, 1.0], [0, 0, -1.0]]),
-        ...              (0, 0, 0), (0, 0, 1), math.radians(100)).tolist()
-        [True, True, False]
-    """
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    c = np.asarray(position, dtype=np.float64)
-    f = np.asarray(look_at, dtype=np.float64) - c
-    f = f / np.linalg.norm(f)
-    d = p - c
-    dist = np.sqrt((d * d).sum(axis=1))
-    return (d @ f) >= math.cos(0.5 * fov) * dist - 1e-15
-
-
-def _default_endoscope() -> EndoscopeView:
-    from vasim.abdomen.anatomy import trocar_points
-
-    port = trocar_points()[0]
-    return EndoscopeView(position=(float(port[0]), float(port[1]), float(port[2])),
-                         look_at=(float(WORKSPACE_CENTRE[0]), float(WORKSPACE_CENTRE[1]),
-                                  float(WORKSPACE_CENTRE[2])),
-                         fov_deg=DEFAULT_ENDOSCOPE_FOV_DEG)
-
-
-DEFAULT_ENDOSCOPE_FOV_DEG = 100.0
-"""Full field of view of the fixed default endoscope [deg] (module docstring, decision)."""
-
-DEFAULT_ENDOSCOPE = _default_endoscope()
-"""The fixed camera of trials without Mag: lens at the camera trocar, aimed at the workspace
-centre, 100 deg field of view (module docstring)."""
 
 
 def make_task(config: TrialConfig) -> Task:
@@ -762,115 +686,14 @@ _MAX_PREALLOCATED = 1_000_000
 """Sample rows preallocated at most (~170 MB); longer trials grow the buffer."""
 
 
-def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
-    """The trial configuration as plain JSON-able data (stored with the trial)."""
-    # mode and label only when set: the records of other trials stay as they were
-    rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name in ("mode", "label") and getattr(config, f.name) is None)}
-    rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
-    return rec
-
-
-def trial_meta(config: TrialConfig, schema: Schema, profile: OperatorProfile, *,
-               session_id: int | None = None, schedule_index: int | None = None,
-               protocol: str | None = None) -> TrialMeta:
-    """The store's ``TrialMeta`` of a trial about to run in this process.
-
-    Args:
-        config: the trial. schema: its loaded schema. profile: the operator's profile.
-        session_id, schedule_index: the scheduled trial this is an attempt at, if any.
-        protocol: the protocol name, if any.
-    """
-    from vasim.records.trial_meta import TrialMeta
-
-    return TrialMeta(
-        subject=config.subject, task=config.task, variant=config.variant,
-        schema=schema.name, operator=config.operator, seed=config.seed,
-        dt=config.dt, active_fixtures=",".join(schema.fixture_names),
-        pid=os.getpid(), host=socket.gethostname(),
-        config=config_record(config, profile), schema_toml=dumps_schema(schema),
-        session_id=session_id, schedule_index=schedule_index, protocol=protocol,
-        label=config.label,
-    )
-
-
-def run_trial(config: TrialConfig, store: TrialSink | None = None, *,
-              progress: bool = False, session_id: int | None = None,
-              schedule_index: int | None = None, protocol: str | None = None,
-              metric_params: MetricParams | None = None,
-              ) -> tuple[TrialResult, int | None]:
-    """Runs a whole trial headless, as fast as the machine allows.
-
-    With a ``TrialStore``, the trial row is created as 'running' before the first step and
-    made durable (samples + per-point metrics + trial metrics + status 'completed') in one
-    transaction at the end; any exception or Ctrl-C marks it 'interrupted' (keeping the
-    partial samples) and re-raises.
-
-    Args:
-        config: the trial. store: a ``TrialStore`` or None. progress: a tqdm bar over POIs.
-        session_id, schedule_index, protocol: the scheduled trial of a session this run is
-            an attempt at (see ``TrialStore.begin_trial``).
-        metric_params: constants of the trial metrics (default ``MetricParams()``).
-
-    Returns:
-        (result, trial_id) — trial_id is None without a store.
-    """
-    if config.mode is not None:  # a teleoperation mode: the MRCP slave station's trial
-        from vasim.trials.teleop import run_teleop_trial
-
-        return run_teleop_trial(config, store, session_id=session_id,
-                                schedule_index=schedule_index, protocol=protocol,
-                                metric_params=metric_params)
-    runner = TrialRunner(config)
-    trial_id: int | None = None
-    store = check_sink(store)
-    if store is not None:
-        trial_id = store.begin_trial(trial_meta(
-            config, runner.schema, runner.operator.profile, session_id=session_id,
-            schedule_index=schedule_index, protocol=protocol))
-    t0 = time.perf_counter()
-    try:
-        bar = (progress_bar(runner._n, f"trial {config.schema}", "pt", leave=False)
-               if progress else None)
-        chunk = 0.25
-        last_i = 0
-        while not runner.done:
-            frame = runner.advance(chunk)
-            if bar is not None and frame.goal_index != last_i:
-                bar.update(frame.goal_index - last_i)
-                last_i = frame.goal_index
-        if bar is not None:
-            bar.close()
-        result = runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
-        if store is not None and trial_id is not None:
-            store.finish_trial(trial_id, result.samples, result.metrics, result.summary,
-                               events=result.events, trial_metrics=result.trial_metrics)
-    except BaseException as exc:
-        if store is not None and trial_id is not None:
-            # Keep what was recorded: the partial samples and metrics, marked interrupted
-            # (less if those cannot be computed; never left 'running').
-            store.keep_interrupted(
-                trial_id, f"{type(exc).__name__}: {exc}",
-                lambda: runner.result(wall_time=time.perf_counter() - t0,
-                                      metric_params=metric_params),
-                samples=runner.samples)
-        raise
-    return result, trial_id
-
-
 __all__ = [
-    "DEFAULT_ENDOSCOPE",
-    "EndoscopeView",
     "MasterIncrement",
     "PhysicsFeed",
     "TrialConfig",
     "TrialFrame",
     "TrialResult",
     "TrialRunner",
-    "in_view_cone",
     "make_task",
-    "run_trial",
-    "trial_meta",
 ]
 
 

@@ -57,14 +57,9 @@ from vasim.haptics.devices.browser import BrowserDevice
 from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.tasks import TRAJECTORY_VARIANTS
-from vasim.trials.vf import (
-    TrialConfig,
-    TrialFrame,
-    make_profile,
-    make_task,
-    tool_trocar,
-    trial_meta,
-)
+from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
+from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
+from vasim.trials.vf_run import trial_meta
 from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
 
@@ -257,6 +252,7 @@ class TrainingController:
         self._schema_obj: Schema | None = None  # an edited schema (f5PL editor), if any
         self._done_since: float | None = None
         self._stored_done = False
+        self._stored = StoredTrial(None, None)  # the running trial's row (lifecycle)
         self._closed = True
         self.instrument: LaparoscopicDevice | None = None
         """The trainee's instrument of a laparoscopic-input trial (replaced per trial)."""
@@ -333,7 +329,7 @@ class TrainingController:
         trial = self._factory(config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
         task = make_task(config)
-        trial_id = None
+        self._stored = StoredTrial(None, None)  # a demo is not stored
         if mode != "demo":
             meta = trial_meta(config, sch, make_profile(config),
                               session_id=None if session is None else session.id,
@@ -348,7 +344,8 @@ class TrainingController:
                         "fulcrum_effect": self.input_mapping.fulcrum_effect,
                         "sensitivity": self.input_mapping.sensitivity}
                 meta = replace(meta, operator=input_kind, config=cfg)
-            trial_id = self.store().begin_trial(meta)
+            self._stored = begin_stored_trial(self.store(), meta)
+        trial_id = self._stored.trial_id
         self._number += 1
         self.info = TrialInfo(
             number=self._number, config=config, schema=sch.name,
@@ -387,12 +384,9 @@ class TrainingController:
                 # ... and names it in a 'recording' event, as run_realtime_trial does, so
                 # the interrupted trial replays (replay_trial needs the trial to name it).
                 files = (timing or {}).get("recording")
-                events = [*res.events, *([(None, "recording", json.dumps(files))]
-                                         if files else [])]
-                self.store().mark_interrupted(
-                    info.trial_id, reason=reason, samples=res.samples,
-                    point_metrics=res.metrics, summary=_plain_dict(res.summary),
-                    events=events, trial_metrics=res.trial_metrics)
+                events = [(None, "recording", json.dumps(files))] if files else []
+                self._stored.interrupt(reason, res, summary=_plain_dict(res.summary),
+                                       events=events)
                 self._stored_done = True
                 self._publish(running=False, status=f"trial {info.trial_id} stopped "
                               f"({reason}); it stays pending" if info.schedule_index
@@ -412,9 +406,7 @@ class TrainingController:
         res = trial.result(**kw)
         summary = _plain_dict(res.summary)
         if info.trial_id is not None:
-            self.store().finish_trial(
-                info.trial_id, res.samples, res.metrics, res.summary, events=res.events,
-                timing=self._timing(info.trial_id), trial_metrics=res.trial_metrics)
+            self._stored.finish(res, timing=self._timing(info.trial_id))
         self._stored_done = True
         changes: dict[str, Any] = {"running": False, "summary": summary}
         if info.trial_id is not None:

@@ -55,6 +55,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
+from vasim.core.geometry import matrix_from_quat
 from vasim.viewer.access import viewer_url
 from vasim.viewer.mrcp_view import (
     StationFrame,
@@ -666,13 +667,11 @@ class MrcpViewerApp(ErrorReporter):
         Raises:
             ConfigError: for a non-finite pose or a zero quaternion.
         """
-        from scipy.spatial.transform import Rotation
-
         q = np.asarray(wxyz, float)
         if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
             raise ConfigError(f"gizmo orientation must be a non-zero quaternion wxyz, got "
                               f"{q!r}", field="operator")
-        rot = Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
+        rot = matrix_from_quat(q)
         self.live.operator.set_pose(np.asarray(position, float), rot)
 
 

@@ -28,9 +28,9 @@ import numpy as np
 import trimesh
 import viser
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from vasim.core.errors import ConfigError
+from vasim.core.geometry import from_xyzw, matrix_from_quat, quat_from_matrix
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]
@@ -122,8 +122,8 @@ def pose7(matrix: FloatArray) -> FloatArray:
         [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
     """
     m = np.asarray(matrix, dtype=float)
-    xyzw = Rotation.from_matrix(m[..., :3, :3].reshape(-1, 3, 3)).as_quat()
-    out = np.concatenate([m[..., :3, 3].reshape(-1, 3), xyzw[:, [3, 0, 1, 2]]], axis=1)
+    wxyz = quat_from_matrix(m[..., :3, :3].reshape(-1, 3, 3))
+    out = np.concatenate([m[..., :3, 3].reshape(-1, 3), wxyz], axis=1)
     return out.reshape(*m.shape[:-2], 7)
 
 
@@ -177,7 +177,7 @@ def obstacle_mesh(client: int, body: int, name: str = "?") -> trimesh.Trimesh:
         raise ConfigError(f"obstacle {name!r}: pybullet shape type {kind} is not drawable",
                           field="world")
     local = np.eye(4)
-    local[:3, :3] = Rotation.from_quat(local_orn).as_matrix()
+    local[:3, :3] = matrix_from_quat(from_xyzw(local_orn))  # pybullet: xyzw
     local[:3, 3] = local_pos
     if not np.allclose(local, np.eye(4)):
         mesh.apply_transform(local)
@@ -193,7 +193,7 @@ def obstacle_poses(world: Any) -> dict[str, FloatArray]:
         for name in w.obstacle_names():
             pos, xyzw = pb.getBasePositionAndOrientation(w.body_id(name),
                                                          physicsClientId=w.client_id)
-            out[name] = np.array([*pos, xyzw[3], xyzw[0], xyzw[1], xyzw[2]])
+            out[name] = np.array([*pos, *from_xyzw(xyzw)])
     return out
 
 
@@ -381,7 +381,7 @@ class StationView:
         pos, wxyz = frame.task[:3], frame.task[3:]
         self.task.position = tuple(float(v) for v in pos)
         self.task.wxyz = tuple(float(v) for v in wxyz)
-        rot = Rotation.from_quat(np.r_[wxyz[1:], wxyz[0]]).as_matrix()
+        rot = matrix_from_quat(wxyz)
         pts = self.geometry.task_points @ rot.T + pos
         self.points.points = pts.astype(np.float32)
         if frame.cutp != self._cutp and len(pts):

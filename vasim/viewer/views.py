@@ -33,6 +33,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import Organ
+from vasim.core.geometry import matrix_z_to
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 
 FloatArray = NDArray[np.float64]
@@ -43,32 +44,6 @@ def rgb255(color: Sequence[float]) -> Rgb:
     """RGB in [0, 1] -> integer RGB in [0, 255] (what viser takes)."""
     r, g, b = (min(255, max(0, round(float(c) * 255.0))) for c in color)
     return (r, g, b)
-
-
-def quat_from_z(direction: FloatArray) -> tuple[float, float, float, float]:
-    """(w, x, y, z) unit quaternion rotating +z onto ``direction`` (any length > 0)."""
-    d = np.asarray(direction, dtype=np.float64)
-    n = float(np.linalg.norm(d))
-    if n < 1e-12:
-        return (1.0, 0.0, 0.0, 0.0)
-    d = d / n
-    w = 1.0 + float(d[2])  # 1 + dot(z, d)
-    if w < 1e-9:  # antiparallel: half turn about x
-        return (0.0, 1.0, 0.0, 0.0)
-    # cross(z, d) = (-d_y, d_x, 0)
-    q = np.array([w, -d[1], d[0], 0.0])
-    q /= np.linalg.norm(q)
-    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-
-
-def rotation_from_z(direction: FloatArray) -> FloatArray:
-    """(3, 3) rotation matrix taking +z onto ``direction`` (see :func:`quat_from_z`)."""
-    w, x, y, z = quat_from_z(direction)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 # ---------------------------------------------------------------------------------------
@@ -182,7 +157,7 @@ class ToolView:
         d = self.trocar - tip
         length = float(np.linalg.norm(d)) + self.outside
         local = self._template * np.array([1.0, 1.0, max(length, 1e-4)])
-        return (local @ rotation_from_z(d).T + tip).astype(np.float32)
+        return (local @ matrix_z_to(d).T + tip).astype(np.float32)
 
     def set_trocar(self, trocar: FloatArray) -> None:
         """Moves the pivot to another port (3,) [m]; takes effect at the next update."""
@@ -391,7 +366,7 @@ def arrow_vertices(template: FloatArray, start: FloatArray, end: FloatArray,
     local[2 * s:3 * s, 2] = shaft_l
     local[3 * s, 2] = length
     local[3 * s + 2, 2] = shaft_l
-    return (local @ rotation_from_z(d).T + np.asarray(start)).astype(np.float32)
+    return (local @ matrix_z_to(d).T + np.asarray(start)).astype(np.float32)
 
 
 class ArrowView:
@@ -502,7 +477,7 @@ class GhostView:
             return
         p = np.asarray(ghost, dtype=np.float64)
         if self.position is None or not np.array_equal(p, self.position):
-            rot = rotation_from_z(self.trocar - p)
+            rot = matrix_z_to(self.trocar - p)
             self.handle.vertices = (self._template @ rot.T + p).astype(np.float32)
             self.position = p.copy()
         if not self.handle.visible:
@@ -742,7 +717,5 @@ __all__ = [
     "audio_text",
     "hud_markdown",
     "organ_style",
-    "quat_from_z",
     "rgb255",
-    "rotation_from_z",
 ]

@@ -50,13 +50,13 @@ from types import ModuleType
 import numpy as np
 
 from vasim.core.errors import DeviceError
+from vasim.core.geometry import quat_from_matrix
 from vasim.haptics.device import (
     OMNI_LIMITS,
     DeviceLimits,
     DeviceSample,
     FloatArray,
     as_force,
-    quat_from_matrix,
 )
 
 log = logging.getLogger(__name__)

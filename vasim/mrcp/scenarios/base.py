@@ -9,7 +9,8 @@ scripted task trajectory *is* the operator's input). :mod:`vasim.mrcp.scenarios.
 runs it through :class:`~vasim.mrcp.kernel.MRCPKernel`.
 
 Helpers shared by the scenarios: gripper frames on a cube's faces (:func:`cube_points`),
-RX60B stations (:func:`rx60b_model`, :func:`base_pose`) and rotations (:func:`rot_x` ...).
+RX60B stations (:func:`rx60b_model`, :func:`base_pose`); rotations come from
+``vasim.core.geometry``.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vasim.core.geometry import rot_z
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray, ProximityWorld
 from vasim.mrcp.kernel import KernelConfig, TaskPoint
 
@@ -91,19 +93,6 @@ class Scenario(Protocol):
 
 
 # ---------------------------------------------------------------------------- geometry
-def rot_x(a: float) -> FloatArray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(a: float) -> FloatArray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(a: float) -> FloatArray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def gripper_frame(approach: FloatArray, x_hint: FloatArray) -> FloatArray:

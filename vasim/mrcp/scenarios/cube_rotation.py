@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from vasim.core.geometry import rot_z
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 from vasim.mrcp.kernel import IndexSpec, KernelConfig
 from vasim.mrcp.planner import PlannerParams
@@ -26,7 +27,6 @@ from vasim.mrcp.scenarios.base import (
     base_pose,
     cube_points,
     grasp_configuration,
-    rot_z,
 )
 from vasim.mrcp.scenarios.world import Station, view_cone_vertices
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from vasim.core.geometry import rot_z
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 from vasim.mrcp.kernel import IndexSpec, TaskPoint
 from vasim.mrcp.scenarios.base import (
@@ -26,7 +27,6 @@ from vasim.mrcp.scenarios.base import (
     base_pose,
     grasp_configuration,
     gripper_frame,
-    rot_z,
 )
 from vasim.mrcp.scenarios.cube_rotation import kernel_config
 from vasim.mrcp.scenarios.world import Station

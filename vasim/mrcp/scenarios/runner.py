@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from vasim.core.geometry import matrix_from_rotvec, rotvec_from_matrix
 from vasim.mrcp.interfaces import FloatArray
 from vasim.mrcp.kernel import CycleRecord, MRCPKernel
 from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
@@ -184,11 +184,11 @@ class TrackingOperator:
         if target[1] is None or last[1] is None:
             return pos, None
         ach = np.eye(3) if achieved[1] is None else np.asarray(achieved[1], float)
-        rv = Rotation.from_matrix(np.asarray(target[1], float) @ ach.T).as_rotvec()
+        rv = rotvec_from_matrix(np.asarray(target[1], float) @ ach.T)
         a = float(np.linalg.norm(rv))
         if a > self.max_rate * dt:
             rv = rv * (self.max_rate * dt / a)
-        return pos, Rotation.from_rotvec(rv).as_matrix() @ np.asarray(last[1], float)
+        return pos, matrix_from_rotvec(rv) @ np.asarray(last[1], float)
 
 
 #: A target pose source: time [s] -> task position ``(3,)`` and rotation ``(3, 3)`` or None.

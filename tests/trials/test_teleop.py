@@ -18,8 +18,9 @@ from vasim.cli import main
 from vasim.operator.needle import needle_task
 from vasim.study.protocol import load_protocol
 from vasim.study.store import TrialStore
+from vasim.trials.registry import run_trial
 from vasim.trials.teleop import CYCLE_DT, TISSUE_METRICS, TeleopTrial
-from vasim.trials.vf import TrialConfig, run_trial
+from vasim.trials.vf import TrialConfig
 
 SEED = 3
 

@@ -1,4 +1,4 @@
-"""The real-time trial with its servo loop in a child process (``realtime_process``).
+"""The real-time trial with its servo loop in a child process (``vasim.trials.realtime.process``).
 
 Each test spawns a servo process (a few seconds to import and build the trial); the runs
 themselves are about a second of wall time, and only behaviour is asserted.
@@ -17,12 +17,12 @@ from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.devices.replay import stream_path
 from vasim.study.store import TrialStore
 from vasim.trials.realtime import (
+    ProcessRealtimeTrial,
     RealtimeRecording,
     realtime_path,
     replay_trial,
     run_realtime_trial,
 )
-from vasim.trials.realtime_process import ProcessRealtimeTrial
 from vasim.trials.vf import TrialConfig
 
 

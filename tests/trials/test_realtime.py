@@ -118,7 +118,7 @@ def test_physics_log_round_trips_through_arrays() -> None:
 
 def test_replay_without_recording_says_what_is_missing(tmp_path: Path) -> None:
     from vasim.core.errors import DeviceError
-    from vasim.trials.vf import run_trial
+    from vasim.trials.registry import run_trial
 
     db = tmp_path / "s.sqlite"
     with TrialStore(db) as store:

@@ -17,7 +17,8 @@ import pytest
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.study.store import TrialStore
-from vasim.trials.vf import TrialConfig, TrialRunner, run_trial
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig, TrialRunner
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 r"""The real-time trial with the servo loop in its own process (no shared interpreter lock).
 
 :class:`ProcessRealtimeTrial` has the surface of
-:class:`~vasim.trials.realtime.RealtimeTrial` (``start``, ``stop``, ``done``, ``frame``,
+:class:`~vasim.trials.realtime.loop.RealtimeTrial` (``start``, ``stop``, ``done``, ``frame``,
 ``timing``, ``result``, ``recording``) but runs the device, the 1 kHz servo loop and the
 trial runner (task, fixtures, coupling) in a child process; this process keeps the abdomen
 physics thread and whatever else runs here (the viewer, the caller). **Why, measured**
@@ -37,7 +37,7 @@ e.g. ``functools.partial(OpenHapticsDevice)``; None: the scripted operator). A d
 from this process (the viewer's browser device) needs the threaded ``RealtimeTrial``.
 
 The recording has the same format as the threaded trial's: a replay
-(``vasim.trials.realtime.replay_trial``) reproduces the samples exactly.
+(``vasim.trials.realtime.replay.replay_trial``) reproduces the samples exactly.
 """
 
 from __future__ import annotations
@@ -64,14 +64,10 @@ from vasim.haptics.coupling import CouplingParams
 from vasim.haptics.device import Device
 from vasim.haptics.devices.replay import DeviceStream
 from vasim.haptics.timing import TimingStats
-from vasim.trials.realtime import (
-    DEFAULT_BLEND_S,
-    DEFAULT_RT_PRIORITY,
-    PhysicsLog,
-    RealtimeRecording,
-    RealtimeTiming,
-    RealtimeTrial,
-)
+from vasim.trials.realtime.loop import DEFAULT_RT_PRIORITY, RealtimeTrial
+from vasim.trials.realtime.plant import DEFAULT_BLEND_S
+from vasim.trials.realtime.recording import PhysicsLog, RealtimeRecording
+from vasim.trials.realtime.timing import RealtimeTiming
 from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, TrialRunner
 
 log = logging.getLogger(__name__)

@@ -22,13 +22,15 @@ from vasim.haptics.devices.replay import DeviceStream, stream_path
 from vasim.haptics.servo import CoupledToolPlant, ServoLoop
 from vasim.study.store import TrialStore
 from vasim.trials.realtime import (
+    ProcessRealtimeTrial,
     RealtimeRecording,
     realtime_path,
     replay_trial,
     run_realtime_trial,
 )
-from vasim.trials.realtime_process import ProcessRealtimeTrial, _PoseBoard
-from vasim.trials.vf import TrialConfig, run_trial
+from vasim.trials.realtime.process import _PoseBoard
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig
 
 
 def _frame_threads() -> int:

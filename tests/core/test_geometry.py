@@ -1,0 +1,170 @@
+"""Rotations from one source (``vasim.core.geometry``): the project's wxyz order against
+independent closed forms (the quaternion's matrix and the Hamilton product written out)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from vasim.core.geometry import (
+    QUAT_ORDER,
+    euler_xyz_from_matrix,
+    from_xyzw,
+    matrix_from_quat,
+    matrix_from_rotvec,
+    matrix_z_to,
+    quat_from_matrix,
+    quat_z_to,
+    rot_x,
+    rot_y,
+    rot_z,
+    rotation,
+    rotation_angle,
+    rotvec_from_matrix,
+    slerp_matrix,
+    to_xyzw,
+)
+
+finite = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
+quats = st.tuples(finite, finite, finite, finite).map(np.array).filter(
+    lambda q: np.linalg.norm(q) > 1e-3).map(lambda q: q / np.linalg.norm(q))
+vectors = st.tuples(finite, finite, finite).map(np.array)
+
+
+def closed_form_matrix(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix of a unit quaternion (w, x, y, z), written out."""
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def hamilton(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The Hamilton product p q of quaternions (w, x, y, z), written out."""
+    a1, b1, c1, d1 = p
+    a2, b2, c2, d2 = q
+    return np.array([a1 * a2 - b1 * b2 - c1 * c2 - d1 * d2,
+                     a1 * b2 + b1 * a2 + c1 * d2 - d1 * c2,
+                     a1 * c2 - b1 * d2 + c1 * a2 + d1 * b2,
+                     a1 * d2 + b1 * c2 - c1 * b2 + d1 * a2])
+
+
+def same_rotation(p: np.ndarray, q: np.ndarray) -> bool:
+    return bool(np.allclose(p, q, atol=1e-9) or np.allclose(p, -q, atol=1e-9))
+
+
+def test_the_order_is_scalar_first_and_identity_is_one() -> None:
+    assert QUAT_ORDER == "wxyz"
+    assert quat_from_matrix(np.eye(3)).tolist() == [1.0, 0.0, 0.0, 0.0]
+    np.testing.assert_array_equal(matrix_from_quat([1.0, 0.0, 0.0, 0.0]), np.eye(3))
+    np.testing.assert_array_equal(rotvec_from_matrix(np.eye(3)), np.zeros(3))
+    np.testing.assert_array_equal(matrix_from_rotvec(np.zeros(3)), np.eye(3))
+    # 90 deg about z: w = cos 45 deg, z = sin 45 deg; the x axis goes to y
+    q = quat_from_matrix([[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.testing.assert_allclose(q, [math.sqrt(0.5), 0, 0, math.sqrt(0.5)], atol=1e-15)
+    np.testing.assert_allclose(matrix_from_quat(q) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_matrix_of_a_quaternion_is_the_closed_form(q: np.ndarray) -> None:
+    np.testing.assert_allclose(matrix_from_quat(q), closed_form_matrix(q), atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats)
+def test_round_trips_between_orders_and_matrices(q: np.ndarray) -> None:
+    np.testing.assert_array_equal(from_xyzw(to_xyzw(q)), q)
+    np.testing.assert_array_equal(to_xyzw(q), [q[1], q[2], q[3], q[0]])
+    back = quat_from_matrix(closed_form_matrix(q))
+    assert same_rotation(back, q)
+    assert back[0] >= 0.0                                    # canonical: w >= 0
+    np.testing.assert_allclose(np.linalg.norm(back), 1.0, atol=1e-12)
+    r = closed_form_matrix(q)
+    np.testing.assert_allclose(matrix_from_rotvec(rotvec_from_matrix(r)), r, atol=1e-9)
+    # the same rotation read the pybullet / scipy way (xyzw) gives the same matrix
+    np.testing.assert_allclose(matrix_from_quat(from_xyzw(to_xyzw(q))), r, atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(quats, quats)
+def test_composition_matches_matrices(p: np.ndarray, q: np.ndarray) -> None:
+    """R(p q) = R(p) R(q), the product computed independently (Hamilton)."""
+    np.testing.assert_allclose(matrix_from_quat(hamilton(p, q)),
+                               closed_form_matrix(p) @ closed_form_matrix(q), atol=1e-12)
+    assert same_rotation(quat_from_matrix(closed_form_matrix(p) @ closed_form_matrix(q)),
+                         hamilton(p, q))
+
+
+@settings(max_examples=100, deadline=None)
+@given(quats, quats, st.floats(min_value=0.0, max_value=1.0))
+def test_slerp_and_angle_follow_the_shortest_arc(p: np.ndarray, q: np.ndarray,
+                                                  s: float) -> None:
+    r0, r1 = closed_form_matrix(p), closed_form_matrix(q)
+    rel = hamilton(np.array([p[0], -p[1], -p[2], -p[3]]), q)   # p^-1 q
+    angle = 2.0 * math.atan2(np.linalg.norm(rel[1:]), abs(rel[0]))
+    assert rotation_angle(r0, r1) == pytest.approx(angle, abs=1e-9)
+    mid = slerp_matrix(r0, r1, s)
+    assert rotation_angle(r0, mid) == pytest.approx(s * angle, abs=1e-7)
+    assert rotation_angle(mid, r1) == pytest.approx((1.0 - s) * angle, abs=1e-7)
+
+
+@settings(max_examples=200, deadline=None)
+@given(vectors.filter(lambda d: np.linalg.norm(d) > 1e-6))
+def test_z_to_a_direction_is_the_smallest_rotation(d: np.ndarray) -> None:
+    u = d / np.linalg.norm(d)
+    m = matrix_z_to(d)
+    np.testing.assert_allclose(m @ [0, 0, 1], u, atol=1e-9)
+    np.testing.assert_allclose(m.T @ m, np.eye(3), atol=1e-12)
+    # smallest rotation: its angle is the angle between z and d
+    angle = math.acos(max(-1.0, min(1.0, u[2])))
+    q = quat_z_to(d)
+    assert 2.0 * math.acos(min(1.0, q[0])) == pytest.approx(angle, abs=1e-6)
+
+
+def test_z_to_degenerate_directions() -> None:
+    assert quat_z_to([0, 0, 0]).tolist() == [1.0, 0.0, 0.0, 0.0]
+    assert quat_z_to([0, 0, -2]).tolist() == [0.0, 1.0, 0.0, 0.0]   # half turn about x
+    np.testing.assert_allclose(matrix_z_to([0, 0, -1]) @ [0, 0, 1], [0, 0, -1], atol=1e-15)
+
+
+def test_euler_is_urdf_rpy() -> None:
+    """rpy = (roll, pitch, yaw): R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    roll, pitch, yaw = 0.1, -0.4, 1.2
+    cr, sr, cp, sp, cy, sy = (math.cos(roll), math.sin(roll), math.cos(pitch),
+                              math.sin(pitch), math.cos(yaw), math.sin(yaw))
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    np.testing.assert_allclose(euler_xyz_from_matrix(rz @ ry @ rx), [roll, pitch, yaw],
+                               atol=1e-12)
+
+
+def test_bad_quaternions_are_refused() -> None:
+    with pytest.raises(ValueError, match="4 components"):
+        to_xyzw([1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="non-zero"):
+        rotation([0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="finite"):
+        matrix_from_quat([math.nan, 0.0, 0.0, 1.0])
+    with pytest.raises(ValueError, match="3 x 3"):
+        quat_from_matrix(np.eye(4))
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(min_value=-10.0, max_value=10.0, allow_nan=False))
+def test_elementary_rotations_are_scipys(a: float) -> None:
+    for axis, fn in (("x", rot_x), ("y", rot_y), ("z", rot_z)):
+        np.testing.assert_allclose(fn(a), Rotation.from_euler(axis, a).as_matrix(),
+                                   atol=1e-12)
+    # a quarter turn about z takes x to y, about x takes y to z, about y takes z to x
+    np.testing.assert_allclose(rot_z(math.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+    np.testing.assert_allclose(rot_x(math.pi / 2) @ [0, 1, 0], [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(rot_y(math.pi / 2) @ [0, 0, 1], [1, 0, 0], atol=1e-15)

@@ -1,0 +1,196 @@
+"""Rotations from one source, in one quaternion order.
+
+Every rotation vasim builds or converts goes through these functions, which wrap
+``scipy.spatial.transform.Rotation`` (no hand-written quaternion algebra elsewhere).
+
+**Decision** (the project's quaternion order is **wxyz**, scalar first: ``(w, x, y, z)``),
+because that is what the device protocol and its recorded streams already store
+(``vasim.haptics.device.DeviceSample.orientation``, the ``orientation`` column of a device
+stream) and what viser, the viewer, takes (``handle.wxyz``). scipy (``as_quat()``) and
+pybullet speak **xyzw** (scalar last): code converts at those edges only, with
+:func:`to_xyzw` / :func:`from_xyzw` (the pybullet backend, the viewer's pybullet reads).
+
+Rotation matrices are ``(3, 3)`` (or ``(..., 3, 3)``) and act on column vectors:
+``v_world = R @ v_local`` for a world-from-local ``R``. Quaternions returned here are unit
+and canonical (**decision**: w >= 0, so a rotation has one quaternion and recorded files
+compare bit for bit; for w = 0 scipy's canonical form picks the first non-zero
+component positive).
+
+Example:
+    >>> import numpy as np
+    >>> quat_from_matrix(np.eye(3)).tolist()
+    [1.0, 0.0, 0.0, 0.0]
+    >>> np.round(quat_from_matrix([[0, -1, 0], [1, 0, 0], [0, 0, 1]]), 6).tolist()  # 90 deg z
+    [0.707107, 0.0, 0.0, 0.707107]
+    >>> to_xyzw([1.0, 0.0, 0.0, 0.0]).tolist()
+    [0.0, 0.0, 0.0, 1.0]
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation, Slerp
+
+FloatArray = NDArray[np.float64]
+
+QUAT_ORDER = "wxyz"
+"""The project's quaternion order (module docstring): scalar first."""
+
+
+def _quat(q: ArrayLike, name: str = "quaternion") -> FloatArray:
+    a = np.asarray(q, dtype=np.float64)
+    if a.shape[-1:] != (4,):
+        raise ValueError(f"a {name} must have 4 components (last axis), got shape {a.shape}")
+    return a
+
+
+def to_xyzw(q_wxyz: ArrayLike) -> FloatArray:
+    """``(..., 4)`` quaternion(s) wxyz -> xyzw (scipy, pybullet); no normalisation."""
+    q = _quat(q_wxyz)
+    return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+def from_xyzw(q_xyzw: ArrayLike) -> FloatArray:
+    """``(..., 4)`` quaternion(s) xyzw (scipy, pybullet) -> wxyz; no normalisation."""
+    q = _quat(q_xyzw)
+    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+def rotation(q_wxyz: ArrayLike) -> Rotation:
+    """The scipy ``Rotation`` of ``(..., 4)`` quaternion(s) wxyz (normalised by scipy).
+
+    Raises:
+        ValueError: wrong shape, or a zero / non-finite quaternion.
+    """
+    q = _quat(q_wxyz)
+    if not np.all(np.isfinite(q)) or np.any(np.linalg.norm(q, axis=-1) == 0.0):
+        raise ValueError(f"a quaternion must be finite and non-zero, got {q.tolist()}")
+    return Rotation.from_quat(q, scalar_first=True)
+
+
+def quat_of(r: Rotation) -> FloatArray:
+    """``(4,)`` / ``(n, 4)`` canonical unit quaternion(s) wxyz of a scipy ``Rotation``."""
+    return np.asarray(r.as_quat(canonical=True, scalar_first=True), dtype=np.float64)
+
+
+def quat_from_matrix(m: ArrayLike) -> FloatArray:
+    """Canonical unit quaternion(s) wxyz (``(..., 4)``) of ``(..., 3, 3)`` rotation
+    matrices (scipy projects a slightly non-orthogonal matrix onto the nearest rotation)."""
+    a = np.asarray(m, dtype=np.float64)
+    if a.shape[-2:] != (3, 3):
+        raise ValueError(f"a rotation matrix must be 3 x 3, got shape {a.shape}")
+    flat = a.reshape(-1, 3, 3)
+    q = quat_of(Rotation.from_matrix(flat))
+    return q.reshape(*a.shape[:-2], 4)
+
+
+def matrix_from_quat(q_wxyz: ArrayLike) -> FloatArray:
+    """``(..., 3, 3)`` rotation matrices of ``(..., 4)`` quaternion(s) wxyz."""
+    q = _quat(q_wxyz)
+    return np.asarray(rotation(q.reshape(-1, 4)).as_matrix()).reshape(*q.shape[:-1], 3, 3)
+
+
+def rotvec_from_matrix(m: ArrayLike) -> FloatArray:
+    """Rotation vector(s) (axis * angle [rad], ``(..., 3)``) of rotation matrices."""
+    a = np.asarray(m, dtype=np.float64)
+    return np.asarray(Rotation.from_matrix(a.reshape(-1, 3, 3)).as_rotvec()
+                      ).reshape(*a.shape[:-2], 3)
+
+
+def matrix_from_rotvec(v: ArrayLike) -> FloatArray:
+    """Rotation matrices (``(..., 3, 3)``) of rotation vector(s) [rad]."""
+    a = np.asarray(v, dtype=np.float64)
+    return np.asarray(Rotation.from_rotvec(a.reshape(-1, 3)).as_matrix()
+                      ).reshape(*a.shape[:-1], 3, 3)
+
+
+def rot_x(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about x by ``angle`` [rad].
+
+    **Decision**: the elementary rotations are the closed form (cos/sin), not
+    ``Rotation.from_euler``, because the DH kinematics and the tool station's Jacobian
+    build several per control cycle and a scipy object costs tens of microseconds each;
+    the tests check them against scipy.
+    """
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about y by ``angle`` [rad] (:func:`rot_x`)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(angle: float) -> FloatArray:
+    """``(3, 3)`` right-handed rotation about z by ``angle`` [rad] (:func:`rot_x`)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_angle(r0: ArrayLike, r1: ArrayLike) -> float:
+    """The angle [rad, in [0, pi]] of the rotation taking matrix ``r0`` to ``r1``."""
+    return float(Rotation.from_matrix(np.asarray(r0, dtype=np.float64).T
+                                      @ np.asarray(r1, dtype=np.float64)).magnitude())
+
+
+def slerp_matrix(r0: ArrayLike, r1: ArrayLike, fraction: float) -> FloatArray:
+    """``(3, 3)``: the rotation a ``fraction`` of the way from ``r0`` to ``r1`` along the
+    shortest arc (spherical linear interpolation; 0 -> ``r0``, 1 -> ``r1``)."""
+    ends = Rotation.from_matrix(np.stack([np.asarray(r0, dtype=np.float64),
+                                          np.asarray(r1, dtype=np.float64)]))
+    return np.asarray(Slerp([0.0, 1.0], ends)([float(fraction)]).as_matrix()[0])
+
+
+def euler_xyz_from_matrix(m: ArrayLike) -> FloatArray:
+    """Extrinsic x-y-z Euler angles (roll, pitch, yaw [rad]; URDF's ``rpy``) of a matrix."""
+    return np.asarray(Rotation.from_matrix(np.asarray(m, dtype=np.float64)).as_euler("xyz"))
+
+
+def quat_z_to(direction: ArrayLike) -> FloatArray:
+    """``(4,)`` wxyz: the smallest rotation taking +z onto ``direction`` (any length > 0).
+
+    A zero direction gives the identity; exactly the opposite of +z gives the half turn
+    about x (**decision**: any axis normal to z would do; x is the one the viewer always
+    used). Otherwise the axis is z x d and the angle atan2(|z x d|, z . d), accurate up to
+    the antiparallel limit.
+    """
+    d = np.asarray(direction, dtype=np.float64).reshape(3)
+    n = float(np.linalg.norm(d))
+    if n < 1e-12:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    d = d / n
+    axis = np.array([-d[1], d[0], 0.0])  # z x d
+    s = float(np.linalg.norm(axis))
+    if s == 0.0:
+        return np.array([1.0, 0.0, 0.0, 0.0]) if d[2] > 0 else np.array([0.0, 1.0, 0.0, 0.0])
+    return quat_of(Rotation.from_rotvec(axis * (math.atan2(s, float(d[2])) / s)))
+
+
+def matrix_z_to(direction: ArrayLike) -> FloatArray:
+    """``(3, 3)`` rotation taking +z onto ``direction`` (:func:`quat_z_to`)."""
+    return matrix_from_quat(quat_z_to(direction))
+
+
+__all__ = [
+    "QUAT_ORDER",
+    "euler_xyz_from_matrix",
+    "from_xyzw",
+    "matrix_from_quat",
+    "matrix_from_rotvec",
+    "matrix_z_to",
+    "quat_from_matrix",
+    "quat_of",
+    "quat_z_to",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "rotation",
+    "rotation_angle",
+    "rotvec_from_matrix",
+    "slerp_matrix",
+    "to_xyzw",
+]
