@@ -18,6 +18,7 @@ from vasim.core.bounds import (
     REACH_RADIUS_M,
     REPETITIONS,
     TRIAL_TIME_S,
+    TRIALS_PER_SESSION,
 )
 from vasim.core.config import (
     check_bool,
@@ -25,6 +26,7 @@ from vasim.core.config import (
     check_int,
     check_number,
     check_str,
+    fail,
 )
 from vasim.core.errors import ConfigError
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
@@ -64,12 +66,10 @@ class Block:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
-            raise ConfigError(f"must be a name of letters, digits, '_', '-', '.', got "
-                              f"{self.name!r}", field="name")
+            raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
         check_str(self.condition, "condition")
         if not isinstance(self.variants, tuple):
-            raise ConfigError(f"must be an array of integers, got {self.variants!r}",
-                              field="variants")
+            raise fail(self.variants, "an array of integers", field="variants")
         if not self.variants:
             raise ConfigError("must list at least one variant (an empty block)",
                               field="variants")
@@ -127,8 +127,7 @@ class Protocol:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
-            raise ConfigError(f"must be a name of letters, digits, '_', '-', '.', got "
-                              f"{self.name!r}", field="name")
+            raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
         check_str(self.description, "description")
         check_choice(self.task, "task", TASKS)
         check_number(self.reach_radius, "reach_radius_m", gt=0.0, bound=REACH_RADIUS_M)
@@ -165,6 +164,10 @@ class Protocol:
             if b.probes_after and b.condition in TELEOPERATION_MODES:
                 raise ConfigError("teleoperation-mode blocks have no fixture-free probes",
                                   field=f"blocks[{i}].probes_after")
+        n_trials = sum(b.n_trials for b in self.blocks)
+        if n_trials > TRIALS_PER_SESSION.high:
+            raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "
+                       f"({TRIALS_PER_SESSION.reason})", field="blocks")
         for qname in ("pre", "post"):
             q = getattr(self, qname)
             if not isinstance(q, Questionnaire):

@@ -19,6 +19,7 @@ from vasim.core.config import (
     check_str,
     check_str_tuple,
     rewrap,
+    show,
 )
 from vasim.core.errors import ConfigError
 from vasim.study.store import DEMOGRAPHIC_FIELDS, Demographics
@@ -62,7 +63,8 @@ class QuestionItem:
 
     def __post_init__(self) -> None:
         if not isinstance(self.id, str) or not _ID_RE.fullmatch(self.id):
-            raise ConfigError(f"must be an identifier (letters, digits, '_'), got {self.id!r}",
+            raise ConfigError(f"got {show(self.id)}, expected an identifier (letters, digits, "
+                              "'_')",
                               field="id")
         check_choice(self.type, "type", ITEM_TYPES)
         check_str(self.prompt, "prompt")
@@ -76,7 +78,7 @@ class QuestionItem:
             check_int(getattr(self, name), name, lo=0, hi=1000)
         t = self.type
         if t == "choice" and len(self.options) < 2:
-            raise ConfigError(f"a choice item needs at least 2 options, got {self.options!r}",
+            raise ConfigError(f"a choice item needs at least 2 options, got {show(self.options)}",
                               field="options")
         if t != "choice" and self.options:
             raise ConfigError(f"only choice items have options (this is {t!r})",
@@ -120,7 +122,7 @@ class Questionnaire:
         check_bool(self.demographics, "demographics")
         if not isinstance(self.items, tuple) or not all(
                 isinstance(i, QuestionItem) for i in self.items):
-            raise ConfigError(f"must be a tuple of QuestionItem, got {self.items!r}",
+            raise ConfigError(f"must be a tuple of QuestionItem, got {show(self.items)}",
                               field="items")
         seen: set[str] = set()
         for k, item in enumerate(self.items):
@@ -167,7 +169,7 @@ def validate_answers(protocol: Protocol, questionnaire: Literal["pre", "post"],
     """
     q: Questionnaire = getattr(protocol, questionnaire)
     if not isinstance(answers, Mapping):
-        raise ConfigError(f"answers must be a table of item -> answer, got {answers!r}",
+        raise ConfigError(f"answers must be a table of item -> answer, got {show(answers)}",
                           file=source, field=questionnaire)
     known = [*(DEMOGRAPHIC_FIELDS if q.demographics else ()), *(i.id for i in q.items)]
     for key in answers:
@@ -222,7 +224,7 @@ def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
         return [(item.id, "", a, None)]
     if t == "condition_rating":
         if not isinstance(a, Mapping):
-            raise ConfigError(f"must be a table condition -> rating, got {a!r}")
+            raise ConfigError(f"must be a table condition -> rating, got {show(a)}")
         for c in a:
             if c not in item.conditions:
                 raise ConfigError(f"unknown condition {c!r} (expected "
@@ -239,12 +241,12 @@ def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
     # condition_sets
     if not isinstance(a, list | tuple) or len(a) > item.max_entries:
         raise ConfigError(f"must be a list of at most {item.max_entries} sets of conditions, "
-                          f"got {a!r}")
+                          f"got {show(a)}")
     out = []
     seen: set[frozenset[str]] = set()
     for e, entry in enumerate(a, start=1):
         if not isinstance(entry, list | tuple) or not all(isinstance(c, str) for c in entry):
-            raise ConfigError(f"entry {e} must be a list of conditions, got {entry!r}")
+            raise ConfigError(f"entry {e} must be a list of conditions, got {show(entry)}")
         members = set(entry)
         unknown = sorted(members - set(item.conditions))
         if unknown:
@@ -252,9 +254,9 @@ def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
                               f"{', '.join(item.conditions)})")
         if len(members) != len(entry) or len(members) < item.min_size:
             raise ConfigError(f"entry {e} must list at least {item.min_size} different "
-                              f"conditions, got {entry!r}")
+                              f"conditions, got {show(entry)}")
         if frozenset(members) in seen:
-            raise ConfigError(f"entry {e} repeats an earlier proposal: {entry!r}")
+            raise ConfigError(f"entry {e} repeats an earlier proposal: {show(entry)}")
         seen.add(frozenset(members))
         canon = "+".join(c for c in item.conditions if c in members)
         out.append((item.id, str(e), canon, None))
