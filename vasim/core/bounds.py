@@ -92,6 +92,7 @@ COORDINATE_M = Bound(-0.5, 0.5, "m",
                      "a point inside the abdomen (the cavity is ~0.4 m across; the scene "
                      "origin is its centre)")
 """Any position in a scene or in an organ mesh (after units)."""
+ANCHOR_DISTANCE_M = Bound(0.0, 1.0, "m", "a distance within the abdomen (~0.4 m across)")
 ORGAN_EXTENT_M = Bound(0.005, 0.4, "m",
                        "an organ is 5 mm (a duct) to ~0.25 m (the liver); 0.4 m is the "
                        "abdominal cavity itself")
@@ -101,8 +102,8 @@ MESH_FILE_COORDINATE = Bound(-1e6, 1e6, "file units",
 """Raw vertex coordinates of a mesh file before unit scaling."""
 DT_S = Bound(1e-5, 0.02, "s", "physics steps are tested from 10 us to 16 ms")
 GRAVITY_M_S2 = Bound(0.0, 50.0, "m/s²", "~5 g; beyond, the value is not a gravity")
-BREATHING_HZ = Bound(0.0, 1.0, "Hz", "60 breaths/min, above any tachypnoea (rest 0.2-0.3 Hz)")
-HEARTBEAT_HZ = Bound(0.0, 3.0, "Hz", "180 beats/min, above any heart rate under anaesthesia")
+BREATHING_RATE_HZ = Bound(0.0, 1.0, "Hz", "60 breaths/min, above any tachypnoea (rest 0.2-0.3 Hz)")
+HEARTBEAT_RATE_HZ = Bound(0.0, 3.0, "Hz", "180 beats/min, above any heart rate under anaesthesia")
 BREATHING_AMPLITUDE_M = Bound(-0.05, 0.05, "m",
                               "the diaphragm moves organs 1-3 cm, ~5 cm in forced breathing")
 HEARTBEAT_AMPLITUDE_M = Bound(-0.01, 0.01, "m", "pulsation moves tissue by millimetres")
