@@ -114,6 +114,12 @@ LINK_LENGTH_M = Bound(-5.0, 5.0, "m", "industrial arms reach at most a few metre
 JOINT_LIMIT_RAD = Bound(-4 * 3.141592653589793, 4 * 3.141592653589793, "rad",
                         "two turns either way (continuous joints are given as ±2π)")
 
+JOINT_VELOCITY_RAD_S = Bound(0.0, 100.0, "rad/s",
+                             "industrial joints turn at most ~12 rad/s (700 deg/s)")
+JOINT_ACCELERATION_RAD_S2 = Bound(0.0, 10_000.0, "rad/s²", "~100x an RX60's 20-50 rad/s²")
+LINK_RADIUS_M = Bound(0.0, 1.0, "m", "a robot link's collision capsule is centimetres thick")
+DH_ANGLE_DEG = Bound(-720.0, 720.0, "deg", "a DH twist/offset angle (two turns either way)")
+
 # -- studies -----------------------------------------------------------------------------
 TRIAL_TIME_S = Bound(0.0, 3600.0, "s", "one trial of an hour is already implausible")
 REPETITIONS = Bound(1, 1000, "", "rounds over a block's variants")
