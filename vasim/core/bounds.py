@@ -127,6 +127,12 @@ PROBES_AFTER = Bound(0, 1000, "", "probe trials after one block")
 TRIALS_PER_SESSION = Bound(1, 10_000, "",
                            "a session of 10,000 trials takes days (the thesis' ~40)")
 SUBJECTS = Bound(1, 10_000, "", "a simulated cohort; the thesis' studies had ~10-40 subjects")
+SURGEONS = Bound(0, 10_000, "", "surgeons among a simulated cohort")
+PRACTICE_TRIALS = Bound(0, 100_000, "", "earlier trials of one subject")
+VARIANT = Bound(0, 6, "", "the trajectory's original and six mirrored/rotated variants")
+PORT = Bound(0, 65_535, "", "a TCP port (0: any free port)")
+DURATION_S = Bound(0.0, 86_400.0, "s", "a run of at most a day")
+ID = Bound(1, 2**63 - 1, "", "a database row id (SQLite INTEGER)")
 SEED = Bound(0, 2**63 - 1, "", "numpy SeedSequence entropy as stored (int64)")
 QUESTION_RANGE = Bound(-1_000_000, 1_000_000, "", "integer answers of a questionnaire item")
 TEXT_LENGTH = Bound(1, 100_000, "characters", "a free-text answer")
@@ -140,8 +146,8 @@ def max_workers() -> int:
 
 
 def workers_bound() -> Bound:
-    """``--workers`` in [1, 4 x CPU count]."""
-    return Bound(1, max_workers(), "", f"4 x the {os.cpu_count() or 1} CPUs of this machine")
+    """``--workers`` in [0 (in this process), 4 x CPU count]."""
+    return Bound(0, max_workers(), "", f"4 x the {os.cpu_count() or 1} CPUs of this machine")
 
 
 __all__ = [name for name in dir() if name.isupper()] + [

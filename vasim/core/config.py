@@ -41,7 +41,10 @@ def show(value: object, limit: int = MAX_MESSAGE_CHARS) -> str:
     except Exception:  # a broken __repr__ must not hide the real error
         text = f"<{type(value).__name__}>"
     if len(text) > limit:
-        text = f"{text[:limit]}... ({len(text)} characters)"
+        size = len(value) if isinstance(value, str | bytes | list | tuple | dict) else len(text)
+        unit = "characters" if isinstance(value, str | bytes) else "items" if isinstance(
+            value, list | tuple | dict) else "characters shown"
+        text = f"{text[:limit]}... ({size:,} {unit})"
     return text
 
 
