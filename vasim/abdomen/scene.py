@@ -108,7 +108,7 @@ from vasim.core.bounds import (
     SOLVER_ITERATIONS,
     Bound,
 )
-from vasim.core.config import check_choice, check_int, check_keys, parse_toml
+from vasim.core.config import check_choice, check_int, check_keys, fail, parse_toml
 from vasim.core.errors import ConfigError
 from vasim.core.resources import read_data_file, scenes_dir
 
@@ -348,9 +348,9 @@ class Scene:
         for key in ("breathing_hz", "heartbeat_hz"):
             hz = getattr(self.motion, key)
             if hz >= nyquist:
-                raise ConfigError(f"must be below the Nyquist rate 1/(2 dt) = {nyquist:g} Hz "
-                                  f"of the physics step dt = {self.physics.dt:g} s, got {hz!r}",
-                                  field=f"motion.{key}", file=self.source)
+                raise fail(hz, f"a rate below the Nyquist rate 1/(2 dt) = {nyquist:g} Hz of "
+                           f"the physics step dt = {self.physics.dt:g} s",
+                           field=f"motion.{key}", file=self.source)
         object.__setattr__(self, "organs", organs)
 
     def organ(self, name: str) -> OrganConfig:

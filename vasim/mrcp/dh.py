@@ -614,6 +614,9 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         check_keys(jt, sorted(_JOINT_KEYS), path, file=file,
                    required=sorted(_REQUIRED_JOINT_KEYS))
         vals = {k: _num(jt[k], f"{path}.{k}", file, _JOINT_BOUNDS[k]) for k in jt}
+        if not vals["lower"] < vals["upper"]:
+            raise fail(vals["upper"], f"a limit above lower = {vals['lower']!r} rad",
+                       field=f"{path}.upper", file=file)
         # plausibility: catches millimetres for metres, degrees for radians
         for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
                                  ("lower", MAX_JOINT_ANGLE, "rad"),
@@ -635,6 +638,10 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         raise ConfigError("got nothing (missing required field), expected a value", file=file,
                           field="home")
     home = _vec(data["home"], n, "home", file, JOINT_LIMIT_RAD)
+    for i, (h, jt) in enumerate(zip(home, joints, strict=True)):
+        if not jt.lower <= h <= jt.upper:
+            raise fail(float(h), f"an angle within joints[{i}]'s limits [{jt.lower!r}, "
+                       f"{jt.upper!r}] rad", field=f"home[{i}]", file=file)
     links = []
     raw_links = data.get("links", [])
     if not isinstance(raw_links, list):     # e.g. links = 5: was a TypeError

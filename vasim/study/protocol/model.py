@@ -154,9 +154,8 @@ class Protocol:
             _check_condition(b.condition, self.task, f"blocks[{i}].condition")
             for j, v in enumerate(b.variants):
                 if v >= n_var:
-                    raise ConfigError(
-                        f"variant {v!r} out of range: the {self.task} task has variants "
-                        f"0..{n_var - 1}", field=f"blocks[{i}].variants[{j}]")
+                    raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",
+                               field=f"blocks[{i}].variants[{j}]")
             if b.probe and b.condition != self.probe_condition:
                 raise ConfigError(
                     f"a probe block runs the probe condition {self.probe_condition!r}, got "
@@ -196,9 +195,8 @@ class Protocol:
                                 f"{', '.join(self.conditions)})",
                                 field=f"{path}.conditions[{c}]")
                     if item.type == "condition_sets" and item.min_size > len(item.conditions):
-                        raise ConfigError(
-                            f"min_size {item.min_size} exceeds the {len(item.conditions)} "
-                            "conditions", field=f"{path}.min_size")
+                        raise fail(item.min_size, f"at most the {len(item.conditions)} "
+                                   "conditions asked about", field=f"{path}.min_size")
                 elif item.conditions:
                     raise ConfigError(f"only condition_* items have conditions (this is "
                                       f"{item.type!r})", field=f"{path}.conditions")
