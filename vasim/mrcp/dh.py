@@ -615,8 +615,8 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
                    required=sorted(_REQUIRED_JOINT_KEYS))
         vals = {k: _num(jt[k], f"{path}.{k}", file, _JOINT_BOUNDS[k]) for k in jt}
         if not vals["lower"] < vals["upper"]:
-            raise fail(vals["upper"], f"a limit above lower = {vals['lower']!r} rad",
-                       field=f"{path}.upper", file=file)
+            raise fail(vals["lower"], f"a limit below upper = {vals['upper']!r} rad",
+                       field=f"{path}.lower", file=file)
         # plausibility: catches millimetres for metres, degrees for radians
         for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
                                  ("lower", MAX_JOINT_ANGLE, "rad"),
