@@ -284,7 +284,7 @@ def test_cli_answers_file_and_run(tmp_path: Path, tiny: Path, capsys) -> None:
 @pytest.mark.parametrize(("argv", "needle"), [
     (["study", "run", "--protocol", "nope", "--subject", "S01"], "unknown protocol 'nope'"),
     (["study", "run", "--protocol", "mrcp_vs_stdt", "--subject", "S01", "--max-time", "-1"],
-     "argument --max-time: got -1.0, expected a finite number in (0, 3600] s"),
+     "argument --max-time: got -1.0, expected a finite number in (0, 86400] s"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "S01", "--operator",
       "browser"], "vasim serve"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "Jane Doe"],

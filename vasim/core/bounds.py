@@ -121,7 +121,9 @@ LINK_RADIUS_M = Bound(0.0, 1.0, "m", "a robot link's collision capsule is centim
 DH_ANGLE_DEG = Bound(-720.0, 720.0, "deg", "a DH twist/offset angle (two turns either way)")
 
 # -- studies -----------------------------------------------------------------------------
-TRIAL_TIME_S = Bound(0.0, 3600.0, "s", "one trial of an hour is already implausible")
+TRIAL_TIME_S = Bound(0.0, 86_400.0, "s",
+                     "a day, the trial runner's limit (vasim.trials.kinds.MAX_TRIAL_TIME_S); "
+                     "stored sessions up to it must reload")
 REPETITIONS = Bound(1, 1000, "", "rounds over a block's variants")
 PROBES_AFTER = Bound(0, 1000, "", "probe trials after one block")
 TRIALS_PER_SESSION = Bound(1, 10_000, "",
