@@ -85,9 +85,9 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
     for i, raw in enumerate(raw_blocks):
         path = f"blocks[{i}]"
         check_keys(raw, _BLOCK, path, file=source, required=("name", "condition"))
-        kw = {k: _tuple(v) for k, v in raw.items()}
+        bkw = {k: _tuple(v) for k, v in raw.items()}
         try:
-            blocks.append(Block(**kw))
+            blocks.append(Block(**bkw))
         except ConfigError as exc:
             raise rewrap(exc, path, source) from exc
     qs = _table(data, "questionnaires", "", source, ("pre", "post"))
