@@ -55,7 +55,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="operator seed of the first trial")
     p.add_argument("--skill", choices=["novice", "intermediate", "expert"],
                    default="intermediate", help="scripted operator preset")
-    p.add_argument("--duration", type=bounded_float(DURATION_S, gt=0.0), default=None,
+    p.add_argument("--duration", type=bounded_float(DURATION_S), default=None,
                    metavar="SECONDS",
                    help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--mrcp-coarse", action="store_true",
