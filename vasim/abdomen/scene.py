@@ -458,9 +458,7 @@ def _build(cls: Any, kwargs: dict[str, Any], path: str, source: str) -> Any:
 
 def scene_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Scene:
     """Builds a scene from parsed TOML (see the module docstring for the layout)."""
-    top = _check_keys(data, _TOP_FIELDS, "", source)
-    if "name" not in top:
-        raise ConfigError("missing required field", file=source, field="name")
+    top = check_keys(data, _TOP_FIELDS, "", file=source, required=("name",))
     physics = _build(PhysicsConfig, _check_keys(top.get("physics", {}), _PHYSICS_FIELDS,
                                                 "physics", source), "physics", source)
     motion = _build(MotionConfig, _check_keys(top.get("motion", {}), _MOTION_FIELDS, "motion",

@@ -28,7 +28,6 @@ from vasim.core.config import (
     check_str,
     fail,
 )
-from vasim.core.errors import ConfigError
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 from vasim.trials.kinds import TELEOPERATION_MODES
 
@@ -71,13 +70,13 @@ class Block:
         if not isinstance(self.variants, tuple):
             raise fail(self.variants, "an array of integers", field="variants")
         if not self.variants:
-            raise ConfigError("must list at least one variant (an empty block)",
-                              field="variants")
+            raise fail(self.variants, "at least one variant (an empty block)",
+                       field="variants")
         for i, v in enumerate(self.variants):
             check_int(v, f"variants[{i}]", lo=0)
         if len(set(self.variants)) != len(self.variants):
-            raise ConfigError(f"must not repeat a variant (use repetitions), got "
-                              f"{list(self.variants)!r}", field="variants")
+            raise fail(list(self.variants), "no repeated variant (use repetitions)",
+                       field="variants")
         check_int(self.repetitions, "repetitions", bound=REPETITIONS)
         check_bool(self.probe, "probe")
         check_bool(self.counterbalance, "counterbalance")
@@ -136,20 +135,20 @@ class Protocol:
         check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
         if not isinstance(self.blocks, tuple) or not self.blocks:
-            raise ConfigError("a protocol needs at least one block", field="blocks")
+            raise fail(self.blocks, "at least one block", field="blocks")
         n_var = N_VARIANTS[self.task]
         check_int(self.probe_variant, "probe.variant", lo=0, hi=n_var - 1)
         _check_condition(self.probe_condition, self.task, "probe.condition")
         if _schema_has_fixtures(self.probe_condition):
-            raise ConfigError(f"probe trials are fixture-free: schema "
-                              f"{self.probe_condition!r} has fixtures",
-                              field="probe.condition")
+            raise fail(self.probe_condition, "a schema without fixtures (probe trials are "
+                       "fixture-free)", field="probe.condition")
         names: set[str] = set()
         for i, b in enumerate(self.blocks):
             if not isinstance(b, Block):
-                raise ConfigError(f"must be a Block, got {b!r}", field=f"blocks[{i}]")
+                raise fail(b, "a Block", field=f"blocks[{i}]")
             if b.name in names:
-                raise ConfigError(f"duplicate block name {b.name!r}", field=f"blocks[{i}].name")
+                raise fail(b.name, "a block name not used before (duplicate block name)",
+                           field=f"blocks[{i}].name")
             names.add(b.name)
             _check_condition(b.condition, self.task, f"blocks[{i}].condition")
             for j, v in enumerate(b.variants):
@@ -157,12 +156,11 @@ class Protocol:
                     raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",
                                field=f"blocks[{i}].variants[{j}]")
             if b.probe and b.condition != self.probe_condition:
-                raise ConfigError(
-                    f"a probe block runs the probe condition {self.probe_condition!r}, got "
-                    f"{b.condition!r}", field=f"blocks[{i}].condition")
+                raise fail(b.condition, f"the probe condition {self.probe_condition!r} (a "
+                           "probe block runs it)", field=f"blocks[{i}].condition")
             if b.probes_after and b.condition in TELEOPERATION_MODES:
-                raise ConfigError("teleoperation-mode blocks have no fixture-free probes",
-                                  field=f"blocks[{i}].probes_after")
+                raise fail(b.probes_after, "0 (teleoperation-mode blocks have no "
+                           "fixture-free probes)", field=f"blocks[{i}].probes_after")
         n_trials = sum(b.n_trials for b in self.blocks)
         if n_trials > TRIALS_PER_SESSION.high:
             raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "
@@ -170,11 +168,10 @@ class Protocol:
         for qname in ("pre", "post"):
             q = getattr(self, qname)
             if not isinstance(q, Questionnaire):
-                raise ConfigError(f"must be a Questionnaire, got {q!r}",
-                                  field=f"questionnaires.{qname}")
+                raise fail(q, "a Questionnaire", field=f"questionnaires.{qname}")
         if self.post.demographics:
-            raise ConfigError("demographics are asked before the session (pre)",
-                              field="questionnaires.post.demographics")
+            raise fail(True, "false (demographics are asked before the session: pre)",
+                       field="questionnaires.post.demographics")
         # condition_* items default to the assisted conditions; explicit ones must exist
         assisted = self.assisted_conditions
         for qname in ("pre", "post"):
@@ -185,21 +182,20 @@ class Protocol:
                 if item.type.startswith("condition_"):
                     if not item.conditions:
                         if not assisted:
-                            raise ConfigError("the protocol has no assisted condition to ask "
-                                              "about", field=f"{path}.conditions")
+                            raise fail(item.conditions, "conditions to ask about (the protocol "
+                                       "has no assisted condition)", field=f"{path}.conditions")
                         item = _replace_item(item, conditions=assisted)
                     for c, cond in enumerate(item.conditions):
                         if cond not in self.conditions:
-                            raise ConfigError(
-                                f"unknown condition {cond!r} (the protocol's: "
-                                f"{', '.join(self.conditions)})",
-                                field=f"{path}.conditions[{c}]")
+                            raise fail(cond, f"one of the protocol's conditions "
+                                       f"({', '.join(self.conditions)})",
+                                       field=f"{path}.conditions[{c}]")
                     if item.type == "condition_sets" and item.min_size > len(item.conditions):
                         raise fail(item.min_size, f"at most the {len(item.conditions)} "
                                    "conditions asked about", field=f"{path}.min_size")
                 elif item.conditions:
-                    raise ConfigError(f"only condition_* items have conditions (this is "
-                                      f"{item.type!r})", field=f"{path}.conditions")
+                    raise fail(item.conditions, f"no conditions (only condition_* items have "
+                               f"them; this is {item.type!r})", field=f"{path}.conditions")
                 items.append(item)
             object.__setattr__(self, qname, Questionnaire(q.demographics, tuple(items)))
 
@@ -275,10 +271,10 @@ def _check_condition(cond: object, task: str, name: str) -> None:
         return
     known = available_schemas()
     if cond not in known:
-        raise ConfigError(
-            f"unknown condition {cond!r}: not a schema of protocols/schemas "
-            f"({', '.join(known)}) nor a teleoperation mode ({', '.join(TELEOPERATION_MODES)})",
-            field=name)
+        raise fail(cond, f"a schema of protocols/schemas ({', '.join(known)}) or a "
+                   f"teleoperation mode ({', '.join(TELEOPERATION_MODES)}) (unknown condition)",
+                   field=name)
     scope = _schema_task(cond)
     if scope not in ("any", task):
-        raise ConfigError(f"schema {cond!r} is for {scope!r} tasks, not {task!r}", field=name)
+        raise fail(cond, f"a schema for {task!r} tasks (schema {cond!r} is for {scope!r} tasks, "
+                   f"not {task!r})", field=name)
