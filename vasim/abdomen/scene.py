@@ -324,25 +324,23 @@ class Scene:
                 raise ConfigError(f"must be OrganConfig, got {o!r}", field="organs",
                                   file=self.source)
             if o.name in seen:
-                raise ConfigError(f"duplicate organ name {o.name!r}", field=f"organs.{o.name}",
-                                  file=self.source)
+                raise fail(o.name, f"an organ name not used before (duplicate organ name "
+                           f"{o.name!r})", field=f"organs.{o.name}", file=self.source)
             seen.add(o.name)
         if not organs:
-            raise ConfigError("a scene needs at least one organ", field="organs",
-                              file=self.source)
+            raise fail(organs, "at least one organ", field="organs", file=self.source)
         # a scene of kinematic organs only validated, then a trial failed to bind
         # its targets ("no deformable organ"): at least one organ must deform.
         if all(o.params.kinematic for o in organs):
-            raise ConfigError("a scene needs at least one deformable organ (kinematic = "
-                              "false): every organ is kinematic", field="organs",
-                              file=self.source)
+            raise fail([o.name for o in organs], "at least one deformable organ (kinematic = "
+                       "false): every organ is kinematic", field="organs", file=self.source)
         # a kind="wall" organ is the kinematic wall (no contact, trocars fixed);
         # a deformable wall was never stepped, so it is refused rather than half-supported.
         for o in organs:
             if o.kind == "wall" and not o.params.kinematic:
-                raise ConfigError('an organ of kind "wall" must be kinematic (kinematic = '
-                                  'true): the wall is not deformed', file=self.source,
-                                  field=f"organs.{o.name}.kinematic")
+                raise fail(False, 'true: an organ of kind "wall" must be kinematic (the wall '
+                           'is not deformed)', file=self.source,
+                           field=f"organs.{o.name}.kinematic")
         # a rate at or above the physics step's Nyquist rate aliases to nothing.
         nyquist = 0.5 / self.physics.dt
         for key in ("breathing_hz", "heartbeat_hz"):

@@ -18,6 +18,7 @@ from vasim.core.config import (
     check_int,
     check_str,
     check_str_tuple,
+    fail,
     rewrap,
     show,
 )
@@ -78,22 +79,20 @@ class QuestionItem:
             check_int(getattr(self, name), name, lo=0, hi=1000)
         t = self.type
         if t == "choice" and len(self.options) < 2:
-            raise ConfigError(f"a choice item needs at least 2 options, got {show(self.options)}",
-                              field="options")
+            raise fail(self.options, "at least 2 options (a choice item)", field="options")
         if t != "choice" and self.options:
-            raise ConfigError(f"only choice items have options (this is {t!r})",
-                              field="options")
+            raise fail(self.options, f"no options (only choice items have them; this is "
+                       f"{t!r})", field="options")
         if self.select is not None:
             if t != "condition_choice":
-                raise ConfigError(f"only condition_choice items have select (this is {t!r})",
-                                  field="select")
+                raise fail(self.select, f"no select (only condition_choice items have it; this "
+                           f"is {t!r})", field="select")
             check_choice(self.select, "select", ("best", "worst"))
         if t in ("integer", "condition_rating") and self.min >= self.max:
-            raise ConfigError(f"min must be < max, got min={self.min!r}, max={self.max!r}",
-                              field="max")
+            raise fail(self.max, f"max > min = {self.min!r}", field="max")
         if t == "likert" and self.anchors and len(self.anchors) != LIKERT_POINTS:
-            raise ConfigError(f"a likert item has {LIKERT_POINTS} anchors, got "
-                              f"{len(self.anchors)}", field="anchors")
+            raise fail(self.anchors, f"{LIKERT_POINTS} anchors (a likert item)",
+                       field="anchors")
         if t == "condition_sets":
             check_int(self.max_entries, "max_entries", lo=1, hi=20)
             check_int(self.min_size, "min_size", lo=1)
@@ -127,10 +126,11 @@ class Questionnaire:
         seen: set[str] = set()
         for k, item in enumerate(self.items):
             if item.id in seen:
-                raise ConfigError(f"duplicate item id {item.id!r}", field=f"items[{k}].id")
+                raise fail(item.id, "an item id not used before (duplicate item id)",
+                           field=f"items[{k}].id")
             if self.demographics and item.id in DEMOGRAPHIC_FIELDS:
-                raise ConfigError(f"item id {item.id!r} is a demographic field (asked by "
-                                  "demographics = true)", field=f"items[{k}].id")
+                raise fail(item.id, "an id other than the demographic fields (asked by "
+                           "demographics = true)", field=f"items[{k}].id")
             seen.add(item.id)
 
     @property
