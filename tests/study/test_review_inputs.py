@@ -88,7 +88,7 @@ def test_cli_one_line_errors_for_limits_paths_and_flags(tmp_path: Path, capsys) 
     db = tmp_path / "s.sqlite"
     TrialStore(db).close()
     cases = [
-        (["trial", "--scene", "none", "--max-time", "1e308"], "max_time"),
+        (["trial", "--scene", "none", "--max-time", "1e308"], "--max-time"),
         (["mrcp", "run", "faucet", "--duration", "1e308"], "--duration"),
         (["study", "export", "--db", str(db), "--out", str(afile / "x")], "afile"),
         (["report", "--db", str(db), "--out", str(afile / "x")], "afile"),

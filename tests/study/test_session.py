@@ -284,14 +284,20 @@ def test_cli_answers_file_and_run(tmp_path: Path, tiny: Path, capsys) -> None:
 @pytest.mark.parametrize(("argv", "needle"), [
     (["study", "run", "--protocol", "nope", "--subject", "S01"], "unknown protocol 'nope'"),
     (["study", "run", "--protocol", "mrcp_vs_stdt", "--subject", "S01", "--max-time", "-1"],
-     "max_trial_time"),
+     "argument --max-time: got -1.0, expected a finite number in (0, 86400] s"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "S01", "--operator",
       "browser"], "vasim serve"),
     (["study", "run", "--protocol", "vf_learning_curve", "--subject", "Jane Doe"],
      "Jane Doe"),
     (["study", "resume", "--subject", "S77"], "no session for subject 'S77'"),
     (["study", "simulate", "--protocol", "mrcp_vs_stdt", "--subjects", "2", "--workers", "-1"],
-     "workers must be >= 0"),
+     "argument --workers: got -1, expected an integer in [0, "),
+    (["study", "simulate", "--protocol", "mrcp_vs_stdt", "--subjects", "1000000000"],
+     "argument --subjects: got 1000000000, expected an integer in [1, 10000]"),
+    (["study", "simulate", "--protocol", "mrcp_vs_stdt", "--workers", "1000"],
+     "argument --workers: got 1000, expected an integer in [0, "),
+    (["study", "run", "--protocol", "vf_learning_curve", "--subject", "A" * 100_000],
+     "(100,000 characters), expected a subject code"),
 ])
 def test_cli_errors_are_one_line_exit_2(tmp_path: Path, capsys, argv, needle) -> None:
     db = tmp_path / "s.db"

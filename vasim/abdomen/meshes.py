@@ -40,6 +40,7 @@ import numpy as np
 import trimesh
 
 from vasim.abdomen import _kernels
+from vasim.core.bounds import COORDINATE_M, MESH_FILE_COORDINATE, ORGAN_EXTENT_M, Bound
 from vasim.core.errors import ConfigError
 
 Units = Literal["m", "cm", "mm"]
@@ -51,9 +52,9 @@ MIN_VERTICES = 20
 """Fewer vertices cannot describe an organ's shape."""
 MAX_VERTICES = 20_000
 """More vertices than this make one organ's step too slow for the physics rate."""
-MAX_EXTENT_M = 1.0
-"""An organ larger than this [m] is almost certainly in millimetres."""
-MIN_EXTENT_M = 0.005
+MAX_EXTENT_M = ORGAN_EXTENT_M.high
+"""An organ larger than this [m] is in the wrong units or not an organ (bounds table)."""
+MIN_EXTENT_M = ORGAN_EXTENT_M.low
 """An organ smaller than this [m] is almost certainly in the wrong units."""
 _MAX_REPORTED_PAIRS = 1000
 
@@ -71,12 +72,34 @@ def _units_hint(extent: float) -> str:
         order = ["cm", "mm"]
     else:
         order = ["mm", "cm"]
-    order = [u for u in order if extent * UNIT_SCALE[u] >= MIN_EXTENT_M] or ["cm"]
+    order = [u for u in order if MIN_EXTENT_M <= extent * UNIT_SCALE[u] <= MAX_EXTENT_M]
+    if not order:
+        return (f"no organ in any unit (m, cm, mm give {extent:.3g}, {extent / 100:.3g}, "
+                f"{extent / 1000:.3g} m; an organ is {MIN_EXTENT_M:g}-{MAX_EXTENT_M:g} m)")
     first = order[0]
     text = (f"{_NAMES[first]}; pass units=\"{first}\" (scale by {UNIT_SCALE[first]:g})")
     if len(order) > 1:
         text += f", or units=\"{order[1]}\" if the file is in {_NAMES[order[1]]}"
     return text
+
+
+def _bad_vertex(v: np.ndarray, bound: Bound) -> str | None:
+    """The first non-finite or out-of-``bound`` vertex as a message (None if all are fine).
+
+    Checked before any arithmetic on the coordinates, so a vertex at 1e200 cannot overflow
+    the extent, area or scaling computations.
+    """
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all():
+        i = int(np.flatnonzero(~finite)[0])
+        return (f"non-finite vertex: vertex {i} is {v[i].tolist()!r} "
+                f"({int((~finite).sum())} such vertices)")
+    outside = (np.abs(v) > max(abs(bound.low), abs(bound.high))).any(axis=1)
+    if outside.any():
+        i = int(np.flatnonzero(outside)[0])
+        return (f"vertex {i} at {v[i].tolist()!r} is outside [{bound.low:g}, {bound.high:g}] "
+                f"{bound.unit} ({bound.reason})")
+    return None
 
 
 def mesh_problems(mesh: trimesh.Trimesh, *, check_self_intersection: bool = True) -> list[str]:
@@ -94,8 +117,8 @@ def mesh_problems(mesh: trimesh.Trimesh, *, check_self_intersection: bool = True
     f = np.asarray(mesh.faces, dtype=np.int64)
     if len(f) == 0:
         return ["the mesh has no triangles"]
-    if not np.all(np.isfinite(v)):
-        return ["the mesh has non-finite vertex coordinates"]
+    if not np.isfinite(v).all():
+        return [str(_bad_vertex(v, MESH_FILE_COORDINATE))]
     n = len(v)
     if n < MIN_VERTICES:
         problems.append(f"too few vertices ({n}; at least {MIN_VERTICES})")
@@ -103,9 +126,18 @@ def mesh_problems(mesh: trimesh.Trimesh, *, check_self_intersection: bool = True
         problems.append(f"too many vertices ({n}; at most {MAX_VERTICES}: simplify the mesh)")
     extent = float(np.ptp(v, axis=0).max())
     if extent > MAX_EXTENT_M:
-        problems.append(f"extent {extent:.3g} m looks like {_units_hint(extent)}")
+        problems.append(f"extent {extent:.3g} m looks like {_units_hint(extent)}"
+                        if extent > 1.0 else
+                        f"extent {extent:.3g} m is larger than any organ ({ORGAN_EXTENT_M.reason}"
+                        f"; allowed {MIN_EXTENT_M:g}-{MAX_EXTENT_M:g} m)")
     elif extent < MIN_EXTENT_M:
         problems.append(f"extent {extent:.3g} m is too small for an organ; check the units")
+    if extent > MAX_EXTENT_M:
+        return problems  # wrong units: the area and intersection tests would mislead
+    bad = _bad_vertex(v, COORDINATE_M)
+    if bad:
+        problems.append(bad)
+        return problems
     area = np.asarray(mesh.area_faces)
     degenerate = np.flatnonzero(area <= 1e-12 * max(extent, 1e-12) ** 2)
     if degenerate.size:
@@ -162,12 +194,18 @@ def load_user_mesh(
         raise ConfigError(f"unsupported mesh format {p.suffix!r} (supported: "
                           f"{', '.join(SUPPORTED_FORMATS)})", file=p, field=field)
     try:
-        loaded = trimesh.load(p, file_type=ext, force="mesh", process=True)
+        # process=False first: merging vertices would drop a NaN vertex and report the hole
+        # it leaves ("not closed") instead of the bad vertex.
+        loaded = trimesh.load(p, file_type=ext, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many kinds of errors on bad files
         raise ConfigError(f"cannot read the mesh: {type(exc).__name__}: {exc}", file=p,
                           field=field) from exc
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise ConfigError("the file holds no triangle mesh", file=p, field=field)
+    bad = _bad_vertex(np.asarray(loaded.vertices, dtype=np.float64), MESH_FILE_COORDINATE)
+    if bad:
+        raise ConfigError(bad, file=p, field=field)
+    loaded.process()
     mesh = loaded
     if UNIT_SCALE[units] != 1.0:
         mesh.apply_scale(UNIT_SCALE[units])

@@ -61,6 +61,17 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from vasim.abdomen import _kernels
+from vasim.core.bounds import (
+    ANCHOR_DISTANCE_M,
+    COORDINATE_M,
+    DIRECTION,
+    ORGAN_DAMPING_NS_PER_M,
+    ORGAN_EXTENT_M,
+    ORGAN_MASS_KG,
+    ORGAN_STIFFNESS_N_PER_M,
+    Bound,
+)
+from vasim.core.config import check_number, check_vec3
 from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -84,32 +95,26 @@ _VOLUME_LINK_RADIUS = 1.75
 """Interior nodes closer than this many ``volume_spacing`` are tied by a spring."""
 
 
-def _vec3(value: object, *, field_name: str, unit: bool = False) -> tuple[float, float, float]:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ConfigError(f"must be 3 numbers, got {value!r}", field=field_name) from None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ConfigError(f"must be 3 finite numbers, got {value!r}", field=field_name)
+def _vec3(value: object, *, field_name: str, unit: bool = False,
+          bound: Bound | None = None) -> tuple[float, float, float]:
+    """Three finite numbers (within ``bound``), normalised if ``unit`` (the core toolkit's
+    :func:`vasim.core.config.check_vec3`)."""
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    v = check_vec3(value, field_name, bound=bound, nonzero=unit)
     if unit:
-        norm = float(np.linalg.norm(arr))
-        if norm == 0.0:
-            raise ConfigError(f"must be a non-zero vector, got {value!r}", field=field_name)
-        arr = arr / norm
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
+        norm = math.hypot(*v)
+        v = (v[0] / norm, v[1] / norm, v[2] / norm)
+    return v
 
 
 def _number(value: object, *, field_name: str, low: float | None = None,
-            low_open: bool = False, high: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ConfigError(f"must be a finite number, got {value!r}", field=field_name)
-    v = float(value)
-    if low is not None and (v <= low if low_open else v < low):
-        rel = ">" if low_open else ">="
-        raise ConfigError(f"must be {rel} {low:g}, got {value!r}", field=field_name)
-    if high is not None and v > high:
-        raise ConfigError(f"must be <= {high:g}, got {value!r}", field=field_name)
-    return v
+            low_open: bool = False, high: float | None = None,
+            bound: Bound | None = None) -> float:
+    """A finite number in the given range (the core toolkit's
+    :func:`vasim.core.config.check_number`)."""
+    return check_number(value, field_name, bound=bound,
+                        gt=low if low_open else None, ge=None if low_open else low, le=high)
 
 
 @dataclass(frozen=True)
@@ -145,18 +150,19 @@ class AnchorRule:
                               f"within={self.within!r}, fraction={self.fraction!r}",
                               field="within")
         if self.within is not None:
-            _number(self.within, field_name="within", low=0.0)
+            _number(self.within, field_name="within", low=0.0, bound=ANCHOR_DISTANCE_M)
         if self.fraction is not None:
             _number(self.fraction, field_name="fraction", low=0.0, low_open=True, high=1.0)
         if self.to in ("plane", "point"):
             if self.point is None:
                 raise ConfigError(f"an anchor to a {self.to} needs 'point'", field="point")
-            object.__setattr__(self, "point", _vec3(self.point, field_name="point"))
+            object.__setattr__(self, "point", _vec3(self.point, field_name="point",
+                                                    bound=COORDINATE_M))
         if self.to == "plane":
             if self.normal is None:
                 raise ConfigError("an anchor to a plane needs 'normal'", field="normal")
             object.__setattr__(self, "normal", _vec3(self.normal, field_name="normal",
-                                                     unit=True))
+                                                     unit=True, bound=DIRECTION))
 
 
 @dataclass(frozen=True)
@@ -190,13 +196,16 @@ class OrganParams:
     kinematic: bool = False
 
     def __post_init__(self) -> None:
-        _number(self.stiffness, field_name="stiffness", low=0.0)
-        _number(self.bending_stiffness, field_name="bending_stiffness", low=0.0)
-        _number(self.mass, field_name="mass", low=0.0, low_open=True)
-        _number(self.damping, field_name="damping", low=0.0)
-        _number(self.volume_stiffness, field_name="volume_stiffness", low=0.0)
+        _number(self.stiffness, field_name="stiffness", bound=ORGAN_STIFFNESS_N_PER_M)
+        _number(self.bending_stiffness, field_name="bending_stiffness",
+                bound=ORGAN_STIFFNESS_N_PER_M)
+        _number(self.mass, field_name="mass", bound=ORGAN_MASS_KG)
+        _number(self.damping, field_name="damping", bound=ORGAN_DAMPING_NS_PER_M)
+        _number(self.volume_stiffness, field_name="volume_stiffness",
+                bound=ORGAN_STIFFNESS_N_PER_M)
         if self.volume_spacing is not None:
-            _number(self.volume_spacing, field_name="volume_spacing", low=0.0, low_open=True)
+            _number(self.volume_spacing, field_name="volume_spacing", low=0.0, low_open=True,
+                    bound=ORGAN_EXTENT_M)
         if not isinstance(self.volume, bool):
             raise ConfigError(f"must be true or false, got {self.volume!r}", field="volume")
         if not isinstance(self.kinematic, bool):

@@ -65,7 +65,6 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from functools import cache
@@ -97,26 +96,40 @@ from vasim.abdomen.motion import (
     PhysioMotion,
     PointMotion,
 )
+from vasim.core.bounds import (
+    ANCHOR_DISTANCE_M,
+    BREATHING_AMPLITUDE_M,
+    BREATHING_RATE_HZ,
+    COORDINATE_M,
+    DT_S,
+    GRAVITY_M_S2,
+    HEARTBEAT_AMPLITUDE_M,
+    HEARTBEAT_RATE_HZ,
+    SOLVER_ITERATIONS,
+    Bound,
+)
+from vasim.core.config import check_choice, check_int, check_keys, fail, parse_toml
 from vasim.core.errors import ConfigError
 from vasim.core.resources import read_data_file, scenes_dir
 
-MAX_DT = 0.02
+MAX_DT = DT_S.high
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""
 KINDS = ("parenchyma", "hollow", "vessel", "wall")
 # Plausibility bounds (**decision**: a value outside them is a typo, e.g. breathing
 # amplitudes in mm where m are expected, which made the organ blow up and reset every step):
-MAX_BREATHING_HZ = 1.0
+MAX_BREATHING_HZ = BREATHING_RATE_HZ.high
 """Fastest breathing accepted [Hz]: 60 breaths/min, above any tachypnoea (rest: 0.2-0.3 Hz)."""
-MAX_HEARTBEAT_HZ = 3.0
+MAX_HEARTBEAT_HZ = HEARTBEAT_RATE_HZ.high
 """Fastest heartbeat accepted [Hz]: 180 beats/min, above any heart rate under anaesthesia."""
-MAX_BREATHING_M = 0.05
+MAX_BREATHING_M = BREATHING_AMPLITUDE_M.high
 """Largest breathing amplitude per axis [m]: the diaphragm moves organs by 1-3 cm, at most ~5 cm
 in forced breathing."""
-MAX_HEARTBEAT_M = 0.01
+MAX_HEARTBEAT_M = HEARTBEAT_AMPLITUDE_M.high
 """Largest heartbeat amplitude per axis [m]: pulsation moves tissue by millimetres."""
-MAX_GRAVITY = 50.0
+MAX_GRAVITY = GRAVITY_M_S2.high
 """Largest gravity magnitude accepted [m/s²]: ~5 g; beyond, the value is not a gravity (a typo
 or units error) and the settling/stepping would only blow up."""
+GRAVITY_COMPONENT = Bound(-GRAVITY_M_S2.high, GRAVITY_M_S2.high, "m/s²", GRAVITY_M_S2.reason)
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 _TOP_FIELDS = ("name", "description", "physics", "motion", "organs")
 _PHYSICS_FIELDS = ("dt", "gravity", "tol", "cg_tol", "max_newton", "max_iterations",
@@ -165,8 +178,9 @@ class PhysicsConfig:
     preconditioner: str = "auto"
 
     def __post_init__(self) -> None:
-        _number(self.dt, field_name="dt", low=0.0, low_open=True, high=MAX_DT)
-        object.__setattr__(self, "gravity", _vec3(self.gravity, field_name="gravity"))
+        _number(self.dt, field_name="dt", low=0.0, low_open=True, bound=DT_S)
+        object.__setattr__(self, "gravity", _vec3(self.gravity, field_name="gravity",
+                                                  bound=GRAVITY_COMPONENT))
         g = math.sqrt(sum(c * c for c in self.gravity))
         if g > MAX_GRAVITY:  # plausibility bound (MAX_GRAVITY)
             raise ConfigError(f"magnitude must be <= {MAX_GRAVITY:g} m/s², got "
@@ -175,11 +189,8 @@ class PhysicsConfig:
         _number(self.cg_tol, field_name="cg_tol", low=0.0, low_open=True, high=0.99)
         for name in ("max_newton", "max_iterations"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ConfigError(f"must be an integer >= 1, got {value!r}", field=name)
-        if self.preconditioner not in ("auto", "diagonal", "factor"):
-            raise ConfigError(f"must be one of auto, diagonal, factor, got "
-                              f"{self.preconditioner!r}", field="preconditioner")
+            check_int(value, name, bound=SOLVER_ITERATIONS)
+        check_choice(self.preconditioner, "preconditioner", ("auto", "diagonal", "factor"))
 
     @property
     def rate_hz(self) -> float:
@@ -205,11 +216,13 @@ class MotionConfig:
     heart_falloff_m: float = 0.08
 
     def __post_init__(self) -> None:
-        _number(self.breathing_hz, field_name="breathing_hz", low=0.0, high=MAX_BREATHING_HZ)
-        _number(self.heartbeat_hz, field_name="heartbeat_hz", low=0.0, high=MAX_HEARTBEAT_HZ)
+        _number(self.breathing_hz, field_name="breathing_hz", bound=BREATHING_RATE_HZ)
+        _number(self.heartbeat_hz, field_name="heartbeat_hz", bound=HEARTBEAT_RATE_HZ)
         object.__setattr__(self, "heart_centre", _vec3(self.heart_centre,
-                                                       field_name="heart_centre"))
-        _number(self.heart_falloff_m, field_name="heart_falloff_m", low=0.0, low_open=True)
+                                                       field_name="heart_centre",
+                                                       bound=COORDINATE_M))
+        _number(self.heart_falloff_m, field_name="heart_falloff_m", low=0.0, low_open=True,
+                bound=ANCHOR_DISTANCE_M)
 
 
 @dataclass(frozen=True)
@@ -259,14 +272,11 @@ class OrganConfig:
         if not isinstance(self.params, OrganParams):
             raise ConfigError(f"must be OrganParams, got {self.params!r}", field="params")
         object.__setattr__(self, "breathing_m", _vec3(self.breathing_m,
-                                                      field_name="breathing_m"))
+                                                      field_name="breathing_m",
+                                                      bound=BREATHING_AMPLITUDE_M))
         object.__setattr__(self, "heartbeat_m", _vec3(self.heartbeat_m,
-                                                      field_name="heartbeat_m"))
-        for key, bound in (("breathing_m", MAX_BREATHING_M), ("heartbeat_m", MAX_HEARTBEAT_M)):
-            amp = getattr(self, key)
-            if any(abs(c) > bound for c in amp):  # plausibility bounds (module constants)
-                raise ConfigError(f"each component must be within ±{bound:g} m, got "
-                                  f"{list(amp)!r} (a length in mm or cm?)", field=key)
+                                                      field_name="heartbeat_m",
+                                                      bound=HEARTBEAT_AMPLITUDE_M))
 
     @property
     def is_procedural(self) -> bool:
@@ -314,33 +324,31 @@ class Scene:
                 raise ConfigError(f"must be OrganConfig, got {o!r}", field="organs",
                                   file=self.source)
             if o.name in seen:
-                raise ConfigError(f"duplicate organ name {o.name!r}", field=f"organs.{o.name}",
-                                  file=self.source)
+                raise fail(o.name, f"an organ name not used before (duplicate organ name "
+                           f"{o.name!r})", field=f"organs.{o.name}", file=self.source)
             seen.add(o.name)
         if not organs:
-            raise ConfigError("a scene needs at least one organ", field="organs",
-                              file=self.source)
+            raise fail(organs, "at least one organ", field="organs", file=self.source)
         # a scene of kinematic organs only validated, then a trial failed to bind
         # its targets ("no deformable organ"): at least one organ must deform.
         if all(o.params.kinematic for o in organs):
-            raise ConfigError("a scene needs at least one deformable organ (kinematic = "
-                              "false): every organ is kinematic", field="organs",
-                              file=self.source)
+            raise fail([o.name for o in organs], "at least one deformable organ (kinematic = "
+                       "false): every organ is kinematic", field="organs", file=self.source)
         # a kind="wall" organ is the kinematic wall (no contact, trocars fixed);
         # a deformable wall was never stepped, so it is refused rather than half-supported.
         for o in organs:
             if o.kind == "wall" and not o.params.kinematic:
-                raise ConfigError('an organ of kind "wall" must be kinematic (kinematic = '
-                                  'true): the wall is not deformed', file=self.source,
-                                  field=f"organs.{o.name}.kinematic")
+                raise fail(False, 'true: an organ of kind "wall" must be kinematic (the wall '
+                           'is not deformed)', file=self.source,
+                           field=f"organs.{o.name}.kinematic")
         # a rate at or above the physics step's Nyquist rate aliases to nothing.
         nyquist = 0.5 / self.physics.dt
         for key in ("breathing_hz", "heartbeat_hz"):
             hz = getattr(self.motion, key)
             if hz >= nyquist:
-                raise ConfigError(f"must be below the Nyquist rate 1/(2 dt) = {nyquist:g} Hz "
-                                  f"of the physics step dt = {self.physics.dt:g} s, got {hz!r}",
-                                  field=f"motion.{key}", file=self.source)
+                raise fail(hz, f"a rate below the Nyquist rate 1/(2 dt) = {nyquist:g} Hz of "
+                           f"the physics step dt = {self.physics.dt:g} s",
+                           field=f"motion.{key}", file=self.source)
         object.__setattr__(self, "organs", organs)
 
     def organ(self, name: str) -> OrganConfig:
@@ -430,21 +438,11 @@ def load_scene(name_or_path: str | Path = "default") -> Scene:
 def parse_scene(text: str, *, source: str = "<string>") -> Scene:
     """Parses and validates scene TOML text; ``source`` names it in errors and anchors
     relative mesh paths (its folder)."""
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"invalid TOML: {exc}", file=source) from exc
-    return scene_from_dict(data, source=source)
+    return scene_from_dict(parse_toml(text, file=source, kind="scene"), source=source)
 
 
 def _check_keys(table: Any, allowed: Sequence[str], path: str, source: str) -> dict[str, Any]:
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"must be a table, got {table!r}", file=source, field=path)
-    for key, value in table.items():
-        if key not in allowed:
-            raise ConfigError(f"unknown field (value {value!r}); expected one of "
-                              f"{', '.join(allowed)}", file=source, field=_join(path, key))
-    return dict(table)
+    return check_keys(table, allowed, path, file=source)
 
 
 def _build(cls: Any, kwargs: dict[str, Any], path: str, source: str) -> Any:
@@ -458,9 +456,7 @@ def _build(cls: Any, kwargs: dict[str, Any], path: str, source: str) -> Any:
 
 def scene_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Scene:
     """Builds a scene from parsed TOML (see the module docstring for the layout)."""
-    top = _check_keys(data, _TOP_FIELDS, "", source)
-    if "name" not in top:
-        raise ConfigError("missing required field", file=source, field="name")
+    top = check_keys(data, _TOP_FIELDS, "", file=source, required=("name",))
     physics = _build(PhysicsConfig, _check_keys(top.get("physics", {}), _PHYSICS_FIELDS,
                                                 "physics", source), "physics", source)
     motion = _build(MotionConfig, _check_keys(top.get("motion", {}), _MOTION_FIELDS, "motion",

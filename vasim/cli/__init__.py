@@ -11,6 +11,7 @@ import argparse
 import os
 import sys
 from collections.abc import Callable, Sequence
+from typing import NoReturn
 
 from vasim import __version__
 from vasim.core.errors import VasimError
@@ -31,8 +32,21 @@ def _registrars() -> list[Registrar]:
             haptics_cli.register, report_cli.register, mrcp_cli.register]
 
 
+class _Parser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line, like vasim's own errors.
+
+    **Decision**: argparse prints the whole usage before a bad argument (several lines); a
+    refused value (``--subjects 1000000000``) reads better as the one line
+    ``vasim study simulate: error: argument --subjects: got ..., expected ...``; the usage
+    is one ``--help`` away. Subparsers inherit the class.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser: argparse.ArgumentParser = _Parser(
         prog="vasim",
         description="Haptic surgical training simulator with task-oriented virtual fixtures.",
     )
@@ -45,7 +59,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # a usage error (printed, one line) returns 2; --help exits
+        if exc.code == 2:
+            return 2
+        raise
     try:
         code = args.func(args)
     except VasimError as exc:

@@ -15,6 +15,8 @@ import sys
 from pathlib import Path
 from typing import Any, TextIO
 
+from vasim.cli.args import bounded_float, bounded_int
+from vasim.core.bounds import DURATION_S, SEED
 from vasim.core.errors import ConfigError
 from vasim.core.jsonio import dumps
 from vasim.trials.kinds import MAX_TRIAL_TIME_S
@@ -44,9 +46,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     r.add_argument("scenario", help="scenario name (see `vasim mrcp list`)")
     r.add_argument("--plot", metavar="PATH", help="save the indices/texec/ttransf*/NTT/RSel "
                    "plot (PNG, PDF or SVG by suffix)")
-    r.add_argument("--seed", type=int, default=0, help="seed of the planner's random force")
-    r.add_argument("--duration", type=float, default=None, help="run length [s] (default: "
-                   "the scenario's)")
+    r.add_argument("--seed", type=bounded_int(SEED), default=0,
+                   help="seed of the planner's random force")
+    r.add_argument("--duration", type=bounded_float(DURATION_S, gt=0.0), default=None,
+                   help="run length [s] (default: the scenario's)")
     r.add_argument("--coarse", action="store_true", help="cheaper run: 36 ms period (same "
                    "prediction and texec windows in seconds), first-order trajectory IK")
     r.add_argument("--json", action="store_true", help="print the run summary as JSON")

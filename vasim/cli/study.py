@@ -19,6 +19,16 @@ import math
 import sys
 from pathlib import Path
 
+from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
+from vasim.core.bounds import (
+    ID,
+    PRACTICE_TRIALS,
+    SEED,
+    SUBJECTS,
+    SURGEONS,
+    TRIAL_TIME_S,
+    VARIANT,
+)
 from vasim.core.errors import ConfigError
 
 
@@ -34,24 +44,25 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         ),
     )
     p.add_argument("--task", choices=["trajectory", "point"], default="trajectory")
-    p.add_argument("--variant", type=int, default=0,
+    p.add_argument("--variant", type=bounded_int(VARIANT), default=0,
                    help="trajectory variant: 0 original, 1-6 mirrored/rotated (default 0)")
     p.add_argument("--schema", default="none",
                    help="fixture schema name (see `vasim schemas list`) or TOML path")
     p.add_argument("--operator", choices=["scripted"], default="scripted")
     p.add_argument("--skill", choices=["novice", "intermediate", "expert"],
                    default="intermediate", help="scripted operator preset")
-    p.add_argument("--practice", type=int, default=0,
+    p.add_argument("--practice", type=bounded_int(PRACTICE_TRIALS), default=0,
                    help="earlier trials of this subject (learning), default 0")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--subject", default=None,
+    p.add_argument("--seed", type=bounded_int(SEED), default=0)
+    p.add_argument("--subject", type=subject_code, default=None,
                    help="subject code (not a name); default: none (the trial is stored "
                         "without a subject and left out of subject analyses)")
     p.add_argument("--label", default=None,
                    help="free-practice label of a trial (stored beside, never as, the "
                         "subject; it must contain a space or ':', e.g. 'free: warm-up', so "
                         "that it cannot be mistaken for a subject code)")
-    p.add_argument("--max-time", type=float, default=180.0, help="time limit [s]")
+    p.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=180.0,
+                   help="time limit [s]")
     p.add_argument("--scene", default="default",
                    help="abdomen scene (protocols/scenes/NAME.toml or a TOML path), or 'none' "
                         "for a static task without tissue (default: default)")
@@ -310,15 +321,16 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     r = ss.add_parser("run", help="run a subject's whole session headless")
     r.add_argument("--protocol", required=True,
                    help="protocol name (protocols/studies) or TOML path")
-    r.add_argument("--subject", required=True, help="subject code (never a name)")
+    r.add_argument("--subject", type=subject_code, required=True,
+                   help="subject code (never a name)")
     r.add_argument("--db", type=Path, required=True, help="SQLite study database")
     r.add_argument("--operator", default="scripted",
                    help="input device: scripted (browser sessions run from `vasim serve`)")
-    r.add_argument("--seed", type=int, default=None,
+    r.add_argument("--seed", type=bounded_int(SEED), default=None,
                    help="randomisation seed (default: a fresh random one, printed and stored)")
     r.add_argument("--skill", choices=["novice", "intermediate", "expert"],
                    default="intermediate", help="scripted operator preset")
-    r.add_argument("--max-time", type=float, default=None,
+    r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
     r.add_argument("--answers", type=Path, default=None,
                    help="TOML file with [pre] and [post] questionnaire answers")
@@ -327,8 +339,9 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     r = ss.add_parser("resume", help="continue a session at its first unfinished trial")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--subject", default=None, help="subject code of a running session")
-    r.add_argument("--session", type=int, default=None, help="session id")
+    r.add_argument("--subject", type=subject_code, default=None,
+                   help="subject code of a running session")
+    r.add_argument("--session", type=bounded_int(ID), default=None, help="session id")
     r.add_argument("--protocol", default=None,
                    help="protocol name, when the subject has several running sessions")
     r.add_argument("--answers", type=Path, default=None,
@@ -338,7 +351,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     r = ss.add_parser("list", help="sessions with their progress")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--subject", default=None)
+    r.add_argument("--subject", type=subject_code, default=None)
     r.set_defaults(func=_cmd_list)
 
     r = ss.add_parser("export", help="write tidy tables (CSV / Parquet)")
@@ -353,33 +366,35 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     r = ss.add_parser("simulate", help="simulate a cohort of scripted subjects")
     r.add_argument("--protocol", required=True)
-    r.add_argument("--subjects", type=int, default=46, help="cohort size (default 46)")
-    r.add_argument("--surgeons", type=int, default=None,
+    r.add_argument("--subjects", type=bounded_int(SUBJECTS), default=46,
+                   help=f"cohort size (default 46; at most {SUBJECTS.high:,})")
+    r.add_argument("--surgeons", type=bounded_int(SURGEONS), default=None,
                    help="surgeons among them (default 31 of 46, scaled for other sizes)")
-    r.add_argument("--seed", type=int, default=7, help="cohort seed (default 7)")
+    r.add_argument("--seed", type=bounded_int(SEED), default=7, help="cohort seed (default 7)")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--workers", type=int, default=None,
-                   help="worker processes (default: number of cores; 0: in this process)")
-    r.add_argument("--max-time", type=float, default=None,
+    r.add_argument("--workers", type=workers, default=None,
+                   help="worker processes (default: number of cores; 0: in this process; at "
+                        "most 4 x the cores)")
+    r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
 
     r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
     r.add_argument("--protocol", required=True)
-    r.add_argument("--seed", type=int, required=True)
+    r.add_argument("--seed", type=bounded_int(SEED), required=True)
     r.set_defaults(func=_cmd_schedule)
 
     r = ss.add_parser("answer", help="record questionnaire answers from a TOML file")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--session", type=int, required=True)
+    r.add_argument("--session", type=bounded_int(ID), required=True)
     r.add_argument("--file", type=Path, required=True,
                    help="TOML with a [pre] and/or [post] table of item = answer")
     r.set_defaults(func=_cmd_answer)
 
     r = ss.add_parser("abort", help="close a session for good (its trials are kept)")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--session", type=int, required=True)
+    r.add_argument("--session", type=bounded_int(ID), required=True)
     r.add_argument("--reason", required=True)
     r.set_defaults(func=_cmd_abort)
 

@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vasim.cli.args import bounded_float, bounded_int, host_address
+from vasim.core.bounds import DURATION_S, PORT, SEED
 from vasim.core.errors import ConfigError
 
 
@@ -32,16 +34,17 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
             "Ctrl-C stops the server."
         ),
     )
-    p.add_argument("--host", default="127.0.0.1",
+    p.add_argument("--host", type=host_address, default="127.0.0.1",
                    help="interface to bind (default 127.0.0.1: this machine only; any other "
                         "address needs --expose)")
     p.add_argument("--expose", action="store_true",
                    help="allow a --host beyond this machine; every page (trainee and "
                         "experimenter) then needs the access token printed with the URL")
-    p.add_argument("--port", type=int, default=8080,
+    p.add_argument("--port", type=bounded_int(PORT), default=8080,
                    help="TCP port (default 8080; if busy, the next free port is used and "
                         "printed; 0 picks any free port)")
-    p.add_argument("--experimenter-port", type=int, default=None, metavar="PORT",
+    p.add_argument("--experimenter-port", type=bounded_int(PORT), default=None,
+                   metavar="PORT",
                    help="TCP port of the experimenter's page (default: --port + 1; the "
                         "trainee's page is on --port)")
     p.add_argument("--scene", default="default",
@@ -57,10 +60,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                         "(default: trajectory_following, or point_targeting with --task point)")
     p.add_argument("--task", choices=["trajectory", "point"], default="trajectory",
                    help="task of the demo trials (default trajectory)")
-    p.add_argument("--seed", type=int, default=0, help="operator seed of the first trial")
+    p.add_argument("--seed", type=bounded_int(SEED), default=0,
+                   help="operator seed of the first trial")
     p.add_argument("--skill", choices=["novice", "intermediate", "expert"],
                    default="intermediate", help="scripted operator preset")
-    p.add_argument("--duration", type=float, default=None, metavar="SECONDS",
+    p.add_argument("--duration", type=bounded_float(DURATION_S), default=None,
+                   metavar="SECONDS",
                    help="stop after this many seconds (default: run until Ctrl-C)")
     p.add_argument("--mrcp-coarse", action="store_true",
                    help="MRCP scenes: the runner's cheaper 36 ms cycle (keeps real time on a "

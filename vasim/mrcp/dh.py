@@ -60,7 +60,6 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -69,6 +68,16 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from vasim.core.bounds import (
+    DH_ANGLE_DEG,
+    JOINT_ACCELERATION_RAD_S2,
+    JOINT_LIMIT_RAD,
+    JOINT_VELOCITY_RAD_S,
+    LINK_LENGTH_M,
+    LINK_RADIUS_M,
+    Bound,
+)
+from vasim.core.config import check_keys, check_number, fail, parse_toml, show
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import rot_x, rot_z
 from vasim.core.resources import data_file, protocols_dir, read_data_file
@@ -542,30 +551,27 @@ def jacobian_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = N
 
 # ---------------------------------------------------------------------------- loading
 
-def _num(value: Any, path: str, file: str | Path | None) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(f"expected a number, got {value!r}", file=file, field=path)
-    if not math.isfinite(float(value)):
-        raise ConfigError(f"expected a finite number, got {value!r}", file=file, field=path)
-    return float(value)
+def _num(value: Any, path: str, file: str | Path | None, bound: Bound | None = None,
+         ) -> float:
+    return check_number(value, path, bound=bound, file=file)
 
 
-def _vec(value: Any, n: int, path: str, file: str | Path | None) -> FloatArray:
+def _vec(value: Any, n: int, path: str, file: str | Path | None,
+         bound: Bound | None = None) -> FloatArray:
     if not isinstance(value, list) or len(value) != n:
-        raise ConfigError(f"expected a list of {n} numbers, got {value!r}", file=file,
-                          field=path)
-    return np.array([_num(v, f"{path}[{i}]", file) for i, v in enumerate(value)])
+        raise fail(value, f"a list of {n} numbers", field=path, file=file)
+    return np.array([_num(v, f"{path}[{i}]", file, bound) for i, v in enumerate(value)])
 
 
 def _check_keys(table: dict[str, Any], allowed: set[str], path: str,
                 file: str | Path | None) -> None:
-    unknown = sorted(set(table) - allowed)
-    if unknown:
-        where = f"{path}.{unknown[0]}" if path else unknown[0]
-        raise ConfigError(f"unknown field (allowed: {', '.join(sorted(allowed))})",
-                          file=file, field=where)
+    check_keys(table, sorted(allowed), path, file=file)
 
 
+_JOINT_BOUNDS = {"alpha_deg": DH_ANGLE_DEG, "theta_offset_deg": DH_ANGLE_DEG,
+                 "a": LINK_LENGTH_M, "d": LINK_LENGTH_M, "lower": JOINT_LIMIT_RAD,
+                 "upper": JOINT_LIMIT_RAD, "max_velocity": JOINT_VELOCITY_RAD_S,
+                 "max_acceleration": JOINT_ACCELERATION_RAD_S2}
 _JOINT_KEYS = {"alpha_deg", "a", "d", "theta_offset_deg", "lower", "upper", "max_velocity",
                "max_acceleration"}
 _REQUIRED_JOINT_KEYS = _JOINT_KEYS - {"theta_offset_deg"}
@@ -577,10 +583,7 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
     Raises:
         ConfigError: naming the file, the dotted field and the bad value.
     """
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"invalid TOML: {exc}", file=file) from exc
+    data = parse_toml(text, file=file, kind="robot")
     _check_keys(data, {"name", "tcp", "home", "joints", "links"}, "", file)
     name = data.get("name")
     if not isinstance(name, str) or not name:
@@ -597,12 +600,14 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
     for i, jt in enumerate(raw_joints):
         path = f"joints[{i}]"
         if not isinstance(jt, dict):
-            raise ConfigError(f"expected a table, got {jt!r}", file=file, field=path)
+            raise ConfigError(f"got {show(jt)}, expected a table", file=file, field=path)
         _check_keys(jt, _JOINT_KEYS, path, file)
-        missing = sorted(_REQUIRED_JOINT_KEYS - set(jt))
-        if missing:
-            raise ConfigError("missing field", file=file, field=f"{path}.{missing[0]}")
-        vals = {k: _num(jt[k], f"{path}.{k}", file) for k in jt}
+        check_keys(jt, sorted(_JOINT_KEYS), path, file=file,
+                   required=sorted(_REQUIRED_JOINT_KEYS))
+        vals = {k: _num(jt[k], f"{path}.{k}", file, _JOINT_BOUNDS[k]) for k in jt}
+        if not vals["lower"] < vals["upper"]:
+            raise fail(vals["lower"], f"a limit below upper = {vals['upper']!r} rad",
+                       field=f"{path}.lower", file=file)
         # plausibility: catches millimetres for metres, degrees for radians
         for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
                                  ("lower", MAX_JOINT_ANGLE, "rad"),
@@ -619,37 +624,45 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         except ConfigError as exc:
             raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
     n = len(joints)
-    tcp = _vec(data.get("tcp", [0.0, 0.0, 0.0]), 3, "tcp", file)
+    tcp = _vec(data.get("tcp", [0.0, 0.0, 0.0]), 3, "tcp", file, LINK_LENGTH_M)
     if "home" not in data:
-        raise ConfigError("missing field", file=file, field="home")
-    home = _vec(data["home"], n, "home", file)
+        raise ConfigError("got nothing (missing required field), expected a value", file=file,
+                          field="home")
+    home = _vec(data["home"], n, "home", file, JOINT_LIMIT_RAD)
+    for i, (h, jt) in enumerate(zip(home, joints, strict=True)):
+        if not jt.lower <= h <= jt.upper:
+            raise fail(float(h), f"an angle within joints[{i}]'s limits [{jt.lower!r}, "
+                       f"{jt.upper!r}] rad", field=f"home[{i}]", file=file)
     links = []
     raw_links = data.get("links", [])
     if not isinstance(raw_links, list):     # e.g. links = 5: was a TypeError
-        raise ConfigError(f"expected [[links]] tables, got {raw_links!r}", file=file,
+        raise ConfigError(f"got {show(raw_links)}, expected [[links]] tables", file=file,
                           field="links")
     for k, lt in enumerate(raw_links):
         path = f"links[{k}]"
         if not isinstance(lt, dict):
-            raise ConfigError(f"expected a table, got {lt!r}", file=file, field=path)
+            raise ConfigError(f"got {show(lt)}, expected a table", file=file, field=path)
         _check_keys(lt, {"radius", "points", "chain"}, path, file)
         if "radius" not in lt:
-            raise ConfigError("missing field", file=file, field=f"{path}.radius")
+            raise ConfigError("got nothing (missing required field), expected a value",
+                              file=file, field=f"{path}.radius")
         pts_raw = lt.get("points", [])
         if not isinstance(pts_raw, list):
-            raise ConfigError(f"expected a list of points, got {pts_raw!r}", file=file,
+            raise ConfigError(f"got {show(pts_raw)}, expected a list of points", file=file,
                               field=f"{path}.points")
-        pts = tuple(tuple(float(x) for x in _vec(p, 3, f"{path}.points[{j}]", file))
+        pts = tuple(tuple(float(x) for x in _vec(p, 3, f"{path}.points[{j}]", file,
+                                                   LINK_LENGTH_M))
                     for j, p in enumerate(pts_raw))
         chain = lt.get("chain", True)
         if not isinstance(chain, bool):
-            raise ConfigError(f"expected true or false, got {chain!r}", file=file,
+            raise ConfigError(f"got {show(chain)}, expected true or false", file=file,
                               field=f"{path}.chain")
         if not chain and not pts:
             raise ConfigError("a link with chain = false needs points", file=file,
                               field=f"{path}.points")
         try:
-            links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file),
+            links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file,
+                                                   LINK_RADIUS_M),
                                       points=pts,  # type: ignore[arg-type]
                                       chain=chain))
         except ConfigError as exc:

@@ -1,0 +1,299 @@
+"""The one toolkit every TOML loader validates with (schemas, protocols, scenes, robots).
+
+Every check raises :class:`vasim.core.errors.ConfigError` with the same words::
+
+    protocols/schemas/ff.toml: field 'fixtures.ff.max_force_n': got 1000.0, expected a
+    number in [0, 3.3] N (the Phantom Omni's peak force, 3.3 N (Geomagic spec))
+
+that is ``<file>: field '<dotted.path>': got <value>, expected <what>``. Unknown keys read
+``got unknown field (value ...), expected one of a, b, c``. Values are echoed with ``repr``
+truncated to :data:`vasim.core.bounds.MAX_MESSAGE_CHARS` characters.
+
+**Decision**: a small module of plain functions over the existing frozen dataclasses rather
+than msgspec/pydantic models, because the dataclasses (and their ``__post_init__`` checks)
+are the public types every layer already uses, and a second model layer would duplicate
+them; the functions are what the five former toolkits had in common, worded once.
+
+**Decision**: a UTF-8 byte-order mark at the start of a TOML text is stripped (editors on
+Windows write one; ``tomllib`` would report "invalid statement at line 1").
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vasim.core.bounds import MAX_MESSAGE_CHARS, Bound
+from vasim.core.errors import ConfigError
+
+BOM = "\ufeff"
+
+
+def show(value: object, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """``repr(value)`` cut to ``limit`` characters (with the full length noted)."""
+    try:
+        text = repr(value)
+    except Exception:  # a broken __repr__ must not hide the real error
+        text = f"<{type(value).__name__}>"
+    if len(text) > limit:
+        size = len(value) if isinstance(value, str | bytes | list | tuple | dict) else len(text)
+        unit = "characters" if isinstance(value, str | bytes) else "items" if isinstance(
+            value, list | tuple | dict) else "characters shown"
+        text = f"{text[:limit]}... ({size:,} {unit})"
+    return text
+
+
+def fail(value: object, expected: str, *, field: str | None = None,
+         file: str | Path | None = None) -> ConfigError:
+    """The standard error: ``got <value>, expected <expected>`` at ``file``/``field``."""
+    return ConfigError(f"got {show(value)}, expected {expected}", file=file, field=field)
+
+
+def join(*parts: str | None) -> str:
+    """Dotted path of the non-empty parts (``join("fixtures", "ff", "k")``)."""
+    return ".".join(p for p in parts if p)
+
+
+def rewrap(exc: ConfigError, prefix: str | None = None,
+           file: str | Path | None = None) -> ConfigError:
+    """``exc`` with its field under ``prefix`` and ``file`` named (unless it names one)."""
+    return ConfigError(exc.reason, file=exc.file or file, field=join(prefix, exc.field) or None)
+
+
+# -- TOML --------------------------------------------------------------------------------
+def parse_toml(text: object, *, file: str | Path | None = None, kind: str = "TOML",
+               ) -> dict[str, Any]:
+    """Parses TOML text (a leading BOM is stripped); errors name ``file``.
+
+    Raises:
+        ConfigError: not a string, or invalid TOML (tomllib's message, with line/column).
+    """
+    if not isinstance(text, str):
+        raise ConfigError(f"{kind} text must be a string, got {type(text).__name__}", file=file)
+    if text.startswith(BOM):
+        text = text[len(BOM):]
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid TOML: {exc}", file=file) from exc
+
+
+def check_table(value: object, field: str | None = None, *, file: str | Path | None = None,
+                what: str = "a table") -> dict[str, Any]:
+    """A TOML table (``dict``), returned as a new dict."""
+    if not isinstance(value, Mapping):
+        raise fail(value, what, field=field, file=file)
+    return dict(value)
+
+
+def check_keys(table: object, known: Sequence[str], path: str | None = None, *,
+               file: str | Path | None = None, required: Sequence[str] = ()) -> dict[str, Any]:
+    """A table whose keys are all in ``known`` and include every ``required`` key.
+
+    Returns:
+        a copy of the table.
+    """
+    t = check_table(table, path or None, file=file)
+    for key, value in t.items():
+        if key not in known:
+            raise ConfigError(f"got unknown field (value {show(value)}), expected one of "
+                              f"{', '.join(known)}", file=file, field=join(path, str(key)))
+    for key in required:
+        if key not in t:
+            raise ConfigError("got nothing (missing required field), expected a value", file=file,
+                              field=join(path, key))
+    return t
+
+
+def check_array_of_tables(value: object, field: str, *, file: str | Path | None = None,
+                          ) -> list[dict[str, Any]]:
+    """An array of tables (``[[field]]``)."""
+    if not isinstance(value, list) or not all(isinstance(x, Mapping) for x in value):
+        raise fail(value, f"an array of tables ([[{field}]])", field=field, file=file)
+    return [dict(x) for x in value]
+
+
+# -- scalars -----------------------------------------------------------------------------
+def is_int(value: object) -> bool:
+    """An integer (Python or numpy), not a bool."""
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+def is_number(value: object) -> bool:
+    """A real number (int, float, numpy), not a bool."""
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+        value, bool)
+
+
+def _fmt(x: float) -> str:
+    return f"{x:g}" if isinstance(x, float) else str(x)
+
+
+def describe_range(*, bound: Bound | None = None, gt: float | None = None,
+                   ge: float | None = None, lt: float | None = None, le: float | None = None,
+                   ) -> str:
+    """The text after "a number" for these limits (``in (0, 3.3] N (reason)``)."""
+    lo, lo_open, hi, hi_open = -math.inf, True, math.inf, True
+    if bound is not None:
+        lo, lo_open, hi, hi_open = bound.low, False, bound.high, False
+    if ge is not None and ge >= lo:
+        lo, lo_open = ge, False
+    if gt is not None and gt >= lo:
+        lo, lo_open = gt, True
+    if le is not None and le <= hi:
+        hi, hi_open = le, False
+    if lt is not None and lt <= hi:
+        hi, hi_open = lt, True
+    unit = f" {bound.unit}" if bound is not None and bound.unit else ""
+    reason = f" ({bound.reason})" if bound is not None else ""
+    if math.isinf(lo) and math.isinf(hi):
+        return f"{reason}".strip()
+    if math.isinf(hi):
+        return f"{'>' if lo_open else '>='} {_fmt(lo)}{unit}{reason}"
+    if math.isinf(lo):
+        return f"{'<' if hi_open else '<='} {_fmt(hi)}{unit}{reason}"
+    return (f"in {'(' if lo_open else '['}{_fmt(lo)}, {_fmt(hi)}{')' if hi_open else ']'}"
+            f"{unit}{reason}")
+
+
+def check_number(value: object, field: str | None = None, *, bound: Bound | None = None,
+                 gt: float | None = None, ge: float | None = None, lt: float | None = None,
+                 le: float | None = None, file: str | Path | None = None) -> float:
+    """A finite real number within ``bound`` and the strict/loose limits; returned as float.
+
+    Raises:
+        ConfigError: ``got <value>, expected a finite number in [lo, hi] unit (reason)``.
+    """
+    rng = describe_range(bound=bound, gt=gt, ge=ge, lt=lt, le=le)
+    expected = f"a finite number {rng}".rstrip()
+    if not is_number(value):
+        raise fail(value, expected, field=field, file=file)
+    try:
+        x = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an int beyond the float range
+        raise fail(value, expected, field=field, file=file) from None
+    if not math.isfinite(x):
+        raise fail(value, expected, field=field, file=file)
+    ok = ((bound is None or bound.low <= x <= bound.high)
+          and (gt is None or x > gt) and (ge is None or x >= ge)
+          and (lt is None or x < lt) and (le is None or x <= le))
+    if not ok:
+        raise fail(value, expected, field=field, file=file)
+    return x
+
+
+def check_int(value: object, field: str | None = None, *, bound: Bound | None = None,
+              lo: int | None = None, hi: int | None = None,
+              file: str | Path | None = None) -> int:
+    """An integer (not a bool) within ``bound`` and [lo, hi]; returned as int."""
+    rng = describe_range(bound=bound, ge=lo, le=hi)
+    expected = f"an integer {rng}".rstrip()
+    if not is_int(value):
+        raise fail(value, expected, field=field, file=file)
+    v = int(value)  # type: ignore[call-overload]
+    if ((bound is not None and not bound.low <= v <= bound.high)
+            or (lo is not None and v < lo) or (hi is not None and v > hi)):
+        raise fail(value, expected, field=field, file=file)
+    return v
+
+
+def check_bool(value: object, field: str | None = None, *,
+               file: str | Path | None = None) -> bool:
+    """``true`` or ``false``."""
+    if not isinstance(value, bool):
+        raise fail(value, "true or false", field=field, file=file)
+    return value
+
+
+def check_str(value: object, field: str | None = None, *, one_line: bool = True,
+              empty: bool = False, max_length: int | None = None,
+              file: str | Path | None = None) -> str:
+    """A string (one line unless ``one_line=False``; not empty unless ``empty``)."""
+    what = "a one-line string" if one_line else "a string"
+    if not empty:
+        what += " (not empty)"
+    if max_length is not None:
+        what += f" of at most {max_length} characters"
+    if (not isinstance(value, str) or (not empty and not value)
+            or (one_line and "\n" in value)
+            or (max_length is not None and len(value) > max_length)):
+        raise fail(value, what, field=field, file=file)
+    return value
+
+
+def check_choice(value: object, field: str | None, choices: Sequence[Any], *,
+                 file: str | Path | None = None) -> Any:
+    """One of ``choices``."""
+    try:
+        ok = value in choices
+    except TypeError:  # unhashable against a set-like
+        ok = False
+    if not ok or isinstance(value, bool) != any(isinstance(c, bool) for c in choices):
+        raise fail(value, f"one of {', '.join(map(repr, choices))}", field=field, file=file)
+    return value
+
+
+def check_vec3(value: object, field: str | None = None, *, bound: Bound | None = None,
+               nonzero: bool = False, file: str | Path | None = None,
+               ) -> tuple[float, float, float]:
+    """Three finite numbers (each within ``bound``), as a tuple of floats."""
+    rng = describe_range(bound=bound)
+    what = f"3 finite numbers {rng}".rstrip()
+    if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
+        raise fail(value, what, field=field, file=file)
+    items = list(value)
+    if len(items) != 3:
+        raise fail(value, what, field=field, file=file)
+    out = []
+    for c in items:
+        try:
+            out.append(check_number(c, field, bound=bound, file=file))
+        except ConfigError:
+            raise fail(value, what, field=field, file=file) from None
+    if nonzero and not any(out):
+        raise fail(value, "a non-zero vector", field=field, file=file)
+    return (out[0], out[1], out[2])
+
+
+def check_str_tuple(value: object, field: str, *, unique: bool = True, empty: bool = False,
+                    file: str | Path | None = None) -> tuple[str, ...]:
+    """A tuple of one-line non-empty strings (unique unless told)."""
+    if not isinstance(value, tuple):
+        raise fail(value, "an array of strings", field=field, file=file)
+    if not empty and not value:
+        raise fail(value, "a non-empty array", field=field, file=file)
+    for i, x in enumerate(value):
+        check_str(x, f"{field}[{i}]", file=file)
+    if unique and len(set(value)) != len(value):
+        dup = next(x for x in value if value.count(x) > 1)
+        raise fail(value, f"no repeated value ({dup!r} is there twice)", field=field,
+                   file=file)
+    return value
+
+
+__all__ = [
+    "BOM",
+    "check_array_of_tables",
+    "check_bool",
+    "check_choice",
+    "check_int",
+    "check_keys",
+    "check_number",
+    "check_str",
+    "check_str_tuple",
+    "check_table",
+    "check_vec3",
+    "describe_range",
+    "fail",
+    "is_int",
+    "is_number",
+    "join",
+    "parse_toml",
+    "rewrap",
+    "show",
+]

@@ -1,0 +1,151 @@
+"""Study protocols are data: TOML files under ``protocols/studies/`` (spec/study.md §1).
+
+A protocol names the task, its blocks of trials (condition, trajectory variants,
+repetitions, fixture-free probe trials), how block order and variant order are randomised,
+and the questionnaires before and after the session. ``load_protocol`` parses a file once
+into frozen dataclasses, validated on load: an unknown key, a wrong type, an unknown schema,
+a variant out of range, an empty block... raise ``ConfigError`` naming the file, the dotted
+field path (``blocks[2].condition``) and the value. ``generate_schedule(protocol, seed)`` is
+a pure function from a protocol and a seed to the list of scheduled trials; a session stores
+the seed *and* the realised schedule (the store's ``scheduled_trials``), and a resumed
+session replays the stored schedule, never recomputing it.
+
+TOML layout (every field is checked; defaults in brackets)::
+
+    name = "vf_learning_curve"          # required: letters, digits, '_', '-', '.'
+    description = "one line"            # required
+    task = "trajectory"                 # required: "trajectory" | "point"
+    reach_radius_m = 0.005              # [0.005] r_reach: the goal advances at |x - p_i| <= r
+    max_trial_time_s = 180.0            # [180] simulated time limit of one trial [s]
+    excessive_force_n = 2.0             # [2.0] threshold of the excessive-force metrics [N]
+    repeat_timed_out = false            # [false] a trial that hits its time limit is run
+                                        # again (a new attempt) instead of counting as done
+
+    [randomisation]
+    block_order = "random"              # ["fixed"] | "random" | "latin_square"
+    variant_order = "random"            # ["fixed"] | "random"
+
+    [probe]                             # the fixture-free probe trials (learning curve)
+    condition = "none"                  # ["none"] a schema without fixtures
+    variant = 0                         # [0] all probe trials use this trajectory
+
+    [[blocks]]                          # at least one; run in file order unless randomised
+    name = "baseline"                   # required, unique
+    condition = "none"                  # required: a schema name (protocols/schemas) or, in
+                                        # the MRCP protocols, a mode "stdt"|"mrcp"|"mrcp_cam"
+    variants = [0]                      # [[0]] trajectory variants (0..6; point task: 0)
+    repetitions = 3                     # [1] every variant this many times
+    probe = true                        # [false] these trials are probe trials
+    counterbalance = false              # [true] takes part in the block-order randomisation
+    probes_after = 0                    # [0] probe trials appended after the block's trials
+
+    [questionnaires.pre]
+    demographics = true                 # [false] group, specialisation, experience levels
+    [[questionnaires.pre.items]]        # further items (same layout as post)
+
+    [[questionnaires.post.items]]
+    id = "best_vf"                      # required identifier, unique per questionnaire
+    type = "condition_choice"           # required, see ITEM_TYPES
+    prompt = "Which fixture helped most?"   # required
+    required = true                     # [true]
+    select = "best"                     # condition_choice: "best" | "worst" (what is asked)
+    conditions = ["vg", "ag"]           # condition_*: [the protocol's assisted conditions]
+    options = ["a", "b"]                # choice: required
+    min = 0                             # integer / condition_rating: [0]
+    max = 10                            # integer / condition_rating: [10]
+    anchors = ["...", ..., "..."]       # likert: [none] five labels
+    max_entries = 3                     # condition_sets: [3] proposals at most
+    min_size = 2                        # condition_sets: [2] conditions per proposal
+    max_length = 2000                   # text: [2000] characters
+
+Item types (``ITEM_TYPES``): ``choice`` (one of ``options``), ``text`` (free text, stored as
+given), ``integer`` (in [min, max]), ``likert`` (five-point, 1..5), ``condition_choice``
+(one of ``conditions``: best / worst fixture), ``condition_rating`` (an integer in
+[min, max] per condition: the 0-10 rating of each fixture), ``condition_sets`` (up to
+``max_entries`` sets of >= ``min_size`` conditions: proposed schemas).
+
+Schedule rules (**decisions**):
+
+* Blocks with ``counterbalance = false`` keep their position in the file; the others are
+  permuted among the positions they occupy: ``"fixed"`` keeps the file order, ``"random"``
+  draws a uniform permutation per subject from the seed, ``"latin_square"`` takes row
+  ``seed mod R`` of a Williams balanced Latin square (R = n rows for an even number n of
+  counterbalanced blocks, 2n for odd n; each block appears once in every position and
+  follows every other block equally often over R consecutive rows: give a cohort
+  consecutive seeds).
+* Within a block the trials are ``repetitions`` rounds over ``variants``; ``"random"``
+  shuffles each round independently (every variant once before any twice), ``"fixed"``
+  keeps the listed order. ``probes_after`` probe trials (``probe.condition`` on
+  ``probe.variant``) follow the block's trials.
+* Randomness: ``numpy.random.default_rng(SeedSequence([seed, stream, block]))``, one stream
+  for the block order and one per block for its variants. numpy does not promise the same
+  stream across versions: the realised schedule is what is stored and replayed.
+* Probe trials are numbered 1, 2, ... in schedule order (``probe_index``: the VF study's
+  8-level "trial" factor).
+
+Example:
+    >>> p = load_protocol("vf_learning_curve")
+    >>> s = generate_schedule(p, seed=7)
+    >>> len(s), sum(t.probe for t in s), {t.variant for t in s if t.probe}
+    (38, 8, {0})
+"""
+
+from __future__ import annotations
+
+from vasim.study.protocol.loader import (
+    available_protocols,
+    load_protocol,
+    parse_protocol,
+    protocol_from_dict,
+    protocol_path,
+)
+from vasim.study.protocol.model import (
+    BLOCK_ORDERS,
+    N_VARIANTS,
+    TASKS,
+    VARIANT_ORDERS,
+    Block,
+    Protocol,
+    TaskKind,
+)
+from vasim.study.protocol.questionnaires import (
+    ITEM_TYPES,
+    LIKERT_POINTS,
+    AnswerRow,
+    QuestionItem,
+    Questionnaire,
+    validate_answers,
+)
+from vasim.study.protocol.schedule import (
+    ScheduledTrial,
+    block_order,
+    generate_schedule,
+    williams_square,
+)
+from vasim.trials.kinds import TELEOPERATION_MODES
+
+__all__ = [
+    "BLOCK_ORDERS",
+    "ITEM_TYPES",
+    "LIKERT_POINTS",
+    "N_VARIANTS",
+    "TASKS",
+    "TELEOPERATION_MODES",
+    "VARIANT_ORDERS",
+    "AnswerRow",
+    "Block",
+    "Protocol",
+    "QuestionItem",
+    "Questionnaire",
+    "ScheduledTrial",
+    "TaskKind",
+    "available_protocols",
+    "block_order",
+    "generate_schedule",
+    "load_protocol",
+    "parse_protocol",
+    "protocol_from_dict",
+    "protocol_path",
+    "validate_answers",
+    "williams_square",
+]

@@ -1,0 +1,284 @@
+"""The protocol model: ``Block`` and ``Protocol``, frozen dataclasses validated on
+construction (types, plausibility bounds of :mod:`vasim.core.bounds`, conditions that
+exist for the task, questionnaire items that name the protocol's conditions).
+
+The file layout is described in :mod:`vasim.study.protocol`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+from functools import cache
+from typing import Any, Literal
+
+from vasim.core.bounds import (
+    FORCE_N,
+    PROBES_AFTER,
+    REACH_RADIUS_M,
+    REPETITIONS,
+    TRIAL_TIME_S,
+    TRIALS_PER_SESSION,
+)
+from vasim.core.config import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_number,
+    check_str,
+    fail,
+)
+from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
+from vasim.trials.kinds import TELEOPERATION_MODES
+
+TaskKind = Literal["trajectory", "point"]
+TASKS: tuple[str, ...] = ("trajectory", "point")
+BLOCK_ORDERS: tuple[str, ...] = ("fixed", "random", "latin_square")
+VARIANT_ORDERS: tuple[str, ...] = ("fixed", "random")
+N_VARIANTS = {"trajectory": 7, "point": 1}
+"""Variants per task: the trajectory's original + six mirrored/rotated; one point task."""
+
+_NO_QUESTIONS = Questionnaire()
+"""The empty questionnaire (frozen, shared as the default)."""
+_NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")  # fullmatch: no trailing "\n"
+
+
+@dataclass(frozen=True)
+class Block:
+    """A block of trials under one condition (see the module docstring).
+
+    Attributes:
+        name: unique block name. condition: schema name or teleoperation mode.
+        variants: trajectory variants, in listed order. repetitions: rounds over variants.
+        probe: the block's own trials are probe (fixture-free) trials.
+        counterbalance: takes part in the block-order randomisation.
+        probes_after: probe trials appended after the block's trials.
+    """
+
+    name: str
+    condition: str
+    variants: tuple[int, ...] = (0,)
+    repetitions: int = 1
+    probe: bool = False
+    counterbalance: bool = True
+    probes_after: int = 0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
+            raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
+        check_str(self.condition, "condition")
+        if not isinstance(self.variants, tuple):
+            raise fail(self.variants, "an array of integers", field="variants")
+        if not self.variants:
+            raise fail(self.variants, "at least one variant (an empty block)",
+                       field="variants")
+        for i, v in enumerate(self.variants):
+            check_int(v, f"variants[{i}]", lo=0)
+        if len(set(self.variants)) != len(self.variants):
+            raise fail(list(self.variants), "no repeated variant (use repetitions)",
+                       field="variants")
+        check_int(self.repetitions, "repetitions", bound=REPETITIONS)
+        check_bool(self.probe, "probe")
+        check_bool(self.counterbalance, "counterbalance")
+        check_int(self.probes_after, "probes_after", bound=PROBES_AFTER)
+
+    @property
+    def n_trials(self) -> int:
+        """Trials of the block, appended probes included."""
+        return len(self.variants) * self.repetitions + self.probes_after
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """A validated study protocol (see the module docstring for the file layout).
+
+    Attributes:
+        name, description: as in the file. task: ``"trajectory"`` or ``"point"``.
+        reach_radius: r_reach [m]. max_trial_time: time limit of one trial [s].
+        excessive_force_n: threshold of the excessive-force metrics [N].
+        repeat_timed_out: a scheduled trial whose attempt timed out (outcome
+            ``'timed_out'``) is run again: ``vasim.study.session`` begins a new attempt.
+        block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
+        probe_condition: condition of probe trials (a fixture-free schema).
+        probe_variant: variant of probe trials.
+        blocks: the blocks in file order. pre, post: the questionnaires.
+        text: the TOML text it was parsed from (stored with each session; not compared).
+        source: the file it came from (not compared).
+
+    Raises:
+        ConfigError: naming the field (dotted path) and the value; ``load_protocol`` adds
+            the file.
+    """
+
+    name: str
+    description: str
+    task: TaskKind
+    blocks: tuple[Block, ...]
+    reach_radius: float = 0.005
+    max_trial_time: float = 180.0
+    excessive_force_n: float = 2.0
+    repeat_timed_out: bool = False
+    block_order: str = "fixed"
+    variant_order: str = "fixed"
+    probe_condition: str = "none"
+    probe_variant: int = 0
+    pre: Questionnaire = _NO_QUESTIONS
+    post: Questionnaire = _NO_QUESTIONS
+    text: str | None = field(default=None, compare=False, repr=False)
+    source: str | None = field(default=None, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
+            raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
+        check_str(self.description, "description")
+        check_choice(self.task, "task", TASKS)
+        check_number(self.reach_radius, "reach_radius_m", gt=0.0, bound=REACH_RADIUS_M)
+        check_number(self.max_trial_time, "max_trial_time_s", gt=0.0, bound=TRIAL_TIME_S)
+        check_number(self.excessive_force_n, "excessive_force_n", gt=0.0, bound=FORCE_N)
+        check_bool(self.repeat_timed_out, "repeat_timed_out")
+        check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
+        check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
+        if not isinstance(self.blocks, tuple) or not self.blocks:
+            raise fail(self.blocks, "at least one block", field="blocks")
+        n_var = N_VARIANTS[self.task]
+        check_int(self.probe_variant, "probe.variant", lo=0, hi=n_var - 1)
+        _check_condition(self.probe_condition, self.task, "probe.condition")
+        if _schema_has_fixtures(self.probe_condition):
+            raise fail(self.probe_condition, "a schema without fixtures (probe trials are "
+                       "fixture-free)", field="probe.condition")
+        names: set[str] = set()
+        for i, b in enumerate(self.blocks):
+            if not isinstance(b, Block):
+                raise fail(b, "a Block", field=f"blocks[{i}]")
+            if b.name in names:
+                raise fail(b.name, "a block name not used before (duplicate block name)",
+                           field=f"blocks[{i}].name")
+            names.add(b.name)
+            _check_condition(b.condition, self.task, f"blocks[{i}].condition")
+            for j, v in enumerate(b.variants):
+                if v >= n_var:
+                    raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",
+                               field=f"blocks[{i}].variants[{j}]")
+            if b.probe and b.condition != self.probe_condition:
+                raise fail(b.condition, f"the probe condition {self.probe_condition!r} (a "
+                           "probe block runs it)", field=f"blocks[{i}].condition")
+            if b.probes_after and b.condition in TELEOPERATION_MODES:
+                raise fail(b.probes_after, "0 (teleoperation-mode blocks have no "
+                           "fixture-free probes)", field=f"blocks[{i}].probes_after")
+        n_trials = sum(b.n_trials for b in self.blocks)
+        if n_trials > TRIALS_PER_SESSION.high:
+            raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "
+                       f"({TRIALS_PER_SESSION.reason})", field="blocks")
+        for qname in ("pre", "post"):
+            q = getattr(self, qname)
+            if not isinstance(q, Questionnaire):
+                raise fail(q, "a Questionnaire", field=f"questionnaires.{qname}")
+        if self.post.demographics:
+            raise fail(True, "false (demographics are asked before the session: pre)",
+                       field="questionnaires.post.demographics")
+        # condition_* items default to the assisted conditions; explicit ones must exist
+        assisted = self.assisted_conditions
+        for qname in ("pre", "post"):
+            q = getattr(self, qname)
+            items = []
+            for k, item in enumerate(q.items):
+                path = f"questionnaires.{qname}.items[{k}]"
+                if item.type.startswith("condition_"):
+                    if not item.conditions:
+                        if not assisted:
+                            raise fail(item.conditions, "conditions to ask about (the protocol "
+                                       "has no assisted condition)", field=f"{path}.conditions")
+                        item = _replace_item(item, conditions=assisted)
+                    for c, cond in enumerate(item.conditions):
+                        if cond not in self.conditions:
+                            raise fail(cond, f"one of the protocol's conditions "
+                                       f"({', '.join(self.conditions)})",
+                                       field=f"{path}.conditions[{c}]")
+                    if item.type == "condition_sets" and item.min_size > len(item.conditions):
+                        raise fail(item.min_size, f"at most the {len(item.conditions)} "
+                                   "conditions asked about", field=f"{path}.min_size")
+                elif item.conditions:
+                    raise fail(item.conditions, f"no conditions (only condition_* items have "
+                               f"them; this is {item.type!r})", field=f"{path}.conditions")
+                items.append(item)
+            object.__setattr__(self, qname, Questionnaire(q.demographics, tuple(items)))
+
+    # -- views --------------------------------------------------------------------------
+    @property
+    def conditions(self) -> tuple[str, ...]:
+        """Every condition of the protocol (blocks and probes), in first-use order."""
+        out: list[str] = []
+        for b in self.blocks:
+            for c in (b.condition, self.probe_condition if b.probes_after else None):
+                if c is not None and c not in out:
+                    out.append(c)
+        return tuple(out)
+
+    @property
+    def assisted_conditions(self) -> tuple[str, ...]:
+        """Conditions of non-probe blocks other than the probe condition (the fixtures or
+        modes the questionnaires ask about), in file order."""
+        out: list[str] = []
+        for b in self.blocks:
+            if not b.probe and b.condition != self.probe_condition and b.condition not in out:
+                out.append(b.condition)
+        return tuple(out)
+
+    @property
+    def teleoperation_modes(self) -> tuple[str, ...]:
+        """The teleoperation-mode conditions used (empty for a fixture study)."""
+        return tuple(c for c in self.conditions if c in TELEOPERATION_MODES)
+
+    @property
+    def n_trials(self) -> int:
+        """Trials per session."""
+        return sum(b.n_trials for b in self.blocks)
+
+    def check_runnable(self) -> None:
+        """The hook where a protocol this release cannot run would be refused.
+
+        Nothing is refused now: every protocol that validates runs, fixture conditions
+        through the trial runner (``vasim.trials.vf``) and teleoperation modes (StdT,
+        MRCP, MRCP+Cam) through the MRCP slave station's needle task
+        (``vasim.trials.teleop``), whatever the protocol's ``task`` names. The callers
+        (session, cohort, CLI) keep calling it before anything is started.
+        """
+
+
+def _replace_item(item: QuestionItem, **changes: Any) -> QuestionItem:
+    return replace(item, **changes)
+
+
+@cache
+def _schema_task(name: str) -> str:
+    from vasim.fixtures.schema import load_schema
+
+    return load_schema(name).task
+
+
+@cache
+def _schema_has_fixtures(name: str) -> bool:
+    from vasim.fixtures.schema import load_schema
+
+    if name in TELEOPERATION_MODES:
+        return True
+    return bool(load_schema(name).fixtures)
+
+
+def _check_condition(cond: object, task: str, name: str) -> None:
+    """A condition is a shipped schema usable for ``task`` or a teleoperation mode."""
+    from vasim.fixtures.schema import available_schemas
+
+    check_str(cond, name)
+    assert isinstance(cond, str)
+    if cond in TELEOPERATION_MODES:
+        return
+    known = available_schemas()
+    if cond not in known:
+        raise fail(cond, f"a schema of protocols/schemas ({', '.join(known)}) or a "
+                   f"teleoperation mode ({', '.join(TELEOPERATION_MODES)}) (unknown condition)",
+                   field=name)
+    scope = _schema_task(cond)
+    if scope not in ("any", task):
+        raise fail(cond, f"a schema for {task!r} tasks (schema {cond!r} is for {scope!r} tasks, "
+                   f"not {task!r})", field=name)

@@ -1,0 +1,173 @@
+"""Schedules: a pure function from a protocol and a seed to the list of scheduled trials
+(block counterbalancing by Williams squares or permutations, variant shuffles, probes).
+
+The rules are described in :mod:`vasim.study.protocol`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vasim.core.bounds import SEED
+from vasim.core.config import check_int, is_int
+from vasim.study.protocol.model import Protocol
+from vasim.trials.kinds import TELEOPERATION_MODES
+
+
+@dataclass(frozen=True)
+class ScheduledTrial:
+    """One trial of a session's schedule.
+
+    Attributes:
+        index: 0-based position in the session.
+        block: block name. block_index: 0-based position of the block in this schedule.
+        trial_in_block: 0-based position within the block (appended probes included).
+        condition: the protocol's condition label. schema: the fixture schema to run (None
+            for a teleoperation mode). task: ``"trajectory"`` or ``"point"``.
+        variant: trajectory variant. probe: a fixture-free probe trial.
+        probe_index: 1-based number among the session's probe trials (None if not a probe).
+        repetition: 0-based round over the block's variants (or over its appended probes).
+    """
+
+    index: int
+    block: str
+    block_index: int
+    trial_in_block: int
+    condition: str
+    schema: str | None
+    task: str
+    variant: int
+    probe: bool
+    probe_index: int | None
+    repetition: int
+
+    def as_row(self) -> dict[str, Any]:
+        """The store's ``scheduled_trials`` columns (``index`` -> ``trial_index``)."""
+        return {"trial_index": self.index, "block": self.block, "block_index": self.block_index,
+                "trial_in_block": self.trial_in_block, "condition": self.condition,
+                "schema": self.schema, "task": self.task, "variant": self.variant,
+                "probe": self.probe, "probe_index": self.probe_index,
+                "repetition": self.repetition}
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any]) -> ScheduledTrial:
+        """Inverse of ``as_row`` (e.g. a row of ``TrialStore.schedule``)."""
+        def opt_int(v: Any) -> int | None:
+            return None if v is None or pd.isna(v) else int(v)
+
+        return cls(index=int(row["trial_index"]), block=str(row["block"]),
+                   block_index=int(row["block_index"]), trial_in_block=int(row["trial_in_block"]),
+                   condition=str(row["condition"]),
+                   schema=None if pd.isna(row["schema"]) else str(row["schema"]),
+                   task=str(row["task"]), variant=int(row["variant"]), probe=bool(row["probe"]),
+                   probe_index=opt_int(row["probe_index"]), repetition=int(row["repetition"]))
+
+
+def _rng(seed: int, *stream: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), *stream]))
+
+
+def williams_square(n: int) -> list[list[int]]:
+    """Rows of a Williams balanced Latin square for n conditions (0..n-1).
+
+    n rows for even n, 2n for odd n (the square and its mirror image). Every condition
+    appears once per row and equally often in every position, and over all rows every
+    ordered pair (a, b), a != b, appears as neighbours once (even n) or twice (odd n)
+    (Williams 1949, "Experimental designs balanced for the estimation of residual effects
+    of treatments").
+
+    Example:
+        >>> williams_square(4)
+        [[0, 1, 3, 2], [1, 2, 0, 3], [2, 3, 1, 0], [3, 0, 2, 1]]
+    """
+    if not is_int(n) or n < 1:
+        raise ValueError(f"n must be an integer >= 1, got {n!r}")
+    first = [0]
+    lo, hi = 1, n - 1
+    for k in range(1, n):
+        if k % 2 == 1:
+            first.append(lo)
+            lo += 1
+        else:
+            first.append(hi)
+            hi -= 1
+    rows = [[(c + r) % n for c in first] for r in range(n)]
+    if n % 2 == 1:
+        rows += [row[::-1] for row in rows]
+    return rows
+
+
+def block_order(protocol: Protocol, seed: int) -> list[int]:
+    """Indices into ``protocol.blocks`` in this seed's order (module docstring rules)."""
+    slots = [i for i, b in enumerate(protocol.blocks) if b.counterbalance]
+    order = list(range(len(protocol.blocks)))
+    if len(slots) < 2 or protocol.block_order == "fixed":
+        return order
+    if protocol.block_order == "random":
+        perm = _rng(seed, 1).permutation(len(slots)).tolist()
+    else:
+        rows = williams_square(len(slots))
+        perm = rows[seed % len(rows)]
+    for slot, k in zip(slots, perm, strict=True):
+        order[slot] = slots[k]
+    return order
+
+
+def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
+    """The realised schedule of one session: a pure function of protocol and seed.
+
+    Args:
+        protocol: the validated protocol.
+        seed: the session's randomisation seed, an integer in [0, 2**63).
+
+    Returns:
+        ``protocol.n_trials`` scheduled trials in session order.
+
+    Raises:
+        ConfigError: a bad seed.
+
+    Example:
+        >>> from vasim.study.protocol import load_protocol
+        >>> p = load_protocol("vf_learning_curve")
+        >>> a, b = generate_schedule(p, 1), generate_schedule(p, 1)
+        >>> a == b, a[0].block, a[3].block_index
+        (True, 'baseline', 1)
+    """
+    seed = check_int(seed, "seed", bound=SEED)
+    out: list[ScheduledTrial] = []
+    n_probe = 0
+
+    def schema_of(cond: str) -> str | None:
+        return None if cond in TELEOPERATION_MODES else cond
+
+    for pos, bi in enumerate(block_order(protocol, seed)):
+        b = protocol.blocks[bi]
+        rng = _rng(seed, 2, bi)
+        k = 0
+        for rep in range(b.repetitions):
+            variants = list(b.variants)
+            if protocol.variant_order == "random" and len(variants) > 1:
+                variants = [variants[j] for j in rng.permutation(len(variants)).tolist()]
+            for v in variants:
+                if b.probe:
+                    n_probe += 1
+                out.append(ScheduledTrial(
+                    index=len(out), block=b.name, block_index=pos, trial_in_block=k,
+                    condition=b.condition, schema=schema_of(b.condition), task=protocol.task,
+                    variant=v, probe=b.probe, probe_index=n_probe if b.probe else None,
+                    repetition=rep))
+                k += 1
+        for rep in range(b.probes_after):
+            n_probe += 1
+            out.append(ScheduledTrial(
+                index=len(out), block=b.name, block_index=pos, trial_in_block=k,
+                condition=protocol.probe_condition, schema=protocol.probe_condition,
+                task=protocol.task, variant=protocol.probe_variant, probe=True,
+                probe_index=n_probe, repetition=rep))
+            k += 1
+    return out
