@@ -98,7 +98,7 @@ from vasim.abdomen.motion import (
     PointMotion,
 )
 from vasim.core.errors import ConfigError
-from vasim.core.resources import read_data_file, scenes_dir
+from vasim.core.resources import data_file, read_data_file, scenes_dir
 
 MAX_DT = 0.02
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""
@@ -413,7 +413,7 @@ def scene_path(ref: str | Path) -> Path:
     p = Path(ref)
     if p.suffix == ".toml" or len(p.parts) > 1:
         return p
-    return scenes_dir() / f"{ref}.toml"
+    return data_file(ref, scenes_dir(), "scene")
 
 
 def load_scene(name_or_path: str | Path = "default") -> Scene:
