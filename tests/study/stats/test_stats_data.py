@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -99,3 +100,10 @@ def test_nan_to_none() -> None:
     assert nan_to_none(float("nan")) is None
     assert nan_to_none(np.float64(2.5)) == 2.5 and type(nan_to_none(np.int64(3))) is int
     assert nan_to_none(pd.NA) is None and nan_to_none(float("inf")) is None
+
+
+def test_stats_reads_the_export_missing_value_marker(tmp_path: Path) -> None:
+    p = tmp_path / "t.csv"
+    p.write_text("subject,condition,completion_time\nS01,vg,1.5\nS01,ff,\\N\n")
+    df = read_long_csv(p)
+    assert math.isnan(df["completion_time"].iloc[1]) and df["completion_time"].iloc[0] == 1.5
