@@ -154,10 +154,10 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
         if in_process:
             device = factory() if callable(factory) else None
             result, trial_id, timing = run_realtime_trial(
-                config, store, device, physics=args.physics)  # type: ignore[arg-type]
+                config, store, device, physics=args.physics)
         else:
             result, trial_id, timing = run_realtime_trial(
-                config, store, physics=args.physics, process=True,  # type: ignore[arg-type]
+                config, store, physics=args.physics, process=True,
                 device_factory=factory, device_name=args.device)
     finally:
         if store is not None:
@@ -243,7 +243,7 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
         ("path length", f"{m['path_l1'].sum():.3f} m (Manhattan), "
                         f"{m['path_l2'].sum():.3f} m (Euclidean)"),
         ("samples", f"{len(result.samples)} at {1 / result.config.dt:.0f} Hz"),
-        ("speed", f"{s['sim_time'] / max(result.wall_time, 1e-9):.1f}x real time"),
+        ("speed", f"{float(s['sim_time']) / max(result.wall_time, 1e-9):.1f}x real time"),
     ]
     if result.events:
         rows.append(("events", f"{len(result.events)} (see the events table)"))

@@ -74,6 +74,7 @@ from vasim.viewer.views import (
     HudInfo,
     HudView,
     OrganView,
+    SceneView,
     ToolView,
     TrajectoryView,
 )
@@ -181,7 +182,7 @@ class DragInput:
             if tip is not None:
                 dev.push(t + 1e-4, p, BUTTON_2)
                 dev.push(t + 2e-4, tip, BUTTON_2)
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.asarray(tip, dtype=np.float64)
             return
         self._dragging = True
         dev.push(t, p)
@@ -193,7 +194,7 @@ class DragInput:
         if self.handle.visible != active:
             self.handle.visible = active
             if active:
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.asarray(tip, dtype=np.float64)
                 dev = self._device()
                 if dev is not None:  # the first sample: where the gizmo starts
                     dev.push(time.perf_counter(), self._last_tip)
@@ -396,7 +397,9 @@ class ViewerApp(ErrorReporter):
     def scene_nodes(self) -> list[str]:
         """Names of the scene nodes the views own (sorted)."""
         names: list[str] = []
-        for v in (*self.organs, self.tool, self.trajectory, self.arrows, self.ghost):
+        views: tuple[SceneView, ...] = (*self.organs, self.tool, self.trajectory,
+                                        self.arrows, self.ghost)
+        for v in views:
             names.extend(v.node_names())
         return sorted(names)
 
@@ -417,7 +420,7 @@ class ViewerApp(ErrorReporter):
         }
         trial = self.controller.trial
         timing = trial.timing() if trial is not None else None
-        d = timing.to_dict() if hasattr(timing, "to_dict") else {}
+        d = timing.to_dict() if timing is not None and hasattr(timing, "to_dict") else {}
         for k, v in d.items():
             if isinstance(v, dict):  # RealtimeTiming's physics thread figures
                 for k2, v2 in v.items():
@@ -467,7 +470,7 @@ class ViewerApp(ErrorReporter):
         return [Organ(name=m.name,
                       mesh=trimesh.Trimesh(np.array(snap.organ(m.name).surface), m.faces,
                                            process=False),
-                      color=m.color, delicate=m.delicate, kind=m.kind)  # type: ignore[arg-type]
+                      color=m.color, delicate=m.delicate, kind=m.kind)
                 for m in models]
 
     def _build_gui(self) -> None:

@@ -257,9 +257,9 @@ def make_live_trial(config: TrialConfig, device: Device | None = None, *,
     started), else :class:`SimThreadTrial` (also for ``speed`` != 1, which the servo loop
     does not offer)."""
     if speed == 1.0 and realtime_available():
-        from vasim.trials.realtime import RealtimeTrial  # type: ignore[import-not-found]
+        from vasim.trials.realtime import RealtimeTrial
 
-        return RealtimeTrial(config, device, schema=schema)  # type: ignore[no-any-return]
+        return RealtimeTrial(config, device, schema=schema)
     return SimThreadTrial(config, device, schema=schema, speed=speed)
 
 

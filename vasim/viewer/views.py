@@ -26,6 +26,7 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import trimesh
@@ -88,6 +89,26 @@ def organ_style(organ: Organ) -> dict[str, object]:
                 "cast_shadow": False, "receive_shadow": False}
     return {"opacity": None, "side": "front", "flat_shading": False,
             "cast_shadow": True, "receive_shadow": True}
+
+
+def set_gui_value(handle: Any, value: object) -> None:
+    """Assigns a viser GUI input's value (synchronised to every client by viser).
+
+    ``handle`` is any of viser's input handles (``GuiInputHandle`` subclasses, or the
+    progress bar's handle, which viser does not export).
+
+    viser 1.1 declares the ``value`` setter with a wider type than the getter, which mypy
+    reports as a read-only property; the assignment is done here, once, instead.
+    """
+    setattr(handle, "value", value)  # noqa: B010 (see the docstring)
+
+
+class SceneView(Protocol):
+    """What every view owning scene nodes offers (for listing them, e.g. in tests)."""
+
+    def node_names(self) -> list[str]:
+        """Names of the scene nodes this view owns."""
+        ...
 
 
 class OrganView:
