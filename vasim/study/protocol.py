@@ -644,7 +644,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
             questionnaires[qname] = Questionnaire(q.get("demographics", False), tuple(items))
         except ConfigError as exc:
             raise _prefixed(exc, qpath, source) from exc
-    kw: dict[str, Any] = {
+    kw = {
         "name": data["name"], "description": data["description"], "task": data["task"],
         "blocks": tuple(blocks),
         "reach_radius": data.get("reach_radius_m", 0.005),

@@ -1315,7 +1315,8 @@ class TrialStore:
         Raises:
             ConfigError: unknown status.
         """
-        where, args = [], []
+        where: list[str] = []
+        args: list[object] = []
         if status is not None:
             if status not in TRIAL_STATUSES:
                 raise ConfigError(f"unknown trial status {status!r} (expected one of "

@@ -264,7 +264,7 @@ def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, con
         if runner.abdomen is not None:
             runner.set_physics_feed(feed)
         trial.plant.on_done.append(lambda: setattr(done, "value", 1))
-        trial.loop.plant = _FramePublisher(trial.plant, runner, frames, sent, read,  # type: ignore[assignment]
+        trial.loop.plant = _FramePublisher(trial.plant, runner, frames, sent, read,
                                            spec["frame_every"])
         trial.start()  # a device that cannot start fails start() in the parent
         control.send(("ready", getattr(trial.device, "name", "?")))

@@ -83,6 +83,12 @@ class TrialSource(Protocol):
     def sample_buffer(self, trial_id: int) -> SampleBuffer:
         ...
 
+    def point_metrics(self, trial_id: int) -> pd.DataFrame:
+        ...
+
+    def trial_metrics(self, trial_id: int) -> pd.DataFrame:
+        ...
+
 
 def check_sink(store: object | None) -> TrialSink | None:
     """``store`` as a ``TrialSink`` (or None); anything else is a ``TypeError``."""

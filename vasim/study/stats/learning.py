@@ -298,7 +298,7 @@ def fit_learning_curves(data: pd.DataFrame, dv: str, subject: str, trial: str,
             where = "" if cond is None else f" for {condition}={cond!r}"
             raise ConfigError(f"learning-curve fit{where}: {exc.reason}", file=src,
                               field=trial) from None
-        row: dict[str, Any] = {} if cond is None else {condition: cond}
+        row: dict[str, Any] = {} if cond is None or condition is None else {condition: cond}
         row.update(n_obs=fit.n_obs, a=fit.a, b=fit.b, c=fit.c, se_a=fit.se_a, se_b=fit.se_b,
                    se_c=fit.se_c, rss=fit.rss, dof=fit.dof)
         rows.append(row)
