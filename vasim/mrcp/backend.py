@@ -751,7 +751,7 @@ class PybulletWorld:
             pairs = self._all_pairs(a, b)
             bounds = None if pairs is None else self._pair_bounds(
                 a, b, pairs, max_distance + _ABOVE, COMPILED_TOLERANCE + _ABOVE)
-            if bounds is not None and not np.any(np.isneginf(bounds)):
+            if pairs is not None and bounds is not None and not np.any(np.isneginf(bounds)):
                 return self._min_distance_among(a, b, pairs, bounds, max_distance)
         spheres_a, spheres_b = self._spheres(a), self._spheres(b)
         body_a, body_b = self.body_id(a), self.body_id(b)
@@ -1001,13 +1001,14 @@ class PybulletWorld:
                                       physicsClientId=self._cid)
             if any(p[8] <= 0.0 for p in pts):
                 return True
-        pairs = r.self_pairs
-        if self.compiled_distances and pairs:
-            idx = _self_pair_array(pairs)
+        self_pairs = r.self_pairs
+        if self.compiled_distances and self_pairs:
+            idx = _self_pair_array(self_pairs)
             bounds = self._pair_bounds(robot, robot, idx, 2.0 * _ABOVE)
             if bounds is not None:
-                pairs = tuple(p for p, v in zip(pairs, bounds, strict=True) if v <= _ABOVE)
-        return any(self._links_touch(r.body, a, r.body, b) for a, b in pairs)
+                self_pairs = tuple(p for p, v in zip(self_pairs, bounds, strict=True)
+                                   if v <= _ABOVE)
+        return any(self._links_touch(r.body, a, r.body, b) for a, b in self_pairs)
 
     def self_collision_pairs(self, robot: str) -> tuple[tuple[int, int], ...]:
         """The link pairs (pybullet indices) checked for self-collision."""
