@@ -371,7 +371,7 @@ class Scene:
             if o.is_procedural:
                 out[o.name] = _procedural()[o.mesh].mesh.copy()
             else:
-                out[o.name] = load_user_mesh(o.mesh, units=o.units,  # type: ignore[arg-type]
+                out[o.name] = load_user_mesh(o.mesh, units=o.units,  # type: ignore[arg-type]  # o.mesh: a path here
                                              field=f"organs.{o.name}.mesh")
         return out
 

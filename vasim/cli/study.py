@@ -382,7 +382,7 @@ def _record_file_answers(store: object, session_id: int, path: Path | None,
     done = []
     for q in which:
         if q in data and q not in answered:
-            n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]
+            n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]  # a parsed answers table
             done.append(f"{q} ({n} answers)")
     return done
 
@@ -414,7 +414,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from vasim.study.session import load_answers_file
 
         for q, table in load_answers_file(args.answers).items():
-            validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]
+            validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]  # a parsed answers table
     with TrialStore(_new_db(args.db)) as store:
         sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings)
         recorded = _record_file_answers(store, sid, args.answers, ("pre",))

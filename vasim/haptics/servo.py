@@ -450,7 +450,7 @@ class ServoLoop:
         self.period_s = 1.0 / self.rate_hz
         self.home: Vec | None = (None if home is None else
                                  tuple(float(v) for v in np.asarray(home, dtype=np.float64)
-                                       .reshape(3)))  # type: ignore[assignment]
+                                       .reshape(3)))  # type: ignore[assignment]  # 3 floats after reshape(3)
         self.clutch_button = int(clutch_button)
         self.workspace_margin_m = float(workspace_margin_m)
         self.spin_s = float(spin_s)
@@ -709,16 +709,16 @@ class ServoLoop:
         k = self._k
         dev = self.device
         if self._observing:
-            obs: OperatorObservation | None = self.plant.observation()  # type: ignore[attr-defined]
+            obs: OperatorObservation | None = self.plant.observation()  # type: ignore[attr-defined]  # checked: ObservationSource
             if obs is not None:
-                dev.observe(obs)  # type: ignore[attr-defined]
+                dev.observe(obs)  # type: ignore[attr-defined]  # checked: an observing device
         sample = dev.read()
         if self.recording is not None:
             self.recording.append(k, sample)
         event = check_sample(sample, self._limits, k, self.workspace_margin_m)
         held = event is not None
         if held:
-            self.guard.add(event)  # type: ignore[arg-type]
+            self.guard.add(event)  # type: ignore[arg-type]  # held: not None
             good = self._good
             buttons = self._good_buttons
         else:

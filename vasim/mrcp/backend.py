@@ -190,7 +190,7 @@ class PybulletArm:
         self._reach = sum(float(np.linalg.norm(dh.joint_origin(j)[:3, 3]))
                           for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
         self._closed_form = closed_form and dh.is_puma_like(robot)
-        self._offsets = robot.table[3]  # type: ignore[attr-defined]
+        self._offsets = robot.table[3]
         unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
         self._spread = robot.lower + unit * (robot.upper - robot.lower)
 
@@ -811,7 +811,7 @@ class PybulletWorld:
                      for i in range(qs.shape[0])]
             if modelled:
                 packed = self._packed([names[j] for j in modelled])
-                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]
+                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]  # modelled: swept
                                            for j in modelled])
                 dist = np.empty((qs.shape[0], len(modelled)))
                 swept_distances(frames_a, sweep_a.pts, sweep_a.count, sweep_a.scale,
@@ -861,7 +861,7 @@ class PybulletWorld:
         scales, balls, bounding centres and radii), their link starts and margins."""
         key = tuple(names)
         if key not in self._packs:
-            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]
+            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]  # names: modelled bodies
             counts = [s.pts.shape[0] for s in sweeps]
             self._packs[key] = (
                 np.concatenate([s.pts for s in sweeps]),

@@ -136,7 +136,7 @@ def _check_str(v: object, name: str, *, one_line: bool = True, empty: bool = Fal
 def _check_int(v: object, name: str, lo: int | None = None, hi: int | None = None) -> None:
     if not _is_int(v):
         raise ConfigError(f"must be an integer, got {v!r}", field=name)
-    if (lo is not None and v < lo) or (hi is not None and v > hi):  # type: ignore[operator]
+    if (lo is not None and v < lo) or (hi is not None and v > hi):  # type: ignore[operator]  # v: an int (checked)
         rng = f"[{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
         raise ConfigError(f"must be an integer in {rng}, got {v!r}", field=name)
 

@@ -783,7 +783,7 @@ class TrialStore:
 
     def _claim_scheduled(self, con: sqlite3.Connection, meta: TrialMeta) -> int:
         """Checks a scheduled trial can start and counts the attempt; returns its number."""
-        sid, idx = int(meta.session_id), int(meta.schedule_index)  # type: ignore[arg-type]
+        sid, idx = int(meta.session_id), int(meta.schedule_index)  # type: ignore[arg-type]  # scheduled: both set
         srow = con.execute("SELECT status, subject FROM sessions WHERE id = ?",
                            (sid,)).fetchone()
         if srow is None:

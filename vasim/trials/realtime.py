@@ -357,7 +357,7 @@ class TrialPlant:
         self._kt_prev: tuple[float, ...] | None = None
         self._x_prev: tuple[float, ...] = tuple(runner._x)
         self.input = MasterIncrement()
-        runner.operator = self.input  # type: ignore[assignment]
+        runner.operator = self.input  # type: ignore[assignment]  # an operator-like input
         self.coupled = CoupledToolPlant(coupling, dt=dt)
         self.on_done: list[Any] = []
         self._prev: tuple[float, float, float] | None = None
@@ -543,7 +543,7 @@ class RealtimeTrial:
             elif physics == "thread":
                 self.physics_log = PhysicsLog()
                 self._world = _RecordingWorld(abdomen, self.physics_log)
-                self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]
+                self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]  # duck-typed world
                 self.runner.set_physics_feed(_ThreadFeed(self.physics_thread,
                                                          self.physics_log))
                 self.plant.on_done.append(self._world.freeze)

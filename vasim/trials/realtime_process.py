@@ -362,7 +362,7 @@ class ProcessRealtimeTrial:
             self.physics_log = PhysicsLog()
             self._world = _PipeWorld(self.runner.abdomen, self._board, self._snap_tx,
                                      self.physics_log, self._taken, self._done)
-            self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]
+            self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]  # duck-typed world
         self._proc: Any = None
         self._frame: TrialFrame = self.runner.frame
         self._rx_thread: threading.Thread | None = None

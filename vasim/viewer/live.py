@@ -157,7 +157,7 @@ class SimThreadTrial:
         self.runner = TrialRunner(config, schema)
         self.device = device
         if device is not None:
-            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]
+            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]  # a device operator in the operator slot
         self.speed = float(speed)
         self.period = 1.0 / float(loop_hz)
         self.max_catch_up_s = float(max_catch_up_s)

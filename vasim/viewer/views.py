@@ -126,7 +126,7 @@ class OrganView:
         f = np.ascontiguousarray(organ.mesh.faces, dtype=np.uint32)
         self.n_vertices = len(v)
         self.handle = server.scene.add_mesh_simple(
-            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]
+            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]  # viser's style kwargs
         )
 
     def update(self, vertices: FloatArray) -> None:

@@ -148,7 +148,7 @@ class LaparoscopicRings:
         qc = camera.ik(np.array([0.0, 0.0, -0.06]), None, model.home)
         if qc is None:
             raise RuntimeError("laparoscopic_rings: the camera robot cannot reach its view")
-        st.physical.add_robot("C", model, camera.arm.base, qc)  # type: ignore[attr-defined]
+        st.physical.add_robot("C", model, camera.arm.base, qc)  # type: ignore[attr-defined]  # a pybullet world
         # bodies ring_k (first ring, the name the viewer's tests count) and ring1_k (second)
         for i, rx in enumerate(RINGS):
             for k, (half, centre, rot) in enumerate(ring_segments(
