@@ -22,6 +22,8 @@ run: install
 test: install
 	.ci/ensure-chromium
 	$(VENV)/bin/ruff check vasim tests bench
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 	$(PY) -m pytest
 
 bench: install
@@ -29,6 +31,8 @@ bench: install
 
 lint: install
 	$(VENV)/bin/ruff check vasim tests bench
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from trimesh import triangles as tri_ops
 
-from vasim.abdomen._contact_kernels import box_apart, cells_near, scatter_forces
+from vasim.abdomen._contact_kernels import _closest, box_apart, cells_near, scatter_forces
 from vasim.abdomen.contact import (
     STABILITY_FRACTION,
     ContactPatch,
@@ -362,3 +362,12 @@ def test_inconsistent_arrays_are_refused_not_read_out_of_bounds():
         detect_contacts(model.rest, model.faces, model.mass[:-1], pose, SHAPE, dt=4e-3)
     with pytest.raises(ValueError, match="contact patch"):
         ContactPatch(np.zeros((2, 3)), np.zeros((3, 3)), np.zeros(2), np.zeros(2), 0.0025)
+
+
+def test_closest_point_on_a_degenerate_triangle_does_not_divide_by_zero() -> None:
+    # a == b: the denominator of the edge-ac branch was zero (ZeroDivisionError in numba)
+    q = _closest(1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+    assert all(np.isfinite(q))
+    for p in ((0.5, 1.0, 0.0), (2.0, 0.0, 0.0), (1.0, 1.0, 1.0)):
+        assert all(np.isfinite(_closest(*p, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0)))
+        assert all(np.isfinite(_closest(*p, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)))

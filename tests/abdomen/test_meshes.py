@@ -129,3 +129,15 @@ def test_file_problems_name_the_file(tmp_path: Path) -> None:
     assert "cannot read" in info.value.reason or "no triangle" in info.value.reason
     with pytest.raises(ConfigError, match="units"):
         load_user_mesh(write(sphere(), tmp_path / "ball.obj"), units="inch")  # type: ignore
+
+
+def test_the_units_hint_names_centimetres_or_millimetres(tmp_path: Path) -> None:
+    cm = tmp_path / "cm.obj"
+    trimesh.creation.icosphere(subdivisions=2, radius=3.0).export(cm)
+    with pytest.raises(ConfigError, match='centimetres; pass units="cm"'):
+        load_user_mesh(cm)
+    assert load_user_mesh(cm, units="cm").extents.max() == pytest.approx(0.06, rel=1e-6)
+    mm = tmp_path / "mm.obj"
+    trimesh.creation.icosphere(subdivisions=2, radius=150.0).export(mm)
+    with pytest.raises(ConfigError, match='millimetres; pass units="mm"'):
+        load_user_mesh(mm)

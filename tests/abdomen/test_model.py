@@ -202,3 +202,19 @@ def test_open_mesh_is_refused() -> None:
     mesh = trimesh.Trimesh(mesh.vertices, mesh.faces[1:], process=False)
     with pytest.raises(ConfigError, match="watertight"):
         build_organ(mesh, OrganParams(anchors=(TOP,)), name="ball")
+
+
+def test_unanchored_organs_and_parts_are_refused() -> None:
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.03)
+    with pytest.raises(ConfigError, match="no anchor") as info:
+        build_organ(ball, OrganParams(), name="ball")
+    assert info.value.field == "anchors"
+    two = trimesh.util.concatenate([ball, ball.copy().apply_translation((0.2, 0.0, 0.0))])
+    rule = AnchorRule(to="point", point=(0.0, 0.0, 0.0), fraction=0.1)
+    with pytest.raises(ConfigError, match=r"'pair'.*part 1 of 2 connected parts"):
+        build_organ(two, OrganParams(anchors=(rule,)), name="pair")
+    rule2 = AnchorRule(to="point", point=(0.2, 0.0, 0.0), within=0.031)
+    model = build_organ(two, OrganParams(anchors=(rule, rule2)), name="pair")
+    assert len(model.anchors) > 0
+    # a kinematic organ is entirely anchored: accepted
+    build_organ(ball, OrganParams(kinematic=True, volume=False), name="rigid")

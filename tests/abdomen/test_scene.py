@@ -199,3 +199,50 @@ def test_with_organ_replaces_or_adds(default: Scene) -> None:
     assert with_organ(default, extra).organs[-1].name == "liver_copy"
     with pytest.raises(ConfigError, match=re.escape("duplicate organ name 'liver'")):
         Scene("x", organs=(liver, liver))
+
+
+# -- Plausibility bounds: implausible motion amplitudes, rates and gravity are refused; a
+# deformable abdominal wall or an all-kinematic scene too.
+LIVER = """
+[[organs.liver.anchors]]
+to = "plane"
+point = [0.0, 0.142, 0.0]
+normal = [0.0, -1.0, 0.0]
+fraction = 0.1
+"""
+
+
+def scene_text(physics: str = "", motion: str = "", organ: str = "") -> str:
+    return (f'name="x"\n[physics]\n{physics}\n[motion]\n{motion}\n[organs.liver]\n{organ}\n'
+            + LIVER)
+
+
+@pytest.mark.parametrize(("kw", "field", "value"), [
+    ({"organ": "breathing_m=[0.0,12.0,0.0]"}, "organs.liver.breathing_m", "12.0"),
+    ({"organ": "heartbeat_m=[0.0,0.0,0.02]"}, "organs.liver.heartbeat_m", "0.02"),
+    ({"motion": "breathing_hz=100.0"}, "motion.breathing_hz", "100.0"),
+    ({"motion": "heartbeat_hz=250.0"}, "motion.heartbeat_hz", "250.0"),
+    ({"physics": "gravity=[0.0,0.0,-1e6]"}, "physics.gravity", "1000000.0"),
+])
+def test_implausible_motion_and_gravity_are_refused(kw: dict[str, str], field: str,
+                                                    value: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_scene(scene_text(**kw), source="/x/scene.toml")
+    assert info.value.field == field and info.value.file == "/x/scene.toml"
+    assert value in str(info.value)
+
+
+def test_plausible_values_and_still_motion_are_accepted() -> None:
+    scene = parse_scene(scene_text(motion="breathing_hz=0.0\nheartbeat_hz=3.0",
+                                   organ="breathing_m=[0.0,0.05,0.0]\nheartbeat_m=[0,0,0.01]"))
+    assert scene.motion.heartbeat_hz == 3.0
+
+
+def test_a_deformable_wall_and_an_all_kinematic_scene_are_refused() -> None:
+    with pytest.raises(ConfigError, match="must be kinematic") as info:
+        parse_scene('name="w"\n[organs.abdominal_wall]\nkinematic=false\n' + LIVER.replace(
+            "liver", "abdominal_wall"))
+    assert info.value.field == "organs.abdominal_wall.kinematic"
+    with pytest.raises(ConfigError, match="deformable organ") as info:
+        parse_scene('name="w"\n[organs.liver]\nkinematic=true\nvolume=false\n')
+    assert info.value.field == "organs"

@@ -3,18 +3,21 @@ sleeping organs, snapshots, the physics thread."""
 
 from __future__ import annotations
 
-import time
+from typing import Any
 
 import numpy as np
 import pytest
 import trimesh
 
+from tests.abdomen.test_scene import LIVER, scene_text
+from tests.polling import wait_until
 from vasim.abdomen.contact import ToolPose, ToolShape, detect_contacts
-from vasim.abdomen.integrate import OrganSolver
+from vasim.abdomen.integrate import OrganSolver, StepReport
 from vasim.abdomen.model import AnchorRule, OrganParams, build_organ
 from vasim.abdomen.runner import PhysicsThread
-from vasim.abdomen.scene import load_scene
-from vasim.abdomen.world import Abdomen, motion_phases
+from vasim.abdomen.scene import load_scene, parse_scene
+from vasim.abdomen.world import MAX_EVENTS, Abdomen, motion_phases, settled_positions
+from vasim.core.errors import ConfigError
 from vasim.tasks import point_task
 
 
@@ -160,9 +163,9 @@ def test_physics_thread_publishes_whole_snapshots():
     w = Abdomen("default")
     with PhysicsThread(w) as physics:
         physics.set_tool(ToolPose(np.zeros(3), np.array([np.inf, 0.0, 0.0])))  # ignored
-        time.sleep(0.2)
+        wait_until(lambda: physics.latest.seq > 0, what="a first physics snapshot")
         first = physics.latest
-        time.sleep(0.1)
+        wait_until(lambda: physics.latest.seq > first.seq, what="a later physics snapshot")
         second = physics.latest
     assert physics.error is None
     assert second.seq > first.seq > 0
@@ -178,3 +181,61 @@ def test_frame_velocities_are_point_motions_velocities_to_the_bit():
     for b in world._bodies:
         for t in (0.0, 0.123, 1.7, 12.345):
             np.testing.assert_array_equal(b.frame_velocities(t), b.node_motion.velocities(t))
+
+
+# -- A kinematic delicate vessel in contact, settling that keeps resetting, huge poses and
+# reset events.
+def test_a_kinematic_delicate_vessel_is_touched_and_counts_as_damage() -> None:
+    scene = parse_scene(
+        'name="kinvessel"\n[organs.liver]\n' + LIVER
+        + '\n[organs.vessel]\nkinematic=true\nvolume=false\n')
+    world = Abdomen(scene)
+    body = next(b for b in world._bodies if b.model.name == "vessel")
+    assert body.kinematic and body.model.delicate
+    s = body.settled[: body.model.n_surface]
+    p = s[int(np.argmax(s[:, 2]))]
+    snap = world.step(ToolPose(p + np.array([0, 0, 0.1]), p - np.array([0, 0, 0.003])))
+    assert "vessel" in snap.touching and snap.delicate_contact
+    assert snap.force[2] > 0.0  # the rigid organ pushes the tool back (up)
+    assert not world.awake()["vessel"]  # never stepped
+    assert world.quality.delicate_count == 1 and world.quality.delicate_time > 0.0
+
+
+class _ResettingSolver:
+    dt = 0.004
+
+    def __init__(self, solver: Any) -> None:
+        self._inner = solver
+
+    def initial_state(self) -> Any:
+        return self._inner.initial_state()
+
+    def step(self, state: Any, targets: Any, *a: Any, **k: Any) -> StepReport:
+        state.v[...] = 0.0  # what a reset leaves: looks "still"
+        return StepReport(False, True, "liver: blow-up; reset to rest", 0, 0, False, state.t)
+
+
+def test_settling_that_keeps_resetting_is_refused_naming_the_organ() -> None:
+    from vasim.abdomen.integrate import OrganSolver
+    scene = parse_scene(scene_text(), source="/x/settle.toml")
+    (model,) = scene.build()
+    scene = parse_scene(scene_text().replace('name="x"', 'name="settle_reset_test"'),
+                        source="/x/settle.toml")
+    with pytest.raises(ConfigError, match="does not settle") as info:
+        settled_positions(scene, model,
+                          lambda: _ResettingSolver(OrganSolver(model, 0.004)))  # type: ignore
+    assert info.value.field == "organs.liver" and "liver" in str(info.value)
+
+
+def test_huge_poses_are_no_contact_and_reset_events_name_the_organ_once() -> None:
+    world = Abdomen("default", always_awake=True)
+    assert world.events.maxlen == MAX_EVENTS
+    for ful in ([0.0, 0.0, 1e155], [0.0, 0.0, 1e160], [1e200, 0.0, 0.0]):
+        snap = world.step(ToolPose(np.array(ful), np.array([0.0, 0.0, 0.05])))
+        assert not snap.in_contact and np.array_equal(snap.force, np.zeros(3))
+    body = next(b for b in world._bodies if b.model.name == "liver")
+    body.state.x[3] = np.nan
+    snap = world.step(None)
+    (_kind, detail), = [e for e in snap.events if e[0] == "organ_reset"]
+    assert detail.startswith("liver: ") and not detail.startswith("liver: liver:")
+    assert world.n_events == 1 and world.events[-1][2] == detail

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import sys
-import time
 from collections.abc import Callable
 
 import numpy as np
@@ -15,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.polling import wait_until
 from vasim.core.errors import DeviceError
 from vasim.haptics.device import BUTTON_1, BUTTON_2, OMNI_LIMITS, DeviceLimits, DeviceSample
 from vasim.haptics.devices.emulator import EmulatorDevice
@@ -244,12 +244,6 @@ def test_scripted_device_sees_the_plant_observation_every_tick() -> None:
 
 # -- real time ------------------------------------------------------------------------------
 
-def _wait_for(cond: Callable[[], bool], timeout: float = 5.0) -> None:
-    t_end = time.monotonic() + timeout
-    while not cond() and time.monotonic() < t_end:
-        time.sleep(0.01)
-
-
 def test_realtime_smoke() -> None:
     """Only that ticks happen and the statistics are finite (no timing thresholds)."""
     dev = EmulatorDevice(hand=_hand)
@@ -258,7 +252,7 @@ def test_realtime_smoke() -> None:
     loop = ServoLoop(dev, plant, switch_interval_s=5e-4)
     loop.start()
     assert sys.getswitchinterval() == pytest.approx(5e-4)
-    time.sleep(0.2)
+    wait_until(lambda: loop.ticks >= 2, what="two servo ticks")
     loop.stop()
     assert sys.getswitchinterval() == before  # restored
     st_ = loop.stats()
@@ -282,7 +276,7 @@ def test_realtime_errors_stay_in_the_thread() -> None:
     plant = Spy(fail_at=3)
     loop = ServoLoop(EmulatorDevice(hand=_hand), plant)
     loop.start()
-    _wait_for(lambda: not loop.running)
+    wait_until(lambda: not loop.running, what="the servo loop to stop", timeout=5.0)
     loop.stop()
     assert isinstance(loop.error, RuntimeError) and plant.calls == ["start", "stop"]
 

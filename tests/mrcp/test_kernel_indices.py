@@ -304,3 +304,11 @@ def test_cone_azimuth_just_below_zero_is_covered_by_two_sectors() -> None:
     single = cone.margin(tip)
     assert single == pytest.approx(1.0 - (np.pi / 6) / np.arctan(0.8))  # φ(0) = atan(a)
     assert cone.margins(tip[None, :])[0] == pytest.approx(single)
+
+
+def test_minus_infinity_is_an_impact_and_nan_is_still_skipped() -> None:
+    t = np.array([0.0, 0.1, 0.2])
+    assert impact_time(t, np.array([0.3, -np.inf, 0.1]), 5.0) == pytest.approx(0.1)
+    assert impact_time(t, np.array([-np.inf, 0.2, 0.1]), 5.0) == 0.0
+    assert impact_time(t, np.array([0.3, np.nan, 0.1]), 5.0) == pytest.approx(0.3)
+    assert impact_time(t, np.array([0.3, np.nan, np.nan]), 5.0) == 5.0

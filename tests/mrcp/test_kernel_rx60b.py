@@ -11,11 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
+from vasim.mrcp import backend, dh
 from vasim.mrcp.indices import EvalContext
 from vasim.mrcp.indices.dexterity import AnisotropicDexterityIndex
-
-backend = pytest.importorskip("vasim.mrcp.backend")
-dh = pytest.importorskip("vasim.mrcp.dh")
 
 
 @pytest.fixture(scope="module")

@@ -14,8 +14,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("vasim.mrcp.backend")
-
 from vasim.cli import main
 from vasim.cli.mrcp import format_events
 from vasim.core.errors import ConfigError

@@ -4,9 +4,6 @@ the task goes to R0 with RJ as the cause, before R1 has to refuse the operator."
 from __future__ import annotations
 
 import numpy as np
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
 
 from tests.mrcp.test_scen_common import joint_margins, scenario_run
 from vasim.core.geometry import rot_z

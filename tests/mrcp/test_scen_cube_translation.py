@@ -5,9 +5,6 @@ collision risk, and the robot placing the cube on the table holds it by the top 
 from __future__ import annotations
 
 import numpy as np
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
 
 from tests.mrcp.test_scen_common import joint_margins, scenario_run
 from vasim.mrcp.scenarios.cube_translation import WAYPOINTS, CubeTranslation

@@ -4,12 +4,9 @@ limit (RJ), and the wheel keeps turning the commanded way."""
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
-
 import itertools
+
+import numpy as np
 
 from tests.mrcp.test_scen_common import joint_margins, scenario_run
 

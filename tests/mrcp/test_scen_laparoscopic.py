@@ -9,9 +9,6 @@ left behind."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
 
 from tests.mrcp.test_scen_common import scenario_run
 from vasim.mrcp.scenarios import get_scenario

@@ -4,10 +4,6 @@ has moved to the end that came through without touching the wall or the other ro
 
 from __future__ import annotations
 
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
-
 from tests.mrcp.test_scen_common import scenario_run
 from vasim.mrcp.scenarios.obstacle_hole import HALF_BAR, PASSES, SPEED, Y_END
 

@@ -13,12 +13,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from vasim.mrcp import backend, dh
 from vasim.mrcp.indices import EvalContext
 from vasim.mrcp.indices.dexterity import AnisotropicDexterityIndex
 from vasim.mrcp.scenarios.base import gripper_frame
-
-backend = pytest.importorskip("vasim.mrcp.backend")
-dh = pytest.importorskip("vasim.mrcp.dh")
 
 TILT = np.radians(15.0)
 ROT = gripper_frame(np.array([np.cos(TILT), 0.0, -np.sin(TILT)]), np.array([0.0, 0.0, 1.0]))

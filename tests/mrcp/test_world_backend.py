@@ -4,14 +4,23 @@ must, and distances that agree with an independent computation on the trimesh hu
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pybullet as pb
 import pytest
 import trimesh
+from scipy.optimize import minimize_scalar
 
 from vasim.mrcp import dh
-from vasim.mrcp.backend import HULL_MARGIN, PybulletArm, PybulletWorld, pose_matrix, rotation_error
+from vasim.mrcp.backend import (
+    HULL_MARGIN,
+    PybulletArm,
+    PybulletWorld,
+    pose_matrix,
+    rotation_error,
+)
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.urdf import link_hulls, write_urdf
 
@@ -257,3 +266,103 @@ def test_closed_form_and_numeric_ik_agree_on_what_is_reachable_within_limits() -
                 assert RX.within_limits(sol)
                 assert np.linalg.norm(dh.fk(RX, sol, BASE)[0] - pos) < 1e-6
     assert outcomes == {True, False}
+
+
+# -- Non-finite joints and IK inputs are refused (a NaN seed hung pybullet's IK); the closed-
+# form IK at the shoulder singularity falls back to the numeric search.
+def test_non_finite_joints_are_rejected_by_the_world() -> None:
+    w = PybulletWorld()
+    w.add_robot("a", RX)
+    w.add_robot("b", RX, pose_matrix([0.5, 0.0, 0.0], dh.rot_z(math.pi)))
+    q = RX.home.copy()
+    q[0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        w.set_configuration("a", q)
+    np.testing.assert_array_equal(w.configuration("a"), RX.home)   # unchanged
+    q[0] = np.inf
+    with pytest.raises(ValueError, match="finite"):
+        w.min_distances("a", np.stack([RX.home, q]), ["b"], 1.0)
+    w.compiled_distances = False
+    with pytest.raises(ValueError, match="finite"):
+        w.min_distances("a", q[None], ["b"], 1.0)
+
+
+@pytest.fixture(scope="module")
+def closed_form_arm() -> PybulletArm:
+    return PybulletArm(RX)
+
+
+def test_ik_rejects_non_finite_rotation_and_seed(closed_form_arm: PybulletArm) -> None:
+    p, r = closed_form_arm.tcp_pose(RX.home)
+    bad_r = r.copy()
+    bad_r[0, 0] = np.nan
+    with pytest.raises(ValueError, match="rotation"):
+        closed_form_arm.ik(p, bad_r, RX.home)
+    with pytest.raises(ValueError, match="rotation"):
+        closed_form_arm.ik(p, bad_r)
+    with pytest.raises(ValueError, match="rotation"):
+        closed_form_arm.ik(p, np.eye(4))
+    with pytest.raises(ValueError, match="q_seed"):
+        closed_form_arm.ik(p, r, np.full(6, np.nan))
+    with pytest.raises(ValueError, match="position"):
+        closed_form_arm.ik(np.array([np.nan, 0.0, 0.3]), r)
+
+
+def test_ik_position_only_with_a_nan_seed_raises_instead_of_hanging() -> None:
+    # in a subprocess: the old code looped forever inside pybullet
+    code = ("import numpy as np\n"
+            "from vasim.mrcp import dh\n"
+            "from vasim.mrcp.backend import PybulletArm\n"
+            "arm = PybulletArm(dh.load_robot('rx60b'))\n"
+            "p, _ = arm.tcp_pose(arm.home)\n"
+            "try:\n"
+            "    arm.ik(p, None, np.full(6, np.nan))\n"
+            "except ValueError as e:\n"
+            "    print('ValueError', e)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120, check=False)
+    assert "ValueError" in out.stdout and "q_seed" in out.stdout, out.stderr[-2000:]
+
+
+def _shoulder_singular(q: np.ndarray) -> np.ndarray:
+    """``q`` with joint 2 moved so that the wrist centre lies on the d3 circle about the
+    first axis (rho2 = 0: the shoulder singularity)."""
+    d3 = RX.joints[2].d
+
+    def rho2(q2: float) -> float:
+        qq = q.copy()
+        qq[1] = q2
+        w = dh.frames_one(RX, qq)[4][:3, 3]
+        return float(w[0] ** 2 + w[1] ** 2 - d3 ** 2)
+
+    res = minimize_scalar(rho2, bounds=(q[1] - 1e-3, q[1] + 1e-3), method="bounded",
+                          options={"xatol": 1e-12})
+    out = q.copy()
+    out[1] = res.x
+    assert abs(rho2(res.x)) < 1e-12
+    return out
+
+
+@pytest.mark.parametrize("q", [[-1.7107, -1.7253, 1.8697, 2.6558, 0.7911, -1.9774],
+                               [-0.6936, -2.0168, 2.4321, 1.9764, 0.5328, 2.2632]])
+def test_closed_form_ik_at_the_shoulder_singularity(closed_form_arm: PybulletArm, q: list[float]
+                                                    ) -> None:
+    qs = _shoulder_singular(np.array(q))
+    p, r = closed_form_arm.tcp_pose(qs)
+    assert len(dh.puma_ik(RX, p, r)) == 8            # was 0 (rho2 ~ -1e-18 from round-off)
+    sol = closed_form_arm.ik(p, r)
+    assert sol is not None and RX.within_limits(sol)
+    p2, r2 = closed_form_arm.tcp_pose(sol)
+    assert np.linalg.norm(p2 - p) <= 1e-6
+    assert np.linalg.norm(rotation_error(r2, r)) <= 1e-6
+
+
+def test_an_empty_closed_form_within_reach_falls_back_to_the_numeric_search(
+        closed_form_arm: PybulletArm, monkeypatch: pytest.MonkeyPatch) -> None:
+    q = np.array([0.3, -1.2, 2.6, 0.4, 1.0, -0.5])
+    p, r = closed_form_arm.tcp_pose(q)
+    monkeypatch.setattr(dh, "puma_ik", lambda *args, **kwargs: [])
+    assert closed_form_arm._closed_form_ik(p, r, RX.home, 1e-6, 1e-6) == (None, False)
+    sol = closed_form_arm.ik(p, r)
+    assert sol is not None
+    assert np.linalg.norm(closed_form_arm.tcp_pose(sol)[0] - p) <= 1e-6

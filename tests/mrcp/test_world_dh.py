@@ -4,6 +4,7 @@ finite differences, and bad robot files against clear errors."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -176,3 +177,58 @@ def test_wrap_into_picks_the_in_limit_turn_nearest_the_reference() -> None:
     out = dh.wrap_into(np.array([2.0 * math.pi + 0.5, -0.5]), lo, up, np.array([0.0, 5.0]))
     np.testing.assert_allclose(out, [0.5, 2 * math.pi - 0.5])
     assert dh.wrap_into(np.array([3.1, 1.0]), lo, up, np.zeros(2)) is None
+
+
+# -- Robot-file checks: names, key points per link, the links table, implausible lengths and
+# limits.
+def _sub(old: str, new: str) -> str:
+    text = _rx_text()
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+@pytest.mark.parametrize("name", ["a/b", "..", ".hidden", 'a"b<c', "a b", "x\\y"])
+def test_bad_robot_names_are_rejected(name: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        dh.parse_robot(_sub('name = "rx60b"', f"name = '{name}'"), file="bad.toml")
+    assert err.value.field == "name"
+    with pytest.raises(ConfigError) as err:
+        dh.RobotModel(name, RX.joints, home=RX.home)
+    assert err.value.field == "name"
+
+
+def test_a_plain_robot_name_is_accepted() -> None:
+    assert dh.parse_robot(_sub('name = "rx60b"', 'name = "rx60b_v2.1-test"')).name == \
+        "rx60b_v2.1-test"
+
+
+def test_more_than_three_key_points_per_link_are_rejected_at_parse_time() -> None:
+    text = _sub("radius = 0.07", "radius = 0.07\npoints = [[0.1, 0.0, 0.1]]")
+    with pytest.raises(ConfigError) as err:
+        dh.parse_robot(text, file="bad.toml")
+    assert err.value.field == "links[2].points"
+    # three points without the chain, or a duplicate of a chain point, are fine
+    dh.parse_robot(_sub("radius = 0.07", "radius = 0.07\nchain = false\n"
+                                         "points = [[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]]"))
+    dh.parse_robot(_sub("radius = 0.07", "radius = 0.07\npoints = [[0.0, 0.0, 0.0]]"))
+
+
+@pytest.mark.parametrize("value", ["5", '"abc"', "{ radius = 0.1 }"])
+def test_a_links_value_that_is_not_a_table_list_is_a_config_error(value: str) -> None:
+    text = re.sub(r"\[\[links\]\].*", "", _rx_text(), flags=re.S)
+    text = text.replace('name = "rx60b"', f'name = "rx60b"\nlinks = {value}', 1)
+    with pytest.raises(ConfigError) as err:
+        dh.parse_robot(text, file="bad.toml")
+    assert err.value.field == "links"
+
+
+@pytest.mark.parametrize(("old", "new", "field"), [
+    ("a = 0.290", "a = 290.0", "joints[2].a"),
+    ("d = 0.310", "d = -310.0", "joints[3].d"),
+    ("lower = -2.79\nupper = 2.79", "lower = -160.0\nupper = 160.0", "joints[0].lower"),
+    ("lower = -3.05\nupper = 3.05", "lower = -3.05\nupper = 20.0", "joints[3].upper"),
+])
+def test_implausible_lengths_and_limits_are_rejected(old: str, new: str, field: str) -> None:
+    with pytest.raises(ConfigError) as err:
+        dh.parse_robot(_sub(old, new), file="bad.toml")
+    assert err.value.field == field

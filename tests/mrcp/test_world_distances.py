@@ -3,6 +3,8 @@ key-point geometry against an independent convex minimisation (scipy)."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -11,7 +13,12 @@ from scipy.optimize import minimize
 
 from vasim.mrcp import dh
 from vasim.mrcp._distance_kernels import hull_points_distance
-from vasim.mrcp.backend import COMPILED_TOLERANCE, PybulletArm, PybulletWorld, pose_matrix
+from vasim.mrcp.backend import (
+    COMPILED_TOLERANCE,
+    PybulletArm,
+    PybulletWorld,
+    pose_matrix,
+)
 
 RX = dh.load_robot("rx60b")
 
@@ -186,3 +193,88 @@ def test_min_distance_and_in_collision_are_pybullets_with_the_model_as_a_filter(
                 assert (f.link_a, f.link_b) == (r.link_a, r.link_b)
                 np.testing.assert_allclose(f.point_a, r.point_a, atol=1e-9)
     assert 5 < hits < 75        # both answers occur
+
+
+# -- Pairs without a model estimate (-inf) are penetrations, refined in pybullet on request;
+# deep penetrations stay lower bounds within the tolerance.
+def test_pairs_without_a_model_estimate_are_a_penetration_or_refined_on_request() -> None:
+    w = PybulletWorld()
+    w.add_robot("a", RX)
+    frames = dh.frames_one(RX, RX.home)
+    pts = RX.link_key_points(2)                      # inside the upper arm's key-point hull
+    centre = (frames[2] @ np.c_[pts, np.ones(len(pts))].T).T[:, :3].mean(axis=0)
+    w.add_sphere("ball", 0.02, centre)
+    q = RX.home[None, :]
+    fast = w.min_distances("a", q, ["ball"], 1.0)
+    ref = _pybullet(w, q, ["ball"], 1.0)
+    assert ref[0, 0] < -0.05 and fast[0, 0] <= ref[0, 0]    # -inf: "in, no estimate"
+    w.refine_below = 0.0                                      # every penetration exact
+    np.testing.assert_array_equal(w.min_distances("a", q, ["ball"], 1.0), ref)
+
+
+_LB_CASE = {   # the reviewer's case: model 1.087 mm below pybullet at 7 cm penetration
+    "ba": [[0.6065586612966181, 0.6222882066102803, 0.4948171160336066, -0.003110412232102527],
+           [-0.795038735160781, 0.47476215289796175, 0.37751067239170577,
+            -0.07116146500204364],
+           [0.0, -0.6223811421383633, 0.782714324584996, -0.06115749309388823],
+           [0.0, 0.0, 0.0, 1.0]],
+    "bb": [[-0.4637633934137484, 0.8859590932595957, 0.0, 0.6046569087288115],
+           [-0.8859590932595957, -0.4637633934137484, 0.0, -0.21407365127791042],
+           [0.0, 0.0, 1.0, 0.13603952372220537], [0.0, 0.0, 0.0, 1.0]],
+    "qb": [0.9472087527795794, 0.045796167675844046, 2.63276413571293, 0.08369175160069808,
+           1.731545909362709, 2.2359516790409195],
+    "qa": [0.6222055973835809, -0.5786288879283412, 2.345150827846893, -0.12003676022323218,
+           0.46676072661299306, -0.08693023199629568],
+}
+
+
+@pytest.mark.parametrize("case", ["reviewer", "same_base"])
+def test_deep_penetrations_stay_within_the_tolerance(case: str) -> None:
+    w = PybulletWorld()
+    if case == "reviewer":
+        w.add_robot("a", RX, np.array(_LB_CASE["ba"]))
+        w.add_robot("b", RX, np.array(_LB_CASE["bb"]), np.array(_LB_CASE["qb"]))
+        q = np.array(_LB_CASE["qa"])
+    else:               # two arms 5 cm apart at home: model 2.6 mm below pybullet
+        w.add_robot("a", RX)
+        w.add_robot("b", RX, pose_matrix([0.05, 0.0, 0.0]))
+        q = RX.home
+    fast = w.min_distances("a", q[None], ["b"], 1.0)
+    ref = _pybullet(w, q[None], ["b"], 1.0)
+    assert ref[0, 0] < -0.05
+    assert fast[0, 0] - ref[0, 0] <= 1e-5           # still a lower bound
+    w.refine_below = 0.0
+    assert w.min_distances("a", q[None], ["b"], 1.0)[0, 0] == ref[0, 0]
+    w.refine_below = -math.inf
+    w.set_configuration("a", q)
+    exact = w.min_distance("a", "b").distance
+    w.compiled_distances = False
+    assert exact == pytest.approx(w.min_distance("a", "b").distance, abs=1e-12)
+
+
+def test_random_penetrations_are_lower_bounds_and_exact_on_request() -> None:
+    """The model is a lower bound everywhere, within the tolerance where pybullet finds no
+    penetration, and any penetration keeps its sign; refine_below = 0 makes penetrations
+    pybullet's values."""
+    rng = np.random.default_rng(11)
+    w = PybulletWorld()
+    w.add_robot("a", RX)
+    w.add_robot("b", RX, pose_matrix([0.45, 0.05, 0.0], dh.rot_z(2.8)))
+    w.add_sphere("s", 0.06, np.array([0.25, 0.0, 0.3]))
+    negative = 0
+    for _ in range(40):
+        w.set_configuration("b", rng.uniform(RX.lower, RX.upper))
+        qs = rng.uniform(RX.lower, RX.upper, size=(4, 6))
+        w.refine_below = -math.inf
+        fast = w.min_distances("a", qs, ["b", "s"], 1.0)
+        ref = _pybullet(w, qs, ["b", "s"], 1.0)
+        d = fast - ref
+        assert d.max() <= 1e-5
+        assert d[ref > 0].min(initial=0.0) >= -COMPILED_TOLERANCE
+        assert np.all(fast[ref < -1e-5] < 0)                   # a penetration stays one
+        w.refine_below = 0.0
+        exact = w.min_distances("a", qs, ["b", "s"], 1.0)
+        np.testing.assert_allclose(exact[ref < -COMPILED_TOLERANCE],
+                                   ref[ref < -COMPILED_TOLERANCE], atol=1e-12)
+        negative += int(np.sum(ref < 0))
+    assert negative > 5

@@ -234,3 +234,30 @@ def test_bad_answers_name_the_item(q: str, change: dict, field: str) -> None:
     del missing["best_vf"]
     with pytest.raises(ConfigError, match="required"):
         validate_answers(p, "post", missing)
+
+
+# -- Names with a trailing newline and time limits beyond a day are refused.
+def test_protocol_names_with_a_trailing_newline_are_refused(tmp_path: Path) -> None:
+    from vasim.study.protocol import load_protocol
+
+    src = Path(__file__).parents[2] / "protocols" / "studies" / "vf_learning_curve.toml"
+    text = src.read_text().replace('name = "vf_learning_curve"', 'name = "vf_learning_curve\\n"')
+    assert text != src.read_text()
+    p = tmp_path / "p.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError, match="name"):
+        load_protocol(p)
+
+
+def test_a_protocol_time_limit_beyond_a_day_is_refused(tmp_path: Path) -> None:
+    from vasim.study.protocol import load_protocol
+
+    src = Path(__file__).parents[2] / "protocols" / "studies" / "vf_learning_curve.toml"
+    text = src.read_text()
+    assert "max_trial_time_s" in text
+    lines = [("max_trial_time_s = 1e308" if ln.startswith("max_trial_time_s") else ln)
+             for ln in text.splitlines()]
+    p = tmp_path / "p.toml"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match="max_trial_time_s"):
+        load_protocol(p)

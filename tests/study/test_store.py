@@ -574,3 +574,18 @@ def test_buffer_optional_columns_default_and_reset_on_clear():
     # an older frame without the optional columns still builds a buffer
     old = buf.to_frame().drop(columns=["fc_x", "fc_y", "fc_z", "in_view"])
     assert SampleBuffer.from_columns(old).view()["in_view"].tolist() == [-1]
+
+
+def test_a_locked_database_is_a_store_error(tmp_path: Path) -> None:
+    db = tmp_path / "s.db"
+    TrialStore(db).close()
+    holder = sqlite3.connect(db, timeout=0.1)
+    holder.execute("BEGIN IMMEDIATE")
+    try:
+        with TrialStore(db) as st:
+            st.con.execute("PRAGMA busy_timeout = 100")
+            with pytest.raises(StoreError, match="busy or locked"):
+                st.add_subject("S01")
+    finally:
+        holder.rollback()
+        holder.close()

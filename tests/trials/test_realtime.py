@@ -10,11 +10,15 @@ import math
 import sqlite3
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import trimesh
 
+from tests.abdomen.test_runner import _Snap
+from tests.polling import wait_until
+from vasim.abdomen.contact import ToolPose
 from vasim.abdomen.world import Abdomen
 from vasim.core.errors import ConfigError
 from vasim.haptics.device import BUTTON_2, OMNI_LIMITS, DeviceLimits, DeviceSample
@@ -30,6 +34,7 @@ from vasim.trials.realtime import (
     replay_trial,
     run_realtime_trial,
 )
+from vasim.trials.realtime.plant import ThreadFeed
 from vasim.trials.vf import TrialConfig
 
 # An Omni's forces and resolution in a box large enough for the task's travel (the task
@@ -335,13 +340,14 @@ def test_servo_loop_asks_for_real_time_priority_and_reports_the_answer() -> None
     loop = ServoLoop(EmulatorDevice(hand=np.zeros(3)), NullPlant(), rt_priority=10)
     assert loop.priority_granted is None
     loop.start()
-    time.sleep(0.05)
+    wait_until(lambda: loop.priority_granted is not None,
+               what="the servo loop to ask for real-time priority")
     loop.stop()
     assert loop.priority_granted in (True, False)  # granted as root, refused otherwise
     assert [e.kind for e in loop.events].count("priority") == 1
     plain = ServoLoop(EmulatorDevice(hand=np.zeros(3)), NullPlant())  # default: not asked
     plain.start()
-    time.sleep(0.02)
+    wait_until(lambda: plain.ticks > 0, what="the servo loop's first tick")
     plain.stop()
     assert plain.priority_granted is None
 
@@ -357,3 +363,32 @@ def test_cli_realtime_in_process_runs_the_threaded_loop(tmp_path: Path, capsys) 
         row = store.trial(int(store.trials()["id"].iloc[0]))
     assert row["operator"] == "emulator" and row["timing"]["mode"] == "realtime"
     assert row["n_samples"] == 200
+
+
+class _FakePhysics:
+    def __init__(self) -> None:
+        self.latest = _Snap(0.0, 0)
+        self.events: list[tuple[float, str, str]] = []
+
+    def set_tool(self, pose: Any) -> None:
+        pass
+
+    def drain_events(self) -> list[tuple[float, str, str]]:
+        out, self.events = self.events, []
+        return out
+
+
+def test_the_thread_feed_hands_over_the_events_of_skipped_snapshots() -> None:
+    physics = _FakePhysics()
+    feed = ThreadFeed(physics, PhysicsLog())  # type: ignore[arg-type]
+    pose = ToolPose(np.zeros(3), np.array([0.0, 0.0, -0.1]))
+    # steps 1-3 reset (snapshots 1 and 2 skipped); step 4's event was queued after the
+    # feed read snapshot 3: it waits for snapshot 4
+    physics.events = [(0.004, "organ_reset", "a"), (0.008, "organ_reset", "b"),
+                      (0.012, "organ_reset", "c"), (0.016, "organ_reset", "d")]
+    physics.latest = _Snap(0.012, 3, (("organ_reset", "c"),))
+    snap = feed(0, pose)
+    assert snap.events == (("organ_reset", "a"), ("organ_reset", "b"), ("organ_reset", "c"))
+    assert feed(1, pose) is None  # same snapshot
+    physics.latest = _Snap(0.016, 4, (("organ_reset", "d"),))
+    assert feed(2, pose).events == (("organ_reset", "d"),)

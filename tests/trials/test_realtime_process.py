@@ -7,12 +7,12 @@ themselves are about a second of wall time, and only behaviour is asserted.
 from __future__ import annotations
 
 import functools
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.polling import wait_until
 from vasim.core.errors import ConfigError, DeviceError
 from vasim.haptics.devices.replay import stream_path
 from vasim.study.store import TrialStore
@@ -51,10 +51,8 @@ def test_process_trial_is_stored_and_replays_exactly(tmp_path: Path) -> None:
 
 def test_process_trial_viewer_surface() -> None:
     trial = ProcessRealtimeTrial(TrialConfig(schema="vg", seed=2, max_time=0.4)).start()
-    deadline = time.monotonic() + 30.0
-    while not trial.done and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert trial.done
+    wait_until(lambda: trial.done, what="the 0.4 s process trial to end", timeout=30.0,
+               step=0.02)
     frame = trial.frame()
     assert frame.abdomen is not None and len(frame.abdomen.organs) > 0  # meshes from here
     result = trial.result()  # stops the child and evaluates its end state here

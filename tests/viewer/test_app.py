@@ -17,6 +17,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
+from tests.polling import wait_until
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError
@@ -82,7 +83,10 @@ def test_trial_runs_in_real_time_and_the_tool_moves(app: ViewerApp) -> None:
     use_schema(app, "trajectory_following")
     p0 = np.array(app.tool.tip.position)
     t0, w0 = app.snapshot.frame.t, time.monotonic()
-    time.sleep(0.6)
+    # at least a 0.6 s window (for the pacing ratio), and until the tool has moved
+    wait_until(lambda: time.monotonic() - w0 >= 0.6
+               and np.linalg.norm(np.array(app.tool.tip.position) - p0) > 1e-4,
+               what="the tool to move", timeout=30.0, step=0.05)
     p1 = np.array(app.tool.tip.position)
     t1, w1 = app.snapshot.frame.t, time.monotonic()
     assert np.linalg.norm(p1 - p0) > 1e-4

@@ -6,21 +6,31 @@ controller thread (``handle`` + ``poll``); trials run faster than real time (``s
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from collections.abc import Callable, Iterator
 from contextlib import closing
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 import pytest
 
+import vasim.viewer.controller as controller_mod
+from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.fixtures.logistic import Logistic5
-from vasim.fixtures.schema import load_schema
+from vasim.fixtures.schema import load_schema, schema_path
 from vasim.study.store import TrialStore
 from vasim.trials.registry import run_trial
-from vasim.viewer.controller import Command, TrainingController, f5pl_fields, with_f5pl
+from vasim.viewer.controller import (
+    Command,
+    TrainingController,
+    f5pl_fields,
+    schema_choices,
+    with_f5pl,
+)
 
 SPEED = 25.0
 
@@ -264,3 +274,63 @@ def test_a_stopped_real_time_trial_replays_identically(tmp_path: Path) -> None:
         assert files is not None and all((tmp_path / n).exists() for n in files.values())
         report = replay_trial(st, tid)
     assert report.samples_equal and report.metrics_equal, report.differences
+
+
+# -- The schema menu accepts only its own entries (no file path from a client is ever read); a
+# --db directory is refused at start-up.
+def test_a_schema_outside_the_menu_is_refused_without_reading_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    secret = tmp_path / "notaschema.toml"
+    secret.write_text('secret_token = "hunter2"\n')
+    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=25.0, max_time=20.0)
+    try:
+        c.handle(Command("mode", "free"))
+        read: list[str] = []
+        real = controller_mod.load_schema
+
+        def spy(name: Any, *a: Any, **k: Any) -> Any:
+            read.append(str(name))
+            return real(name, *a, **k)
+
+        monkeypatch.setattr(controller_mod, "load_schema", spy)
+        before = c.panel.schema
+        for value in (str(secret), "/etc/passwd", "/nonexistent/x.toml", "x" * 500):
+            with pytest.raises(ConfigError) as exc:
+                c.handle(Command("schema", value))
+            msg = str(exc.value)
+            assert "hunter2" not in msg and "unknown schema" in msg
+            assert value[:40] in msg and len(msg) < 200
+        assert read == [] and c.panel.schema == before
+        # Menu entries still work.
+        assert "vg" in schema_choices(before)
+        c.handle(Command("schema", "vg"))
+        assert c.panel.schema == "vg"
+    finally:
+        c.close()
+
+
+def test_a_schema_file_given_at_start_up_stays_selectable(tmp_path: Path) -> None:
+    own = tmp_path / "own.toml"
+    shutil.copy(schema_path("trajectory_following"), own)
+    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", schema=str(own),
+                           speed=25.0, max_time=20.0)
+    try:
+        assert str(own) in schema_choices(str(own))
+        c.handle(Command("mode", "free"))
+        c.handle(Command("schema", "vg"))
+        c.handle(Command("schema", str(own)))  # the menu offers it: accepted
+        assert c.panel.schema == str(own)
+    finally:
+        c.close()
+
+
+def test_a_db_directory_is_refused_at_start_up(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ConfigError, match="is a directory"):
+        TrainingController(scene="none", db=tmp_path)
+    code = main(["serve", "--db", str(tmp_path), "--scene", "none", "--port", "0",
+                 "--duration", "0"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("vasim serve: error:")
+    assert "is a directory" in err and str(tmp_path) in err

@@ -9,9 +9,11 @@ from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+import vasim.viewer.audio as audio
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.types import AudioCue
 from vasim.viewer.audio import SYNTH_JS, AudioStream, cue_params
@@ -100,3 +102,36 @@ def test_audio_goes_to_each_client_never_broadcast_at_the_stream_rate() -> None:
     del clients[1]
     stream.update(cue, now=14.0)
     assert stream._installed == {2}
+
+
+# -- The audio stream survives clients connecting while it sends.
+def test_audio_install_during_an_update_does_not_break_the_stream(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A client connecting (viser callback thread) while update() sends (view thread): the
+    send to the first client installs another, deterministically, in the middle of the
+    iteration (this raised "Set changed size during iteration")."""
+    clients: dict[int, Any] = {i: SimpleNamespace(client_id=i) for i in range(3)}
+    sets: list[int] = []
+    armed = [False]
+
+    def run_js(client: Any, src: str) -> None:
+        if src.startswith("window.__vasimAudioSet"):
+            sets.append(client.client_id)
+            if armed[0]:  # a client connects while update() is sending
+                armed[0] = False
+                clients[99] = SimpleNamespace(client_id=99)
+                stream.install(clients[99])
+
+    monkeypatch.setattr(audio, "run_js", run_js)
+    stream = AudioStream(SimpleNamespace(get_clients=lambda: dict(clients)),  # type: ignore[arg-type]
+                         rate_hz=1e9)
+    for c in list(clients.values()):
+        stream.install(c)
+    cue = AudioCue(600.0, 0.2, 0.5)
+    armed[0] = True
+    stream.update(cue, now=1.0)  # raised "Set changed size during iteration"
+    assert sorted(sets) == [0, 1, 2, 99]  # 99 got the cue from install()
+    assert stream._installed == {0, 1, 2, 99}
+    sets.clear()
+    stream.update(cue, now=2.0)
+    assert sorted(sets) == [0, 1, 2, 99]

@@ -221,7 +221,7 @@ def stomach(
         count: tube resolution (segments around and rings along).
     """
     cap = _tube(length - 2 * radius, radius, count, count)
-    v = cap.vertices.copy()  # axis along z, centred
+    v = np.array(cap.vertices, dtype=np.float64)  # a plain copy; axis along z, centred
     # Lay along x: (x, y, z) <- (z, y, x); handedness fixed by _finish.
     v = v[:, [2, 1, 0]]
     # Bend the x axis into an arc of radius R in the x-y plane (concave toward -y,

@@ -273,7 +273,7 @@ class OrganSolver:
             raise ValueError(f"dt must be a finite number > 0 [s], got {dt!r}")
         self.model = model
         self.dt = float(dt)
-        self.options = SolverOptions(**solver_options)  # type: ignore[arg-type]
+        self.options = SolverOptions(**solver_options)  # type: ignore[arg-type]  # SolverOptions checks the keys
         n = model.n_nodes
         # Writable contiguous copies: one compiled signature of the kernel for every model
         # (the model's own arrays are read-only, a different numba type).

@@ -389,11 +389,11 @@ def _unique_springs(pairs: Sequence[IntArray], stiffness: Sequence[float],
                     types: Sequence[int]) -> tuple[IntArray, FloatArray, IntArray]:
     """Concatenates spring groups, dropping repeated node pairs (the first group wins)."""
     allp, allk, allt = [], [], []
-    for p, k, t in zip(pairs, stiffness, types, strict=True):
-        p = np.asarray(p, dtype=np.int64).reshape(-1, 2)
-        allp.append(p)
-        allk.append(np.full(len(p), float(k)))
-        allt.append(np.full(len(p), t, dtype=np.int64))
+    for group, k_group, t_group in zip(pairs, stiffness, types, strict=True):
+        g = np.asarray(group, dtype=np.int64).reshape(-1, 2)
+        allp.append(g)
+        allk.append(np.full(len(g), float(k_group)))
+        allt.append(np.full(len(g), t_group, dtype=np.int64))
     p = np.vstack(allp)
     k = np.concatenate(allk)
     t = np.concatenate(allt)
@@ -474,6 +474,7 @@ def select_anchors(surface: FloatArray, rules: Sequence[AnchorRule], *,
         if rule.within is not None:
             chosen.append(np.flatnonzero(dist <= rule.within))
         else:
+            assert rule.fraction is not None  # AnchorRule: exactly one of within, fraction
             count = max(1, round(float(rule.fraction) * len(surface)))
             chosen.append(np.argsort(dist, kind="stable")[:count])
     if not chosen:
@@ -522,7 +523,8 @@ def build_organ(
         mass = np.full(m, params.mass / m)
         return OrganModel(name=name, rest=rest, faces=faces, n_surface=m, springs=springs,
                           rest_length=np.zeros(0), stiffness=k, mass=mass,
-                          damping=params.damping, anchors=np.arange(m), gravity=gravity,
+                          damping=params.damping, anchors=np.arange(m),
+                          gravity=np.asarray(gravity, dtype=np.float64),
                           delicate=delicate, kind=kind, color=color, spring_type=stype)
     edges = np.asarray(mesh.edges_unique, dtype=np.int64)
     groups = [edges]
@@ -567,7 +569,8 @@ def build_organ(
     _check_parts_anchored(m, edges, anchors, name)
     return OrganModel(name=name, rest=rest, faces=faces, n_surface=m, springs=springs,
                       rest_length=rest_length, stiffness=k, mass=mass, damping=params.damping,
-                      anchors=anchors, gravity=gravity, delicate=delicate, kind=kind,
+                      anchors=anchors, gravity=np.asarray(gravity, dtype=np.float64),
+                      delicate=delicate, kind=kind,
                       color=color, spring_type=stype)
 
 

@@ -40,8 +40,14 @@ import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
+import numpy as np
+from numpy.typing import NDArray
 
-def _norm(v: Sequence[float]) -> float:
+#: A (3,) vector [N] or [N·m]: a tuple from callers, an array from the physics snapshot.
+Vector3 = Sequence[float] | NDArray[np.float64]
+
+
+def _norm(v: Vector3) -> float:
     return math.sqrt(sum(float(c) * float(c) for c in v))
 
 
@@ -63,15 +69,15 @@ class TissueQuality:
     _was_delicate: bool = False
     _disp_integral: float = 0.0
 
-    def add(self, dt: float, *, force: Sequence[float], torque: Sequence[float],
+    def add(self, dt: float, *, force: Vector3, torque: Vector3,
             in_contact: bool, delicate_contact: bool = False,
             target_displacement: float = 0.0) -> None:
         """Accounts one physics step of length ``dt`` [s]."""
         self._accumulate(dt, _norm(force), _norm(torque), in_contact, delicate_contact,
                          target_displacement)
 
-    def add_instruments(self, dt: float, *, forces: Sequence[Sequence[float]],
-                        torques: Sequence[Sequence[float]], in_contact: bool,
+    def add_instruments(self, dt: float, *, forces: Sequence[Vector3],
+                        torques: Sequence[Vector3], in_contact: bool,
                         delicate_contact: bool = False,
                         target_displacement: float = 0.0) -> None:
         """Accounts one physics step with several instruments (module docstring).

@@ -110,7 +110,7 @@ from vasim.core.bounds import (
 )
 from vasim.core.config import check_choice, check_int, check_keys, fail, parse_toml
 from vasim.core.errors import ConfigError
-from vasim.core.resources import read_data_file, scenes_dir
+from vasim.core.resources import data_file, read_data_file, scenes_dir
 
 MAX_DT = DT_S.high
 """Largest physics step accepted [s] (the integrator is tested up to 16 ms)."""
@@ -379,7 +379,7 @@ class Scene:
             if o.is_procedural:
                 out[o.name] = _procedural()[o.mesh].mesh.copy()
             else:
-                out[o.name] = load_user_mesh(o.mesh, units=o.units,  # type: ignore[arg-type]
+                out[o.name] = load_user_mesh(o.mesh, units=o.units,  # type: ignore[arg-type]  # o.mesh: a path here
                                              field=f"organs.{o.name}.mesh")
         return out
 
@@ -421,7 +421,7 @@ def scene_path(ref: str | Path) -> Path:
     p = Path(ref)
     if p.suffix == ".toml" or len(p.parts) > 1:
         return p
-    return scenes_dir() / f"{ref}.toml"
+    return data_file(ref, scenes_dir(), "scene")
 
 
 def load_scene(name_or_path: str | Path = "default") -> Scene:

@@ -182,10 +182,10 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
         if in_process:
             device = factory() if callable(factory) else None
             result, trial_id, timing = run_realtime_trial(
-                config, store, device, physics=args.physics)  # type: ignore[arg-type]
+                config, store, device, physics=args.physics)
         else:
             result, trial_id, timing = run_realtime_trial(
-                config, store, physics=args.physics, process=True,  # type: ignore[arg-type]
+                config, store, physics=args.physics, process=True,
                 device_factory=factory, device_name=args.device)
     finally:
         if store is not None:
@@ -275,7 +275,7 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
         ("path length", f"{m['path_l1'].sum():.3f} m (Manhattan), "
                         f"{m['path_l2'].sum():.3f} m (Euclidean)"),
         ("samples", f"{len(result.samples)} at {1 / result.config.dt:.0f} Hz"),
-        ("speed", f"{s['sim_time'] / max(result.wall_time, 1e-9):.1f}x real time"),
+        ("speed", f"{float(s['sim_time']) / max(result.wall_time, 1e-9):.1f}x real time"),
     ]
     if result.events:
         rows.append(("events", f"{len(result.events)} (see the events table)"))
@@ -439,7 +439,7 @@ def _record_file_answers(store: object, session_id: int, path: Path | None,
     done = []
     for q in which:
         if q in data and q not in answered:
-            n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]
+            n = record_answers(store, session_id, q, data[q], source=str(path))  # type: ignore[arg-type]  # a parsed answers table
             done.append(f"{q} ({n} answers)")
     return done
 
@@ -471,7 +471,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from vasim.study.session import load_answers_file
 
         for q, table in load_answers_file(args.answers).items():
-            validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]
+            validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]  # a parsed answers table
     with TrialStore(_new_db(args.db)) as store:
         sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings)
         recorded = _record_file_answers(store, sid, args.answers, ("pre",))

@@ -92,7 +92,7 @@ def _libc_renameat2() -> Callable[..., int] | None:
     fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p,
                    ctypes.c_uint]
     fn.restype = ctypes.c_int
-    return fn  # type: ignore[no-any-return]  # a ctypes function pointer
+    return fn  # a ctypes function pointer
 
 
 def exchange(a: Path, b: Path) -> bool:

@@ -184,7 +184,7 @@ class LinearForce:
 
     def force_xyz(self, x: Sequence[float]) -> tuple[float, float, float]:
         """F(x) on floats (same arithmetic as ``extrapolate_force``)."""
-        f, k, x0 = self._f0, self._k, self._x0  # type: ignore[attr-defined]
+        f, k, x0 = self._f0, self._k, self._x0  # type: ignore[attr-defined]  # slots set in __post_init__
         d0, d1, d2 = x[0] - x0[0], x[1] - x0[1], x[2] - x0[2]
         return (f[0] + (k[0] * d0 + k[1] * d1 + k[2] * d2),
                 f[1] + (k[3] * d0 + k[4] * d1 + k[5] * d2),
@@ -250,7 +250,7 @@ def _tissue_xyz(tissue: TissueModel, x: Sequence[float]
     if tissue is None:
         return (0.0, 0.0, 0.0), None
     if isinstance(tissue, LinearForce):
-        k = tissue._k  # type: ignore[attr-defined]
+        k = tissue._k  # type: ignore[attr-defined]  # slot set in __post_init__
         return tissue.force_xyz(x), (k if any(k) else None)
     f, k = patch_force(tissue.patch, ToolPose(fulcrum=tissue.fulcrum, tip=np.array(x)))
     kl = k.reshape(9).tolist()

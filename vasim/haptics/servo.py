@@ -80,7 +80,7 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from math import isfinite
 from typing import Literal, Protocol, runtime_checkable
@@ -137,7 +137,8 @@ class Plant(Protocol):
 
     def on_start(self, t: float) -> None: ...
 
-    def tick(self, t: float, master: FloatArray, buttons: int) -> ArrayLike: ...
+    def tick(self, t: float, master: FloatArray, buttons: int
+             ) -> FloatArray | Sequence[float]: ...
 
     def on_stop(self) -> None: ...
 
@@ -172,6 +173,12 @@ class CoupledToolPlant:
         tissue: initial tissue model.
         extra_force: optional external force on the proxy [N].
     """
+
+    # The servo-thread state (floats, not arrays: cheaper at 1 kHz); set by ``on_start``.
+    _xp: tuple[float, ...] | None  # proxy position [m], None before the first tick
+    _vp: tuple[float, ...]  # proxy velocity [m/s]
+    _x_prev: tuple[float, ...] | None  # last master position [m]
+    _vd: tuple[float, ...]  # filtered device velocity [m/s]
 
     def __init__(self, params: CouplingParams | None = None, *, dt: float = 1e-3,
                  tissue: TissueModel = None,
@@ -215,10 +222,10 @@ class CoupledToolPlant:
 
     def on_start(self, t: float) -> None:
         del t
-        self._xp: tuple[float, ...] | None = None
-        self._vp: tuple[float, ...] = (0.0, 0.0, 0.0)
-        self._x_prev: tuple[float, ...] | None = None
-        self._vd: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self._xp = None
+        self._vp = (0.0, 0.0, 0.0)
+        self._x_prev = None
+        self._vd = (0.0, 0.0, 0.0)
         self.proxy_resets = 0
 
     def tick(self, t: float, master: FloatArray, buttons: int) -> tuple[float, float, float]:
@@ -234,10 +241,10 @@ class CoupledToolPlant:
         self._x_prev = (x0, x1, x2)
         tissue = self._tissue
         if self._extra is not None:
-            xp = np.array(self._xp)
-            f_t, k_t = tissue_force(tissue, xp)
-            fe = np.asarray(self._extra(t, xp, np.array(self._vp)), dtype=np.float64)
-            tissue = LinearForce(f_t + fe, k_t, xp)
+            x_proxy = np.array(self._xp)
+            f_t, k_t = tissue_force(tissue, x_proxy)
+            fe = np.asarray(self._extra(t, x_proxy, np.array(self._vp)), dtype=np.float64)
+            tissue = LinearForce(f_t + fe, k_t, x_proxy)
         xp, vp, force = proxy_step_xyz(self._xp, self._vp, (x0, x1, x2), vd, tissue,
                                        self.params, dt)
         if not (isfinite(xp[0]) and isfinite(xp[1]) and isfinite(xp[2])
@@ -443,7 +450,7 @@ class ServoLoop:
         self.period_s = 1.0 / self.rate_hz
         self.home: Vec | None = (None if home is None else
                                  tuple(float(v) for v in np.asarray(home, dtype=np.float64)
-                                       .reshape(3)))  # type: ignore[assignment]
+                                       .reshape(3)))  # type: ignore[assignment]  # 3 floats after reshape(3)
         self.clutch_button = int(clutch_button)
         self.workspace_margin_m = float(workspace_margin_m)
         self.spin_s = float(spin_s)
@@ -702,16 +709,16 @@ class ServoLoop:
         k = self._k
         dev = self.device
         if self._observing:
-            obs: OperatorObservation | None = self.plant.observation()  # type: ignore[attr-defined]
+            obs: OperatorObservation | None = self.plant.observation()  # type: ignore[attr-defined]  # checked: ObservationSource
             if obs is not None:
-                dev.observe(obs)  # type: ignore[attr-defined]
+                dev.observe(obs)  # type: ignore[attr-defined]  # checked: an observing device
         sample = dev.read()
         if self.recording is not None:
             self.recording.append(k, sample)
         event = check_sample(sample, self._limits, k, self.workspace_margin_m)
         held = event is not None
         if held:
-            self.guard.add(event)  # type: ignore[arg-type]
+            self.guard.add(event)  # type: ignore[arg-type]  # held: not None
             good = self._good
             buttons = self._good_buttons
         else:

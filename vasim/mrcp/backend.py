@@ -190,7 +190,7 @@ class PybulletArm:
         self._reach = sum(float(np.linalg.norm(dh.joint_origin(j)[:3, 3]))
                           for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
         self._closed_form = closed_form and dh.is_puma_like(robot)
-        self._offsets = robot.table[3]  # type: ignore[attr-defined]
+        self._offsets = robot.table[3]
         unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
         self._spread = robot.lower + unit * (robot.upper - robot.lower)
 
@@ -751,7 +751,7 @@ class PybulletWorld:
             pairs = self._all_pairs(a, b)
             bounds = None if pairs is None else self._pair_bounds(
                 a, b, pairs, max_distance + _ABOVE, COMPILED_TOLERANCE + _ABOVE)
-            if bounds is not None and not np.any(np.isneginf(bounds)):
+            if pairs is not None and bounds is not None and not np.any(np.isneginf(bounds)):
                 return self._min_distance_among(a, b, pairs, bounds, max_distance)
         spheres_a, spheres_b = self._spheres(a), self._spheres(b)
         body_a, body_b = self.body_id(a), self.body_id(b)
@@ -811,7 +811,7 @@ class PybulletWorld:
                      for i in range(qs.shape[0])]
             if modelled:
                 packed = self._packed([names[j] for j in modelled])
-                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]
+                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]  # modelled: swept
                                            for j in modelled])
                 dist = np.empty((qs.shape[0], len(modelled)))
                 swept_distances(frames_a, sweep_a.pts, sweep_a.count, sweep_a.scale,
@@ -861,7 +861,7 @@ class PybulletWorld:
         scales, balls, bounding centres and radii), their link starts and margins."""
         key = tuple(names)
         if key not in self._packs:
-            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]
+            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]  # names: modelled bodies
             counts = [s.pts.shape[0] for s in sweeps]
             self._packs[key] = (
                 np.concatenate([s.pts for s in sweeps]),
@@ -1001,13 +1001,14 @@ class PybulletWorld:
                                       physicsClientId=self._cid)
             if any(p[8] <= 0.0 for p in pts):
                 return True
-        pairs = r.self_pairs
-        if self.compiled_distances and pairs:
-            idx = _self_pair_array(pairs)
+        self_pairs = r.self_pairs
+        if self.compiled_distances and self_pairs:
+            idx = _self_pair_array(self_pairs)
             bounds = self._pair_bounds(robot, robot, idx, 2.0 * _ABOVE)
             if bounds is not None:
-                pairs = tuple(p for p, v in zip(pairs, bounds, strict=True) if v <= _ABOVE)
-        return any(self._links_touch(r.body, a, r.body, b) for a, b in pairs)
+                self_pairs = tuple(p for p, v in zip(self_pairs, bounds, strict=True)
+                                   if v <= _ABOVE)
+        return any(self._links_touch(r.body, a, r.body, b) for a, b in self_pairs)
 
     def self_collision_pairs(self, robot: str) -> tuple[tuple[int, int], ...]:
         """The link pairs (pybullet indices) checked for self-collision."""

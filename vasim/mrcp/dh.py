@@ -161,6 +161,7 @@ class RobotModel:
     tcp: FloatArray = field(default_factory=lambda: np.zeros(3))
     home: FloatArray = field(default_factory=lambda: np.zeros(0))
     links: tuple[LinkGeometry, ...] = ()
+    table: FloatArray = field(init=False, repr=False)  # (4, n) set by __post_init__
 
     def __post_init__(self) -> None:
         # the name becomes a cache folder, a file name and URDF (XML) text
@@ -206,7 +207,7 @@ class RobotModel:
                 and self.links == other.links and np.array_equal(self.tcp, other.tcp)
                 and np.array_equal(self.home, other.home))
 
-    __hash__ = None  # type: ignore[assignment]
+    __hash__ = None  # type: ignore[assignment]  # unhashable: array fields
 
     @property
     def n_joints(self) -> int:
@@ -270,7 +271,7 @@ def joint_origin(joint: DHJoint) -> FloatArray:
 
 
 def _dh_arrays(robot: RobotModel) -> tuple[FloatArray, ...]:
-    t = robot.table   # type: ignore[attr-defined]
+    t = robot.table
     return t[0], t[1], t[2], t[3]
 
 
@@ -457,7 +458,7 @@ def position_dls(robot: RobotModel, q0: FloatArray, target: FloatArray,
     (above 0.7 x its value 5 steps earlier, from step 8 on) or after ``iterations``. The
     3 x 3 system is solved by an explicit Cholesky factorisation (no LAPACK call)."""
     q, ok = _position_dls_kernel(
-        robot.table, robot.tcp,  # type: ignore[attr-defined]
+        robot.table, robot.tcp,
         _EYE4 if base is None else np.ascontiguousarray(base, dtype=float),
         np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(target, dtype=float),
         robot.lower, robot.upper, float(tol), int(iterations), float(damping))
@@ -472,7 +473,7 @@ def frames_many(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
     if q.ndim != 2 or q.shape[1] != robot.n_joints:
         raise ValueError(f"q must have shape (m, {robot.n_joints}), got {q.shape}")
     frames = np.empty((q.shape[0], robot.n_joints + 2, 4, 4))
-    _many_kernel(robot.table, robot.tcp,  # type: ignore[attr-defined]
+    _many_kernel(robot.table, robot.tcp,
                  _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), q,
                  frames, np.empty((1, 6, robot.n_joints)), False)
     return frames
@@ -488,7 +489,7 @@ def frames_one(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
     if q.shape != (robot.n_joints,):
         raise ValueError(f"q must have shape ({robot.n_joints},), got {q.shape}")
     frames = np.empty((robot.n_joints + 2, 4, 4))
-    _chain_kernel(robot.table, robot.tcp, _EYE4 if base is None  # type: ignore[attr-defined]
+    _chain_kernel(robot.table, robot.tcp, _EYE4 if base is None
                   else np.ascontiguousarray(base, dtype=float), q, frames)
     return frames
 
@@ -536,7 +537,7 @@ def jacobian_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = N
     if q.ndim == 2 and q.shape[1] == robot.n_joints:
         qc = np.ascontiguousarray(q)
         jac = np.empty((q.shape[0], 6, robot.n_joints))
-        _many_kernel(robot.table, robot.tcp,  # type: ignore[attr-defined]
+        _many_kernel(robot.table, robot.tcp,
                      _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), qc,
                      np.empty((q.shape[0], robot.n_joints + 2, 4, 4)), jac, True)
         return jac
@@ -663,7 +664,7 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         try:
             links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file,
                                                    LINK_RADIUS_M),
-                                      points=pts,  # type: ignore[arg-type]
+                                      points=pts,  # type: ignore[arg-type]  # checked (k, 3) floats
                                       chain=chain))
         except ConfigError as exc:
             raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
@@ -687,7 +688,7 @@ def is_puma_like(robot: RobotModel) -> bool:
     intersecting at the shoulder, a spherical wrist (joint frames 4-6 share their origin)."""
     if robot.n_joints != 6:
         return False
-    al, a, d, _ = robot.table  # type: ignore[attr-defined]
+    al, a, d, _ = robot.table
     h = math.pi / 2
     checks = [(al[0], 0.0), (a[0], 0.0), (al[1], -h), (a[1], 0.0), (d[1], 0.0), (al[2], 0.0),
               (al[3], -h), (al[4], h), (a[4], 0.0), (d[4], 0.0), (al[5], -h), (a[5], 0.0),
@@ -729,7 +730,7 @@ def puma_ik(robot: RobotModel, position: FloatArray, rotation: FloatArray,
     """
     if not is_puma_like(robot):
         return []
-    _, a, d, off = robot.table  # type: ignore[attr-defined]
+    _, a, d, off = robot.table
     t = np.eye(4) if base is None else np.asarray(base, dtype=float)
     rb = t[:3, :3]
     p = rb.T @ (np.asarray(position, dtype=float) - t[:3, 3])

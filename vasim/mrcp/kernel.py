@@ -440,7 +440,7 @@ class MRCPKernel:
         rots = np.array(self._rotations)
         nq = len(self.task_points)
         world_tp = pos[:, None, :] + np.einsum("nij,qj->nqi", rots, self._tp_local)
-        future = t + cfg.dt * cfg.stride * np.arange(1, cfg.horizon + 1)
+        future = t + cfg.dt * cfg.stride * np.arange(1, cfg.horizon + 1, dtype=np.float64)
         pred = self.predictor.predict(times, world_tp.reshape(len(times), -1), future)
         all_t = np.concatenate([[t], future])
         mean = np.concatenate([world_tp[-1:], pred.mean.reshape(-1, nq, 3)])

@@ -278,7 +278,7 @@ class RPQ:
             b.centre = t[0, :3, 3].copy()
             b.reach = np.array([float(np.linalg.norm(half))])
             return t, half
-        return _robot_boxes(b.model.table, b.model.tcp, b.base,  # type: ignore[attr-defined]
+        return _robot_boxes(b.model.table, b.model.tcp, b.base,
                             self.world.joint_view(b.name), b.obb_local), b.half
 
     def collision_matrix(self, a: str, b: str) -> NDArray[np.bool_]:
@@ -329,8 +329,8 @@ class RPQ:
         if ba.model is not None and bb.model is not None:     # two robots: one compiled call
             ma, mb = ba.model, bb.model
             boxes_a, boxes_b, apart = _robot_pair_boxes(
-                ma.table, ma.tcp, ba.base, self.world.joint_view(a),  # type: ignore[attr-defined]
-                ba.obb_local, ba.half, mb.table, mb.tcp, bb.base,  # type: ignore[attr-defined]
+                ma.table, ma.tcp, ba.base, self.world.joint_view(a),
+                ba.obb_local, ba.half, mb.table, mb.tcp, bb.base,
                 self.world.joint_view(b), bb.obb_local, bb.half)
             half_a, half_b = ba.half, bb.half
         else:

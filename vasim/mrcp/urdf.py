@@ -20,6 +20,7 @@ import os
 import tempfile
 import threading
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -161,7 +162,7 @@ def write_urdf(robot: RobotModel, folder: Path | None = None) -> Path:
         folder.mkdir(parents=True, exist_ok=True)
         for mesh_path, hull in zip(meshes, link_hulls(robot), strict=True):
             if not mesh_path.is_file():
-                _atomic_write(mesh_path, lambda t, h=hull: h.export(t, file_type="obj"))
+                _atomic_write(mesh_path, partial(hull.export, file_type="obj"))
         if not path.is_file():
             text = urdf_text(robot)
             _atomic_write(path, lambda t: t.write_text(text, encoding="utf-8"))

@@ -188,7 +188,7 @@ def needle_task(n_rings: int = len(RING_SITES), *, clearance: float = RING_CLEAR
         rings.append(p + np.array([0.0, 0.0, clearance]))
         normals.append(n)
     r = np.array(rings)
-    sides: tuple[Side, ...] = tuple(s for s, *_ in RING_SITES[:n_rings])  # type: ignore[misc]
+    sides: tuple[Side, ...] = tuple(s for s, *_ in RING_SITES[:n_rings])  # type: ignore[misc]  # RING_SITES rows start with a Side
     return NeedleTask(rings=r, normals=np.array(normals), sides=sides,
                       organs=tuple(o for _, o, *_ in RING_SITES[:n_rings]),
                       ring_radius=ring_radius, start=r[0] + START_OFFSET)

@@ -271,8 +271,8 @@ def point_metrics(
     error_l1 = np.bincount(gi[active], weights=err[active], minlength=N)[:N]
     n_samples = np.bincount(gi[active], minlength=N)[:N].astype(np.int64)
 
-    path_l1 = np.zeros(N)
-    path_l2 = np.zeros(N)
+    path_l1: NDArray[Any] = np.zeros(N)  # float64 (np.bincount with weights)
+    path_l2: NDArray[Any] = np.zeros(N)
     if n >= 2:
         d = np.diff(xx, axis=0)  # d[j-1] = x(j) - x(j-1), the motion of step j
         seg_goal = gi[1:]

@@ -166,7 +166,8 @@ class SampleBuffer:
             shape: tuple[int, ...] = (capacity,) if len(parts) == 1 else (capacity, len(parts))
             # Optional columns start at their defaults: ``append`` writes them only when a
             # producer gives a value (the 1 kHz loop then pays nothing for them).
-            a = (np.full(shape, _DEFAULT_FILL[name], dtype=dtype) if name in OPTIONAL_COLUMNS
+            a: NDArray[Any] = (np.full(shape, _DEFAULT_FILL[name], dtype=dtype)
+                               if name in OPTIONAL_COLUMNS
                  else np.empty(shape, dtype=dtype))
             if copy_from is not None:
                 a[: self._n] = copy_from[name][: self._n]
@@ -323,7 +324,7 @@ class SampleBuffer:
             if v is None:
                 v = _DEFAULT_FILL[name]
             shape = (m,) if len(parts) == 1 else (m, len(parts))
-            a = np.asarray(v, dtype=dtype)
+            a: NDArray[Any] = np.asarray(v, dtype=dtype)
             try:
                 a = np.broadcast_to(a, shape)
             except ValueError:

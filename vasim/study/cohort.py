@@ -249,7 +249,7 @@ def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
     for j in range(1, n_subjects + 1):
         group = groups[order[j - 1]]
         rng = _stream(seed, 5, j)
-        profile = OperatorProfile.sample(rng, group)  # type: ignore[arg-type]
+        profile = OperatorProfile.sample(rng, group)
         session_seed = _seed63(seed, 6, j)
         if latin_square:
             session_seed = counterbalanced_seed(session_seed, j)

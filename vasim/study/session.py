@@ -210,7 +210,7 @@ class Session:
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
         return TrialConfig(
-            task=scheduled.task,  # type: ignore[arg-type]
+            task=scheduled.task,  # type: ignore[arg-type]  # protocol task names are checked
             variant=scheduled.variant,
             schema="none" if mode is not None else str(scheduled.schema), mode=mode,
             operator=s.operator,

@@ -228,7 +228,7 @@ class Task:
         return TaskState(
             tcp=np.asarray(tcp, dtype=np.float64), goal=self.points[j], scale=self.scale,
             kind=self.kind, lookahead=self.lookahead(j), normal=self.normal(j),
-            **kwargs,  # type: ignore[arg-type]
+            **kwargs,  # type: ignore[arg-type]  # kwargs: TaskState's optional fields
         )
 
 

@@ -209,11 +209,11 @@ def _guarded_serve(policy: AccessPolicy) -> Iterator[None]:
         return original(handler, *args, process_request=check, **kwargs)
 
     with _serve_lock:
-        websockets.asyncio.server.serve = serve  # type: ignore[assignment]  # see module doc
+        setattr(websockets.asyncio.server, "serve", serve)  # noqa: B010 (see module doc)
         try:
             yield
         finally:
-            websockets.asyncio.server.serve = original  # type: ignore[misc]
+            setattr(websockets.asyncio.server, "serve", original)  # noqa: B010
 
 
 def guarded_server(host: str, port: int, policy: AccessPolicy) -> viser.ViserServer:

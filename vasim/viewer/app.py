@@ -76,6 +76,7 @@ from vasim.viewer.views import (
     HudInfo,
     HudView,
     OrganView,
+    SceneView,
     ToolView,
     TrajectoryView,
 )
@@ -173,7 +174,7 @@ class DragInput:
             if tip is not None:
                 dev.push(t + 1e-4, p, BUTTON_2)
                 dev.push(t + 2e-4, tip, BUTTON_2)
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.asarray(tip, dtype=np.float64)
             return
         self._dragging = True
         dev.push(t, p)
@@ -185,7 +186,7 @@ class DragInput:
         if self.handle.visible != active:
             self.handle.visible = active
             if active:
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.asarray(tip, dtype=np.float64)
                 dev = self._device()
                 if dev is not None:  # the first sample: where the gizmo starts
                     dev.push(time.perf_counter(), self._last_tip)
@@ -252,7 +253,9 @@ class SceneViews:
 
     def node_names(self) -> list[str]:
         names: list[str] = []
-        for v in (*self.organs, self.tool, self.trajectory, self.arrows, self.ghost):
+        views: tuple[SceneView, ...] = (*self.organs, self.tool, self.trajectory,
+                                        self.arrows, self.ghost)
+        for v in views:
             names.extend(v.node_names())
         return sorted(names)
 
@@ -525,7 +528,7 @@ class ViewerApp(ErrorReporter):
         }
         trial = self.controller.trial
         timing = trial.timing() if trial is not None else None
-        d = timing.to_dict() if hasattr(timing, "to_dict") else {}
+        d = timing.to_dict() if timing is not None and hasattr(timing, "to_dict") else {}
         for k, v in d.items():
             if isinstance(v, dict):  # RealtimeTiming's physics thread figures
                 for k2, v2 in v.items():
@@ -575,7 +578,7 @@ class ViewerApp(ErrorReporter):
         return [Organ(name=m.name,
                       mesh=trimesh.Trimesh(np.array(snap.organ(m.name).surface), m.faces,
                                            process=False),
-                      color=m.color, delicate=m.delicate, kind=m.kind)  # type: ignore[arg-type]
+                      color=m.color, delicate=m.delicate, kind=m.kind)
                 for m in models]
 
     def _build_gui(self) -> None:
@@ -714,7 +717,7 @@ class ViewerApp(ErrorReporter):
             force_n=None if out.force is None else float(np.linalg.norm(out.force.force)),
             zoom=None if out.camera is None else float(out.camera.zoom),
             # The runtime reports a ghost exactly when the schema has MS.
-            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]
+            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]  # 3 MS factors
             done=frame.done,
         )
 

@@ -262,8 +262,8 @@ class TrainingController:
         """The trainee view's (right, up) axes the instrument's screen motion follows."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
-        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
-                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]
+        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]  # validated by TrialConfig
+                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]  # str choices: TrialConfig checks them
         self.panel = PanelState(schema=schema, task=task,
                                 f5pl=f5pl_fields(load_schema(schema)))
         self.info: TrialInfo = self._launch(self._base, mode="demo")
@@ -457,7 +457,7 @@ class TrainingController:
                 continue
             row = wide.loc[tid]
             out.append((n, *(float(row.get(m, math.nan)) for m in CURVE_METRICS)))
-        return tuple(out)  # type: ignore[arg-type]
+        return tuple(out)  # type: ignore[arg-type]  # (n, *metrics) rows
 
     # -- protocol sessions ---------------------------------------------------------------
     def _session(self) -> Any:
@@ -518,7 +518,7 @@ class TrainingController:
     def _free_config(self) -> TrialConfig:
         p = self.panel
         base = self._base
-        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]
+        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]  # panel strs: TrialConfig checks
                        variant=base.variant if p.task == "trajectory" else 0,
                        subject=p.subject or base.subject, seed=base.seed + self._number)
 
@@ -542,7 +542,7 @@ class TrainingController:
                                   "protocol": "protocol: enter the subject code and pick a "
                                               "protocol, then Start"}[value])
             if value == "demo":
-                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]
+                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]  # panel strs: TrialConfig checks
             elif value == "protocol" and p.subject and p.protocol:
                 self._publish(curve=(), **self._select_session())
         elif kind == "schema":
@@ -681,7 +681,7 @@ class TrainingController:
         if p.mode == "demo":
             self._close_trial("schema changed")
             variant = self.info.config.variant if task == self.info.config.task else 0
-            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]
+            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]  # strs: TrialConfig checks
 
     def _set_task(self, task: str) -> None:
         p = self.panel
@@ -701,7 +701,7 @@ class TrainingController:
         self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
         if p.mode == "demo":
             self._close_trial("task changed")
-            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]
+            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]  # strs: TrialConfig checks
 
     def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
         """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes

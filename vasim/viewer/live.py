@@ -157,7 +157,7 @@ class SimThreadTrial:
         self.runner = TrialRunner(config, schema)
         self.device = device
         if device is not None:
-            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]
+            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]  # a device operator in the operator slot
         self.speed = float(speed)
         self.period = 1.0 / float(loop_hz)
         self.max_catch_up_s = float(max_catch_up_s)
@@ -257,9 +257,9 @@ def make_live_trial(config: TrialConfig, device: Device | None = None, *,
     started), else :class:`SimThreadTrial` (also for ``speed`` != 1, which the servo loop
     does not offer)."""
     if speed == 1.0 and realtime_available():
-        from vasim.trials.realtime import RealtimeTrial  # type: ignore[import-not-found]
+        from vasim.trials.realtime import RealtimeTrial
 
-        return RealtimeTrial(config, device, schema=schema)  # type: ignore[no-any-return]
+        return RealtimeTrial(config, device, schema=schema)
     return SimThreadTrial(config, device, schema=schema, speed=speed)
 
 

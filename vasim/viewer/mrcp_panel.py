@@ -65,6 +65,7 @@ from vasim.viewer.mrcp_view import (
     task_pose,
 )
 from vasim.viewer.notify import ErrorReporter
+from vasim.viewer.views import set_gui_value
 
 log = logging.getLogger(__name__)
 
@@ -394,7 +395,7 @@ class MrcpPanel:
         tabs = gui.add_tab_group()
         x = np.array([0.0, 1.0])
         nan = np.full(2, math.nan)
-        axes = {"x": {"time": False}}
+        axes: dict[str, viser.uplot.Scale] = {"x": {"time": False}}
         with tabs.add_tab("MRCP", icon=viser.Icon.ROBOT):
             self.status = gui.add_markdown(status_text(scenario, None, 1.0))
             self.ntt = gui.add_uplot(
@@ -402,7 +403,7 @@ class MrcpPanel:
                 (viser.uplot.Series(label="t [s]"),
                  viser.uplot.Series(label="NTT", stroke="#212529", width=2),
                  viser.uplot.Series(label="threshold", stroke="#e03131", width=1,
-                                    dash=[6, 4]),
+                                    dash=(6.0, 4.0)),
                  viser.uplot.Series(label="TT (not evaluated)", stroke="#f0a0a0",
                                     width=0, fill="rgba(240, 80, 80, 0.12)")),
                 title="NTT (∞ drawn at 1.5)",
@@ -549,22 +550,22 @@ class MrcpViewerApp(ErrorReporter):
             s.gui.configure_theme(control_width="large")
             s.scene.set_up_direction("+z")
             position, look_at = station_camera(geometry)
-            s.initial_camera.position = tuple(float(v) for v in position)
-            s.initial_camera.look_at = tuple(float(v) for v in look_at)
+            s.initial_camera.position = np.asarray(position, dtype=np.float64)
+            s.initial_camera.look_at = np.asarray(look_at, dtype=np.float64)
             s.scene.add_grid("/mrcp/floor", width=2.0, height=2.0, cell_size=0.1,
                              position=(0.0, 0.0, float(min(r.base[2, 3] for r in
                                                            geometry.robots)) - 0.3))
             self.station = StationView(s, geometry)
-            self.panel = MrcpPanel(s, self.scenario.name, self.live.robots,
-                                   self.live.ntt_threshold, self.live.t_max)
+            panel = self.panel = MrcpPanel(s, self.scenario.name, self.live.robots,
+                                           self.live.ntt_threshold, self.live.t_max)
             start = task_pose(geometry.task_start, None)
-            self.gizmo = s.scene.add_transform_controls(
+            gizmo = self.gizmo = s.scene.add_transform_controls(
                 "/mrcp/operator_gizmo", scale=0.25, position=tuple(start[:3]),
                 wxyz=tuple(start[3:]), visible=False)
-            self.panel.operator.on_update(self._guard(
-                lambda _: self.set_operator_mode(str(self.panel.operator.value))))  # type: ignore[union-attr]
-            self.gizmo.on_update(self._guard(lambda _: self.set_operator_pose(
-                np.asarray(self.gizmo.position, float), np.asarray(self.gizmo.wxyz, float))))  # type: ignore[union-attr]
+            panel.operator.on_update(self._guard(
+                lambda _: self.set_operator_mode(str(panel.operator.value))))
+            gizmo.on_update(self._guard(lambda _: self.set_operator_pose(
+                np.asarray(gizmo.position, float), np.asarray(gizmo.wxyz, float))))
             self.live.start()
             self._thread = threading.Thread(target=self._view_loop, name="vasim-viewer-view",
                                             daemon=True)
@@ -658,7 +659,7 @@ class MrcpViewerApp(ErrorReporter):
         self.live.operator.set_mode(mode)
         self.gizmo.visible = mode == "browser"
         if self.panel.operator.value != mode:
-            self.panel.operator.value = mode
+            set_gui_value(self.panel.operator, mode)
 
     def set_operator_pose(self, position: FloatArray, wxyz: FloatArray) -> None:
         """The browser target (what dragging the gizmo does): position ``(3,)`` [m],

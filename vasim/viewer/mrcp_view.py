@@ -227,7 +227,9 @@ def task_shape(scenario: str, points: FloatArray) -> trimesh.Trimesh:
             spoke.apply_translation([faucet.RADIUS / 2, 0.0, 0.0])
             spoke.apply_transform(trimesh.transformations.rotation_matrix(a, [0, 0, 1]))
             parts.append(spoke)
-        return trimesh.util.concatenate(parts)
+        wheel = trimesh.util.concatenate(parts)
+        assert isinstance(wheel, trimesh.Trimesh)  # Trimesh parts concatenate to one Trimesh
+        return wheel
     pts = np.asarray(points, dtype=float)
     try:
         return trimesh.convex.convex_hull(pts)
@@ -325,7 +327,7 @@ class StationView:
                 for k, h in enumerate(r.hulls)]
             self.labels[r.name] = scene.add_label(
                 f"/mrcp/robots/{r.name}/label", r.name,
-                position=tuple(float(v) for v in r.base[:3, 3] + np.array([0, 0, 0.42])),
+                position=np.asarray(r.base[:3, 3] + np.array([0, 0, 0.42]), dtype=np.float64),
                 anchor="bottom-center")
         self.obstacles: dict[str, Any] = {}
         for o in geometry.obstacles:
@@ -379,8 +381,8 @@ class StationView:
             h.position = tuple(float(v) for v in pose[:3])
             h.wxyz = tuple(float(v) for v in pose[3:])
         pos, wxyz = frame.task[:3], frame.task[3:]
-        self.task.position = tuple(float(v) for v in pos)
-        self.task.wxyz = tuple(float(v) for v in wxyz)
+        self.task.position = np.asarray(pos, dtype=np.float64)
+        self.task.wxyz = np.asarray(wxyz, dtype=np.float64)
         rot = matrix_from_quat(wxyz)
         pts = self.geometry.task_points @ rot.T + pos
         self.points.points = pts.astype(np.float32)
@@ -393,7 +395,7 @@ class StationView:
         text = holder_text(frame)
         if self.holder.text != text:
             self.holder.text = text
-        self.holder.position = tuple(float(v) for v in pos + np.array([0.0, 0.0, 0.08]))
+        self.holder.position = np.asarray(pos + np.array([0.0, 0.0, 0.08]), dtype=np.float64)
         self.updates += 1
 
 

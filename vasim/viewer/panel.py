@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from vasim.fixtures.logistic import Logistic5
 from vasim.trials.vf import TrialFrame
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
+from vasim.viewer.views import set_gui_value
 
 FloatArray = NDArray[np.float64]
 
@@ -186,8 +187,12 @@ class ExperimenterPanel:
         on(self.input, lambda e: submit(Command("input", e.target.value)))
         self.set_subject.on_click(guard(
             lambda e: submit(Command("subject", self.subject.value.strip()))))
-        on(self.protocol, lambda e: e.target.value != NO_PROTOCOL
-           and submit(Command("protocol", e.target.value)))
+
+        def pick_protocol(e: Any) -> None:
+            if e.target.value != NO_PROTOCOL:
+                submit(Command("protocol", e.target.value))
+
+        on(self.protocol, pick_protocol)
         self.start.on_click(guard(lambda e: submit(Command("start"))))
         self.stop.on_click(guard(lambda e: submit(Command("stop"))))
         self.advance.on_click(guard(lambda e: submit(Command("start"))))
@@ -227,7 +232,7 @@ class ExperimenterPanel:
         self._local.syncing = True
         try:
             for k in F5PL_FIELDS:
-                self.numbers[k].value = float(getattr(p, k))
+                set_gui_value(self.numbers[k], float(getattr(p, k)))
         finally:
             self._local.syncing = False
         x, y = f5pl_curve(p)
@@ -244,14 +249,15 @@ class ExperimenterPanel:
             self.status.content = md_escape(p.status) if p.status else ""
             self.progress.content = progress_text(p)
             if p.total:
-                self.progress_bar.value = 100.0 * (p.completed or 0) / p.total
+                set_gui_value(self.progress_bar, 100.0 * (p.completed or 0) / p.total)
                 self.progress_bar.visible = True
             else:
                 self.progress_bar.visible = False
-            for handle, value in ((self.mode, p.mode), (self.input, p.input),
-                                  (self.schema, p.schema), (self.task, p.task),
-                                  (self.protocol, p.protocol or NO_PROTOCOL),
-                                  (self.auto_advance, p.auto_advance)):
+            choices: tuple[tuple[Any, str | bool], ...] = (
+                (self.mode, p.mode), (self.input, p.input), (self.schema, p.schema),
+                (self.task, p.task), (self.protocol, p.protocol or NO_PROTOCOL),
+                (self.auto_advance, p.auto_advance))
+            for handle, value in choices:
                 if handle.value != value:
                     if isinstance(handle, viser.GuiDropdownHandle) and \
                             value not in handle.options:
@@ -260,7 +266,7 @@ class ExperimenterPanel:
             if p.subject != self._shown_subject:  # only on a change: never clobber typing
                 self._shown_subject = p.subject
                 if self.subject.value != (p.subject or ""):
-                    self.subject.value = p.subject or ""
+                    set_gui_value(self.subject, p.subject or "")
             free = p.mode != "protocol"
             for h in (self.schema, self.task, self.fixture, self.apply,
                       *self.numbers.values()):
@@ -275,7 +281,7 @@ class ExperimenterPanel:
             if tuple(self.fixture.options) != names:
                 self.fixture.options = names
             if self.fixture.value != keep:
-                self.fixture.value = keep
+                set_gui_value(self.fixture, keep)
             self.summary.content = summary_text(p.summary)
             if p.curve:
                 c = np.array(p.curve, dtype=np.float64)

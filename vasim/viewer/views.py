@@ -26,6 +26,7 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import trimesh
@@ -65,6 +66,26 @@ def organ_style(organ: Organ) -> dict[str, object]:
             "cast_shadow": True, "receive_shadow": True}
 
 
+def set_gui_value(handle: Any, value: object) -> None:
+    """Assigns a viser GUI input's value (synchronised to every client by viser).
+
+    ``handle`` is any of viser's input handles (``GuiInputHandle`` subclasses, or the
+    progress bar's handle, which viser does not export).
+
+    viser 1.1 declares the ``value`` setter with a wider type than the getter, which mypy
+    reports as a read-only property; the assignment is done here, once, instead.
+    """
+    setattr(handle, "value", value)  # noqa: B010 (see the docstring)
+
+
+class SceneView(Protocol):
+    """What every view owning scene nodes offers (for listing them, e.g. in tests)."""
+
+    def node_names(self) -> list[str]:
+        """Names of the scene nodes this view owns."""
+        ...
+
+
 class OrganView:
     """One organ surface (``/organs/<name>``); deformable in place.
 
@@ -80,7 +101,7 @@ class OrganView:
         f = np.ascontiguousarray(organ.mesh.faces, dtype=np.uint32)
         self.n_vertices = len(v)
         self.handle = server.scene.add_mesh_simple(
-            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]
+            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]  # viser's style kwargs
         )
 
     def update(self, vertices: FloatArray) -> None:

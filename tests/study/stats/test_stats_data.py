@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -158,3 +159,10 @@ def test_text_columns_keep_na_and_none_as_labels(tmp_path: Path) -> None:
     assert df["y"].isna().tolist() == [False, True, True, False, False]  # value columns: NA
     with pytest.raises(ConfigError, match="missing labels at line 6"):
         cell_means(df.fillna({"y": 0.0}), "y", "s", ["fixture"])
+
+
+def test_stats_reads_the_export_missing_value_marker(tmp_path: Path) -> None:
+    p = tmp_path / "t.csv"
+    p.write_text("subject,condition,completion_time\nS01,vg,1.5\nS01,ff,\\N\n")
+    df = read_long_csv(p)
+    assert math.isnan(df["completion_time"].iloc[1]) and df["completion_time"].iloc[0] == 1.5

@@ -178,7 +178,7 @@ class EmulatorDevice:
         if start_position is not None:
             x0 = np.array(start_position, dtype=np.float64).reshape(3)
         elif self._hand is not None:
-            x0 = self._hand_at(0.0)
+            x0 = np.array(self._hand_at(0.0))
         else:
             x0 = 0.5 * (np.asarray(limits.workspace_min) + np.asarray(limits.workspace_max))
             x0 = np.where(np.isfinite(x0), x0, 0.0)

@@ -192,7 +192,7 @@ def sample_from_transform(t: float, m: object, buttons: int) -> DeviceSample:
     >>> s.position.tolist(), s.orientation.tolist(), s.buttons
     ([0.01, -0.02, 0.005], [1.0, 0.0, 0.0, 0.0], 1)
     """
-    a = np.array([[float(m[i][j]) for j in range(4)] for i in range(4)])  # type: ignore[index]
+    a = np.array([[float(m[i][j]) for j in range(4)] for i in range(4)])  # type: ignore[index]  # m: the driver's 4x4 nested list
     rot = a[:3, :3].T  # m[col][row] -> R[row][col]
     pos = a[3, :3] * 1e-3
     finite = bool(np.all(np.isfinite(a)))

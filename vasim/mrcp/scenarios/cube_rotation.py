@@ -74,10 +74,10 @@ class CubeRotation:
         arms: dict[str, ArmKinematics] = {"R0": PybulletArm(st.model, b0, name="R0"),
                                           "R1": PybulletArm(st.model, b1, name="R1")}
         q1 = grasp_configuration(arms["R1"], CENTRE + tps[0].position, tps[0].rotation,
-                                 arms["R1"].home, "the +x face")          # type: ignore[attr-defined]
+                                 arms["R1"].home, "the +x face")          # type: ignore[attr-defined]  # a PybulletArm
         pre = CENTRE + tps[1].position + tps[1].approach
         q0 = grasp_configuration(arms["R0"], pre, tps[1].rotation,
-                                 arms["R0"].home, "the -x pre-grasp")     # type: ignore[attr-defined]
+                                 arms["R0"].home, "the -x pre-grasp")     # type: ignore[attr-defined]  # a PybulletArm
         st.add_robot("R0", b0, q0)
         st.add_robot("R1", b1, q1)
         st.add_sensing_convex("view_cone", view_cone_vertices(CAMERA, CENTRE, HALF * np.sqrt(3)))

@@ -79,10 +79,10 @@ class CubeTranslation:
         b1 = base_pose(np.array([0.5, 0.0, 0.0]), np.pi)
         arms: dict[str, ArmKinematics] = {"R0": PybulletArm(st.model, b0, name="R0"),
                                           "R1": PybulletArm(st.model, b1, name="R1")}
-        home0 = arms["R0"].home                                   # type: ignore[attr-defined]
+        home0 = arms["R0"].home                                   # type: ignore[attr-defined]  # a PybulletArm
         q0 = grasp_configuration(arms["R0"], START + tps[4].position, tps[4].rotation, home0,
                                  "the cube's top face")
-        q1 = arms["R1"].home.copy()                               # type: ignore[attr-defined]
+        q1 = arms["R1"].home.copy()                               # type: ignore[attr-defined]  # a PybulletArm
         q1[0] = 0.6                                               # "a random configuration"
         st.add_robot("R0", b0, q0)
         st.add_robot("R1", b1, q1)

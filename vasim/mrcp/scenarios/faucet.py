@@ -77,10 +77,10 @@ class Faucet:
                                           "R1": PybulletArm(st.model, b1, name="R1")}
         # R1 holds spoke 0 (on its side, +x); R0 waits over spoke 1.
         q1 = grasp_configuration(arms["R1"], CENTRE + tps[0].position, tps[0].rotation,
-                                 arms["R1"].home, "spoke 0")          # type: ignore[attr-defined]
+                                 arms["R1"].home, "spoke 0")          # type: ignore[attr-defined]  # a PybulletArm
         pre = CENTRE + tps[1].position + tps[1].approach
         q0 = grasp_configuration(arms["R0"], pre, tps[1].rotation,
-                                 arms["R0"].home, "over spoke 1")     # type: ignore[attr-defined]
+                                 arms["R0"].home, "over spoke 1")     # type: ignore[attr-defined]  # a PybulletArm
         st.add_robot("R0", b0, q0)
         st.add_robot("R1", b1, q1)
         st.add_box("faucet_body", np.array([0.03, 0.03, 0.15]),

@@ -73,7 +73,7 @@ TROCARS = {"R0": np.array([-0.07, PATH_Y, 0.0]), "R1": np.array([0.07, PATH_Y, 0
 CAMERA_TROCAR = np.array([0.0, 0.08, 0.0])
 
 
-def tool_model(length: float = TOOL_LENGTH, radius: float = SHAFT_RADIUS):  # type: ignore[no-untyped-def]
+def tool_model(length: float = TOOL_LENGTH, radius: float = SHAFT_RADIUS):
     """The RX60B holding a straight tool on its flange: the last link's collision geometry
     becomes the hull of ``radius`` spheres from the wrist centre to the tool tip."""
     from vasim.mrcp.dh import LinkGeometry
@@ -148,7 +148,7 @@ class LaparoscopicRings:
         qc = camera.ik(np.array([0.0, 0.0, -0.06]), None, model.home)
         if qc is None:
             raise RuntimeError("laparoscopic_rings: the camera robot cannot reach its view")
-        st.physical.add_robot("C", model, camera.arm.base, qc)  # type: ignore[attr-defined]
+        st.physical.add_robot("C", model, camera.arm.base, qc)  # type: ignore[attr-defined]  # a pybullet world
         # bodies ring_k (first ring, the name the viewer's tests count) and ring1_k (second)
         for i, rx in enumerate(RINGS):
             for k, (half, centre, rot) in enumerate(ring_segments(

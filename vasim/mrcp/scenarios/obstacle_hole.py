@@ -97,8 +97,8 @@ class ObstacleHole:
                                           "R1": PybulletArm(st.model, b1, name="R1")}
         centre0 = np.array([0.0, bar_y(0.0), wall_height(0.0)])
         q0 = grasp_configuration(arms["R0"], centre0 + tps[0].position, tps[0].rotation,
-                                 arms["R0"].home, "the bar's -y end")  # type: ignore[attr-defined]
-        q1 = arms["R1"].home.copy()                                     # type: ignore[attr-defined]
+                                 arms["R0"].home, "the bar's -y end")  # type: ignore[attr-defined]  # a PybulletArm
+        q1 = arms["R1"].home.copy()                                     # type: ignore[attr-defined]  # a PybulletArm
         st.add_robot("R0", b0, q0)
         st.add_robot("R1", b1, q1)
         pieces = wall_pieces()

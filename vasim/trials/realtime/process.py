@@ -260,7 +260,7 @@ def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, con
         if runner.abdomen is not None:
             runner.set_physics_feed(feed)
         trial.plant.on_done.append(lambda: setattr(done, "value", 1))
-        trial.loop.plant = _FramePublisher(trial.plant, runner, frames, sent, read,  # type: ignore[assignment]
+        trial.loop.plant = _FramePublisher(trial.plant, runner, frames, sent, read,
                                            spec["frame_every"])
         trial.start()  # a device that cannot start fails start() in the parent
         control.send(("ready", getattr(trial.device, "name", "?")))
@@ -358,7 +358,7 @@ class ProcessRealtimeTrial:
             self.physics_log = PhysicsLog()
             self._world = _PipeWorld(self.runner.abdomen, self._board, self._snap_tx,
                                      self.physics_log, self._taken, self._done)
-            self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]
+            self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]  # duck-typed world
         self._proc: Any = None
         self._frame: TrialFrame = self.runner.frame
         self._rx_thread: threading.Thread | None = None

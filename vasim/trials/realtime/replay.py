@@ -51,7 +51,7 @@ def stored_config(row: dict[str, Any]) -> TrialConfig:
         raise ConfigError(f"trial {row.get('id')} has no stored configuration",
                           field="config_json")
     names = {f.name for f in fields(TrialConfig)} - {"profile", "operator"}
-    return TrialConfig(**{k: v for k, v in rec.items() if k in names})  # type: ignore[arg-type]
+    return TrialConfig(**{k: v for k, v in rec.items() if k in names})
 
 
 def replay_trial(store: TrialSource, trial_id: int) -> ReplayReport:
