@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.atomic import atomic_file
 from vasim.core.errors import DeviceError
 from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_force
 
@@ -85,15 +86,20 @@ class DeviceStream:
                             buttons=int(self.buttons[i]), valid=bool(self.valid[i]))
 
     def save(self, path: str | Path) -> Path:
-        """Writes the stream to ``path`` (.npz, compressed); returns the path."""
+        """Writes the stream to ``path`` (.npz, compressed; the suffix is added if missing)
+        atomically: a killed process leaves the previous file or the new one, never a
+        truncated one. Returns the path written."""
         path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_name(path.name + ".npz")
         meta = {"device": self.device, "rate_hz": self.rate_hz,
                 "limits": self.limits.to_dict(), "n": len(self)}
-        np.savez_compressed(path, format=np.array(FORMAT), version=np.int64(VERSION),
-                            meta=np.array(json.dumps(meta)), tick=self.tick, t=self.t,
-                            position=self.position, orientation=self.orientation,
-                            buttons=self.buttons, valid=self.valid)
-        return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+        with atomic_file(path) as fh:
+            np.savez_compressed(fh, format=np.array(FORMAT), version=np.int64(VERSION),
+                                meta=np.array(json.dumps(meta)), tick=self.tick, t=self.t,
+                                position=self.position, orientation=self.orientation,
+                                buttons=self.buttons, valid=self.valid)
+        return path
 
     @classmethod
     def load(cls, path: str | Path) -> DeviceStream:

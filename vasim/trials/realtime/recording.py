@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.abdomen.contact import ToolPose
+from vasim.core.atomic import atomic_file
 from vasim.core.errors import DeviceError
 from vasim.haptics.devices.replay import DeviceStream, stream_path
 from vasim.trials.sink import TrialSource
@@ -100,11 +101,12 @@ class RealtimeRecording:
         arrays = (self.physics.arrays() if self.physics is not None
                   else {"pose": np.zeros((0, 6)), "applied": np.zeros((0, 2), np.int64)})
         p_rt = realtime_path(db_path, trial_id)
-        np.savez_compressed(p_rt, format=np.array(REALTIME_FORMAT),
-                            version=np.int64(REALTIME_VERSION),
-                            meta=np.array(json.dumps({**self.meta,
-                                                      "has_physics": self.physics is not None})),
-                            **arrays)
+        with atomic_file(p_rt) as fh:  # complete or absent, like every output
+            np.savez_compressed(fh, format=np.array(REALTIME_FORMAT),
+                                version=np.int64(REALTIME_VERSION),
+                                meta=np.array(json.dumps(
+                                    {**self.meta, "has_physics": self.physics is not None})),
+                                **arrays)
         return p_dev, p_rt
 
     @classmethod
