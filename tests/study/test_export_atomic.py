@@ -20,7 +20,8 @@ import pytest
 from vasim.core.errors import ConfigError
 from vasim.study.export import export_study, read_export
 from vasim.study.store import TrialStore
-from vasim.trials.vf import TrialConfig, run_trial
+from vasim.trials.registry import run_trial
+from vasim.trials.vf import TrialConfig
 
 
 @pytest.fixture(scope="module")
