@@ -34,7 +34,8 @@ from typing import Any
 import numpy as np
 
 from vasim.abdomen.contact import ToolPose
-from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+from vasim.abdomen.snapshot import AbdomenSnapshot
+from vasim.abdomen.world import Abdomen
 
 log = logging.getLogger(__name__)
 

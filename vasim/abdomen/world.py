@@ -63,8 +63,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from functools import cached_property, partial
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -86,6 +85,7 @@ from vasim.abdomen.model import OrganModel, OrganState
 from vasim.abdomen.motion import PhysioMotion, PointMotion, _sin_cos
 from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
+from vasim.abdomen.snapshot import AbdomenSnapshot, OrganView, ToolContact, readonly
 from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -109,12 +109,6 @@ MAX_EVENTS = 10_000
 POSE_LIMIT = 1e3
 """A tool point farther than this from the origin on an axis [m] is out of the abdomen (no
 contact): larger finite values overflow the kernel's squared lengths."""
-
-
-def _readonly(a: FloatArray) -> FloatArray:
-    a = np.array(a, dtype=np.float64)
-    a.setflags(write=False)
-    return a
 
 
 # ---------------------------------------------------------------------------------------
@@ -195,147 +189,10 @@ def settled_positions(scene: Scene, model: OrganModel,
                 f"{resets} times while settling (last: {report.reason}); check its stiffness, "
                 "mass, anchors and the scene's gravity", file=scene.source,
                 field=f"organs.{model.name}")
-    out = _readonly(state.x)
+    out = readonly(state.x)
     with _SETTLED_LOCK:
         _SETTLED[key] = out
     return out
-
-
-# ---------------------------------------------------------------------------------------
-# Snapshots
-
-
-@dataclass(frozen=True, eq=False)
-class OrganView:
-    """One organ's surface in a snapshot (computed on first read when the organ sleeps)."""
-
-    name: str
-    awake: bool
-    _x: FloatArray | None = field(repr=False, default=None)
-    _body: _Body | None = field(repr=False, default=None)
-    _t: float = 0.0
-
-    @cached_property
-    def surface(self) -> FloatArray:
-        """(n_surface, 3) surface node positions [m], read-only."""
-        if self._x is not None:
-            return self._x
-        assert self._body is not None
-        return _readonly(self._body.sleeping_x(self._t)[: self._body.model.n_surface])
-
-
-@dataclass(frozen=True, eq=False)
-class ToolContact:
-    """One instrument's contact result in a snapshot (arrays read-only).
-
-    Attributes:
-        name: the instrument's name (the mapping key given to :meth:`Abdomen.step`, else its
-            position in the sequence, ``"0"``, ``"1"``, ...).
-        force: (3,) total contact force on this instrument [N].
-        force_tip: (3,) contact force felt at its tip [N].
-        torque: (3,) contact torque about its fulcrum [N·m].
-        stiffness_tip: (3, 3) dF_tip/dx [N/m].
-        patch: its contact planes for a 1 kHz force model.
-        touching: names of the organs it touches (scene order).
-        delicate_contact: it touches a delicate organ.
-    """
-
-    name: str
-    force: FloatArray
-    force_tip: FloatArray
-    torque: FloatArray
-    stiffness_tip: FloatArray
-    patch: ContactPatch = field(repr=False)
-    touching: tuple[str, ...]
-    delicate_contact: bool
-
-    @property
-    def in_contact(self) -> bool:
-        return bool(self.touching)
-
-
-@dataclass(frozen=True, eq=False)
-class AbdomenSnapshot:
-    """The abdomen after one physics step (immutable: arrays are read-only copies).
-
-    Attributes:
-        t: simulated time [s].
-        seq: step counter (1 for the first step).
-        organs: (property) per organ, its surface (see :class:`OrganView`), scene order.
-        targets: (p, 3) bound target positions [m] (empty without bound targets).
-        target_normals: (p, 3) unit normals of the tissue under the targets.
-        target_displacement: (p,) distance of each target from where the physiological
-            motion alone would put it [m] (what the tool did to it).
-        force: (3,) total contact force on the (first) tool [N].
-        force_tip: (3,) contact force felt at the (first) tool's tip [N].
-        torque: (3,) contact torque about the (first) tool's fulcrum [N·m].
-        stiffness_tip: (3, 3) dF_tip/dx of the first tool [N/m].
-        patch: the first tool's contact planes for the 1 kHz force model.
-        touching: names of the organs the first tool touches.
-        delicate_contact: the first tool touches a delicate organ.
-        events: (kind, detail) of what happened in this step (e.g. an organ reset).
-        tools: every instrument's result, in the order given to :meth:`Abdomen.step`
-            (empty without a tool); ``tools[0]`` carries the top-level fields' values.
-    """
-
-    t: float
-    seq: int
-    organ_sources: tuple[tuple[str, FloatArray | None, _Body], ...] = field(repr=False)
-    targets: FloatArray
-    target_normals: FloatArray
-    target_displacement: FloatArray
-    force: FloatArray
-    force_tip: FloatArray
-    torque: FloatArray
-    stiffness_tip: FloatArray
-    patch: ContactPatch
-    touching: tuple[str, ...]
-    delicate_contact: bool
-    events: tuple[tuple[str, str], ...] = ()
-    tools: tuple[ToolContact, ...] = ()
-
-    @property
-    def in_contact(self) -> bool:
-        """The first tool touches tissue (see :attr:`any_contact` for every instrument)."""
-        return bool(self.touching)
-
-    @property
-    def any_contact(self) -> bool:
-        """Any instrument touches tissue."""
-        return self.in_contact or any(tc.in_contact for tc in self.tools)
-
-    @property
-    def touching_any(self) -> tuple[str, ...]:
-        """Names of the organs touched by any instrument (first-seen order)."""
-        names = dict.fromkeys(self.touching)
-        for tc in self.tools:
-            names.update(dict.fromkeys(tc.touching))
-        return tuple(names)
-
-    @property
-    def delicate_any(self) -> bool:
-        """Any instrument touches a delicate organ."""
-        return self.delicate_contact or any(tc.delicate_contact for tc in self.tools)
-
-    def tool(self, name: str) -> ToolContact:
-        """The result of the instrument named ``name``."""
-        for tc in self.tools:
-            if tc.name == name:
-                return tc
-        raise KeyError(f"no instrument {name!r} in the snapshot "
-                       f"(instruments: {[tc.name for tc in self.tools]!r})")
-
-    @cached_property
-    def organs(self) -> tuple[OrganView, ...]:
-        return tuple(OrganView(name, True, _x=x) if x is not None
-                     else OrganView(name, False, _body=body, _t=self.t)
-                     for name, x, body in self.organ_sources)
-
-    def organ(self, name: str) -> OrganView:
-        for o in self.organs:
-            if o.name == name:
-                return o
-        raise KeyError(f"no organ {name!r} in the snapshot")
 
 
 # ---------------------------------------------------------------------------------------
@@ -722,15 +579,15 @@ class Abdomen:
         b.awake = False
 
     def _snapshot(self, events: tuple[tuple[str, str], ...]) -> AbdomenSnapshot:
-        views = tuple((b.model.name, _readonly(b.state.x[: b.model.n_surface])
+        views = tuple((b.model.name, readonly(b.state.x[: b.model.n_surface])
                        if b.awake else None, b) for b in self._bodies)
         tools = tuple(self._tool_contact(name, contacts)
                       for name, contacts in self._last_contacts)
         first = tools[0] if tools else self._tool_contact("", {})
         p, n, disp = self._targets()
         return AbdomenSnapshot(
-            t=self.t, seq=self.seq, organ_sources=views, targets=_readonly(p),
-            target_normals=_readonly(n), target_displacement=_readonly(disp),
+            t=self.t, seq=self.seq, organ_sources=views, targets=readonly(p),
+            target_normals=readonly(n), target_displacement=readonly(disp),
             force=first.force, force_tip=first.force_tip, torque=first.torque,
             stiffness_tip=first.stiffness_tip, patch=first.patch, touching=first.touching,
             delicate_contact=first.delicate_contact, events=events, tools=tools)
@@ -739,15 +596,15 @@ class Abdomen:
         """One instrument's contacts with every organ, summed into its snapshot entry."""
         if len(contacts) == 1:  # one organ touched (the usual case): no sums to form
             (c,) = contacts.values()
-            force, force_tip = _readonly(c.force), _readonly(c.force_tip)
-            torque, stiff = _readonly(c.torque), _readonly(c.stiffness_tip)
+            force, force_tip = readonly(c.force), readonly(c.force_tip)
+            torque, stiff = readonly(c.torque), readonly(c.stiffness_tip)
             patch = c.patch
         elif contacts:
             cs = list(contacts.values())
-            force = _readonly(np.sum([c.force for c in cs], axis=0))
-            force_tip = _readonly(np.sum([c.force_tip for c in cs], axis=0))
-            torque = _readonly(np.sum([c.torque for c in cs], axis=0))
-            stiff = _readonly(np.sum([c.stiffness_tip for c in cs], axis=0))
+            force = readonly(np.sum([c.force for c in cs], axis=0))
+            force_tip = readonly(np.sum([c.force_tip for c in cs], axis=0))
+            torque = readonly(np.sum([c.torque for c in cs], axis=0))
+            stiff = readonly(np.sum([c.stiffness_tip for c in cs], axis=0))
             patch = ContactPatch.merge([c.patch for c in cs], self.tool.radius)
         else:
             force = force_tip = torque = _ZERO3
@@ -779,8 +636,8 @@ def _in_reach(p: FloatArray) -> bool:
     return bool((np.abs(p) < POSE_LIMIT).all())
 
 
-_ZERO3 = _readonly(np.zeros(3))
-_ZERO33 = _readonly(np.zeros((3, 3)))
+_ZERO3 = readonly(np.zeros(3))
+_ZERO33 = readonly(np.zeros((3, 3)))
 
 
 __all__ = [

@@ -150,7 +150,8 @@ from vasim.trials.vf import TrialConfig, TrialResult
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
-    from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+    from vasim.abdomen.snapshot import AbdomenSnapshot
+    from vasim.abdomen.world import Abdomen
 
 CYCLE_DT = 0.018
 """Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""

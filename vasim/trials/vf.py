@@ -72,7 +72,8 @@ from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 
 if TYPE_CHECKING:
-    from vasim.abdomen.world import Abdomen, AbdomenSnapshot
+    from vasim.abdomen.snapshot import AbdomenSnapshot
+    from vasim.abdomen.world import Abdomen
 
 TaskName = Literal["trajectory", "point"]
 
