@@ -568,6 +568,7 @@ class _Robot:
     q: FloatArray
     self_pairs: tuple[tuple[int, int], ...]
     frames: FloatArray | None = None     # link frames at q (compiled model), lazily
+    sweep: _Sweep | None = None          # its compiled distance model, looked up once
 
 
 class PybulletWorld:
@@ -806,13 +807,13 @@ class PybulletWorld:
         if self.compiled_distances:
             sweep_a = _robot_sweep(r.model)
             frames_a = np.ascontiguousarray(dh.frames_many(r.model, qs, r.base)[:, :-1])
-            modelled = [j for j, name in enumerate(names) if self._sweep_of(name) is not None]
-            exact = [(i, j) for j in range(len(names)) if j not in modelled
+            models = [self._sweep_of(name) for name in names]
+            modelled = [j for j, m in enumerate(models) if m is not None]
+            exact = [(i, j) for j in range(len(names)) if models[j] is None
                      for i in range(qs.shape[0])]
             if modelled:
                 packed = self._packed([names[j] for j in modelled])
-                frames_b = np.concatenate([self._sweep_of(names[j])[1]  # type: ignore[index]
-                                           for j in modelled])
+                frames_b = np.concatenate([models[j][1] for j in modelled])  # type: ignore[index]
                 dist = np.empty((qs.shape[0], len(modelled)))
                 swept_distances(frames_a, sweep_a.pts, sweep_a.count, sweep_a.scale,
                                 sweep_a.ball, sweep_a.centre, sweep_a.radius, frames_b,
@@ -852,7 +853,9 @@ class PybulletWorld:
             o = self._robots[name]
             if o.frames is None:
                 o.frames = np.ascontiguousarray(dh.frames_one(o.model, o.q, o.base)[:-1])
-            return _robot_sweep(o.model), o.frames
+            if o.sweep is None:
+                o.sweep = _robot_sweep(o.model)
+            return o.sweep, o.frames
         self._known(name)
         return self._sphere_obstacles.get(name)
 

@@ -94,6 +94,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
+from vasim.mrcp.indices.base import prefetch_distances
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.modes import KernelEvent, KernelState, next_state
 from vasim.mrcp.planner import ObstacleMemory, PlannerParams, move_candidate
@@ -487,6 +488,7 @@ class MRCPKernel:
         times, mean, std, trot = self._prediction(t)
         dt_pred = cfg.dt * cfg.stride
         raw: dict[Key, dict[str, float]] = {}
+        contexts: dict[Key, EvalContext] = {}
         pairs = [(self.rsel, self.cutp)] + [(r, q) for r in self.arms if r != self.rsel
                                             for q in range(len(self.task_points))
                                             if q != self.cutp]
@@ -516,20 +518,41 @@ class MRCPKernel:
                 vel[0] = qdot[r]
             past = [hist[-cfg.stride * (j + 1)] for j in range(cfg.horizon)
                     if len(hist) >= cfg.stride * (j + 1)]
-            ctx = EvalContext(
+            raw[(r, q)] = {}            # filled below; keeps the pairs' order in raw
+            contexts[(r, q)] = EvalContext(
                 robot=r, arm=arm, point=q, selected=selected, times=times,
                 positions=mean[:, q], std=std[:, q],
                 rotations=np.array(rotations) if tp.rotation is not None else None,
                 configs=configs, reachable=reach, joint_velocity=vel, past_configs=past,
                 world=self.world, wrench=wrench, extras=extras,
                 distance_points=cfg.distance_points)
-            raw[(r, q)] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
-            hist.append(configs.copy())
+        reach_d = self._distance_range()
+        if reach_d is not None:     # one batched distance query per robot (see below)
+            for r in self.arms:
+                prefetch_distances([c for (rr, _), c in contexts.items() if rr == r], reach_d)
+        for key, ctx in contexts.items():
+            raw[key] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
+            self._pred_hist[key].append(ctx.configs.copy())
         for ix in self._groups:
             combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
             for k, v in combined.items():
                 raw[k][ix.name] = v
         return self._to_time(t, raw, q_meas)
+
+    def _distance_range(self) -> float | None:
+        """The largest body-distance range any index declares (``distance_range(world)``),
+        None when none reads distances.
+
+        **Decision** (issue #17 §4, cost): every (robot, point) context of a robot gets its
+        distances from one batched ``min_distances`` call per cycle
+        (:func:`~vasim.mrcp.indices.base.prefetch_distances`) before any index runs; the
+        values are the ones each context would have queried (the world does not move
+        during the evaluation), so every outcome is unchanged.
+        """
+        ranges = [f(self.world) for ix in self.indices
+                  if (f := getattr(ix, "distance_range", None)) is not None]
+        found = [float(v) for v in ranges if v is not None]
+        return max(found) if found else None
 
     def _to_time(self, t: float, raw: Mapping[Key, dict[str, float]],
                  q_meas: Mapping[str, FloatArray]) -> dict[Key, Evaluation]:
