@@ -17,7 +17,7 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from vasim.core.errors import ConfigError
-from vasim.mrcp import dh, urdf
+from vasim.mrcp import closed_form_ik, dh, urdf
 from vasim.mrcp.backend import (
     COMPILED_TOLERANCE,
     PybulletArm,
@@ -149,7 +149,7 @@ def test_closed_form_ik_at_the_shoulder_singularity(arm: PybulletArm, q: list[fl
                                                     ) -> None:
     qs = _shoulder_singular(np.array(q))
     p, r = arm.tcp_pose(qs)
-    assert len(dh.puma_ik(RX, p, r)) == 8            # was 0 (rho2 ~ -1e-18 from round-off)
+    assert len(closed_form_ik.puma_ik(RX, p, r)) == 8    # was 0 (rho2 ~ -1e-18, round-off)
     sol = arm.ik(p, r)
     assert sol is not None and RX.within_limits(sol)
     p2, r2 = arm.tcp_pose(sol)
@@ -161,7 +161,7 @@ def test_an_empty_closed_form_within_reach_falls_back_to_the_numeric_search(
         arm: PybulletArm, monkeypatch: pytest.MonkeyPatch) -> None:
     q = np.array([0.3, -1.2, 2.6, 0.4, 1.0, -0.5])
     p, r = arm.tcp_pose(q)
-    monkeypatch.setattr(dh, "puma_ik", lambda *args, **kwargs: [])
+    monkeypatch.setattr(closed_form_ik, "puma_ik", lambda *args, **kwargs: [])
     assert arm._closed_form_ik(p, r, RX.home, 1e-6, 1e-6) == (None, False)
     sol = arm.ik(p, r)
     assert sol is not None

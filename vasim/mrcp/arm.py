@@ -42,7 +42,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import qmc
 
 from vasim.core.errors import ConfigError
-from vasim.mrcp import dh
+from vasim.mrcp import closed_form_ik, dh
 from vasim.mrcp.dh import RobotModel
 from vasim.mrcp.interfaces import FloatArray
 from vasim.mrcp.urdf import write_urdf
@@ -166,7 +166,7 @@ class PybulletArm:
         self._shoulder = (self.base @ dh.joint_origin(robot.joints[0]))[:3, 3]
         self._reach = sum(float(np.linalg.norm(dh.joint_origin(j)[:3, 3]))
                           for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
-        self._closed_form = closed_form and dh.is_puma_like(robot)
+        self._closed_form = closed_form and closed_form_ik.is_puma_like(robot)
         self._offsets = robot.table[3]  # type: ignore[attr-defined]
         unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
         self._spread = robot.lower + unit * (robot.upper - robot.lower)
@@ -256,8 +256,9 @@ class PybulletArm:
 
         Arms with the PUMA structure (the RX60B) and a full pose: up to four Newton steps
         from ``q_seed`` (tracking a small task increment, ~50 µs), else the closed form
-        (:func:`vasim.mrcp.dh.puma_ik`, all 8 solutions) wrapped into the limits, the one
-        closest to ``q_seed`` returned; no in-limit solution -> None (exact, ~0.1 ms).
+        (:func:`vasim.mrcp.closed_form_ik.puma_ik`, all 8 solutions) wrapped into the
+        limits, the one closest to ``q_seed`` returned; no in-limit solution -> None
+        (exact, ~0.1 ms).
         Otherwise (other arms, position-only targets, wrist singularities): damped least
         squares on the compiled DH chain, projected into the joint limits at every step
         (joints wrapped by 2π, then clamped), started from ``q_seed`` (the nearest branch
@@ -333,11 +334,11 @@ class PybulletArm:
         at all, since ``ik`` only calls this within reach: an empty closed form there may
         be round-off at a boundary, so the numeric search must still run)."""
         lower, upper = self.robot.lower, self.robot.upper
-        cands = dh.puma_ik(self.robot, target, rot, self.base)
+        cands = closed_form_ik.puma_ik(self.robot, target, rot, self.base)
         if not cands:       # all([]) would be True and skip the numeric fallback
             return None, False
         complete = all(abs(math.sin(c[4] + self._offsets[4])) > 1e-9 for c in cands)
-        wrapped = dh.wrap_into_batch(np.array(cands), lower, upper, seed)
+        wrapped = closed_form_ik.wrap_into_batch(np.array(cands), lower, upper, seed)
         fits = ~np.isnan(wrapped[:, 0])
         if not np.any(fits):
             return None, complete
