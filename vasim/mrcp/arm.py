@@ -241,6 +241,13 @@ class PybulletArm:
         (numpy DH kinematics, identical to :meth:`tcp_pose` to 1e-9)."""
         return dh.fk_batch(self.robot, q, self.base)
 
+    def dh_chain(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The compiled DH chain behind :meth:`jacobian_batch` / :meth:`tcp_pose_batch`:
+        ``(table, tcp, base)`` as ``vasim.mrcp.dh``'s kernels take them (``base`` ``(4, 4)``,
+        world frame), for indices that evaluate many configurations in one compiled call."""
+        return (self.robot.table, self.robot.tcp,  # type: ignore[attr-defined]
+                np.ascontiguousarray(self.base, dtype=float))
+
     def jacobian_batch(self, q: FloatArray) -> FloatArray:
         """``(m, 6, n)`` TCP Jacobians for ``(m, n)`` samples (numpy DH kinematics)."""
         return dh.jacobian_batch(self.robot, np.atleast_2d(q), self.base)
