@@ -64,7 +64,8 @@ def capture(src: Path, out: Path) -> None:
     """Run the fixed-seed commands with the code of ``src``; write outputs under ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     print(f"[equivalence] {src}: one trial", file=sys.stderr)
-    _vasim(["trial", "--schema", "ff", "--seed", "1", "--db", str(out / "trial.sqlite")], src, out)
+    _vasim(["trial", "--schema", "ff", "--seed", "1", "--subject", "S00",
+            "--db", str(out / "trial.sqlite")], src, out)
     print(f"[equivalence] {src}: 3-subject cohort", file=sys.stderr)
     _vasim(
         ["study", "simulate", "--protocol", "vf_learning_curve", "--subjects", "3",
@@ -78,21 +79,64 @@ def capture(src: Path, out: Path) -> None:
     (out / "mrcp_cube_rotation.json").write_text(text)
 
 
-def _rows(db: Path) -> dict[str, list[tuple[object, ...]]]:
+def _columns(db: Path) -> dict[str, list[str]]:
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
     try:
         tables = [r[0] for r in con.execute(
             "SELECT name FROM sqlite_master WHERE type='table' ORDER BY name")]
+        return {t: [r[1] for r in con.execute(f"PRAGMA table_info({t})")
+                    if r[1] not in VOLATILE_COLUMNS and not r[1].endswith("_at")]
+                for t in tables}
+    finally:
+        con.close()
+
+
+def _json_cell(value: object, keys: set[str] | None) -> object:
+    """A JSON text cell with only ``keys`` kept (None: all), for comparison."""
+    if not isinstance(value, str) or not value.startswith("{"):
+        return value
+    try:
+        d = json.loads(value)
+    except ValueError:
+        return value
+    if keys is not None:
+        d = {k: v for k, v in d.items() if k in keys}
+    return json.dumps(d, sort_keys=True)
+
+
+def _rows(db: Path, columns: dict[str, list[str]],
+          json_keys: dict[str, set[str]] | None = None) -> dict[str, list[tuple[object, ...]]]:
+    """Every row of ``columns``' tables, those columns only (JSON cells: ``json_keys``)."""
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+    try:
         result: dict[str, list[tuple[object, ...]]] = {}
-        for table in tables:
-            cols = [r[1] for r in con.execute(f"PRAGMA table_info({table})")]
-            keep = [c for c in cols if c not in VOLATILE_COLUMNS and not c.endswith("_at")]
+        for table, keep in columns.items():
+            if not keep:
+                continue
             sel = ", ".join(f'"{c}"' for c in keep)
-            rows = con.execute(f'SELECT {sel} FROM "{table}" ORDER BY {sel}').fetchall()
-            result[table] = [tuple(keep), *rows]
+            rows = con.execute(f'SELECT {sel} FROM "{table}"').fetchall()
+            rows = [tuple(_json_cell(v, (json_keys or {}).get(c)) for c, v in zip(keep, r,
+                                                                               strict=True))
+                    for r in rows]
+            result[table] = [tuple(keep), *sorted(rows, key=repr)]
         return result
     finally:
         con.close()
+
+
+def _json_keys(a: Path, b: Path, table: str, column: str) -> set[str]:
+    """Keys present in every JSON cell of ``table.column`` of both databases."""
+    keys: set[str] | None = None
+    for db in (a, b):
+        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        try:
+            for (v,) in con.execute(f'SELECT "{column}" FROM "{table}"'):
+                if isinstance(v, str) and v.startswith("{"):
+                    k = set(json.loads(v))
+                    keys = k if keys is None else keys & k
+        finally:
+            con.close()
+    return keys or set()
 
 
 def _table(path: Path) -> list[list[str]]:
@@ -109,10 +153,19 @@ def compare(a: Path, b: Path) -> list[str]:
     """Differences between two captured output folders (empty when identical)."""
     diffs: list[str] = []
     for name in ("trial.sqlite", "cohort.sqlite"):
-        ra, rb = _rows(a / name), _rows(b / name)
-        if sorted(ra) != sorted(rb):
-            diffs.append(f"{name}: tables differ {sorted(ra)} vs {sorted(rb)}")
+        ca, cb = _columns(a / name), _columns(b / name)
+        if sorted(ca) != sorted(cb):
+            diffs.append(f"{name}: tables differ {sorted(ca)} vs {sorted(cb)}")
             continue
+        shared = {t: [c for c in ca[t] if c in cb[t]] for t in ca}
+        for t in ca:
+            extra = sorted(set(ca[t]) ^ set(cb[t]))
+            if extra:
+                print(f"  {name}:{t}: compared without the columns only one side has: "
+                      f"{extra}")
+        keys = {c: _json_keys(a / name, b / name, "trials", c)
+                for c in ("summary_json", "config_json") if c in shared.get("trials", [])}
+        ra, rb = _rows(a / name, shared, keys), _rows(b / name, shared, keys)
         for table in ra:
             if ra[table] != rb[table]:
                 n = sum(x != y for x, y in zip(ra[table], rb[table], strict=False))

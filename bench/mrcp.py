@@ -4,8 +4,9 @@ A cycle is everything :meth:`vasim.mrcp.kernel.MRCPKernel.step` does in TOp: pre
 task, evaluate RSel at CuTP and every candidate at every other task point with every index,
 texec / ttransf* / tus, RCnt and NTT, RSel's follow step and the candidates' guided moves.
 The figure is for ``n`` robots x 6 indices (RJ, Θ, CR, tool cone, visibility, force-torque)
-x 6 task points with the kernel's default sampling, for n = 2, 4 and 8, on a task moving
-along a smooth closed path. Transfers are disabled (NTT threshold out of reach) so every
+x 6 task points with the kernel's default sampling, for n = 2, 4, 8 and 16 (issue #17 §4:
+8 RX60B within the 18 ms cycle, 16 to show how it scales), on a task moving along a smooth
+closed path. Transfers are disabled (NTT threshold out of reach) so every
 timed cycle is a full evaluation cycle.
 
 Stations (the arm factory is pluggable, ``STATIONS``):
@@ -104,8 +105,16 @@ def planar_station(n: int) -> Station:
     return Station(arms, world, tps, centre.copy(), path, cones)
 
 
+def _ring(i: int, n: int) -> tuple[float, float]:
+    """(angle [rad], radius [m]) of robot ``i`` of ``n``: a 0.5 m circle up to 8 robots,
+    wider beyond so the bases stay as far apart (16 bases on the 0.5 m circle would be
+    0.2 m apart: the RX60B bases touch and RSel's first move is a collision)."""
+    return 2 * np.pi * i / n, 0.5 if n <= 8 else 0.62
+
+
 def rx60b_station(n: int) -> Station:
-    """``n`` RX60B arms of the pybullet backend on a circle (0.5 m) facing the task."""
+    """``n`` RX60B arms of the pybullet backend on a circle (0.5 m) facing the task
+    (a second ring beyond 8, see :func:`_ring`)."""
     from vasim.mrcp.backend import PybulletArm, PybulletWorld, pose_matrix
     from vasim.mrcp.dh import load_robot
 
@@ -116,13 +125,17 @@ def rx60b_station(n: int) -> Station:
     arms: dict[str, ArmKinematics] = {}
     cones = {}
     for i in range(n):
-        a = 2 * np.pi * i / n
-        pos = 0.5 * np.array([np.cos(a), np.sin(a), 0.0])
+        a, radius = _ring(i, n)
+        pos = radius * np.array([np.cos(a), np.sin(a), 0.0])
         c, s = np.cos(a + np.pi), np.sin(a + np.pi)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         base = pose_matrix(pos, rot)
         arm = PybulletArm(model, base, name=f"r{i}")
-        goal = (centre + tps[0].position) if i == 0 else centre + 0.35 * (pos - centre)
+        # the candidates wait with their TCPs on a circle about the task, wider for more
+        # than 8 robots (16 arms on the 8-robot circle would touch)
+        goal = ((centre + tps[0].position) if i == 0
+                else centre + 0.35 * (pos - centre) if n <= 8
+                else centre + 0.6 * (pos - centre) + np.array([0.0, 0.0, 0.25]))
         q = arm.ik(goal, None, arm.home)
         if q is None:
             raise RuntimeError(f"rx60b station: robot {i} cannot reach its start")
@@ -201,7 +214,7 @@ def main() -> None:
         if factory is None:
             print(f"{name:8s} not available")
             continue
-        for n in (2, 4, 8):
+        for n in (2, 4, 8, 16):
             try:
                 st = factory(n)
                 wall, cpu, pairs = time_cycles(st, CYCLES, traj, dist)

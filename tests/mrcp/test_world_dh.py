@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasim.core.errors import ConfigError
-from vasim.mrcp import dh
+from vasim.mrcp import closed_form_ik, dh
 from vasim.mrcp.dh import load_robot, parse_robot
 
 RX = load_robot("rx60b")
@@ -152,31 +152,32 @@ def test_closed_form_ik_returns_every_branch_and_the_original() -> None:
     base = np.eye(4)
     base[:3, 3] = [0.2, -0.1, 0.3]
     base[:3, :3] = dh.rot_z(0.7)
-    assert dh.is_puma_like(RX)
+    assert closed_form_ik.is_puma_like(RX)
     for q in np.random.default_rng(21).uniform(RX.lower, RX.upper, size=(100, 6)):
         pos, rot = dh.fk(RX, q, base)
-        sols = dh.puma_ik(RX, pos, rot, base)
+        sols = closed_form_ik.puma_ik(RX, pos, rot, base)
         assert len(sols) == 8
         for s in sols:
             p2, r2 = dh.fk(RX, s, base)
             np.testing.assert_allclose(p2, pos, atol=1e-12)
             np.testing.assert_allclose(r2, rot, atol=1e-12)
-        wrapped = dh.wrap_into_batch(np.array(sols), RX.lower - 10, RX.upper + 10, q)
+        wrapped = closed_form_ik.wrap_into_batch(np.array(sols), RX.lower - 10, RX.upper + 10, q)
         assert np.min(np.linalg.norm(wrapped - q, axis=1)) < 1e-9
 
 
 def test_closed_form_ik_out_of_reach_and_other_structures() -> None:
-    assert dh.puma_ik(RX, np.array([0.0, 0.0, 0.8]), np.eye(3)) == []
+    assert closed_form_ik.puma_ik(RX, np.array([0.0, 0.0, 0.8]), np.eye(3)) == []
     planar = dh.RobotModel("p", RX.joints[:2], home=RX.home[:2])
-    assert not dh.is_puma_like(planar)
-    assert dh.puma_ik(planar, np.zeros(3), np.eye(3)) == []
+    assert not closed_form_ik.is_puma_like(planar)
+    assert closed_form_ik.puma_ik(planar, np.zeros(3), np.eye(3)) == []
 
 
 def test_wrap_into_picks_the_in_limit_turn_nearest_the_reference() -> None:
     lo, up = np.array([-3.0, 0.0]), np.array([3.0, 6.0])
-    out = dh.wrap_into(np.array([2.0 * math.pi + 0.5, -0.5]), lo, up, np.array([0.0, 5.0]))
+    out = closed_form_ik.wrap_into(np.array([2.0 * math.pi + 0.5, -0.5]), lo, up,
+                                   np.array([0.0, 5.0]))
     np.testing.assert_allclose(out, [0.5, 2 * math.pi - 0.5])
-    assert dh.wrap_into(np.array([3.1, 1.0]), lo, up, np.zeros(2)) is None
+    assert closed_form_ik.wrap_into(np.array([3.1, 1.0]), lo, up, np.zeros(2)) is None
 
 
 # -- Robot-file checks: names, key points per link, the links table, implausible lengths and

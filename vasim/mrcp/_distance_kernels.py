@@ -260,12 +260,18 @@ def _to_world(frames: np.ndarray, pts: np.ndarray, count: np.ndarray, centre: np
 def _pair(wa: np.ndarray, na: int, rot_a: np.ndarray, scale_a: float, ball_a: float,
           wb: np.ndarray, nb: int, rot_b: np.ndarray, scale_b: float, ball_b: float,
           verts: np.ndarray, nbrs: np.ndarray, iterations: int, skip_above: float,
-          ws: np.ndarray) -> float:  # pragma: no cover - compiled
+          ws: np.ndarray, stop_above: float = np.inf) -> float:  # pragma: no cover
     """Lower bound of the distance between two swept links (see the module docstring),
     the direction improved ``iterations`` times: the key-point hulls shifted by the current
     supporting points give the next direction; ``inf`` when the links' capsule bound is
     already ``>= skip_above``. ``ws`` ``(16, 3)`` is scratch space; the witness points are
-    left in its rows 14 (on a) and 15 (on b)."""
+    left in its rows 14 (on a) and 15 (on b).
+
+    ``stop_above``: once a separation reaches it, the improvements stop and that
+    separation is returned. Every improvement only raises the value (the maximum over the
+    directions is kept), so a caller that wants the pair only when it is below
+    ``stop_above`` (a running minimum) gets the same minimum with less work; with the
+    default ``inf`` the value is the full one."""
     ca, cb, sa, sb, u, nu = ws[0], ws[1], ws[2], ws[3], ws[4], ws[5]
     ta, tb = ws[6:9], ws[9:12]
     t1, t2 = ws[12], ws[13]
@@ -300,7 +306,7 @@ def _pair(wa: np.ndarray, na: int, rot_a: np.ndarray, scale_a: float, ball_a: fl
             for r in range(3):
                 ws[14, r] = ca[r] + sa[r]
                 ws[15, r] = cb[r] + sb[r]
-        if it == iterations or (ball_a > 0.0 and ball_b > 0.0):
+        if it == iterations or (ball_a > 0.0 and ball_b > 0.0) or best >= stop_above:
             break
         for k in range(na):
             for r in range(3):
@@ -317,6 +323,28 @@ def _pair(wa: np.ndarray, na: int, rot_a: np.ndarray, scale_a: float, ball_a: fl
             ca[r] -= sa[r]
             cb[r] -= sb[r]
     return best
+
+
+@njit(cache=True, nogil=True)
+def _axis_bound(wa: np.ndarray, na: int, wb: np.ndarray, nb: int, ca: np.ndarray,
+                cb: np.ndarray) -> float:  # pragma: no cover - compiled
+    """Separation of the key points ``wa[:na]`` / ``wb[:nb]`` along the unit direction
+    ``ca -> cb`` (a lower bound of their hulls' distance; ``-inf`` when ``ca == cb``)."""
+    ux, uy, uz = cb[0] - ca[0], cb[1] - ca[1], cb[2] - ca[2]
+    n = np.sqrt(ux * ux + uy * uy + uz * uz)
+    if n <= 1e-12:
+        return -np.inf
+    lo = -np.inf
+    for k in range(na):
+        v = wa[k, 0] * ux + wa[k, 1] * uy + wa[k, 2] * uz
+        if v > lo:
+            lo = v
+    hi = np.inf
+    for k in range(nb):
+        v = wb[k, 0] * ux + wb[k, 1] * uy + wb[k, 2] * uz
+        if v < hi:
+            hi = v
+    return (hi - lo) / n
 
 
 @njit(cache=True, nogil=True)
@@ -375,10 +403,21 @@ def swept_distances(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
                     break
                 i = idx // nbl
                 j = j0 + idx % nbl
+                # a cheaper lower bound first: the key points' separation along the line
+                # of the bounding centres, less both sweeping radii (the pair's value is
+                # at least its capsule bound, which is at least this; 1e-9 m of slack for
+                # round-off keeps the minimum exactly the one of the full values)
+                if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
+                        - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
+                        - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
+                        - margin - 1e-9 >= best:
+                    continue
                 # _pair skips the support search when the capsule bound is already >= best
+                # and stops refining once the pair is surely no nearer than best: the
+                # minimum is the one of the full values, at about half the cost per pair
                 dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
                              rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
-                             best + margin, ws) - margin
+                             best + margin, ws, best + margin) - margin
                 if dist < best:
                     best = dist
             out[c, body] = best

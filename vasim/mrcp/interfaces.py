@@ -2,8 +2,9 @@
 
 The kernel (prediction, indices, time transformation, selection, actions; spec/mrcp.md
 §§3-8) never imports pybullet: it sees robots through :class:`ArmKinematics` and the world
-through :class:`ProximityWorld`. ``vasim.mrcp.backend`` implements both over pybullet; tests
-may implement them analytically (e.g. a planar arm) to check the kernel independently.
+through :class:`ProximityWorld`. ``vasim.mrcp.arm`` and ``vasim.mrcp.world`` implement them
+over pybullet; tests may implement them analytically (e.g. a planar arm) to check the kernel
+independently.
 
 Conventions (every implementation follows them):
 

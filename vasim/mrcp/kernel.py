@@ -83,7 +83,6 @@ Example:
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -94,9 +93,12 @@ from numpy.typing import NDArray
 
 from vasim.core.geometry import rotvec_from_matrix
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
+from vasim.mrcp.indices.base import prefetch_distances
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
+from vasim.mrcp.kernel_config import IndexSpec as IndexSpec
+from vasim.mrcp.kernel_config import KernelConfig as KernelConfig
 from vasim.mrcp.modes import KernelEvent, KernelState, next_state
-from vasim.mrcp.planner import ObstacleMemory, PlannerParams, move_candidate
+from vasim.mrcp.planner import ObstacleMemory, move_candidate
 from vasim.mrcp.predict import PolynomialPredictor, Predictor, predict_rotations
 from vasim.mrcp.select import Assignment, candidate_hierarchy
 from vasim.mrcp.timefx import Continuity, continuity_robot, estimate_transfer, texec_many
@@ -119,107 +121,6 @@ class TaskPoint:
     position: FloatArray
     rotation: FloatArray | None = None
     approach: FloatArray = field(default_factory=lambda: np.zeros(3))
-
-
-@dataclass(frozen=True)
-class IndexSpec:
-    """An index of the registry by name, with its keyword parameters."""
-
-    name: str
-    params: Mapping[str, Any] = field(default_factory=dict)
-
-
-@dataclass(frozen=True)
-class KernelConfig:
-    """Parameters of the control kernel (SI units).
-
-    Attributes:
-        dt: evaluation period [s] (the seed's hardware: 18 ms).
-        horizon: ``K`` predicted points.
-        stride: cycles between predicted points.
-        window: samples of the task trajectory used by the predictor.
-        texec_window: samples of each index used to fit ``texec``.
-        texec_degree: polynomial degree of that fit.
-        texec_min_samples: a series shorter than this gives ``t_max`` (**decision**: a fit
-            through a handful of samples extrapolates noise over the whole window).
-        t_max: the confidence window of ``texec`` [s].
-        ntt_threshold: start a transfer when ``NTT >= ntt_threshold``.
-        max_tcp_speed: robot name -> maximum TCP speed [m/s] (``default_tcp_speed`` else).
-        ttc_samples: joint samples along a transfer line for TTC (ends included).
-        trajectory_ik: ``"exact"`` (IK at every predicted point) or ``"linear"``
-            (**decision**, an option for arms with costly IK: IK at the current point, then
-            first-order steps ``q + J⁺ Δx`` along the prediction; a step leaving the joint
-            limits makes the point unreachable).
-        distance_points: ``"all"`` or ``"ends"``: where along the trajectory the world's
-            distance queries are made (:class:`~vasim.mrcp.indices.EvalContext`).
-        planner: action planner parameters.
-        indices: the indices evaluated each cycle.
-        grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
-        grasp_cycles: cycles both robots hold the task before RSel releases.
-        tt_timeout: a transfer not done within it is aborted [s].
-        abort_cooldown: after an aborted transfer, that (robot, point) is not chosen as
-            RCnt again for this long [s] (**decision**: otherwise the same blocked transfer
-            would restart at once and keep the operator's input held).
-        seed: seed of the planner's random force.
-    """
-
-    dt: float = 0.018
-    horizon: int = 3
-    stride: int = 3
-    window: int = 12
-    predictor_degree: int = 2
-    texec_window: int = 15
-    texec_degree: int = 1
-    texec_min_samples: int = 5
-    t_max: float = 5.0
-    ntt_threshold: float = 0.9
-    max_tcp_speed: Mapping[str, float] = field(default_factory=dict)
-    default_tcp_speed: float = 0.5
-    ttc_samples: int = 4
-    trajectory_ik: str = "exact"
-    distance_points: str = "all"
-    planner: PlannerParams = field(default_factory=PlannerParams)
-    indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
-    grasp_tolerance: float = 0.002
-    grasp_cycles: int = 2
-    tt_timeout: float = 5.0
-    abort_cooldown: float = 1.0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        def bad(name: str, value: object, rule: str) -> ValueError:
-            return ValueError(f"KernelConfig.{name} must be {rule}, got {value!r}")
-
-        for name in ("dt", "t_max", "default_tcp_speed", "tt_timeout", "grasp_tolerance",
-                     "ntt_threshold"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise bad(name, v, "finite and > 0")
-        if not (math.isfinite(self.abort_cooldown) and self.abort_cooldown >= 0.0):
-            raise bad("abort_cooldown", self.abort_cooldown, "finite and >= 0")
-        for name in ("horizon", "stride", "window", "texec_window", "ttc_samples",
-                     "texec_min_samples", "grasp_cycles"):
-            if getattr(self, name) < 1:
-                raise bad(name, getattr(self, name), ">= 1")
-        for name in ("predictor_degree", "texec_degree", "seed"):
-            if getattr(self, name) < 0:
-                raise bad(name, getattr(self, name), ">= 0")
-        if self.texec_min_samples > self.texec_window:
-            raise bad("texec_min_samples", self.texec_min_samples,
-                      f"<= texec_window ({self.texec_window}): a longer series never forms")
-        for robot, v in self.max_tcp_speed.items():
-            if not (math.isfinite(v) and v > 0.0):
-                raise bad(f"max_tcp_speed[{robot!r}]", v, "finite and > 0")
-        if self.trajectory_ik not in ("exact", "linear"):
-            raise ValueError(f"KernelConfig.trajectory_ik must be 'exact' or 'linear', got "
-                             f"{self.trajectory_ik!r}")
-        if self.distance_points not in ("all", "ends"):
-            raise ValueError(f"KernelConfig.distance_points must be 'all' or 'ends', got "
-                             f"{self.distance_points!r}")
-        for spec in self.indices:
-            if spec.name not in INDICES:
-                raise ValueError(f"KernelConfig.indices: unknown index {spec.name!r}; "
-                                 f"known: {INDICES.names()}")
 
 
 @dataclass
@@ -487,6 +388,7 @@ class MRCPKernel:
         times, mean, std, trot = self._prediction(t)
         dt_pred = cfg.dt * cfg.stride
         raw: dict[Key, dict[str, float]] = {}
+        contexts: dict[Key, EvalContext] = {}
         pairs = [(self.rsel, self.cutp)] + [(r, q) for r in self.arms if r != self.rsel
                                             for q in range(len(self.task_points))
                                             if q != self.cutp]
@@ -516,20 +418,41 @@ class MRCPKernel:
                 vel[0] = qdot[r]
             past = [hist[-cfg.stride * (j + 1)] for j in range(cfg.horizon)
                     if len(hist) >= cfg.stride * (j + 1)]
-            ctx = EvalContext(
+            raw[(r, q)] = {}            # filled below; keeps the pairs' order in raw
+            contexts[(r, q)] = EvalContext(
                 robot=r, arm=arm, point=q, selected=selected, times=times,
                 positions=mean[:, q], std=std[:, q],
                 rotations=np.array(rotations) if tp.rotation is not None else None,
                 configs=configs, reachable=reach, joint_velocity=vel, past_configs=past,
                 world=self.world, wrench=wrench, extras=extras,
                 distance_points=cfg.distance_points)
-            raw[(r, q)] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
-            hist.append(configs.copy())
+        reach_d = self._distance_range()
+        if reach_d is not None:     # one batched distance query per robot (see below)
+            for r in self.arms:
+                prefetch_distances([c for (rr, _), c in contexts.items() if rr == r], reach_d)
+        for key, ctx in contexts.items():
+            raw[key] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
+            self._pred_hist[key].append(ctx.configs.copy())
         for ix in self._groups:
             combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
             for k, v in combined.items():
                 raw[k][ix.name] = v
         return self._to_time(t, raw, q_meas)
+
+    def _distance_range(self) -> float | None:
+        """The largest body-distance range any index declares (``distance_range(world)``),
+        None when none reads distances.
+
+        **Decision** (issue #17 §4, cost): every (robot, point) context of a robot gets its
+        distances from one batched ``min_distances`` call per cycle
+        (:func:`~vasim.mrcp.indices.base.prefetch_distances`) before any index runs; the
+        values are the ones each context would have queried (the world does not move
+        during the evaluation), so every outcome is unchanged.
+        """
+        ranges = [f(self.world) for ix in self.indices
+                  if (f := getattr(ix, "distance_range", None)) is not None]
+        found = [float(v) for v in ranges if v is not None]
+        return max(found) if found else None
 
     def _to_time(self, t: float, raw: Mapping[Key, dict[str, float]],
                  q_meas: Mapping[str, FloatArray]) -> dict[Key, Evaluation]:

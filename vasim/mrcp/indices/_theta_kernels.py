@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from vasim.mrcp.dh import _many_kernel  # the compiled DH chain (frames and Jacobians)
+
 _EPS = 1e-12
 
 
@@ -295,3 +297,61 @@ def theta_segments(pos: np.ndarray, std: np.ndarray, z: np.ndarray, dens: np.nda
                                      ginv)
         seg[k] = acc / total
     return seg
+
+
+@njit(cache=True, nogil=True)
+def theta_dh_segments(table: np.ndarray, tcp: np.ndarray, base: np.ndarray,
+                      configs: np.ndarray, pos: np.ndarray, std: np.ndarray, z: np.ndarray,
+                      dens: np.ndarray, reach: np.ndarray, rows: np.ndarray, tr: np.ndarray,
+                      threshold: float, at_least: bool) -> np.ndarray:  # pragma: no cover
+    """Θ's segment values for an arm given by its compiled DH chain, in one call: the same
+    steps and arithmetic as ``AnisotropicDexterityIndex.evaluate``'s general path
+    (Jacobians at the points, first-order samples, their Jacobians, the σ_min test on the
+    ``tr`` rows, :func:`theta_segments`), without the Python between them.
+
+    Args:
+        table, tcp, base: the chain (``RobotModel.table``, ``.tcp``, ``(4, 4)`` base).
+        configs: ``(K+1, n)``; pos, std: ``(K+1, m)`` (the ``rows`` columns).
+        rows: ``(m,)`` task rows of ψ; tr: rows held against ``threshold``;
+        at_least: ``len(tr) <= n`` (:func:`sigma_min_at_least`, else :func:`sigma_min_many`).
+
+    Returns:
+        ``(K,)`` segment values.
+    """
+    kk = configs.shape[0] - 1
+    n = configs.shape[1]
+    m = rows.shape[0]
+    s_count = z.shape[0]
+    t = tr.shape[0]
+    full = np.empty((kk + 1, 6, n))
+    _many_kernel(table, tcp, base, configs, np.empty((kk + 1, n + 2, 4, 4)), full, True)
+    jac = np.empty((kk + 1, m, n))
+    for k in range(kk + 1):
+        for a in range(m):
+            for i in range(n):
+                jac[k, a, i] = full[k, rows[a], i]
+    q_samp = sample_configs(std, z, configs, jac).reshape(kk * s_count, n)
+    full_s = np.empty((kk * s_count, 6, n))
+    _many_kernel(table, tcp, base, q_samp, np.empty((kk * s_count, n + 2, 4, 4)), full_s,
+                 True)
+    stack = np.empty((1 + kk * s_count, t, n))
+    for a in range(t):
+        for i in range(n):
+            stack[0, a, i] = full[0, tr[a], i]
+    for p in range(kk * s_count):
+        for a in range(t):
+            for i in range(n):
+                stack[1 + p, a, i] = full_s[p, tr[a], i]
+    if at_least:
+        passes = sigma_min_at_least(stack, threshold)
+    else:
+        passes = sigma_min_many(stack) >= threshold
+    ok = np.empty((kk, s_count), dtype=np.bool_)
+    jac_s = np.empty((kk, s_count, m, n))
+    for k in range(kk):
+        for s in range(s_count):
+            ok[k, s] = passes[1 + k * s_count + s] and reach[k + 1]
+            for a in range(m):
+                for i in range(n):
+                    jac_s[k, s, a, i] = full_s[k * s_count + s, rows[a], i]
+    return theta_segments(pos, std, z, dens, reach, jac, jac_s, bool(passes[0]), ok)

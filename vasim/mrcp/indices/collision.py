@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.mrcp.indices.base import INDICES, EvalContext, Key
+from vasim.mrcp.interfaces import ProximityWorld
 
 FloatArray = NDArray[np.float64]
 
@@ -88,6 +89,11 @@ class CollisionRiskIndex:
         self.t_max = float(t_max)
         self.max_distance = float(max_distance)
         self.ignore = frozenset(ignore)
+
+    def distance_range(self, world: ProximityWorld) -> float | None:
+        """The range of the body distances this index reads [m], for the kernel's one
+        batched query per robot."""
+        return self.max_distance
 
     def distances(self, ctx: EvalContext) -> FloatArray:
         """``(K+1,)`` minimum distance to any other body at each reachable point (NaN else)."""

@@ -37,6 +37,7 @@ from vasim.mrcp.indices._theta_kernels import (
     sample_configs,
     sigma_min_at_least,
     sigma_min_many,
+    theta_dh_segments,
     theta_segments,
 )
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
@@ -104,6 +105,8 @@ class AnisotropicDexterityIndex:
         self.threshold_rows = tuple(int(r) for r in threshold_rows)
         self.sigma_min_threshold = float(sigma_min_threshold)
         self.samples = _Samples(int(n_samples), len(self.rows), seed)
+        self._rows = np.array(self.rows, dtype=np.int64)
+        self._tr = np.array(self.threshold_rows, dtype=np.int64)
 
     def evaluate(self, ctx: EvalContext) -> float:
         reach = ctx.reachable
@@ -118,6 +121,17 @@ class AnisotropicDexterityIndex:
         std = np.ascontiguousarray(ctx.std[:, rows], dtype=np.float64)
         configs = np.ascontiguousarray(
             np.where(reach[:, None], ctx.configs, ctx.configs[0][None, :]), dtype=np.float64)
+        chain = getattr(ctx.arm, "dh_chain", None)
+        if chain is not None:
+            # **Decision** (cost, issue #17 §4): an arm that exposes its compiled DH chain
+            # (``dh_chain() -> (table, tcp, base)``, PybulletArm) gets the whole index in
+            # one compiled call, the same steps as below (the tests hold the two equal)
+            table, tcp, base = chain()
+            seg = theta_dh_segments(table, tcp, base, configs, pos, std, z, dens,
+                                    np.ascontiguousarray(reach), self._rows, self._tr,
+                                    self.sigma_min_threshold, len(self.threshold_rows) <= n)
+            w = prediction_weights(kk)
+            return float((w * seg).sum() / w.sum())
         full = jacobians(ctx.arm, configs)                                 # (K+1, 6, n)
         jac = np.ascontiguousarray(full[:, rows, :])                        # (K+1, m, n)
         q_samp = sample_configs(std, z, configs, jac)                       # (K, S, n)

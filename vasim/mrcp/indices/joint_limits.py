@@ -22,6 +22,16 @@ now), ``[θmin + |e_k|, θmax - |e_k|]`` — conservative whatever the error's s
 eq. 3.17 shifts it by the signed error). ``J̄eval_i = Σ_k w_k Jeval_{i,k} / Σ_k w_k`` with
 ``w_k = 1/(k+1)``; an unreachable predicted point contributes ``Jeval = 0``;
 ``RJ = min_i J̄eval_i``.
+
+**Decision** (issue #17 §3, eq. 3.19's denominator): the seed prints
+``Σ_k w_k Jeval_k / Σ_k Jeval_k``; vasim divides by ``Σ_k w_k`` because the printed ratio is
+homogeneous of degree 0 in the Jeval values: a trajectory held at Jeval = 0.0002 (next to a
+limit) and one at Jeval = 1 (mid-range) both score ``Σw/(K+1)`` (0.52 for K = 3), and at the
+limit itself it is 0/0 — RJ would stop measuring the distance to a limit, contrary to the
+text ("the weights balance the contribution of each Jeval_k") and to eq. 3.20 taking the
+minimum over joints. With ``Σ w_k`` the value is a weighted mean of the points' Jeval in
+[0, 1] and a still trajectory scores its single-pose RJ (eq. 3.15).
+``tests/mrcp/test_kernel_rj_eq319.py`` shows both.
 """
 
 from __future__ import annotations

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
+from vasim.mrcp.interfaces import ProximityWorld
 
 
 def view_cone_half_angle(camera: np.ndarray, center: np.ndarray, radius: float) -> float:
@@ -49,6 +50,11 @@ class VisibilityIndex:
             raise ValueError(f"visibility: d_ref must be > 0, got {d_ref!r}")
         self.cone_body = cone_body
         self.d_ref = float(d_ref)
+
+    def distance_range(self, world: ProximityWorld) -> float | None:
+        """The range of the body distances this index reads [m] (None: it reads none in
+        ``world``), for the kernel's one batched query per robot."""
+        return self.d_ref if self.cone_body in world.obstacle_names() else None
 
     def evaluate(self, ctx: EvalContext) -> float:
         world = ctx.world

@@ -11,12 +11,14 @@ from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
 from vasim.mrcp.scenarios.cube_rotation import CubeRotation
 from vasim.mrcp.scenarios.cube_translation import CubeTranslation
+from vasim.mrcp.scenarios.eight_robots import EightRobots
 from vasim.mrcp.scenarios.faucet import Faucet
 from vasim.mrcp.scenarios.laparoscopic_rings import LaparoscopicRings
 from vasim.mrcp.scenarios.obstacle_hole import ObstacleHole
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
-    CubeRotation(), CubeTranslation(), ObstacleHole(), LaparoscopicRings(), Faucet())}
+    CubeRotation(), CubeTranslation(), ObstacleHole(), LaparoscopicRings(), Faucet(),
+    EightRobots())}
 
 
 def get_scenario(name: str) -> Scenario:

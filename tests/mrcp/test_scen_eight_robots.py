@@ -1,0 +1,23 @@
+"""Eight RX60B around one cube (issue #17 §4-5): the 8-robot station runs with the
+invariants held and hands the turning cube over once, to a robot opposite R0's side, on
+collision risk, before R0 has to refuse the operator."""
+
+from __future__ import annotations
+
+import pytest
+
+pytest.importorskip("vasim.mrcp.backend")
+
+from tests.mrcp.test_scen_common import scenario_run
+
+
+def test_eight_robots_hand_the_cube_over_once_with_the_invariants_held() -> None:
+    res = scenario_run("eight_robots", 6.0)
+    assert res.violations == []
+    assert {s for s in res.samples[0].configs} == {f"R{i}" for i in range(8)}
+    tr = res.transfers()
+    assert [(t["from"], t["to"], t["point"], t["cause"]) for t in tr] == [("R0", "R4", 4, "cr")]
+    assert tr[0]["ntt"] >= 0.9 and tr[0]["t_done"] is not None
+    assert 3.5 < tr[0]["t_start"] < 5.0                 # measured 4.21 s (coarse run)
+    assert not [t for t, _ in res.events("rsel_hold") if t < tr[0]["t_start"]]
+    assert res.samples[-1].rsel == "R4"
