@@ -184,9 +184,9 @@ def test_operator_motion_during_a_safety_stop_is_not_stored_up() -> None:
 
 def test_cli_refuses_bad_values_before_running(tmp_path: Path,
                                               capsys: pytest.CaptureFixture[str]) -> None:
-    cases = [(["--duration", "nan"], "--duration must be a finite number"),
-             (["--duration", "inf"], "--duration must be a finite number"),
-             (["--seed", "-1"], "--seed must be >= 0"),
+    cases = [(["--duration", "nan"], "argument --duration: got nan, expected a finite number"),
+             (["--duration", "inf"], "argument --duration: got inf, expected a finite number"),
+             (["--seed", "-1"], "argument --seed: got -1, expected an integer in [0,"),
              (["--plot", str(tmp_path / "run.txt")], "the suffix must be .png, .pdf or .svg"),
              (["--plot", str(tmp_path / "nope" / "run.png")], "does not exist")]
     for extra, message in cases:
