@@ -5,6 +5,7 @@ change the schema/task, errors do not kill it, and stop() ends every thread."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import socket
 import subprocess
 import sys
@@ -22,11 +23,10 @@ from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
+from vasim.viewer.trainee import audio_text, hud_markdown
 from vasim.viewer.views import (
     arrow_mesh,
     arrow_vertices,
-    audio_text,
-    hud_markdown,
     quat_from_z,
     rotation_from_z,
 )
@@ -341,15 +341,18 @@ def test_arrow_vertices_span_start_to_end() -> None:
 
 
 def test_hud_text_escapes_and_names_the_audio_state() -> None:
-    from vasim.viewer.views import HudInfo
+    from vasim.viewer.trainee import HudInfo
 
-    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0", trial=1, t=1.0,
-                   error_m=0.004, error_l1=0.5, goal_index=2, n_points=30,
+    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0",
+                   title="trial 7", t=1.0, error_m=0.004, goal_index=2, n_points=30,
                    last_latency=0.8, audio=AudioCue(600.0, 0.3, 0.0), force_n=None,
-                   zoom=None, ms=None, done=False)
+                   zoom=None, ms=None, done=False, time_left=179.0)
     md = hud_markdown(info)
     assert "<b>" not in md and "&lt;b&gt;" in md
-    assert "3 / 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
+    assert "2 of 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
+    assert "**trial 7** — running" in md and "(179 s left)" in md
+    ended = hud_markdown(dataclasses.replace(info, done=True, outcome="timed_out"))
+    assert "ended: time ran out" in ended and "done" not in ended
     assert audio_text(None) == "off"
     assert audio_text(AudioCue(620.0, 0.25, 0.5)) == "620 Hz, every 0.25 s"
 

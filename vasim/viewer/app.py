@@ -68,13 +68,12 @@ from vasim.viewer.controller import (
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
+from vasim.viewer.trainee import HudInfo, HudView, instruction, score_card_markdown
 from vasim.viewer.views import (
     ArrowView,
     CameraController,
     CameraPose,
     GhostView,
-    HudInfo,
-    HudView,
     OrganView,
     ToolView,
     TrajectoryView,
@@ -356,6 +355,7 @@ class ViewerApp(ErrorReporter):
         self._t_started = 0.0
         self._shown: TrialInfo | None = None
         self._shown_frame: TrialFrame | None = None
+        self._shown_extra: tuple[Any, ...] = ()
         self._snapshot = Snapshot(*self.controller.current())
         self.server: viser.ViserServer | None = None
         """The trainee's page: the endoscope's view, the instrument, the fixtures' cues."""
@@ -586,6 +586,7 @@ class ViewerApp(ErrorReporter):
         # experimenter's (**decision**: not even the Mag camera switch — Mag is part of the
         # condition, and the experimenter's page has its own free camera).
         self.hud = HudView(s)
+        self.score = s.gui.add_markdown("", visible=False)
         s.gui.add_markdown(CONTROLS_TEXT)
         # The experimenter's page: today's controls beside a third-person view.
         self.panel_view = ExperimenterPanel(
@@ -681,20 +682,35 @@ class ViewerApp(ErrorReporter):
             return False
         self.panel_view.show(self.controller.panel)
         info, frame = self.controller.current()
-        if info is self._shown and frame is self._shown_frame:
+        ctl = self.controller
+        # The trial ends (Stop, time out), a countdown ticks, a score card arrives: the
+        # trainee page says so even when no new frame comes.
+        extra = (ctl.outcome, None if ctl.countdown_until is None
+                 else int(ctl.countdown_until - time.monotonic()), ctl.panel.scorecard)
+        if info is self._shown and frame is self._shown_frame and extra == self._shown_extra:
             return False
+        self._shown_extra = extra
         t0 = time.thread_time()  # CPU time of this thread: robust to preemption
         out = frame.outputs
         new_trial = info is not self._shown
         self._snapshot = Snapshot(info, frame)
         with server.atomic():
             self.views.update(info, frame, new_trial=new_trial)
-            self.hud.update(self._hud_info(info, frame), force=new_trial or frame.done)
+            self.hud.update(self._hud_info(info, frame), force=True if new_trial
+                            or frame.done or ctl.outcome[1] is not None else False)
+            card = score_card_markdown(ctl.panel.scorecard
+                                       if not ctl.panel.running else None)
+            if card != self.score.content:
+                self.score.content = card
+                self.score.visible = bool(card)
             self.drag.update(frame.tcp, info.input == "browser" and not frame.done)
         assert self.exp_server is not None
         with self.exp_server.atomic():
             self.exp_views.update(info, frame, new_trial=new_trial)
-            self.panel_view.show_live(info, frame, force=new_trial or frame.done)
+            self.panel_view.show_live(info, frame, force=True if new_trial or frame.done
+                                     or ctl.outcome[1] is not None else False,
+                                     outcome=ctl.outcome[1]
+                                     if ctl.outcome[0] == info.number else None)
         self.camera.update(out.camera)
         self.audio.update(out.audio)
         self._shown, self._shown_frame = info, frame
@@ -702,20 +718,27 @@ class ViewerApp(ErrorReporter):
         self._view_updates += 1
         return True
 
-    @staticmethod
-    def _hud_info(info: TrialInfo, frame: TrialFrame) -> HudInfo:
+    def _hud_info(self, info: TrialInfo, frame: TrialFrame) -> HudInfo:
         out = frame.outputs
+        ctl = self.controller
+        number, outcome = ctl.outcome
+        until = ctl.countdown_until
+        limit = float(info.config.max_time)
         return HudInfo(
             schema=info.schema, fixtures=info.fixtures,
-            task=f"{info.task_name}", trial=info.number, t=frame.t,
-            error_m=float(np.linalg.norm(frame.tcp - frame.goal)), error_l1=frame.error_l1,
+            task=f"{info.task_name}", title=info.title, t=frame.t,
+            time_left=limit - frame.t if np.isfinite(limit) else None,
+            outcome=outcome if number == info.number else None,
+            instruction=instruction(info.task_name, len(info.points), info.input),
+            countdown_s=None if until is None else until - time.monotonic(),
+            error_m=float(np.linalg.norm(frame.tcp - frame.goal)),
             goal_index=frame.goal_index, n_points=frame.n_points,
             last_latency=frame.last_latency, audio=out.audio,
             force_n=None if out.force is None else float(np.linalg.norm(out.force.force)),
             zoom=None if out.camera is None else float(out.camera.zoom),
             # The runtime reports a ghost exactly when the schema has MS.
             ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]
-            done=frame.done,
+            done=frame.done or outcome is not None,
         )
 
 

@@ -65,8 +65,10 @@ from vasim.trials.vf import (
     tool_trocar,
     trial_meta,
 )
+from vasim.viewer.condition import named_edit, viewer_condition
 from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
+from vasim.viewer.trainee import ScoreCard, frame_outcome, score_card, trial_title
 
 log = logging.getLogger(__name__)
 
@@ -97,7 +99,8 @@ class Command:
         kind: ``mode`` (value: a ``MODES`` name), ``schema``, ``task``, ``input``
             (``INPUTS``), ``subject`` (a subject code), ``protocol`` (a protocol name),
             ``start``, ``stop``, ``restart``, ``f5pl`` (value: (fixture instance,
-            ``Logistic5``)), ``auto_advance`` (value: bool).
+            ``Logistic5``)), ``auto_advance`` (value: bool), ``input_mapping`` (value: an
+            ``InputMapping``), ``label`` (value: a free-practice label, "" clears it).
         value: the argument.
     """
 
@@ -134,6 +137,11 @@ class TrialInfo:
     schedule_index: int | None = None
     condition: str | None = None
 
+    @property
+    def title(self) -> str:
+        """The trial's name on every page (``trainee.trial_title``: the store id)."""
+        return trial_title(self.trial_id, self.number)
+
 
 @dataclass(frozen=True)
 class PanelState:
@@ -141,7 +149,8 @@ class PanelState:
 
     Attributes:
         mode, input: current choices. schema, task: free-training / demo choices.
-        subject, protocol: chosen subject code and protocol (or None). session_id: the
+        subject, protocol: chosen subject code and protocol (or None). label: the
+        free-practice label of free trials without a subject (or None). session_id: the
         session of the last protocol trial. position: 1-based scheduled trial running or
         next. total: scheduled trials. completed: completed scheduled trials.
         condition: condition of that trial. running: a trial runs. status: one line.
@@ -150,6 +159,7 @@ class PanelState:
         per completed stored trial (protocol trials of the session, or the subject's free
         trials). auto_advance: start the next scheduled trial by itself.
         f5pl: editable f5PL curves of the current schema: fixture instance -> params.
+        scorecard: the score card of the last stored trial (or None).
         version: increments with every change.
     """
 
@@ -158,6 +168,7 @@ class PanelState:
     schema: str = "trajectory_following"
     task: str = "trajectory"
     subject: str | None = None
+    label: str | None = None
     protocol: str | None = None
     session_id: int | None = None
     position: int | None = None
@@ -170,6 +181,7 @@ class PanelState:
     curve: tuple[tuple[int, float, float], ...] = ()
     auto_advance: bool = False
     f5pl: tuple[tuple[str, Logistic5], ...] = ()
+    scorecard: ScoreCard | None = None
     version: int = 0
 
 
@@ -229,6 +241,9 @@ class TrainingController:
             auto-advance) [s].
         speed: simulated seconds per wall second (1 = real time).
         trial_factory: builds the live trial (default ``make_live_trial``).
+        countdown_s: the start cue of a trial a person drives (free and protocol modes,
+            input not scripted): Start counts down this long [s] before the trial begins.
+        optics_deg: the endoscope's optics [deg] (0 or 30), stored with every trial.
 
     Raises:
         ConfigError: for a bad first trial, or a ``db`` that is a directory (before
@@ -239,8 +254,16 @@ class TrainingController:
                  schema: str = "trajectory_following", task: str = "trajectory",
                  skill: str = "intermediate", seed: int = 0, variant: int = 0,
                  max_time: float = 180.0, pause_s: float = 1.5, speed: float = 1.0,
-                 trial_factory: Callable[..., LiveTrial] | None = None):
+                 trial_factory: Callable[..., LiveTrial] | None = None,
+                 countdown_s: float = 0.0, optics_deg: float = 0.0):
         self.scene = scene
+        self.countdown_s = float(countdown_s)
+        self.optics_deg = float(optics_deg)
+        self.countdown_until: float | None = None
+        """Monotonic time the pending trial starts at (the start cue), or None."""
+        self._pending: Callable[[], None] | None = None
+        self.outcome: tuple[int, str | None] = (0, None)
+        """(trial number, how it ended) of the current trial; None while it runs."""
         self.db = None if db is None else Path(db)
         # a directory was only refused when Free mode first opened the store;
         # refuse it at start-up (vasim serve prints this as one line and exits 2).
@@ -341,15 +364,22 @@ class TrainingController:
                               protocol=None if session is None else session.protocol.name)
             if input_kind != "scripted":
                 cfg = dict(meta.config or {})
+                # What was in force, stored with the trial (condition.viewer_condition).
+                # **Decision**: only for trials a person drives through the viewer: a
+                # scripted trial saw nothing of it and is stored exactly like a headless run.
+                cfg["viewer"] = viewer_condition(
+                    input_kind=input_kind,
+                    mapping=self.input_mapping if input_kind == "laparoscopic" else None,
+                    optics_deg=self.optics_deg,
+                    mag_camera=any(f.channel == "camera" for f in sch.fixtures))
                 cfg["operator"] = input_kind
                 cfg.pop("profile", None)  # no simulated person behind a device
-                if input_kind == "laparoscopic":  # what was in force, stored with the trial
-                    cfg["input_mapping"] = {
-                        "fulcrum_effect": self.input_mapping.fulcrum_effect,
-                        "sensitivity": self.input_mapping.sensitivity}
+                if input_kind == "laparoscopic":
+                    cfg["input_mapping"] = cfg["viewer"]["input_mapping"]
                 meta = replace(meta, operator=input_kind, config=cfg)
             trial_id = self.store().begin_trial(meta)
         self._number += 1
+        self.outcome = (self._number, None)
         self.info = TrialInfo(
             number=self._number, config=config, schema=sch.name,
             fixtures=tuple(sch.fixture_names), task_name=task.name,
@@ -378,6 +408,13 @@ class TrainingController:
             return
         trial.stop()
         self._closed = True
+        if self.outcome[1] is None:  # how it ended, for every page (trainee.OUTCOME_TEXT)
+            from vasim.study.store.vocabulary import outcome_of_reason
+
+            last = trial.frame()
+            self.outcome = (info.number, "failed" if failed else
+                            frame_outcome(True, last.goal_index, last.n_points)
+                            if trial.done else outcome_of_reason(reason))
         if info.trial_id is not None and not self._stored_done:
             if trial.done and not failed:
                 self._store_result()
@@ -394,9 +431,9 @@ class TrainingController:
                     point_metrics=res.metrics, summary=_plain_dict(res.summary),
                     events=events, trial_metrics=res.trial_metrics)
                 self._stored_done = True
-                self._publish(running=False, status=f"trial {info.trial_id} stopped "
+                self._publish(running=False, status=f"{info.title} stopped "
                               f"({reason}); it stays pending" if info.schedule_index
-                              is not None else f"trial {info.trial_id} stopped ({reason})")
+                              is not None else f"{info.title} stopped ({reason})")
         self.browser = None
 
     def _store_result(self) -> None:
@@ -411,6 +448,7 @@ class TrainingController:
                                                ).metric_params
         res = trial.result(**kw)
         summary = _plain_dict(res.summary)
+        self.outcome = (info.number, summary.get("outcome"))
         if info.trial_id is not None:
             self.store().finish_trial(
                 info.trial_id, res.samples, res.metrics, res.summary, events=res.events,
@@ -419,7 +457,8 @@ class TrainingController:
         changes: dict[str, Any] = {"running": False, "summary": summary}
         if info.trial_id is not None:
             changes["curve"] = self._curve()
-            changes["status"] = (f"trial {info.trial_id} stored "
+            changes["scorecard"] = self._score_card(res.trial_metrics)
+            changes["status"] = (f"{info.title} stored "
                                  f"({summary.get('points_reached')}/{summary.get('n_points')}"
                                  f" points, {summary.get('duration', 0.0):.1f} s)")
         if info.schedule_index is not None:
@@ -442,6 +481,43 @@ class TrainingController:
             except Exception:  # the trial's data matter more than its replay files
                 log.exception("saving the recording of trial %s failed", trial_id)
         return out
+
+    def _score_card(self, metrics: dict[str, float]) -> ScoreCard:
+        """The score card of the stored trial just finished.
+
+        **Decision**: "earlier trials" are the same trainee's earlier completed trials of
+        the same schema (by stored name: an edited schema is its own condition) and task —
+        the trainee is the subject, else the free-practice label, else the anonymous free
+        trials. The **benchmark** is the mean of the completed trials of that schema and
+        task by experienced laparoscopists (demographics ``laparoscopy_experience`` ">200",
+        the study vocabulary's top level); without such trials there is no benchmark column.
+        """
+        info = self.info
+        st = self.store()
+        df = st.trials("completed")
+        same = ((df["schema"] == info.schema) & (df["task"] == info.config.task)
+                & (df["id"] != info.trial_id))
+        subject, label = info.config.subject, info.config.label
+        if subject:
+            mine = df["subject"] == subject
+        elif label:
+            mine = df["subject"].isna() & (df["label"] == label)
+        else:
+            mine = df["subject"].isna() & df["label"].isna()
+        earlier_ids = [int(i) for i in df[same & mine & (df["id"] < (info.trial_id or 0))]["id"]]
+        demo = st.demographics()
+        experts = set(demo[demo["laparoscopy_experience"] == ">200"]["subject"])
+        bench_ids = [int(i) for i in df[same & df["subject"].isin(experts)]["id"]]
+        wide = st.trial_metrics(wide=True) if earlier_ids or bench_ids else None
+
+        def rows(ids: list[int]) -> list[dict[str, float]]:
+            if wide is None:
+                return []
+            return [wide.loc[i].to_dict() for i in ids if i in wide.index]
+
+        return score_card(metrics, title=info.title, outcome=self.outcome[1],
+                          n_points=len(info.points), earlier=rows(earlier_ids),
+                          benchmark=rows(bench_ids))
 
     def _curve(self) -> tuple[tuple[int, float, float], ...]:
         """The learning curve so far: the session's completed trials in schedule order
@@ -518,17 +594,21 @@ class TrainingController:
             return
         nxt = pending[0]
         cfg = replace(session.trial_config(nxt), scene=self.scene)
-        self._launch(cfg, mode="protocol", input_kind=self.panel.input, session=session,
-                     scheduled=nxt)
-        self._publish(running=True, summary=None, status=f"trial {nxt.index + 1} of "
-                      f"{len(session.schedule)} running ({nxt.condition})", **self._progress())
+        # The session's input (stored with it when it was created) drives all its trials.
+        kind = str(session.settings.extra.get("input", self.panel.input))
+        self._launch(cfg, mode="protocol", input_kind=kind, session=session, scheduled=nxt)
+        self._publish(running=True, summary=None, scorecard=None, input=kind,
+                      status=f"{self.info.title} running: scheduled trial {nxt.index + 1} "
+                      f"of {len(session.schedule)} ({nxt.condition})", **self._progress())
 
     def _free_config(self) -> TrialConfig:
         p = self.panel
         base = self._base
+        subject = p.subject or base.subject
         return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]
                        variant=base.variant if p.task == "trajectory" else 0,
-                       subject=p.subject or base.subject, seed=base.seed + self._number)
+                       subject=subject, label=None if subject else p.label,
+                       seed=base.seed + self._number)
 
     # -- commands ---------------------------------------------------------------------
     def handle(self, cmd: Command) -> None:
@@ -561,6 +641,9 @@ class TrainingController:
             if not isinstance(value, InputMapping):
                 raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
                                   field="input_mapping")
+            if p.mode == "protocol" and self._running_stored():
+                raise ConfigError("the running protocol trial keeps its instrument mapping; "
+                                  "change it between trials", field="input_mapping")
             self.input_mapping = value
             if self.instrument is not None:
                 self.instrument.set_mapping(value)
@@ -568,7 +651,18 @@ class TrainingController:
             if value not in INPUTS:
                 raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
                                   field="input")
+            if value == p.input:
+                return
+            if self._running_stored() or self._pending is not None:
+                raise ConfigError("stop the running trial before changing the input",
+                                  field="input")
+            if p.mode == "protocol" and p.session_id is not None:
+                raise ConfigError(f"session {p.session_id} runs with input {p.input!r} "
+                                  "(stored with the session): every trial of it keeps that "
+                                  "input", field="input")
             self._publish(input=value)
+        elif kind == "label":
+            self._set_label(value)
         elif kind == "subject":
             from vasim.records.trial_meta import validate_subject_code
 
@@ -576,8 +670,8 @@ class TrainingController:
             if self._running_stored():
                 raise ConfigError("stop the running trial before changing the subject",
                                   field="subject")
-            self._publish(subject=code, session_id=None, position=None, total=None,
-                          completed=None, condition=None, curve=())
+            self._publish(subject=code, label=None, session_id=None, position=None,
+                          total=None, completed=None, condition=None, curve=())
             if p.mode == "protocol" and p.protocol:
                 self._publish(**self._select_session())
         elif kind == "protocol":
@@ -596,11 +690,15 @@ class TrainingController:
         elif kind == "start":
             self._start()
         elif kind == "stop":
+            if self._pending is not None:
+                self._pending = self.countdown_until = None
+                self._publish(running=False, status="start cancelled")
+                return
             if not self.active():
                 raise ConfigError("no trial is running", field="stop")
             self._close_trial("stopped by the experimenter")
             if self.info.trial_id is None:
-                self._publish(running=False, status="demo trial stopped")
+                self._publish(running=False, status=f"{self.info.title} stopped")
             elif self.info.schedule_index is not None:
                 self._publish(**self._progress())
         elif kind == "restart":
@@ -617,6 +715,24 @@ class TrainingController:
             self._publish(auto_advance=bool(value))
         else:
             raise ConfigError(f"unknown command {kind!r}")
+
+    def _set_label(self, value: Any) -> None:
+        """The free-practice label of the next free trials without a subject (**decision**:
+        a label and a subject exclude each other — setting one clears the other — so a
+        trial is a subject's or a labelled practice trial, never both; "" clears it)."""
+        from vasim.study.store.vocabulary import validate_label
+
+        if self.panel.mode == "protocol":
+            raise ConfigError("protocol trials belong to the subject: labels are for free "
+                              "practice", field="label")
+        text = str(value).strip() if value is not None else ""
+        label = validate_label(text) if text else None
+        if self._running_stored() or self._pending is not None:
+            raise ConfigError("stop the running trial before changing the label",
+                              field="label")
+        self._publish(label=label, subject=None if label else self.panel.subject, curve=(),
+                      status=f"free practice labelled {label!r}" if label
+                      else "free practice without a label")
 
     def _running_stored(self) -> bool:
         return self.active() and self.info.trial_id is not None
@@ -643,8 +759,24 @@ class TrainingController:
 
     def _start(self) -> None:
         p = self.panel
-        if self.active() and p.mode != "demo":
+        if (self.active() or self._pending is not None) and p.mode != "demo":
             raise ConfigError("a trial is already running (Stop it first)", field="start")
+        if p.mode != "demo" and p.input != "scripted" and self.countdown_s > 0:
+            # The start cue (**decision**: a countdown, not the first move, because the
+            # trial's clock must not depend on when a page's first batch arrives): the
+            # trainee page counts down, the trial and its clock begin at 0.
+            self._close_trial("replaced")
+            self.countdown_until = time.monotonic() + self.countdown_s
+            self._pending = self._begin
+            self._publish(running=True, summary=None, scorecard=None,
+                          status=f"the trial starts in {self.countdown_s:g} s")
+            return
+        self._begin()
+
+    def _begin(self) -> None:
+        """Starts the trial of the current mode (after the countdown, if any)."""
+        p = self.panel
+        self._pending = self.countdown_until = None
         if p.mode == "demo":
             self._close_trial("restarted")
             self._start_demo(self.info.config)
@@ -652,8 +784,8 @@ class TrainingController:
             self._close_trial("replaced")
             self._launch(self._free_config(), mode="free", schema=self._schema_obj,
                          input_kind=p.input)
-            self._publish(running=True, summary=None,
-                          status=f"free training trial running ({self.info.schema})")
+            self._publish(running=True, summary=None, scorecard=None,
+                          status=f"{self.info.title} running ({self.info.schema})")
         else:
             self._close_trial("replaced")
             self._start_protocol_trial()
@@ -721,12 +853,14 @@ class TrainingController:
                               "free training", field="f5pl")
         if not isinstance(params, Logistic5):
             raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
-        base = self._schema_obj if self._schema_obj is not None else load_schema(p.schema)
-        edited = with_f5pl(base, instance, params)
+        shipped = load_schema(p.schema)
+        base = self._schema_obj if self._schema_obj is not None else shipped
+        edited = named_edit(with_f5pl(base, instance, params), shipped)
         self._schema_obj = edited
         self._publish(f5pl=f5pl_fields(edited),
                       status=f"{instance}: f5PL a={params.a:g} b={params.b:g} c={params.c:g} "
-                             f"d={params.d:g} g={params.g:g}")
+                             f"d={params.d:g} g={params.g:g}; trials are stored as schema "
+                             f"{edited.name}")
         if p.mode == "demo":
             self._close_trial("f5PL edited")
             self._start_demo(self.info.config)
@@ -739,6 +873,10 @@ class TrainingController:
     def poll(self, now: float | None = None) -> None:
         """Stores a finished trial; loops the demo; auto-advances a protocol."""
         now = time.monotonic() if now is None else now
+        if self._pending is not None and self.countdown_until is not None:
+            if time.monotonic() >= self.countdown_until:
+                self._begin()
+            return
         trial = self._trial
         if trial is None or not trial.done or (self._closed and self._stored_done):
             return

@@ -20,7 +20,6 @@ Frame: the scene's world frame, metres, ``z`` up (set on the server by the app).
 
 from __future__ import annotations
 
-import html
 import math
 import threading
 import time
@@ -33,7 +32,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import Organ
-from vasim.fixtures.types import Arrow, AudioCue, CameraView
+from vasim.fixtures.types import Arrow, CameraView
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]
@@ -633,114 +632,16 @@ class CameraController:
         self.writes += 1
 
 
-# ---------------------------------------------------------------------------------------
-# HUD
-
-
-def audio_text(audio: AudioCue | None) -> str:
-    """The AG state as text: ``"off"`` (no AG), ``"silent"`` or pitch/period."""
-    if audio is None:
-        return "off"
-    if audio.silent:
-        return "silent"
-    return f"{audio.pitch_hz:.0f} Hz, every {audio.period_s:.2f} s"
-
-
-@dataclass(frozen=True)
-class HudInfo:
-    """What the HUD shows (plain values; the app builds it from a frame).
-
-    Attributes:
-        schema: schema name. fixtures: active fixture names. task: task name.
-        trial: trial counter. t: time in trial [s]. error_m: |x - g| [m].
-        error_l1: cumulative L1 error for the current goal [m].
-        goal_index, n_points: progress. last_latency: l_i of the last reached point [s].
-        audio: AG cue or None. force_n: |F| [N] or None. zoom: Mag zoom or None.
-        ms: (3,) MS factors or None. done: trial finished.
-    """
-
-    schema: str
-    fixtures: tuple[str, ...]
-    task: str
-    trial: int
-    t: float
-    error_m: float
-    error_l1: float
-    goal_index: int
-    n_points: int
-    last_latency: float | None
-    audio: AudioCue | None
-    force_n: float | None
-    zoom: float | None
-    ms: tuple[float, float, float] | None
-    done: bool
-
-
-def hud_markdown(info: HudInfo) -> str:
-    """The HUD's markdown (every string escaped: markdown is not sanitised by viser)."""
-    esc = html.escape
-    lat = "–" if info.last_latency is None else f"{info.last_latency:.2f} s"
-    goal = min(info.goal_index + 1, info.n_points)
-    status = "done" if info.done else "running"
-    rows = [
-        ("Schema", f"{esc(info.schema)} ({esc(', '.join(info.fixtures)) or 'no fixture'})"),
-        ("Task", f"{esc(info.task)}, trial {info.trial} ({status})"),
-        ("Time", f"{info.t:6.2f} s"),
-        ("Goal", f"{goal} / {info.n_points}"),
-        ("Error", f"{info.error_m * 1e3:.1f} mm, e_i so far {info.error_l1:.2f} m"),
-        ("Last latency", lat),
-        ("Audio (AG)", esc(audio_text(info.audio))),
-    ]
-    if info.force_n is not None:
-        rows.append(("Force (FF)", f"{info.force_n:.2f} N"))
-    if info.ms is not None:
-        rows.append(("MS factors", " / ".join(f"{m:.2f}" for m in info.ms)))
-    if info.zoom is not None:
-        rows.append(("Zoom (Mag)", f"{info.zoom:.2f}×"))
-    # A "|" inside a cell would end it: escape it.
-    body = "\n".join(f"| {k} | {v.replace('|', '&#124;')} |" for k, v in rows)
-    return "| | |\n|---|---|\n" + body
-
-
-class HudView:
-    """A GUI markdown panel with the live trial state; rewritten at most ``max_rate_hz``.
-
-    Args:
-        server: the viser server.
-        max_rate_hz: maximum rewrites per second (each is a message to every browser).
-    """
-
-    def __init__(self, server: viser.ViserServer, *, max_rate_hz: float = 10.0):
-        self.min_interval = 1.0 / max_rate_hz
-        self.handle = server.gui.add_markdown("*waiting for the first frame…*")
-        self.text = ""
-        self._last_t = -math.inf
-
-    def update(self, info: HudInfo, now: float | None = None, *, force: bool = False) -> None:
-        now = time.perf_counter() if now is None else now
-        if not force and now - self._last_t < self.min_interval:
-            return
-        text = hud_markdown(info)
-        self._last_t = now
-        if text != self.text:
-            self.text = text
-            self.handle.content = text
-
-
 __all__ = [
     "ArrowView",
     "CameraController",
     "CameraPose",
     "GhostView",
-    "HudInfo",
-    "HudView",
     "OrganView",
     "ToolView",
     "TrajectoryView",
     "arrow_mesh",
     "arrow_vertices",
-    "audio_text",
-    "hud_markdown",
     "organ_style",
     "quat_from_z",
     "rgb255",
