@@ -105,7 +105,7 @@ def test_vg_and_ff_schema_draws_both_arrows_and_the_ghost(app: ViewerApp) -> Non
     assert wait_for(both, timeout=5.0), seen
     assert wait_for(lambda: app.ghost.handle.visible)
     text = app.hud.text
-    assert "trajectory_following" in text and "Goal" in text and "Audio (AG)" in text
+    assert "trajectory_following" in text and "Points reached" in text and "Audio (AG)" in text
 
 
 def test_schema_change_through_the_queue_takes_effect(app: ViewerApp) -> None:

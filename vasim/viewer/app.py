@@ -41,6 +41,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -65,6 +66,7 @@ from vasim.viewer.controller import (
     TrialInfo,
     schema_choices,
 )
+from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose, task_target
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
@@ -202,10 +204,10 @@ class SceneViews:
     """
 
     def __init__(self, server: viser.ViserServer, organs: list[Organ], trocars: FloatArray,
-                 trocar: FloatArray):
+                 trocar: FloatArray, *, tones: bool = False):
         server.scene.set_up_direction("+z")
         self.server = server
-        self.organs = [OrganView(server, o) for o in organs]
+        self.organs = [OrganView(server, o, tones=tones) for o in organs]
         ports = trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
         server.scene.add_point_cloud("/trocars", ports.astype(np.float32), (40, 40, 40),
                                      point_size=0.004, point_shape="circle",
@@ -283,6 +285,9 @@ class ViewerApp(ErrorReporter):
         control_hz, view_hz: rates of the controller and view threads [Hz].
         audio_hz: rate of the AG parameter stream [Hz].
         trial_factory: builds live trials (default ``make_live_trial``).
+        optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
+            every person-driven trial).
+        countdown_s: the start cue before a person-driven trial [s] (0: none).
 
     Raises:
         ConfigError: for an unknown schema, task, skill or scene, a schema that does not
@@ -316,8 +321,11 @@ class ViewerApp(ErrorReporter):
         trial_factory: Callable[..., Any] | None = None,
         token: str | None = None,
         experimenter_port: int | None = None,
+        optics: float = 0.0,
+        countdown_s: float = 3.0,
     ):
         self.access = access_policy(host, token)
+        self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
@@ -341,9 +349,11 @@ class ViewerApp(ErrorReporter):
         self.controller = TrainingController(
             scene=scene, db=db, schema=schema, task=task, skill=skill, seed=seed,
             variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
-            trial_factory=trial_factory)
+            trial_factory=trial_factory, countdown_s=countdown_s, optics_deg=optics)
         self.scene_name = scene
-        eye = endoscope_pose()
+        # The instrument's screen motion follows the scope's image of each trial's task.
+        self.controller.view_axes = self._view_axes
+        eye = self._scope_view(self.controller.info)
         self.controller.screen = screen_axes(eye.position, eye.look_at, eye.up)
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.errors: list[str] = []
@@ -543,12 +553,15 @@ class ViewerApp(ErrorReporter):
         self.trocars = trocar_points()
         info = self._snapshot.info
         trocar = tool_trocar(info.config.task, info.start)
-        self.views = SceneViews(s, organs, self.trocars, trocar)
+        self.views = SceneViews(s, organs, self.trocars, trocar, tones=True)
         self.exp_views = SceneViews(e, organs, self.trocars, trocar)
-        # The trainee sees through the endoscope (Mag moves it when the condition has Mag);
-        # the experimenter orbits freely from a third-person view.
-        self.camera = CameraController(s, endoscope_pose())
+        # The trainee sees through the endoscope (Mag moves it along its port when the
+        # condition has Mag); the experimenter orbits freely from a third-person view.
+        eye = self._scope_view(info)
+        self.camera = CameraController(s, eye, mapper=partial(scope_from_mag, self.scope))
         self.camera.apply_initial()
+        self.light = ScopeLight(s)
+        self.light.follow(eye)
         self.exp_camera = CameraController(e, third_person_pose())
         self.exp_camera.apply_initial()
         self.exp_camera.follow = False
@@ -556,6 +569,15 @@ class ViewerApp(ErrorReporter):
         self.instrument_input = InstrumentInput(s, lambda: self.controller.instrument,
                                                 self._guard)
         self.audio = AudioStream(s, rate_hz=self.audio_hz)
+
+    def _scope_view(self, info: TrialInfo) -> CameraPose:
+        """The scope's pose without Mag for a trial: aimed at its task from 1 cm inside the
+        camera port (every task is in view from there: tests/viewer/test_endoscope.py)."""
+        return scope_pose(self.scope, task_target(info.points, info.start), 0.01)[0]
+
+    def _view_axes(self, points: FloatArray, start: FloatArray) -> tuple[FloatArray, FloatArray]:
+        pose = scope_pose(self.scope, task_target(points, start), 0.01)[0]
+        return screen_axes(pose.position, pose.look_at, pose.up)
 
     def _organs(self) -> list[Organ]:
         """The organs to draw: the scene's surfaces as the trial's physics has them (the
@@ -711,7 +733,11 @@ class ViewerApp(ErrorReporter):
                                      or ctl.outcome[1] is not None else False,
                                      outcome=ctl.outcome[1]
                                      if ctl.outcome[0] == info.number else None)
+        if new_trial:
+            self.camera.retarget(self._scope_view(info))
         self.camera.update(out.camera)
+        if self.light.pose is not self.camera.target:
+            self.light.follow(self.camera.target)
         self.audio.update(out.audio)
         self._shown, self._shown_frame = info, frame
         self._view_costs.append(time.thread_time() - t0)

@@ -287,6 +287,10 @@ class TrainingController:
         """Fulcrum effect and sensitivity of the trainee's instrument (experimenter's page)."""
         self.screen: tuple[FloatArray, FloatArray] | None = None
         """The trainee view's (right, up) axes the instrument's screen motion follows."""
+        self.view_axes: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]] | \
+            None = None
+        """The trainee view's (right, up) axes for a task's points and start (the app's
+        endoscope aims per task); None: ``screen`` for every trial."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
         self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
@@ -350,9 +354,11 @@ class TrainingController:
             device = BrowserDevice()
         elif input_kind == "laparoscopic":
             task0 = make_task(config)
+            screen = (self.view_axes(np.asarray(task0.points), np.asarray(task0.start))
+                      if self.view_axes is not None else self.screen)
             device = instrument_device(tool_trocar(config.task, np.asarray(task0.start)),
-                                       np.asarray(task0.start), self.input_mapping,
-                                       self.screen)
+                                       np.asarray(task0.start), self.input_mapping, screen)
+            self.screen = screen
         trial = self._factory(config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
         task = make_task(config)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,15 +97,24 @@ class OrganView:
         organ: the organ (mesh in metres, world frame).
     """
 
-    def __init__(self, server: viser.ViserServer, organ: Organ):
+    def __init__(self, server: viser.ViserServer, organ: Organ, *, tones: bool = False):
         self.organ = organ
         self.name = f"/organs/{organ.name}"
         v = np.ascontiguousarray(organ.mesh.vertices, dtype=np.float32)
         f = np.ascontiguousarray(organ.mesh.faces, dtype=np.uint32)
         self.n_vertices = len(v)
+        parts = [(f, rgb255(organ.color))]
+        if tones and organ.kind != "wall":  # the endoscope's tissue look (endoscope.py)
+            from vasim.viewer.endoscope import tissue_patches
+
+            seed = int.from_bytes(organ.name.encode()[:8].ljust(8, b"_"), "little")
+            parts = tissue_patches(organ.mesh.vertices, f, organ.color, seed=seed) or parts
         self.handle = server.scene.add_mesh_simple(
-            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]
+            self.name, v, parts[0][0], color=parts[0][1], **organ_style(organ)  # type: ignore[arg-type]
         )
+        self.tones = [server.scene.add_mesh_simple(
+            f"{self.name}/tone{i}", v, fi, color=ci, **organ_style(organ))  # type: ignore[arg-type]
+            for i, (fi, ci) in enumerate(parts[1:], start=1)]
 
     def update(self, vertices: FloatArray) -> None:
         """Moves the vertices (deforming organs).
@@ -123,9 +132,11 @@ class OrganView:
                 f"{self.name}: expected vertices of shape ({self.n_vertices}, 3), got {v.shape}"
             )
         self.handle.vertices = v
+        for h in self.tones:
+            h.vertices = v
 
     def node_names(self) -> list[str]:
-        return [self.name]
+        return [self.name, *(f"{self.name}/tone{i}" for i in range(1, len(self.tones) + 1))]
 
 
 # ---------------------------------------------------------------------------------------
@@ -557,11 +568,15 @@ class CameraController:
         max_rate_hz: maximum camera writes per second.
         near, far: clipping planes [m] (viser's 1 cm default near plane is too far for
             an abdomen).
+        mapper: turns Mag's ``CameraView`` into the pose shown (the trainee's endoscope:
+            ``endoscope.scope_from_mag``, Mag within the port's constraint); None: as is.
     """
 
     def __init__(self, server: viser.ViserServer, default: CameraPose, *,
-                 max_rate_hz: float = 10.0, near: float = 0.002, far: float = 3.0):
+                 max_rate_hz: float = 10.0, near: float = 0.002, far: float = 3.0,
+                 mapper: Callable[[CameraView], CameraPose] | None = None):
         self.server = server
+        self.mapper = mapper
         self.default = default
         self.min_interval = 1.0 / max_rate_hz
         self.near, self.far = near, far
@@ -604,11 +619,25 @@ class CameraController:
                 self._push_all(force=True)
             return
         self._mag = True
-        self._target = CameraPose.from_view(view)
+        self._target = (self.mapper(view) if self.mapper is not None
+                        else CameraPose.from_view(view))
         if now - self._last_push < self.min_interval:
             return
         self._last_push = now
         self._push_all()
+
+    @property
+    def target(self) -> CameraPose:
+        """The pose the pages are being given."""
+        return self._target
+
+    def retarget(self, default: CameraPose) -> None:
+        """A new pose without Mag (e.g. the scope re-aimed at a new trial's task); applied
+        at once unless Mag drives the camera."""
+        self.default = default
+        if not self._mag:
+            self._target = default
+            self._push_all(force=True)
 
     def _push_all(self, *, force: bool = False) -> None:
         with self._lock:
