@@ -70,7 +70,13 @@ from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
-from vasim.viewer.trainee import HudInfo, HudView, instruction, score_card_markdown
+from vasim.viewer.trainee import (
+    HudInfo,
+    HudView,
+    frame_outcome,
+    instruction,
+    score_card_markdown,
+)
 from vasim.viewer.views import (
     ArrowView,
     CameraController,
@@ -754,7 +760,8 @@ class ViewerApp(ErrorReporter):
             schema=info.schema, fixtures=info.fixtures,
             task=f"{info.task_name}", title=info.title, t=frame.t,
             time_left=limit - frame.t if np.isfinite(limit) else None,
-            outcome=outcome if number == info.number else None,
+            outcome=(outcome if number == info.number and outcome is not None
+                     else frame_outcome(frame.done, frame.goal_index, frame.n_points)),
             instruction=instruction(info.task_name, len(info.points), info.input),
             countdown_s=None if until is None else until - time.monotonic(),
             error_m=float(np.linalg.norm(frame.tcp - frame.goal)),

@@ -437,6 +437,11 @@ class TrainingController:
                     point_metrics=res.metrics, summary=_plain_dict(res.summary),
                     events=events, trial_metrics=res.trial_metrics)
                 self._stored_done = True
+                # The trainee's score card of what the trial recorded before it ended.
+                try:
+                    self._publish(scorecard=self._score_card(res.trial_metrics))
+                except (VasimError, StoreError, KeyError, ValueError):
+                    log.exception("the score card of %s failed", info.title)
                 self._publish(running=False, status=f"{info.title} stopped "
                               f"({reason}); it stays pending" if info.schedule_index
                               is not None else f"{info.title} stopped ({reason})")

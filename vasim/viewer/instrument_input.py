@@ -9,7 +9,8 @@ like any device (guarded, recorded, replayable).
 Controls (shown on the trainee's page):
 
 * **Mouse**: click the view to lock the pointer (Esc releases it); moving the mouse turns
-  the instrument about its port; the wheel advances/withdraws it.
+  the instrument about its port; the wheel advances/withdraws it (over the view also
+  without the lock: the trainee's camera is the endoscope, which the wheel never zooms).
 * **Keyboard**: arrow keys turn the instrument, W/S advance/withdraw, Q/E roll.
 * **Gamepad** (the browser's Gamepad API, when one is connected): the left stick turns,
   the right stick's vertical axis advances/withdraws and its horizontal axis rolls.
@@ -104,7 +105,7 @@ CONTROL_JS = r"""
     e.stopImmediatePropagation();
   }, true);
   document.addEventListener("wheel", function (e) {
-    if (!S.locked) { return; }
+    if (!S.locked && e.target !== canvas()) { return; }
     acc.wheel += -e.deltaY / 100.0;
     e.preventDefault(); e.stopImmediatePropagation();
   }, {capture: true, passive: false});

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from vasim.fixtures.logistic import Logistic5
 from vasim.trials.vf import TrialFrame
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
-from vasim.viewer.trainee import OUTCOME_TEXT, score_card_markdown
+from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 
 FloatArray = NDArray[np.float64]
 
@@ -109,6 +109,7 @@ def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
     err = float(np.linalg.norm(np.asarray(frame.tcp) - np.asarray(frame.goal))) * 1e3
     lat = ", ".join(f"{x:.2f}" for x in latencies[-8:]) or "—"
     more = f" (last 8 of {len(latencies)})" if len(latencies) > 8 else ""
+    outcome = outcome or frame_outcome(frame.done, frame.goal_index, frame.n_points)
     state = ("running" if outcome is None and not frame.done
              else f"ended: {OUTCOME_TEXT.get(outcome or '', outcome or 'ended')}")
     limit = float(info.config.max_time)

@@ -138,7 +138,7 @@ def hud_markdown(info: HudInfo) -> str:
     if info.countdown_s is not None:
         head += "  \n**Get ready…** the clock starts at 0."
     time_row = f"{info.t:6.1f} s"
-    if info.time_left is not None:
+    if info.time_left is not None and info.outcome is None and not info.done:
         time_row += f" ({max(info.time_left, 0.0):.0f} s left)"
     rows = [
         ("Points reached", f"{reached} of {info.n_points}"),
