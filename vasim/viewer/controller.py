@@ -42,7 +42,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -50,8 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError, StoreError, VasimError
-from vasim.fixtures.logistic import Logistic5
-from vasim.fixtures.schema import Schema, available_schemas, load_schema
+from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.device import Device
 from vasim.haptics.devices.browser import BrowserDevice
 from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
@@ -65,10 +64,28 @@ from vasim.trials.vf import (
     tool_trocar,
     trial_meta,
 )
-from vasim.viewer.condition import named_edit, viewer_condition
+from vasim.viewer.condition import viewer_condition
+from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
+from vasim.viewer.history import (
+    CURVE_METRICS,
+    learning_curve,
+    open_session,
+    session_progress,
+    trial_score_card,
+)
 from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
-from vasim.viewer.trainee import ScoreCard, frame_outcome, score_card, trial_title
+from vasim.viewer.state import (
+    Command,
+    PanelState,
+    TrialInfo,
+    f5pl_fields,
+    plain,
+    plain_dict,
+    schema_choices,
+    with_f5pl,
+)
+from vasim.viewer.trainee import ScoreCard, frame_outcome
 
 log = logging.getLogger(__name__)
 
@@ -81,152 +98,9 @@ INPUTS: tuple[str, ...] = ("scripted", "browser", "laparoscopic")
 option), or the trainee's laparoscopic instrument (mouse, keyboard, gamepad; the trainee
 page's default input for a person)."""
 
-DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
-    "trajectory": "trajectory_following",
-    "point": "point_targeting",
-}
-"""Schema switched to when the chosen task does not fit the current task-specific schema."""
-
-CURVE_METRICS: tuple[str, ...] = ("completion_time", "mean_latency")
-"""Per-trial metrics of the learning curve (seconds both: one axis)."""
 
 
-@dataclass(frozen=True)
-class Command:
-    """A request to the controller thread.
-
-    Attributes:
-        kind: ``mode`` (value: a ``MODES`` name), ``schema``, ``task``, ``input``
-            (``INPUTS``), ``subject`` (a subject code), ``protocol`` (a protocol name),
-            ``start``, ``stop``, ``restart``, ``f5pl`` (value: (fixture instance,
-            ``Logistic5``)), ``auto_advance`` (value: bool), ``input_mapping`` (value: an
-            ``InputMapping``), ``label`` (value: a free-practice label, "" clears it).
-        value: the argument.
-    """
-
-    kind: str
-    value: Any = None
-
-
-@dataclass(frozen=True, eq=False)
-class TrialInfo:
-    """What does not change during one trial (built once per trial).
-
-    Attributes:
-        number: trial counter since the server started (1, 2, ...).
-        config: the trial's configuration. schema: schema name. fixtures: its fixture
-        names. task_name: e.g. ``"trajectory/v3"``. points: (N, 3) POIs [m]. normals:
-        (N, 3) or None. reach_radius: [m]. start: (3,) tool start [m]. mode: the mode it
-        runs in. input: ``INPUTS``. trial_id: store id (None when not stored).
-        schedule_index: 0-based scheduled trial (protocol mode). condition: the protocol's
-        condition label (protocol mode).
-    """
-
-    number: int
-    config: TrialConfig
-    schema: str
-    fixtures: tuple[str, ...]
-    task_name: str
-    points: FloatArray
-    normals: FloatArray | None
-    reach_radius: float
-    start: FloatArray
-    mode: str = "demo"
-    input: str = "scripted"
-    trial_id: int | None = None
-    schedule_index: int | None = None
-    condition: str | None = None
-
-    @property
-    def title(self) -> str:
-        """The trial's name on every page (``trainee.trial_title``: the store id)."""
-        return trial_title(self.trial_id, self.number)
-
-
-@dataclass(frozen=True)
-class PanelState:
-    """What the experimenter panel shows (published by the controller, immutable).
-
-    Attributes:
-        mode, input: current choices. schema, task: free-training / demo choices.
-        subject, protocol: chosen subject code and protocol (or None). label: the
-        free-practice label of free trials without a subject (or None). session_id: the
-        session of the last protocol trial. position: 1-based scheduled trial running or
-        next. total: scheduled trials. completed: completed scheduled trials.
-        condition: condition of that trial. running: a trial runs. status: one line.
-        summary: last finished trial's summary (plain values) or None.
-        curve: learning curve so far of the subject, ``(n, completion_time, mean_latency)``
-        per completed stored trial (protocol trials of the session, or the subject's free
-        trials). auto_advance: start the next scheduled trial by itself.
-        f5pl: editable f5PL curves of the current schema: fixture instance -> params.
-        scorecard: the score card of the last stored trial (or None).
-        version: increments with every change.
-    """
-
-    mode: str = "demo"
-    input: str = "scripted"
-    schema: str = "trajectory_following"
-    task: str = "trajectory"
-    subject: str | None = None
-    label: str | None = None
-    protocol: str | None = None
-    session_id: int | None = None
-    position: int | None = None
-    total: int | None = None
-    completed: int | None = None
-    condition: str | None = None
-    running: bool = False
-    status: str = ""
-    summary: dict[str, Any] | None = None
-    curve: tuple[tuple[int, float, float], ...] = ()
-    auto_advance: bool = False
-    f5pl: tuple[tuple[str, Logistic5], ...] = ()
-    scorecard: ScoreCard | None = None
-    version: int = 0
-
-
-def f5pl_fields(schema: Schema) -> tuple[tuple[str, Logistic5], ...]:
-    """The f5PL parameter sets of a schema's fixtures, by instance name (MS has none)."""
-    out = []
-    for fx in schema.fixtures:
-        p = getattr(fx.params, "f5pl", None)
-        if isinstance(p, Logistic5):
-            out.append((fx.name, p))
-    return tuple(out)
-
-
-def with_f5pl(schema: Schema, instance: str, params: Logistic5) -> Schema:
-    """A copy of ``schema`` whose fixture ``instance`` has the f5PL ``params``.
-
-    Raises:
-        ConfigError: no such fixture, or it has no f5PL.
-    """
-    fixtures = []
-    found = False
-    for fx in schema.fixtures:
-        if fx.name == instance:
-            if not isinstance(getattr(fx.params, "f5pl", None), Logistic5):
-                raise ConfigError(f"fixture {instance!r} has no f5PL to edit",
-                                  field=f"fixtures.{instance}.f5pl")
-            fx = replace(fx, params=replace(fx.params, f5pl=params))
-            found = True
-        fixtures.append(fx)
-    if not found:
-        raise ConfigError(f"schema {schema.name!r} has no fixture {instance!r} (has "
-                          f"{', '.join(schema.fixture_names) or 'none'})", field="fixtures")
-    return replace(schema, fixtures=tuple(fixtures))
-
-
-def plain(v: Any) -> Any:
-    """A summary value as plain JSON-able Python (NaN -> None)."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-class TrainingController:
+class TrainingController(ConditionCommands):
     """Server-side state of the viewer (module docstring). Not thread-safe by design: one
     controller thread calls ``handle``/``poll``/``close``; other threads read the published
     ``info``, ``frame()`` and ``panel``.
@@ -434,7 +308,7 @@ class TrainingController:
                                          if files else [])]
                 self.store().mark_interrupted(
                     info.trial_id, reason=reason, samples=res.samples,
-                    point_metrics=res.metrics, summary=_plain_dict(res.summary),
+                    point_metrics=res.metrics, summary=plain_dict(res.summary),
                     events=events, trial_metrics=res.trial_metrics)
                 self._stored_done = True
                 # The trainee's score card of what the trial recorded before it ended.
@@ -458,7 +332,7 @@ class TrainingController:
             kw["metric_params"] = load_session(self.store(), self.panel.session_id
                                                ).metric_params
         res = trial.result(**kw)
-        summary = _plain_dict(res.summary)
+        summary = plain_dict(res.summary)
         self.outcome = (info.number, summary.get("outcome"))
         if info.trial_id is not None:
             self.store().finish_trial(
@@ -494,102 +368,34 @@ class TrainingController:
         return out
 
     def _score_card(self, metrics: dict[str, float]) -> ScoreCard:
-        """The score card of the stored trial just finished.
-
-        **Decision**: "earlier trials" are the same trainee's earlier completed trials of
-        the same schema (by stored name: an edited schema is its own condition) and task —
-        the trainee is the subject, else the free-practice label, else the anonymous free
-        trials. The **benchmark** is the mean of the completed trials of that schema and
-        task by experienced laparoscopists (demographics ``laparoscopy_experience`` ">200",
-        the study vocabulary's top level); without such trials there is no benchmark column.
-        """
-        info = self.info
-        st = self.store()
-        df = st.trials("completed")
-        same = ((df["schema"] == info.schema) & (df["task"] == info.config.task)
-                & (df["id"] != info.trial_id))
-        subject, label = info.config.subject, info.config.label
-        if subject:
-            mine = df["subject"] == subject
-        elif label:
-            mine = df["subject"].isna() & (df["label"] == label)
-        else:
-            mine = df["subject"].isna() & df["label"].isna()
-        earlier_ids = [int(i) for i in df[same & mine & (df["id"] < (info.trial_id or 0))]["id"]]
-        demo = st.demographics()
-        experts = set(demo[demo["laparoscopy_experience"] == ">200"]["subject"])
-        bench_ids = [int(i) for i in df[same & df["subject"].isin(experts)]["id"]]
-        wide = st.trial_metrics(wide=True) if earlier_ids or bench_ids else None
-
-        def rows(ids: list[int]) -> list[dict[str, float]]:
-            if wide is None:
-                return []
-            return [wide.loc[i].to_dict() for i in ids if i in wide.index]
-
-        return score_card(metrics, title=info.title, outcome=self.outcome[1],
-                          n_points=len(info.points), earlier=rows(earlier_ids),
-                          benchmark=rows(bench_ids))
+        """The score card of the stored trial just finished (``history.trial_score_card``)."""
+        return trial_score_card(self.store(), self.info, metrics, self.outcome[1])
 
     def _curve(self) -> tuple[tuple[int, float, float], ...]:
-        """The learning curve so far: the session's completed trials in schedule order
-        (protocol), or the subject's completed free trials (free training)."""
-        st = self.store()
+        """The learning curve so far (``history.learning_curve``)."""
         p = self.panel
-        if p.mode == "protocol" and p.session_id is not None:
-            ids = [int(i) for i in st.schedule(p.session_id)["trial_id"].dropna()]
-        else:
-            df = st.trials("completed")
-            subject = p.subject or self._base.subject
-            # The subject's free trials; without a subject, the free trials without one.
-            mine = df["subject"] == subject if subject else df["subject"].isna()
-            ids = [int(i) for i in df[mine & df["session_id"].isna()]["id"]]
-        if not ids:
-            return ()
-        wide = st.trial_metrics(wide=True)
-        out = []
-        for n, tid in enumerate(ids, start=1):
-            if tid not in wide.index:
-                continue
-            row = wide.loc[tid]
-            out.append((n, *(float(row.get(m, math.nan)) for m in CURVE_METRICS)))
-        return tuple(out)  # type: ignore[arg-type]
+        return learning_curve(self.store(), p.session_id if p.mode == "protocol" else None,
+                              p.subject or self._base.subject, p.label)
 
     # -- protocol sessions ---------------------------------------------------------------
     def _session(self) -> Any:
-        """The subject's running session of the chosen protocol, created if none."""
-        from vasim.study.protocol import load_protocol
-        from vasim.study.session import SessionSettings, load_session, start_session
-
+        """The subject's running session of the chosen protocol, created if none (with the
+        input and the instrument's mapping in force now: every trial of it keeps them)."""
         p = self.panel
-        if p.subject is None:
-            raise ConfigError("enter a subject code first", field="subject")
-        if p.protocol is None:
-            raise ConfigError("pick a protocol first", field="protocol")
-        st = self.store()
-        df = st.sessions(subject=p.subject, protocol=p.protocol)
-        running = df[df["status"] == "running"]
-        if len(running):
-            sid = int(running["id"].iloc[-1])
-        else:
-            settings = SessionSettings(extra={"ui": "vasim serve", "input": p.input,
-                                              "scene": self.scene})
-            sid = start_session(st, load_protocol(p.protocol), p.subject, settings=settings)
-        return load_session(st, sid)
+        m = self.input_mapping
+        return open_session(self.store(), p.subject, p.protocol, {
+            "ui": "vasim serve", "input": p.input, "scene": self.scene,
+            "input_mapping": {"fulcrum_effect": m.fulcrum_effect,
+                              "sensitivity": m.sensitivity}})
 
     def _progress(self) -> dict[str, Any]:
         """Progress fields of the panel for the chosen subject and protocol."""
-        from vasim.study.session import load_session
-
         p = self.panel
         if p.session_id is None:
             return {}
-        s = load_session(self.store(), p.session_id)
-        pending = s.pending
         running = self.active() and self.info.schedule_index is not None
-        cur = self.info.schedule_index if running else (pending[0].index if pending else None)
-        return {"total": len(s.schedule), "completed": len(s.schedule) - len(pending),
-                "position": None if cur is None else cur + 1,
-                "condition": None if cur is None else s.schedule[cur].condition}
+        return session_progress(self.store(), p.session_id,
+                                self.info.schedule_index if running else None)
 
     def _start_protocol_trial(self) -> None:
         session = self._session()
@@ -607,6 +413,9 @@ class TrainingController:
         cfg = replace(session.trial_config(nxt), scene=self.scene)
         # The session's input (stored with it when it was created) drives all its trials.
         kind = str(session.settings.extra.get("input", self.panel.input))
+        mapping = session.settings.extra.get("input_mapping")
+        if isinstance(mapping, dict):
+            self.input_mapping = InputMapping(**mapping)
         self._launch(cfg, mode="protocol", input_kind=kind, session=session, scheduled=nxt)
         self._publish(running=True, summary=None, scorecard=None, input=kind,
                       status=f"{self.info.title} running: scheduled trial {nxt.index + 1} "
@@ -727,24 +536,6 @@ class TrainingController:
         else:
             raise ConfigError(f"unknown command {kind!r}")
 
-    def _set_label(self, value: Any) -> None:
-        """The free-practice label of the next free trials without a subject (**decision**:
-        a label and a subject exclude each other — setting one clears the other — so a
-        trial is a subject's or a labelled practice trial, never both; "" clears it)."""
-        from vasim.study.store.vocabulary import validate_label
-
-        if self.panel.mode == "protocol":
-            raise ConfigError("protocol trials belong to the subject: labels are for free "
-                              "practice", field="label")
-        text = str(value).strip() if value is not None else ""
-        label = validate_label(text) if text else None
-        if self._running_stored() or self._pending is not None:
-            raise ConfigError("stop the running trial before changing the label",
-                              field="label")
-        self._publish(label=label, subject=None if label else self.panel.subject, curve=(),
-                      status=f"free practice labelled {label!r}" if label
-                      else "free practice without a label")
-
     def _running_stored(self) -> bool:
         return self.active() and self.info.trial_id is not None
 
@@ -806,80 +597,6 @@ class TrainingController:
                      schema=self._schema_obj)
         self._publish(running=True)
 
-    def _set_schema(self, name: str) -> None:
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol sets the schema; switch to free training to "
-                              "choose one", field="schema")
-        # viser does not check dropdown values against the options, and
-        # load_schema accepts file paths, so any client could make the server read (and
-        # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
-        choices = schema_choices(self._base.schema)
-        if not isinstance(name, str) or name not in choices:
-            shown = repr(name)
-            shown = shown if len(shown) <= 80 else shown[:77] + "..."
-            raise ConfigError(f"unknown schema {shown}: choose one from the Schema menu",
-                              field="schema")
-        if name == p.schema and self._schema_obj is None:
-            return
-        schema = load_schema(name)
-        task = p.task if schema.task in ("any", p.task) else schema.task
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the schema",
-                              field="schema")
-        self._schema_obj = None
-        self._publish(schema=name, task=task, f5pl=f5pl_fields(schema))
-        if p.mode == "demo":
-            self._close_trial("schema changed")
-            variant = self.info.config.variant if task == self.info.config.task else 0
-            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]
-
-    def _set_task(self, task: str) -> None:
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol sets the task", field="task")
-        if task not in DEFAULT_SCHEMA_FOR_TASK:
-            raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
-        if task == p.task:
-            return
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the task", field="task")
-        schema = p.schema
-        if load_schema(schema).task not in ("any", task):
-            schema = DEFAULT_SCHEMA_FOR_TASK[task]
-        if schema != p.schema:
-            self._schema_obj = None
-        self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
-        if p.mode == "demo":
-            self._close_trial("task changed")
-            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]
-
-    def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
-        """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes
-        effect by starting the trial afresh with the edited schema, so every stored trial
-        ran with exactly the schema stored with it (a mid-trial change would not be)."""
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol's schemas are fixed; edit f5PL parameters in "
-                              "free training", field="f5pl")
-        if not isinstance(params, Logistic5):
-            raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
-        shipped = load_schema(p.schema)
-        base = self._schema_obj if self._schema_obj is not None else shipped
-        edited = named_edit(with_f5pl(base, instance, params), shipped)
-        self._schema_obj = edited
-        self._publish(f5pl=f5pl_fields(edited),
-                      status=f"{instance}: f5PL a={params.a:g} b={params.b:g} c={params.c:g} "
-                             f"d={params.d:g} g={params.g:g}; trials are stored as schema "
-                             f"{edited.name}")
-        if p.mode == "demo":
-            self._close_trial("f5PL edited")
-            self._start_demo(self.info.config)
-        elif self._running_stored():
-            self._close_trial("f5PL edited")
-            self._launch(self._free_config(), mode="free", schema=edited, input_kind=p.input)
-            self._publish(running=True, summary=None)
-
     # -- the loop ------------------------------------------------------------------------
     def poll(self, now: float | None = None) -> None:
         """Stores a finished trial; loops the demo; auto-advances a protocol."""
@@ -934,16 +651,6 @@ class TrainingController:
             if self._store is not None:
                 self._store.close()
                 self._store = None
-
-
-def _plain_dict(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: plain(v) for k, v in d.items()}
-
-
-def schema_choices(current: str) -> tuple[str, ...]:
-    """The schema menu: the shipped schemas (plus ``current`` if it is a file path)."""
-    names = available_schemas()
-    return names if current in names else (*names, current)
 
 
 __all__ = [

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 from numpy.typing import NDArray
-from scipy.optimize import brentq
+from scipy import optimize
 
 from vasim.fixtures.types import CameraView
 from vasim.viewer.views import CameraPose
@@ -110,7 +110,7 @@ def scope_pose(scope: Scope, target: FloatArray, insertion: float,
             d = _unit(target - (port + ins * s))
             return math.acos(float(np.clip(s @ d, -1.0, 1.0))) - alpha
 
-        beta = float(brentq(gap, 0.0, alpha, xtol=1e-12))
+        beta = float(optimize.brentq(gap, 0.0, alpha, xtol=1e-12))
     else:
         beta = 0.0
     shaft = shaft_of(beta)
@@ -211,7 +211,7 @@ class ScopeLight:
         from vasim.viewer.views import quat_from_z
 
         self.pose = pose
-        self.spot.position = tuple(float(v) for v in pose.position)
+        self.spot.position = np.asarray(pose.position, dtype=np.float64)
         self.spot.wxyz = quat_from_z(np.asarray(pose.look_at) - np.asarray(pose.position))
 
 

@@ -88,13 +88,16 @@ CONTROL_JS = r"""
     var now = performance.now();
     for (var c in S.held) { release(c, now); }
   });
-  function canvas() { return document.querySelector("canvas"); }
+  // The 3-D view is the canvas that fills the page (the page has other, small canvases).
+  function isView(el) {
+    return !!el && el.tagName === "CANVAS" && el.clientWidth >= window.innerWidth * 0.5;
+  }
   document.addEventListener("pointerlockchange", function () {
-    S.locked = document.pointerLockElement === canvas();
+    S.locked = isView(document.pointerLockElement);
   });
   document.addEventListener("click", function (e) {
-    var c = canvas();
-    if (c && e.target === c && !S.locked && c.requestPointerLock) {
+    var c = e.target;
+    if (isView(c) && !S.locked && c.requestPointerLock) {
       try { var r = c.requestPointerLock(); if (r && r.catch) { r.catch(function () {}); } }
       catch (err) { /* no pointer lock here: keyboard and gamepad still work */ }
     }
@@ -105,7 +108,7 @@ CONTROL_JS = r"""
     e.stopImmediatePropagation();
   }, true);
   document.addEventListener("wheel", function (e) {
-    if (!S.locked && e.target !== canvas()) { return; }
+    if (!S.locked && !isView(e.target)) { return; }
     acc.wheel += -e.deltaY / 100.0;
     e.preventDefault(); e.stopImmediatePropagation();
   }, {capture: true, passive: false});
