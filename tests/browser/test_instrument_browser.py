@@ -12,6 +12,7 @@ reaches into the device: every motion comes from the page's key and wheel events
 from __future__ import annotations
 
 import time
+from contextlib import closing
 from collections.abc import Iterator
 from typing import Any
 
@@ -20,6 +21,7 @@ import pytest
 
 from tests.browser.conftest import wait_for, wait_ready
 from vasim.haptics.laparoscopic import InputMapping
+from vasim.study.store import TrialStore
 from vasim.viewer.app import ViewerApp
 from vasim.viewer.controller import Command
 
@@ -154,7 +156,8 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         body = trainee.inner_text("body")
         assert "running" not in body.split("Score card")[0].split(info.title)[1][:20]
         assert "Points reached" in body and "Path length" in body
-        row = app.controller.store().trial(info.trial_id)
+        with closing(TrialStore(app.controller.db, readonly=True)) as st:
+            row = st.trial(info.trial_id)
         assert row["operator"] == "laparoscopic" and row["outcome"] == "stopped"
         assert row["config"]["viewer"]["input_mapping"]["sensitivity"] == 0.5
         print(f"pointer lock in headless Chromium: {locked}; points reached: {reached}")
