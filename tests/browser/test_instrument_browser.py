@@ -12,8 +12,8 @@ reaches into the device: every motion comes from the page's key and wheel events
 from __future__ import annotations
 
 import time
-from contextlib import closing
 from collections.abc import Iterator
+from contextlib import closing
 from typing import Any
 
 import numpy as np
