@@ -386,7 +386,7 @@ class ViewerApp(ErrorReporter):
         }
         trial = self.controller.trial
         timing = trial.timing() if trial is not None else None
-        d = timing.to_dict() if hasattr(timing, "to_dict") else {}
+        d = timing.to_dict() if timing is not None and hasattr(timing, "to_dict") else {}
         for k, v in d.items():
             if isinstance(v, dict):  # RealtimeTiming's physics thread figures
                 for k2, v2 in v.items():

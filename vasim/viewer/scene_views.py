@@ -92,7 +92,7 @@ class DragInput:
             if tip is not None:
                 dev.push(t + 1e-4, p, BUTTON_2)
                 dev.push(t + 2e-4, tip, BUTTON_2)
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.array(tip, dtype=np.float64)
             return
         self._dragging = True
         dev.push(t, p)
@@ -104,7 +104,7 @@ class DragInput:
         if self.handle.visible != active:
             self.handle.visible = active
             if active:
-                self.handle.position = tuple(float(v) for v in tip)
+                self.handle.position = np.array(tip, dtype=np.float64)
                 dev = self._device()
                 if dev is not None:  # the first sample: where the gizmo starts
                     dev.push(time.perf_counter(), self._last_tip)
@@ -171,7 +171,8 @@ class SceneViews:
 
     def node_names(self) -> list[str]:
         names: list[str] = []
-        for v in (*self.organs, self.tool, self.trajectory, self.arrows, self.ghost):
+        views: list[Any] = [*self.organs, self.tool, self.trajectory, self.arrows, self.ghost]
+        for v in views:
             names.extend(v.node_names())
         return sorted(names)
 
