@@ -119,6 +119,16 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
                                   arg=f"{info.title} — running", timeout=30_000)
         assert "points along the path" in trainee.inner_text("body")
+        # The trainee's camera is the endoscope: dragging over the view does not orbit it.
+        client = next(iter(app.server.get_clients().values()))   # type: ignore[union-attr]
+        cam0 = np.array(client.camera.position)
+        trainee.mouse.move(TRAINEE_VIEW["width"] * 0.2, TRAINEE_VIEW["height"] * 0.5)
+        trainee.mouse.down()
+        trainee.mouse.move(TRAINEE_VIEW["width"] * 0.45, TRAINEE_VIEW["height"] * 0.3,
+                           steps=8)
+        trainee.mouse.up()
+        time.sleep(1.0)
+        assert np.abs(np.array(client.camera.position) - cam0).max() < 1e-3
         # The mouse: the wheel over the view advances the instrument (3 lines: +6 mm at
         # sensitivity 0.5); a click takes the pointer where the browser allows it.
         view = (TRAINEE_VIEW["width"] * 0.25, TRAINEE_VIEW["height"] * 0.6)

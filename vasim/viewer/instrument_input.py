@@ -25,7 +25,9 @@ page writes each batch as JSON into a hidden GUI text field through viser's own 
 ``on_update`` callback. Batches are sent every 33 ms while there is input (30 Hz: the
 device smooths them for the 1 kHz loop) and carry a sequence number so that two equal
 batches are both delivered. The page's keys are taken in the capture phase, so viser's own
-keyboard camera controls never see them. ``window.__vasimInput`` exposes counters for
+keyboard camera controls never see them; pointer events over the 3-D view are taken too
+(**decision**: the trainee's camera is the endoscope, so viser's orbit controls must not
+move it; only Mag or the scope's aim do). ``window.__vasimInput`` exposes counters for
 tests.
 """
 
@@ -102,6 +104,13 @@ CONTROL_JS = r"""
       catch (err) { /* no pointer lock here: keyboard and gamepad still work */ }
     }
   }, true);
+  // The trainee's camera is the endoscope: viser's orbit controls never get the pointer
+  // over the 3-D view (the click that takes the pointer still fires).
+  ["pointerdown", "pointermove", "pointerup"].forEach(function (type) {
+    document.addEventListener(type, function (e) {
+      if (isView(e.target)) { e.stopImmediatePropagation(); }
+    }, true);
+  });
   document.addEventListener("mousemove", function (e) {
     if (!S.locked) { return; }
     acc.dx += e.movementX || 0; acc.dy += e.movementY || 0;
