@@ -5,6 +5,7 @@ change the schema/task, errors do not kill it, and stop() ends every thread."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import socket
 import subprocess
 import sys
@@ -24,11 +25,10 @@ from vasim.core.errors import ConfigError
 from vasim.core.geometry import matrix_z_to, quat_z_to
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
+from vasim.viewer.trainee import audio_text, hud_markdown
 from vasim.viewer.views import (
     arrow_mesh,
     arrow_vertices,
-    audio_text,
-    hud_markdown,
 )
 
 
@@ -108,7 +108,7 @@ def test_vg_and_ff_schema_draws_both_arrows_and_the_ghost(app: ViewerApp) -> Non
     assert wait_for(both, timeout=5.0), seen
     assert wait_for(lambda: app.ghost.handle.visible)
     text = app.hud.text
-    assert "trajectory_following" in text and "Goal" in text and "Audio (AG)" in text
+    assert "trajectory_following" in text and "Points reached" in text and "Audio (AG)" in text
 
 
 def test_schema_change_through_the_queue_takes_effect(app: ViewerApp) -> None:
@@ -344,15 +344,18 @@ def test_arrow_vertices_span_start_to_end() -> None:
 
 
 def test_hud_text_escapes_and_names_the_audio_state() -> None:
-    from vasim.viewer.views import HudInfo
+    from vasim.viewer.trainee import HudInfo
 
-    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0", trial=1, t=1.0,
-                   error_m=0.004, error_l1=0.5, goal_index=2, n_points=30,
+    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0",
+                   title="trial 7", t=1.0, error_m=0.004, goal_index=2, n_points=30,
                    last_latency=0.8, audio=AudioCue(600.0, 0.3, 0.0), force_n=None,
-                   zoom=None, ms=None, done=False)
+                   zoom=None, ms=None, done=False, time_left=179.0)
     md = hud_markdown(info)
     assert "<b>" not in md and "&lt;b&gt;" in md
-    assert "3 / 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
+    assert "2 of 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
+    assert "**trial 7** — running" in md and "(179 s left)" in md
+    ended = hud_markdown(dataclasses.replace(info, done=True, outcome="timed_out"))
+    assert "ended: time ran out" in ended and "done" not in ended
     assert audio_text(None) == "off"
     assert audio_text(AudioCue(620.0, 0.25, 0.5)) == "620 Hz, every 0.25 s"
 

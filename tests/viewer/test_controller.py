@@ -276,6 +276,143 @@ def test_a_stopped_real_time_trial_replays_identically(tmp_path: Path) -> None:
     assert report.samples_equal and report.metrics_equal, report.differences
 
 
+# -- issue #20: edited schemas, labels, one trial number, outcomes, protocol locks ----------
+
+
+def test_an_edited_schema_is_stored_under_its_own_name_beside_its_toml(
+        ctl: TrainingController) -> None:
+    from vasim.fixtures.schema import dumps_schema, parse_schema
+    from vasim.viewer.condition import edited_schema_name, shipped_name
+
+    run(ctl, Command("mode", "free"), Command("schema", "trajectory_following"))
+    shipped = load_schema("trajectory_following")
+    inst, p0 = f5pl_fields(shipped)[0]
+    edited = Logistic5(a=p0.a, b=p0.b, c=p0.c, d=2.0, g=p0.g)   # the issue's d = 2.0
+    run(ctl, Command("f5pl", (inst, edited)), Command("start"))
+    tid = ctl.info.trial_id
+    name = ctl.info.schema
+    assert name.startswith("trajectory_following.edited-") and len(name) == 20 + 8 + 10
+    assert shipped_name(name) == "trajectory_following"
+    run(ctl, Command("stop"))
+    with closing(store(ctl)) as st:
+        row = st.trial(tid)
+    assert row["schema"] == name
+    stored = parse_schema(row["schema_toml"])
+    assert dict(f5pl_fields(stored))[inst].d == 2.0
+    assert stored.name == name and edited_schema_name(stored) == name  # the hash reproduces
+    # Another value, another name; the shipped values again: the shipped name.
+    other = Logistic5(a=p0.a, b=p0.b, c=p0.c, d=2.5, g=p0.g)
+    run(ctl, Command("f5pl", (inst, other)), Command("start"))
+    assert ctl.info.schema.startswith("trajectory_following.edited-")
+    assert ctl.info.schema != name
+    run(ctl, Command("stop"), Command("f5pl", (inst, p0)), Command("start"))
+    assert ctl.info.schema == "trajectory_following"
+    assert dumps_schema(load_schema("trajectory_following")) == dumps_schema(shipped)
+
+
+def test_a_free_practice_label_replaces_an_invented_subject(ctl: TrainingController) -> None:
+    run(ctl, Command("mode", "free"))
+    with pytest.raises(ConfigError, match="subject code") as exc:
+        run(ctl, Command("label", "warmup"))
+    assert exc.value.field == "label"
+    run(ctl, Command("subject", "S03"), Command("label", "free: warm-up"))
+    assert ctl.panel.label == "free: warm-up" and ctl.panel.subject is None
+    run(ctl, Command("start"))
+    tid = ctl.info.trial_id
+    run(ctl, Command("stop"))
+    with closing(store(ctl)) as st:
+        row = st.trial(tid)
+    assert row["label"] == "free: warm-up" and row["subject"] is None
+    run(ctl, Command("subject", "S03"))
+    assert ctl.panel.label is None and ctl.panel.subject == "S03"
+
+
+def test_one_trial_number_and_how_the_trial_ended(ctl: TrainingController) -> None:
+    assert ctl.info.title == f"demo run {ctl.info.number} (not stored)"
+    run(ctl, Command("stop"))
+    assert ctl.outcome == (ctl.info.number, "stopped")
+    assert ctl.panel.status == f"demo run {ctl.info.number} (not stored) stopped"
+    run(ctl, Command("mode", "free"), Command("subject", "S02"), Command("start"))
+    tid = ctl.info.trial_id
+    assert tid is not None and ctl.info.title == f"trial {tid}"
+    assert ctl.outcome == (ctl.info.number, None)
+    run(ctl, Command("stop"))
+    assert ctl.outcome[1] == "stopped" and ctl.panel.status.startswith(f"trial {tid} stopped")
+    with closing(store(ctl)) as st:
+        assert st.trial(tid)["outcome"] == "stopped"
+
+
+def test_a_timed_out_trial_says_so_and_gets_a_score_card(tmp_path: Path) -> None:
+    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED, pause_s=0.05,
+                           max_time=1.0)
+    try:
+        run(c, Command("mode", "free"), Command("subject", "S04"), Command("start"))
+        tid = c.info.trial_id
+        assert drive(c, lambda: not c.panel.running)
+        assert c.outcome == (c.info.number, "timed_out")
+        card = c.panel.scorecard
+        assert card is not None and card.title == f"trial {tid}" and card.outcome == "timed_out"
+        assert card.n_earlier == 0 and card.n_benchmark == 0
+        rows = {r.name: r for r in card.rows}
+        with closing(store(c)) as st:
+            tm = st.trial_metrics(tid, wide=True).loc[tid]
+            assert st.trial(tid)["outcome"] == "timed_out"
+        assert rows["duration"].value == pytest.approx(float(tm["duration"]))
+        assert rows["path_l2"].value == pytest.approx(1e3 * float(tm["path_l2"]))  # mm
+        assert rows["points_reached"].value == float(tm["points_reached"]) < 30
+        # A second trial compares with the first.
+        run(c, Command("start"))
+        assert drive(c, lambda: not c.panel.running)
+        card2 = c.panel.scorecard
+        assert card2 is not None and card2.n_earlier == 1
+        assert {r.name: r for r in card2.rows}["duration"].earlier == pytest.approx(
+            float(tm["duration"]))
+    finally:
+        c.close()
+
+
+def test_protocol_trials_keep_the_sessions_input_and_store_the_condition(
+        ctl: TrainingController) -> None:
+    run(ctl, Command("mode", "protocol"), Command("input", "browser"),
+        Command("subject", "S07"), Command("protocol", "vf_learning_curve"), Command("start"))
+    assert ctl.info.input == "browser" and ctl.info.trial_id is not None
+    tid = ctl.info.trial_id
+    for cmd, field in ((Command("input", "scripted"), "input"),
+                       (Command("schema", "vg"), "schema")):
+        with pytest.raises(ConfigError) as exc:
+            run(ctl, cmd)
+        assert exc.value.field == field
+    run(ctl, Command("stop"))
+    # Between trials too: the session was created with the browser input.
+    with pytest.raises(ConfigError, match="stored with the session"):
+        run(ctl, Command("input", "laparoscopic"))
+    with closing(store(ctl)) as st:
+        cfg = st.trial(tid)["config"]
+    assert cfg["viewer"] == {"input": "browser", "optics_deg": 0.0,
+                             "mag_camera": ctl.info.fixtures.count("mag") > 0}
+
+
+def test_a_person_driven_start_counts_down_first(tmp_path: Path) -> None:
+    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+                           countdown_s=0.3)
+    try:
+        run(c, Command("mode", "free"), Command("input", "browser"), Command("start"))
+        n = c.info.number
+        assert c.countdown_until is not None and c.panel.running
+        c.poll()
+        assert c.info.number == n            # still counting down
+        with pytest.raises(ConfigError, match="already running"):
+            run(c, Command("start"))
+        assert drive(c, lambda: c.info.number == n + 1, timeout=5.0)
+        assert c.countdown_until is None and c.info.input == "browser"
+        run(c, Command("stop"), Command("start"), Command("stop"))   # cancelled in countdown
+        assert c.countdown_until is None and not c.panel.running and c.info.number == n + 1
+    finally:
+        c.close()
+
+
+# -- The schema menu accepts only its own entries (no file path from a client is ever read); a
+# --db directory is refused at start-up.
 # -- The schema menu accepts only its own entries (no file path from a client is ever read); a
 # --db directory is refused at start-up.
 def test_a_schema_outside_the_menu_is_refused_without_reading_it(

@@ -19,12 +19,12 @@ from vasim.viewer.audio import AudioStream as AudioStream
 from vasim.viewer.controller import PanelState as PanelState
 from vasim.viewer.controller import TrainingController as TrainingController
 from vasim.viewer.panel import ExperimenterPanel as ExperimenterPanel
+from vasim.viewer.trainee import HudInfo as HudInfo
+from vasim.viewer.trainee import HudView as HudView
 from vasim.viewer.views import ArrowView as ArrowView
 from vasim.viewer.views import CameraController as CameraController
 from vasim.viewer.views import CameraPose as CameraPose
 from vasim.viewer.views import GhostView as GhostView
-from vasim.viewer.views import HudInfo as HudInfo
-from vasim.viewer.views import HudView as HudView
 from vasim.viewer.views import OrganView as OrganView
 from vasim.viewer.views import ToolView as ToolView
 from vasim.viewer.views import TrajectoryView as TrajectoryView

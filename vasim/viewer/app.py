@@ -41,6 +41,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, Literal
 
 import numpy as np
@@ -50,9 +51,7 @@ from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
 from vasim.core.errors import ConfigError
-from vasim.fixtures.mag import MagParams
 from vasim.fixtures.schema import load_schema
-from vasim.haptics.device import BUTTON_2
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
@@ -65,18 +64,24 @@ from vasim.viewer.controller import (
     TrialInfo,
     schema_choices,
 )
+from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose, task_target
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
+from vasim.viewer.scene_views import DragInput, SceneViews, endoscope_pose, third_person_pose
+from vasim.viewer.trainee import (
+    HudInfo,
+    HudView,
+    frame_outcome,
+    instruction,
+    score_card_markdown,
+)
 from vasim.viewer.views import (
     ArrowView,
     CameraController,
     CameraPose,
     GhostView,
-    HudInfo,
-    HudView,
     OrganView,
-    SceneView,
     ToolView,
     TrajectoryView,
 )
@@ -103,168 +108,12 @@ def check_bind_address(host: str, port: int) -> None:
                           field="host") from None
 
 
-def endoscope_pose(look_at: tuple[float, float, float] = (0.0, 0.02, 0.085),
-                   distance: float = 0.16) -> CameraPose:
-    """The fixed camera without Mag: Mag's own zoom-1 navigation view (a laparoscope through
-    the umbilical port, from above and caudal: ``MagParams.view_dir`` and ``fov_deg``)
-    aimed between the trajectory workspace and the organs below it, so that switching Mag on
-    or off does not swing the view around. From 16 cm (Mag's zoom-1 distance is 15 cm) the
-    whole workspace box stays within 30 deg of the view axis (the half fov is 35 deg).
-
-    Args:
-        look_at: (3,) point aimed at [m], world frame.
-        distance: camera distance from ``look_at`` [m].
-    """
-    mag = MagParams()
-    w = np.asarray(mag.view_dir, dtype=np.float64)
-    w /= np.linalg.norm(w)
-    target = np.asarray(look_at, dtype=np.float64)
-    return CameraPose(position=target + float(distance) * w, look_at=target,
-                      up=np.array([0.0, 0.0, 1.0]), fov=float(np.radians(mag.fov_deg)))
-
-
 @dataclass(frozen=True, eq=False)
 class Snapshot:
     """One trial's info and a frame of it (what the views were last fed)."""
 
     info: TrialInfo
     frame: TrialFrame
-
-
-class DragInput:
-    """The tool-tip gizmo (``/input/tip``): browser input for browser-driven trials.
-
-    Dragging pushes ``(t, position)`` samples into the running trial's ``BrowserDevice``
-    (the device interpolates them for the 1 kHz loop and the trial moves the tool by the
-    master's increments). On release the gizmo snaps back onto the tool tip: two clutched
-    samples (``BUTTON_2``, the servo loop's clutch) — one where the hand let go, one at the
-    tip — re-index the master, so the snap never moves the tool (**decision**).
-
-    Args:
-        server: the viser server.
-        device: returns the current trial's ``BrowserDevice`` (or None).
-        guard: wraps the callback.
-        name: the gizmo's scene node.
-    """
-
-    def __init__(self, server: viser.ViserServer, device: Callable[[], Any],
-                 guard: Callable[[Callable[..., Any]], Callable[..., Any]], *,
-                 name: str = "/input/tip"):
-        self.handle = server.scene.add_transform_controls(
-            name, scale=0.03, disable_rotations=True, depth_test=False,
-            visible=False)
-        self._device = device
-        self._dragging = False
-        self.samples = 0
-        self._last_tip: FloatArray | None = None
-        self.handle.on_update(guard(self._on_update))
-
-    def _on_update(self, event: Any) -> None:
-        dev = self._device()
-        if dev is None:
-            return
-        phase = getattr(event, "phase", "update")
-        p = np.asarray(self.handle.position, dtype=np.float64)
-        t = time.perf_counter()
-        if phase == "end":
-            dev.push(t, p)
-            self.samples += 1
-            self._dragging = False
-            tip = self._last_tip
-            if tip is not None:
-                dev.push(t + 1e-4, p, BUTTON_2)
-                dev.push(t + 2e-4, tip, BUTTON_2)
-                self.handle.position = np.asarray(tip, dtype=np.float64)
-            return
-        self._dragging = True
-        dev.push(t, p)
-        self.samples += 1
-
-    def update(self, tip: FloatArray, active: bool) -> None:
-        """Shows the gizmo for a browser-driven trial; parks it on the tip when not held."""
-        self._last_tip = np.asarray(tip, dtype=np.float64)
-        if self.handle.visible != active:
-            self.handle.visible = active
-            if active:
-                self.handle.position = np.asarray(tip, dtype=np.float64)
-                dev = self._device()
-                if dev is not None:  # the first sample: where the gizmo starts
-                    dev.push(time.perf_counter(), self._last_tip)
-
-
-class SceneViews:
-    """What one page draws of the training scene: the organs, the ports, the instrument,
-    the task, the fixtures' arrows and the MS ghost. Each page (trainee, experimenter) has
-    its own, on its own server; both are fed the same frames by the view thread.
-
-    Args:
-        server: the page's viser server.
-        organs: the organs to draw. trocars: (4, 3) port positions [m].
-        trocar: the instrument's port of the first trial.
-    """
-
-    def __init__(self, server: viser.ViserServer, organs: list[Organ], trocars: FloatArray,
-                 trocar: FloatArray):
-        server.scene.set_up_direction("+z")
-        self.server = server
-        self.organs = [OrganView(server, o) for o in organs]
-        ports = trocars[[i for i, n in enumerate(TROCAR_NAMES) if n != "camera"]]
-        server.scene.add_point_cloud("/trocars", ports.astype(np.float32), (40, 40, 40),
-                                     point_size=0.004, point_shape="circle",
-                                     precision="float32")
-        self.tool = ToolView(server, trocar)
-        self.trajectory = TrajectoryView(server)
-        self.arrows = ArrowView(server)
-        self.ghost = GhostView(server, trocar)
-        self._shown_physics = -1
-
-    def show_trial(self, info: TrialInfo) -> None:
-        """A new trial: its task, and the instrument through its port."""
-        self.trajectory.set_task(info.points, info.reach_radius, info.normals)
-        trocar = tool_trocar(info.config.task, info.start)
-        self.tool.set_trocar(trocar)
-        self.ghost.trocar = trocar
-
-    def show_physics(self, info: TrialInfo, frame: TrialFrame) -> None:
-        """Deforming, breathing organs and the POIs riding on them (one physics step)."""
-        snap = frame.abdomen
-        if snap is None or snap.seq == self._shown_physics:
-            return
-        self._shown_physics = snap.seq
-        for view in self.organs:
-            try:
-                view.update(snap.organ(view.organ.name).surface)
-            except (KeyError, ValueError):  # an organ this scene does not simulate
-                continue
-        if len(snap.targets) == len(info.points):
-            self.trajectory.move(snap.targets, snap.target_normals
-                                 if frame.n_points == 1 else None)
-
-    def update(self, info: TrialInfo, frame: TrialFrame, *, new_trial: bool) -> None:
-        """Every view from one frame (call inside the server's ``atomic()``)."""
-        if new_trial:
-            self.show_trial(info)
-        self.show_physics(info, frame)
-        out = frame.outputs
-        self.tool.update(frame.tcp)
-        self.trajectory.update(frame.goal_index)
-        self.arrows.update(out.arrows)
-        self.ghost.update(out.ghost)
-
-    def node_names(self) -> list[str]:
-        names: list[str] = []
-        views: tuple[SceneView, ...] = (*self.organs, self.tool, self.trajectory,
-                                        self.arrows, self.ghost)
-        for v in views:
-            names.extend(v.node_names())
-        return sorted(names)
-
-
-def third_person_pose() -> CameraPose:
-    """The experimenter's camera: the whole abdomen from above, cranial-left, wide angle."""
-    look_at = np.array([0.0, 0.02, 0.05])
-    return CameraPose(position=look_at + np.array([0.28, -0.30, 0.32]), look_at=look_at,
-                      up=np.array([0.0, 0.0, 1.0]), fov=float(np.radians(55.0)))
 
 
 class ViewerApp(ErrorReporter):
@@ -287,6 +136,9 @@ class ViewerApp(ErrorReporter):
         control_hz, view_hz: rates of the controller and view threads [Hz].
         audio_hz: rate of the AG parameter stream [Hz].
         trial_factory: builds live trials (default ``make_live_trial``).
+        optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
+            every person-driven trial).
+        countdown_s: the start cue before a person-driven trial [s] (0: none).
 
     Raises:
         ConfigError: for an unknown schema, task, skill or scene, a schema that does not
@@ -320,8 +172,11 @@ class ViewerApp(ErrorReporter):
         trial_factory: Callable[..., Any] | None = None,
         token: str | None = None,
         experimenter_port: int | None = None,
+        optics: float = 0.0,
+        countdown_s: float = 3.0,
     ):
         self.access = access_policy(host, token)
+        self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
             if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
@@ -345,9 +200,11 @@ class ViewerApp(ErrorReporter):
         self.controller = TrainingController(
             scene=scene, db=db, schema=schema, task=task, skill=skill, seed=seed,
             variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
-            trial_factory=trial_factory)
+            trial_factory=trial_factory, countdown_s=countdown_s, optics_deg=optics)
         self.scene_name = scene
-        eye = endoscope_pose()
+        # The instrument's screen motion follows the scope's image of each trial's task.
+        self.controller.view_axes = self._view_axes
+        eye = self._scope_view(self.controller.info)
         self.controller.screen = screen_axes(eye.position, eye.look_at, eye.up)
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.errors: list[str] = []
@@ -359,6 +216,7 @@ class ViewerApp(ErrorReporter):
         self._t_started = 0.0
         self._shown: TrialInfo | None = None
         self._shown_frame: TrialFrame | None = None
+        self._shown_extra: tuple[Any, ...] = ()
         self._snapshot = Snapshot(*self.controller.current())
         self.server: viser.ViserServer | None = None
         """The trainee's page: the endoscope's view, the instrument, the fixtures' cues."""
@@ -546,12 +404,15 @@ class ViewerApp(ErrorReporter):
         self.trocars = trocar_points()
         info = self._snapshot.info
         trocar = tool_trocar(info.config.task, info.start)
-        self.views = SceneViews(s, organs, self.trocars, trocar)
+        self.views = SceneViews(s, organs, self.trocars, trocar, tones=True)
         self.exp_views = SceneViews(e, organs, self.trocars, trocar)
-        # The trainee sees through the endoscope (Mag moves it when the condition has Mag);
-        # the experimenter orbits freely from a third-person view.
-        self.camera = CameraController(s, endoscope_pose())
+        # The trainee sees through the endoscope (Mag moves it along its port when the
+        # condition has Mag); the experimenter orbits freely from a third-person view.
+        eye = self._scope_view(info)
+        self.camera = CameraController(s, eye, mapper=partial(scope_from_mag, self.scope))
         self.camera.apply_initial()
+        self.light = ScopeLight(s)
+        self.light.follow(eye)
         self.exp_camera = CameraController(e, third_person_pose())
         self.exp_camera.apply_initial()
         self.exp_camera.follow = False
@@ -559,6 +420,15 @@ class ViewerApp(ErrorReporter):
         self.instrument_input = InstrumentInput(s, lambda: self.controller.instrument,
                                                 self._guard)
         self.audio = AudioStream(s, rate_hz=self.audio_hz)
+
+    def _scope_view(self, info: TrialInfo) -> CameraPose:
+        """The scope's pose without Mag for a trial: aimed at its task from 1 cm inside the
+        camera port (every task is in view from there: tests/viewer/test_endoscope.py)."""
+        return scope_pose(self.scope, task_target(info.points, info.start), 0.01)[0]
+
+    def _view_axes(self, points: FloatArray, start: FloatArray) -> tuple[FloatArray, FloatArray]:
+        pose = scope_pose(self.scope, task_target(points, start), 0.01)[0]
+        return screen_axes(pose.position, pose.look_at, pose.up)
 
     def _organs(self) -> list[Organ]:
         """The organs to draw: the scene's surfaces as the trial's physics has them (the
@@ -589,6 +459,7 @@ class ViewerApp(ErrorReporter):
         # experimenter's (**decision**: not even the Mag camera switch — Mag is part of the
         # condition, and the experimenter's page has its own free camera).
         self.hud = HudView(s)
+        self.score = s.gui.add_markdown("", visible=False)
         s.gui.add_markdown(CONTROLS_TEXT)
         # The experimenter's page: today's controls beside a third-person view.
         self.panel_view = ExperimenterPanel(
@@ -684,41 +555,73 @@ class ViewerApp(ErrorReporter):
             return False
         self.panel_view.show(self.controller.panel)
         info, frame = self.controller.current()
-        if info is self._shown and frame is self._shown_frame:
+        ctl = self.controller
+        # The trial ends (Stop, time out), a countdown ticks, a score card arrives: the
+        # trainee page says so even when no new frame comes.
+        extra = (ctl.outcome, None if ctl.countdown_until is None
+                 else int(ctl.countdown_until - time.monotonic()), ctl.panel.scorecard)
+        if info is self._shown and frame is self._shown_frame and extra == self._shown_extra:
             return False
+        self._shown_extra = extra
         t0 = time.thread_time()  # CPU time of this thread: robust to preemption
         out = frame.outputs
         new_trial = info is not self._shown
         self._snapshot = Snapshot(info, frame)
         with server.atomic():
             self.views.update(info, frame, new_trial=new_trial)
-            self.hud.update(self._hud_info(info, frame), force=new_trial or frame.done)
+            self.hud.update(self._hud_info(info, frame), force=True if new_trial
+                            or frame.done or ctl.outcome[1] is not None else False)
+            card = score_card_markdown(ctl.panel.scorecard
+                                       if not ctl.panel.running else None)
+            if card != self.score.content:
+                self.score.content = card
+                self.score.visible = bool(card)
             self.drag.update(frame.tcp, info.input == "browser" and not frame.done)
         assert self.exp_server is not None
         with self.exp_server.atomic():
             self.exp_views.update(info, frame, new_trial=new_trial)
-            self.panel_view.show_live(info, frame, force=new_trial or frame.done)
+            self.panel_view.show_live(info, frame, force=True if new_trial or frame.done
+                                     or ctl.outcome[1] is not None else False,
+                                     outcome=ctl.outcome[1]
+                                     if ctl.outcome[0] == info.number else None)
+        if new_trial:
+            self.camera.retarget(self._scope_view(info))
         self.camera.update(out.camera)
+        if self.light.pose is not self.camera.target:
+            self.light.follow(self.camera.target)
         self.audio.update(out.audio)
         self._shown, self._shown_frame = info, frame
         self._view_costs.append(time.thread_time() - t0)
         self._view_updates += 1
         return True
 
-    @staticmethod
-    def _hud_info(info: TrialInfo, frame: TrialFrame) -> HudInfo:
+    def _hud_info(self, info: TrialInfo, frame: TrialFrame) -> HudInfo:
         out = frame.outputs
+        ctl = self.controller
+        number, outcome = ctl.outcome
+        until = ctl.countdown_until
+        limit = float(info.config.max_time)
         return HudInfo(
             schema=info.schema, fixtures=info.fixtures,
-            task=f"{info.task_name}", trial=info.number, t=frame.t,
-            error_m=float(np.linalg.norm(frame.tcp - frame.goal)), error_l1=frame.error_l1,
+            task=f"{info.task_name}", t=frame.t,
+            # Counting down: the trial to come (its store id is given when it begins).
+            title=info.title if until is None else "the next trial",
+            time_left=limit - frame.t if np.isfinite(limit) else None,
+            outcome=(outcome if number == info.number and outcome is not None
+                     else frame_outcome(frame.done, frame.goal_index, frame.n_points)),
+            instruction=(instruction(info.task_name, len(info.points), info.input)
+                         if until is None else instruction(
+                             ctl.panel.task, len(info.points) if ctl.panel.task == info.config.task
+                             else 1, ctl.panel.input)),
+            countdown_s=None if until is None else until - time.monotonic(),
+            error_m=float(np.linalg.norm(frame.tcp - frame.goal)),
             goal_index=frame.goal_index, n_points=frame.n_points,
             last_latency=frame.last_latency, audio=out.audio,
             force_n=None if out.force is None else float(np.linalg.norm(out.force.force)),
             zoom=None if out.camera is None else float(out.camera.zoom),
             # The runtime reports a ghost exactly when the schema has MS.
-            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]  # 3 MS factors
-            done=frame.done,
+            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]
+            done=frame.done or outcome is not None,
         )
 
 

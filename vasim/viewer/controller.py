@@ -42,7 +42,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -50,8 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError, StoreError, VasimError
-from vasim.fixtures.logistic import Logistic5
-from vasim.fixtures.schema import Schema, available_schemas, load_schema
+from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.device import Device
 from vasim.haptics.devices.browser import BrowserDevice
 from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
@@ -60,8 +59,28 @@ from vasim.tasks import TRAJECTORY_VARIANTS
 from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
 from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
 from vasim.trials.vf_run import trial_meta
+from vasim.viewer.condition import viewer_condition
+from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
+from vasim.viewer.history import (
+    CURVE_METRICS,
+    learning_curve,
+    open_session,
+    session_progress,
+    trial_score_card,
+)
 from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
+from vasim.viewer.state import (
+    Command,
+    PanelState,
+    TrialInfo,
+    f5pl_fields,
+    plain,
+    plain_dict,
+    schema_choices,
+    with_f5pl,
+)
+from vasim.viewer.trainee import ScoreCard, frame_outcome
 
 log = logging.getLogger(__name__)
 
@@ -74,142 +93,9 @@ INPUTS: tuple[str, ...] = ("scripted", "browser", "laparoscopic")
 option), or the trainee's laparoscopic instrument (mouse, keyboard, gamepad; the trainee
 page's default input for a person)."""
 
-DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
-    "trajectory": "trajectory_following",
-    "point": "point_targeting",
-}
-"""Schema switched to when the chosen task does not fit the current task-specific schema."""
-
-CURVE_METRICS: tuple[str, ...] = ("completion_time", "mean_latency")
-"""Per-trial metrics of the learning curve (seconds both: one axis)."""
 
 
-@dataclass(frozen=True)
-class Command:
-    """A request to the controller thread.
-
-    Attributes:
-        kind: ``mode`` (value: a ``MODES`` name), ``schema``, ``task``, ``input``
-            (``INPUTS``), ``subject`` (a subject code), ``protocol`` (a protocol name),
-            ``start``, ``stop``, ``restart``, ``f5pl`` (value: (fixture instance,
-            ``Logistic5``)), ``auto_advance`` (value: bool).
-        value: the argument.
-    """
-
-    kind: str
-    value: Any = None
-
-
-@dataclass(frozen=True, eq=False)
-class TrialInfo:
-    """What does not change during one trial (built once per trial).
-
-    Attributes:
-        number: trial counter since the server started (1, 2, ...).
-        config: the trial's configuration. schema: schema name. fixtures: its fixture
-        names. task_name: e.g. ``"trajectory/v3"``. points: (N, 3) POIs [m]. normals:
-        (N, 3) or None. reach_radius: [m]. start: (3,) tool start [m]. mode: the mode it
-        runs in. input: ``INPUTS``. trial_id: store id (None when not stored).
-        schedule_index: 0-based scheduled trial (protocol mode). condition: the protocol's
-        condition label (protocol mode).
-    """
-
-    number: int
-    config: TrialConfig
-    schema: str
-    fixtures: tuple[str, ...]
-    task_name: str
-    points: FloatArray
-    normals: FloatArray | None
-    reach_radius: float
-    start: FloatArray
-    mode: str = "demo"
-    input: str = "scripted"
-    trial_id: int | None = None
-    schedule_index: int | None = None
-    condition: str | None = None
-
-
-@dataclass(frozen=True)
-class PanelState:
-    """What the experimenter panel shows (published by the controller, immutable).
-
-    Attributes:
-        mode, input: current choices. schema, task: free-training / demo choices.
-        subject, protocol: chosen subject code and protocol (or None). session_id: the
-        session of the last protocol trial. position: 1-based scheduled trial running or
-        next. total: scheduled trials. completed: completed scheduled trials.
-        condition: condition of that trial. running: a trial runs. status: one line.
-        summary: last finished trial's summary (plain values) or None.
-        curve: learning curve so far of the subject, ``(n, completion_time, mean_latency)``
-        per completed stored trial (protocol trials of the session, or the subject's free
-        trials). auto_advance: start the next scheduled trial by itself.
-        f5pl: editable f5PL curves of the current schema: fixture instance -> params.
-        version: increments with every change.
-    """
-
-    mode: str = "demo"
-    input: str = "scripted"
-    schema: str = "trajectory_following"
-    task: str = "trajectory"
-    subject: str | None = None
-    protocol: str | None = None
-    session_id: int | None = None
-    position: int | None = None
-    total: int | None = None
-    completed: int | None = None
-    condition: str | None = None
-    running: bool = False
-    status: str = ""
-    summary: dict[str, Any] | None = None
-    curve: tuple[tuple[int, float, float], ...] = ()
-    auto_advance: bool = False
-    f5pl: tuple[tuple[str, Logistic5], ...] = ()
-    version: int = 0
-
-
-def f5pl_fields(schema: Schema) -> tuple[tuple[str, Logistic5], ...]:
-    """The f5PL parameter sets of a schema's fixtures, by instance name (MS has none)."""
-    out = []
-    for fx in schema.fixtures:
-        p = getattr(fx.params, "f5pl", None)
-        if isinstance(p, Logistic5):
-            out.append((fx.name, p))
-    return tuple(out)
-
-
-def with_f5pl(schema: Schema, instance: str, params: Logistic5) -> Schema:
-    """A copy of ``schema`` whose fixture ``instance`` has the f5PL ``params``.
-
-    Raises:
-        ConfigError: no such fixture, or it has no f5PL.
-    """
-    fixtures = []
-    found = False
-    for fx in schema.fixtures:
-        if fx.name == instance:
-            if not isinstance(getattr(fx.params, "f5pl", None), Logistic5):
-                raise ConfigError(f"fixture {instance!r} has no f5PL to edit",
-                                  field=f"fixtures.{instance}.f5pl")
-            fx = replace(fx, params=replace(fx.params, f5pl=params))
-            found = True
-        fixtures.append(fx)
-    if not found:
-        raise ConfigError(f"schema {schema.name!r} has no fixture {instance!r} (has "
-                          f"{', '.join(schema.fixture_names) or 'none'})", field="fixtures")
-    return replace(schema, fixtures=tuple(fixtures))
-
-
-def plain(v: Any) -> Any:
-    """A summary value as plain JSON-able Python (NaN -> None)."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    return v
-
-
-class TrainingController:
+class TrainingController(ConditionCommands):
     """Server-side state of the viewer (module docstring). Not thread-safe by design: one
     controller thread calls ``handle``/``poll``/``close``; other threads read the published
     ``info``, ``frame()`` and ``panel``.
@@ -224,6 +110,9 @@ class TrainingController:
             auto-advance) [s].
         speed: simulated seconds per wall second (1 = real time).
         trial_factory: builds the live trial (default ``make_live_trial``).
+        countdown_s: the start cue of a trial a person drives (free and protocol modes,
+            input not scripted): Start counts down this long [s] before the trial begins.
+        optics_deg: the endoscope's optics [deg] (0 or 30), stored with every trial.
 
     Raises:
         ConfigError: for a bad first trial, or a ``db`` that is a directory (before
@@ -234,8 +123,16 @@ class TrainingController:
                  schema: str = "trajectory_following", task: str = "trajectory",
                  skill: str = "intermediate", seed: int = 0, variant: int = 0,
                  max_time: float = 180.0, pause_s: float = 1.5, speed: float = 1.0,
-                 trial_factory: Callable[..., LiveTrial] | None = None):
+                 trial_factory: Callable[..., LiveTrial] | None = None,
+                 countdown_s: float = 0.0, optics_deg: float = 0.0):
         self.scene = scene
+        self.countdown_s = float(countdown_s)
+        self.optics_deg = float(optics_deg)
+        self.countdown_until: float | None = None
+        """Monotonic time the pending trial starts at (the start cue), or None."""
+        self._pending: Callable[[], None] | None = None
+        self.outcome: tuple[int, str | None] = (0, None)
+        """(trial number, how it ended) of the current trial; None while it runs."""
         self.db = None if db is None else Path(db)
         # a directory was only refused when Free mode first opened the store;
         # refuse it at start-up (vasim serve prints this as one line and exits 2).
@@ -260,10 +157,14 @@ class TrainingController:
         """Fulcrum effect and sensitivity of the trainee's instrument (experimenter's page)."""
         self.screen: tuple[FloatArray, FloatArray] | None = None
         """The trainee view's (right, up) axes the instrument's screen motion follows."""
+        self.view_axes: Callable[[FloatArray, FloatArray], tuple[FloatArray, FloatArray]] | \
+            None = None
+        """The trainee view's (right, up) axes for a task's points and start (the app's
+        endoscope aims per task); None: ``screen`` for every trial."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
-        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]  # validated by TrialConfig
-                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]  # str choices: TrialConfig checks them
+        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
+                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]
         self.panel = PanelState(schema=schema, task=task,
                                 f5pl=f5pl_fields(load_schema(schema)))
         self.info: TrialInfo = self._launch(self._base, mode="demo")
@@ -323,9 +224,11 @@ class TrainingController:
             device = BrowserDevice()
         elif input_kind == "laparoscopic":
             task0 = make_task(config)
+            screen = (self.view_axes(np.asarray(task0.points), np.asarray(task0.start))
+                      if self.view_axes is not None else self.screen)
             device = instrument_device(tool_trocar(config.task, np.asarray(task0.start)),
-                                       np.asarray(task0.start), self.input_mapping,
-                                       self.screen)
+                                       np.asarray(task0.start), self.input_mapping, screen)
+            self.screen = screen
         trial = self._factory(config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
         task = make_task(config)
@@ -337,16 +240,23 @@ class TrainingController:
                               protocol=None if session is None else session.protocol.name)
             if input_kind != "scripted":
                 cfg = dict(meta.config or {})
+                # What was in force, stored with the trial (condition.viewer_condition).
+                # **Decision**: only for trials a person drives through the viewer: a
+                # scripted trial saw nothing of it and is stored exactly like a headless run.
+                cfg["viewer"] = viewer_condition(
+                    input_kind=input_kind,
+                    mapping=self.input_mapping if input_kind == "laparoscopic" else None,
+                    optics_deg=self.optics_deg,
+                    mag_camera=any(f.channel == "camera" for f in sch.fixtures))
                 cfg["operator"] = input_kind
                 cfg.pop("profile", None)  # no simulated person behind a device
-                if input_kind == "laparoscopic":  # what was in force, stored with the trial
-                    cfg["input_mapping"] = {
-                        "fulcrum_effect": self.input_mapping.fulcrum_effect,
-                        "sensitivity": self.input_mapping.sensitivity}
+                if input_kind == "laparoscopic":
+                    cfg["input_mapping"] = cfg["viewer"]["input_mapping"]
                 meta = replace(meta, operator=input_kind, config=cfg)
             self._stored = begin_stored_trial(self.store(), meta)
         trial_id = self._stored.trial_id
         self._number += 1
+        self.outcome = (self._number, None)
         self.info = TrialInfo(
             number=self._number, config=config, schema=sch.name,
             fixtures=tuple(sch.fixture_names), task_name=task.name,
@@ -375,6 +285,13 @@ class TrainingController:
             return
         trial.stop()
         self._closed = True
+        if self.outcome[1] is None:  # how it ended, for every page (trainee.OUTCOME_TEXT)
+            from vasim.study.store.vocabulary import outcome_of_reason
+
+            last = trial.frame()
+            self.outcome = (info.number, "failed" if failed else
+                            frame_outcome(True, last.goal_index, last.n_points)
+                            if trial.done else outcome_of_reason(reason))
         if info.trial_id is not None and not self._stored_done:
             if trial.done and not failed:
                 self._store_result()
@@ -385,12 +302,17 @@ class TrainingController:
                 # the interrupted trial replays (replay_trial needs the trial to name it).
                 files = (timing or {}).get("recording")
                 events = [(None, "recording", json.dumps(files))] if files else []
-                self._stored.interrupt(reason, res, summary=_plain_dict(res.summary),
+                self._stored.interrupt(reason, res, summary=plain_dict(res.summary),
                                        events=events)
                 self._stored_done = True
-                self._publish(running=False, status=f"trial {info.trial_id} stopped "
+                # The trainee's score card of what the trial recorded before it ended.
+                try:
+                    self._publish(scorecard=self._score_card(res.trial_metrics))
+                except (VasimError, StoreError, KeyError, ValueError):
+                    log.exception("the score card of %s failed", info.title)
+                self._publish(running=False, status=f"{info.title} stopped "
                               f"({reason}); it stays pending" if info.schedule_index
-                              is not None else f"trial {info.trial_id} stopped ({reason})")
+                              is not None else f"{info.title} stopped ({reason})")
         self.browser = None
 
     def _store_result(self) -> None:
@@ -404,14 +326,16 @@ class TrainingController:
             kw["metric_params"] = load_session(self.store(), self.panel.session_id
                                                ).metric_params
         res = trial.result(**kw)
-        summary = _plain_dict(res.summary)
+        summary = plain_dict(res.summary)
+        self.outcome = (info.number, summary.get("outcome"))
         if info.trial_id is not None:
             self._stored.finish(res, timing=self._timing(info.trial_id))
         self._stored_done = True
         changes: dict[str, Any] = {"running": False, "summary": summary}
         if info.trial_id is not None:
             changes["curve"] = self._curve()
-            changes["status"] = (f"trial {info.trial_id} stored "
+            changes["scorecard"] = self._score_card(res.trial_metrics)
+            changes["status"] = (f"{info.title} stored "
                                  f"({summary.get('points_reached')}/{summary.get('n_points')}"
                                  f" points, {summary.get('duration', 0.0):.1f} s)")
         if info.schedule_index is not None:
@@ -435,66 +359,35 @@ class TrainingController:
                 log.exception("saving the recording of trial %s failed", trial_id)
         return out
 
+    def _score_card(self, metrics: dict[str, float]) -> ScoreCard:
+        """The score card of the stored trial just finished (``history.trial_score_card``)."""
+        return trial_score_card(self.store(), self.info, metrics, self.outcome[1])
+
     def _curve(self) -> tuple[tuple[int, float, float], ...]:
-        """The learning curve so far: the session's completed trials in schedule order
-        (protocol), or the subject's completed free trials (free training)."""
-        st = self.store()
+        """The learning curve so far (``history.learning_curve``)."""
         p = self.panel
-        if p.mode == "protocol" and p.session_id is not None:
-            ids = [int(i) for i in st.schedule(p.session_id)["trial_id"].dropna()]
-        else:
-            df = st.trials("completed")
-            subject = p.subject or self._base.subject
-            # The subject's free trials; without a subject, the free trials without one.
-            mine = df["subject"] == subject if subject else df["subject"].isna()
-            ids = [int(i) for i in df[mine & df["session_id"].isna()]["id"]]
-        if not ids:
-            return ()
-        wide = st.trial_metrics(wide=True)
-        out = []
-        for n, tid in enumerate(ids, start=1):
-            if tid not in wide.index:
-                continue
-            row = wide.loc[tid]
-            out.append((n, *(float(row.get(m, math.nan)) for m in CURVE_METRICS)))
-        return tuple(out)  # type: ignore[arg-type]  # (n, *metrics) rows
+        return learning_curve(self.store(), p.session_id if p.mode == "protocol" else None,
+                              p.subject or self._base.subject, p.label)
 
     # -- protocol sessions ---------------------------------------------------------------
     def _session(self) -> Any:
-        """The subject's running session of the chosen protocol, created if none."""
-        from vasim.study.protocol import load_protocol
-        from vasim.study.session import SessionSettings, load_session, start_session
-
+        """The subject's running session of the chosen protocol, created if none (with the
+        input and the instrument's mapping in force now: every trial of it keeps them)."""
         p = self.panel
-        if p.subject is None:
-            raise ConfigError("enter a subject code first", field="subject")
-        if p.protocol is None:
-            raise ConfigError("pick a protocol first", field="protocol")
-        st = self.store()
-        df = st.sessions(subject=p.subject, protocol=p.protocol)
-        running = df[df["status"] == "running"]
-        if len(running):
-            sid = int(running["id"].iloc[-1])
-        else:
-            settings = SessionSettings(extra={"ui": "vasim serve", "input": p.input,
-                                              "scene": self.scene})
-            sid = start_session(st, load_protocol(p.protocol), p.subject, settings=settings)
-        return load_session(st, sid)
+        m = self.input_mapping
+        return open_session(self.store(), p.subject, p.protocol, {
+            "ui": "vasim serve", "input": p.input, "scene": self.scene,
+            "input_mapping": {"fulcrum_effect": m.fulcrum_effect,
+                              "sensitivity": m.sensitivity}})
 
     def _progress(self) -> dict[str, Any]:
         """Progress fields of the panel for the chosen subject and protocol."""
-        from vasim.study.session import load_session
-
         p = self.panel
         if p.session_id is None:
             return {}
-        s = load_session(self.store(), p.session_id)
-        pending = s.pending
         running = self.active() and self.info.schedule_index is not None
-        cur = self.info.schedule_index if running else (pending[0].index if pending else None)
-        return {"total": len(s.schedule), "completed": len(s.schedule) - len(pending),
-                "position": None if cur is None else cur + 1,
-                "condition": None if cur is None else s.schedule[cur].condition}
+        return session_progress(self.store(), p.session_id,
+                                self.info.schedule_index if running else None)
 
     def _start_protocol_trial(self) -> None:
         session = self._session()
@@ -510,17 +403,24 @@ class TrainingController:
             return
         nxt = pending[0]
         cfg = replace(session.trial_config(nxt), scene=self.scene)
-        self._launch(cfg, mode="protocol", input_kind=self.panel.input, session=session,
-                     scheduled=nxt)
-        self._publish(running=True, summary=None, status=f"trial {nxt.index + 1} of "
-                      f"{len(session.schedule)} running ({nxt.condition})", **self._progress())
+        # The session's input (stored with it when it was created) drives all its trials.
+        kind = str(session.settings.extra.get("input", self.panel.input))
+        mapping = session.settings.extra.get("input_mapping")
+        if isinstance(mapping, dict):
+            self.input_mapping = InputMapping(**mapping)
+        self._launch(cfg, mode="protocol", input_kind=kind, session=session, scheduled=nxt)
+        self._publish(running=True, summary=None, scorecard=None, input=kind,
+                      status=f"{self.info.title} running: scheduled trial {nxt.index + 1} "
+                      f"of {len(session.schedule)} ({nxt.condition})", **self._progress())
 
     def _free_config(self) -> TrialConfig:
         p = self.panel
         base = self._base
-        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]  # panel strs: TrialConfig checks
+        subject = p.subject or base.subject
+        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]
                        variant=base.variant if p.task == "trajectory" else 0,
-                       subject=p.subject or base.subject, seed=base.seed + self._number)
+                       subject=subject, label=None if subject else p.label,
+                       seed=base.seed + self._number)
 
     # -- commands ---------------------------------------------------------------------
     def handle(self, cmd: Command) -> None:
@@ -542,7 +442,7 @@ class TrainingController:
                                   "protocol": "protocol: enter the subject code and pick a "
                                               "protocol, then Start"}[value])
             if value == "demo":
-                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]  # panel strs: TrialConfig checks
+                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]
             elif value == "protocol" and p.subject and p.protocol:
                 self._publish(curve=(), **self._select_session())
         elif kind == "schema":
@@ -553,6 +453,9 @@ class TrainingController:
             if not isinstance(value, InputMapping):
                 raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
                                   field="input_mapping")
+            if p.mode == "protocol" and self._running_stored():
+                raise ConfigError("the running protocol trial keeps its instrument mapping; "
+                                  "change it between trials", field="input_mapping")
             self.input_mapping = value
             if self.instrument is not None:
                 self.instrument.set_mapping(value)
@@ -560,7 +463,18 @@ class TrainingController:
             if value not in INPUTS:
                 raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
                                   field="input")
+            if value == p.input:
+                return
+            if self._running_stored() or self._pending is not None:
+                raise ConfigError("stop the running trial before changing the input",
+                                  field="input")
+            if p.mode == "protocol" and p.session_id is not None:
+                raise ConfigError(f"session {p.session_id} runs with input {p.input!r} "
+                                  "(stored with the session): every trial of it keeps that "
+                                  "input", field="input")
             self._publish(input=value)
+        elif kind == "label":
+            self._set_label(value)
         elif kind == "subject":
             from vasim.records.trial_meta import validate_subject_code
 
@@ -568,8 +482,8 @@ class TrainingController:
             if self._running_stored():
                 raise ConfigError("stop the running trial before changing the subject",
                                   field="subject")
-            self._publish(subject=code, session_id=None, position=None, total=None,
-                          completed=None, condition=None, curve=())
+            self._publish(subject=code, label=None, session_id=None, position=None,
+                          total=None, completed=None, condition=None, curve=())
             if p.mode == "protocol" and p.protocol:
                 self._publish(**self._select_session())
         elif kind == "protocol":
@@ -588,11 +502,15 @@ class TrainingController:
         elif kind == "start":
             self._start()
         elif kind == "stop":
+            if self._pending is not None:
+                self._pending = self.countdown_until = None
+                self._publish(running=False, status="start cancelled")
+                return
             if not self.active():
                 raise ConfigError("no trial is running", field="stop")
             self._close_trial("stopped by the experimenter")
             if self.info.trial_id is None:
-                self._publish(running=False, status="demo trial stopped")
+                self._publish(running=False, status=f"{self.info.title} stopped")
             elif self.info.schedule_index is not None:
                 self._publish(**self._progress())
         elif kind == "restart":
@@ -635,8 +553,24 @@ class TrainingController:
 
     def _start(self) -> None:
         p = self.panel
-        if self.active() and p.mode != "demo":
+        if (self.active() or self._pending is not None) and p.mode != "demo":
             raise ConfigError("a trial is already running (Stop it first)", field="start")
+        if p.mode != "demo" and p.input != "scripted" and self.countdown_s > 0:
+            # The start cue (**decision**: a countdown, not the first move, because the
+            # trial's clock must not depend on when a page's first batch arrives): the
+            # trainee page counts down, the trial and its clock begin at 0.
+            self._close_trial("replaced")
+            self.countdown_until = time.monotonic() + self.countdown_s
+            self._pending = self._begin
+            self._publish(running=True, summary=None, scorecard=None,
+                          status=f"the trial starts in {self.countdown_s:g} s")
+            return
+        self._begin()
+
+    def _begin(self) -> None:
+        """Starts the trial of the current mode (after the countdown, if any)."""
+        p = self.panel
+        self._pending = self.countdown_until = None
         if p.mode == "demo":
             self._close_trial("restarted")
             self._start_demo(self.info.config)
@@ -644,8 +578,8 @@ class TrainingController:
             self._close_trial("replaced")
             self._launch(self._free_config(), mode="free", schema=self._schema_obj,
                          input_kind=p.input)
-            self._publish(running=True, summary=None,
-                          status=f"free training trial running ({self.info.schema})")
+            self._publish(running=True, summary=None, scorecard=None,
+                          status=f"{self.info.title} running ({self.info.schema})")
         else:
             self._close_trial("replaced")
             self._start_protocol_trial()
@@ -655,82 +589,14 @@ class TrainingController:
                      schema=self._schema_obj)
         self._publish(running=True)
 
-    def _set_schema(self, name: str) -> None:
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol sets the schema; switch to free training to "
-                              "choose one", field="schema")
-        # viser does not check dropdown values against the options, and
-        # load_schema accepts file paths, so any client could make the server read (and
-        # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
-        choices = schema_choices(self._base.schema)
-        if not isinstance(name, str) or name not in choices:
-            shown = repr(name)
-            shown = shown if len(shown) <= 80 else shown[:77] + "..."
-            raise ConfigError(f"unknown schema {shown}: choose one from the Schema menu",
-                              field="schema")
-        if name == p.schema and self._schema_obj is None:
-            return
-        schema = load_schema(name)
-        task = p.task if schema.task in ("any", p.task) else schema.task
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the schema",
-                              field="schema")
-        self._schema_obj = None
-        self._publish(schema=name, task=task, f5pl=f5pl_fields(schema))
-        if p.mode == "demo":
-            self._close_trial("schema changed")
-            variant = self.info.config.variant if task == self.info.config.task else 0
-            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]  # strs: TrialConfig checks
-
-    def _set_task(self, task: str) -> None:
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol sets the task", field="task")
-        if task not in DEFAULT_SCHEMA_FOR_TASK:
-            raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
-        if task == p.task:
-            return
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the task", field="task")
-        schema = p.schema
-        if load_schema(schema).task not in ("any", task):
-            schema = DEFAULT_SCHEMA_FOR_TASK[task]
-        if schema != p.schema:
-            self._schema_obj = None
-        self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
-        if p.mode == "demo":
-            self._close_trial("task changed")
-            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]  # strs: TrialConfig checks
-
-    def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
-        """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes
-        effect by starting the trial afresh with the edited schema, so every stored trial
-        ran with exactly the schema stored with it (a mid-trial change would not be)."""
-        p = self.panel
-        if p.mode == "protocol":
-            raise ConfigError("the protocol's schemas are fixed; edit f5PL parameters in "
-                              "free training", field="f5pl")
-        if not isinstance(params, Logistic5):
-            raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
-        base = self._schema_obj if self._schema_obj is not None else load_schema(p.schema)
-        edited = with_f5pl(base, instance, params)
-        self._schema_obj = edited
-        self._publish(f5pl=f5pl_fields(edited),
-                      status=f"{instance}: f5PL a={params.a:g} b={params.b:g} c={params.c:g} "
-                             f"d={params.d:g} g={params.g:g}")
-        if p.mode == "demo":
-            self._close_trial("f5PL edited")
-            self._start_demo(self.info.config)
-        elif self._running_stored():
-            self._close_trial("f5PL edited")
-            self._launch(self._free_config(), mode="free", schema=edited, input_kind=p.input)
-            self._publish(running=True, summary=None)
-
     # -- the loop ------------------------------------------------------------------------
     def poll(self, now: float | None = None) -> None:
         """Stores a finished trial; loops the demo; auto-advances a protocol."""
         now = time.monotonic() if now is None else now
+        if self._pending is not None and self.countdown_until is not None:
+            if time.monotonic() >= self.countdown_until:
+                self._begin()
+            return
         trial = self._trial
         if trial is None or not trial.done or (self._closed and self._stored_done):
             return
@@ -777,16 +643,6 @@ class TrainingController:
             if self._store is not None:
                 self._store.close()
                 self._store = None
-
-
-def _plain_dict(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: plain(v) for k, v in d.items()}
-
-
-def schema_choices(current: str) -> tuple[str, ...]:
-    """The schema menu: the shipped schemas (plus ``current`` if it is a file path)."""
-    names = available_schemas()
-    return names if current in names else (*names, current)
 
 
 __all__ = [

@@ -9,7 +9,8 @@ like any device (guarded, recorded, replayable).
 Controls (shown on the trainee's page):
 
 * **Mouse**: click the view to lock the pointer (Esc releases it); moving the mouse turns
-  the instrument about its port; the wheel advances/withdraws it.
+  the instrument about its port; the wheel advances/withdraws it (over the view also
+  without the lock: the trainee's camera is the endoscope, which the wheel never zooms).
 * **Keyboard**: arrow keys turn the instrument, W/S advance/withdraw, Q/E roll.
 * **Gamepad** (the browser's Gamepad API, when one is connected): the left stick turns,
   the right stick's vertical axis advances/withdraws and its horizontal axis rolls.
@@ -24,7 +25,9 @@ page writes each batch as JSON into a hidden GUI text field through viser's own 
 ``on_update`` callback. Batches are sent every 33 ms while there is input (30 Hz: the
 device smooths them for the 1 kHz loop) and carry a sequence number so that two equal
 batches are both delivered. The page's keys are taken in the capture phase, so viser's own
-keyboard camera controls never see them. ``window.__vasimInput`` exposes counters for
+keyboard camera controls never see them; pointer events over the 3-D view are taken too
+(**decision**: the trainee's camera is the endoscope, so viser's orbit controls must not
+move it; only Mag or the scope's aim do). ``window.__vasimInput`` exposes counters for
 tests.
 """
 
@@ -87,24 +90,34 @@ CONTROL_JS = r"""
     var now = performance.now();
     for (var c in S.held) { release(c, now); }
   });
-  function canvas() { return document.querySelector("canvas"); }
+  // The 3-D view is the canvas that fills the page (the page has other, small canvases).
+  function isView(el) {
+    return !!el && el.tagName === "CANVAS" && el.clientWidth >= window.innerWidth * 0.5;
+  }
   document.addEventListener("pointerlockchange", function () {
-    S.locked = document.pointerLockElement === canvas();
+    S.locked = isView(document.pointerLockElement);
   });
   document.addEventListener("click", function (e) {
-    var c = canvas();
-    if (c && e.target === c && !S.locked && c.requestPointerLock) {
+    var c = e.target;
+    if (isView(c) && !S.locked && c.requestPointerLock) {
       try { var r = c.requestPointerLock(); if (r && r.catch) { r.catch(function () {}); } }
       catch (err) { /* no pointer lock here: keyboard and gamepad still work */ }
     }
   }, true);
+  // The trainee's camera is the endoscope: viser's orbit controls never get the pointer
+  // over the 3-D view (the click that takes the pointer still fires).
+  ["pointerdown", "pointermove", "pointerup"].forEach(function (type) {
+    document.addEventListener(type, function (e) {
+      if (isView(e.target)) { e.stopImmediatePropagation(); }
+    }, true);
+  });
   document.addEventListener("mousemove", function (e) {
     if (!S.locked) { return; }
     acc.dx += e.movementX || 0; acc.dy += e.movementY || 0;
     e.stopImmediatePropagation();
   }, true);
   document.addEventListener("wheel", function (e) {
-    if (!S.locked) { return; }
+    if (!S.locked && !isView(e.target)) { return; }
     acc.wheel += -e.deltaY / 100.0;
     e.preventDefault(); e.stopImmediatePropagation();
   }, {capture: true, passive: false});

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from vasim.fixtures.logistic import Logistic5
 from vasim.trials.vf import TrialFrame
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
+from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 from vasim.viewer.views import set_gui_value
 
 FloatArray = NDArray[np.float64]
@@ -75,9 +76,20 @@ def progress_text(p: PanelState) -> str:
             f"({p.completed or 0} completed)")
 
 
+SUMMARY_UNITS: dict[str, str] = {
+    "duration": "s", "sim_time": "s", "completion_time": "s", "mean_latency": "s",
+    "total_latency": "s", "max_latency": "s",
+    "total_error_l1": "m summed over samples (not a length)",
+    "mean_error_l1": "m summed over samples (not a length)",
+}
+"""Units of the end-of-trial summary's values (the rest are counts, flags or names).
+**Decision**: the thesis's e_i is a sum of per-sample Manhattan errors; its unit says so,
+so that it is never read as a length."""
+
+
 def summary_text(summary: dict[str, Any] | None) -> str:
-    """The end-of-trial summary as a markdown table (escaped), or a line saying that no
-    trial has finished yet."""
+    """The end-of-trial summary as a markdown table with names and units (escaped), or a
+    line saying that no trial has finished yet."""
     if not summary:
         return "*no finished trial yet*"
     rows = []
@@ -86,21 +98,26 @@ def summary_text(summary: dict[str, Any] | None) -> str:
             v = "—" if not math.isfinite(v) else f"{v:.4g}"
         elif v is None:
             v = "—"
-        rows.append(f"| {md_escape(k)} | {md_escape(v)} |")
-    return "| metric | value |\n|---|---|\n" + "\n".join(rows)
+        unit = SUMMARY_UNITS.get(k, "")
+        rows.append(f"| {md_escape(k)} | {md_escape(v)} | {md_escape(unit)} |")
+    return "| metric | value | unit |\n|---|---|---|\n" + "\n".join(rows)
 
 
-def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float]) -> str:
-    """Live metrics: current error, latency per reached point, time in trial (markdown)."""
+def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
+                 outcome: str | None = None) -> str:
+    """Live metrics: the trial (its store id, how it ended), time in trial and its limit,
+    distance to the goal, latency per reached point (markdown)."""
     err = float(np.linalg.norm(np.asarray(frame.tcp) - np.asarray(frame.goal))) * 1e3
     lat = ", ".join(f"{x:.2f}" for x in latencies[-8:]) or "—"
     more = f" (last 8 of {len(latencies)})" if len(latencies) > 8 else ""
-    state = "done" if frame.done else "running"
-    stored = "not stored" if info.trial_id is None else f"stored as trial {info.trial_id}"
+    outcome = outcome or frame_outcome(frame.done, frame.goal_index, frame.n_points)
+    state = ("running" if outcome is None and not frame.done
+             else f"ended: {OUTCOME_TEXT.get(outcome or '', outcome or 'ended')}")
+    limit = float(info.config.max_time)
     return (f"| | |\n|---|---|\n"
-            f"| Trial | {info.number} ({md_escape(info.mode)}, {state}, {stored}) |\n"
-            f"| Time | {frame.t:.2f} s |\n"
-            f"| Current error | {err:.1f} mm |\n"
+            f"| Trial | {md_escape(info.title)} ({md_escape(info.mode)}, {md_escape(state)}) |\n"
+            f"| Time | {frame.t:.2f} s of {limit:.0f} s |\n"
+            f"| Distance to the goal | {err:.1f} mm |\n"
             f"| Points | {min(frame.goal_index, frame.n_points)} / {frame.n_points} |\n"
             f"| Latency per point [s] | {lat}{more} |")
 
@@ -147,10 +164,15 @@ class ExperimenterPanel:
                                      hint="demo: the scripted operator plays by itself; "
                                           "free: free training; protocol: a study session")
         self.input = gui.add_dropdown("Input", INPUTS, initial_value=panel.input,
-                                      hint="scripted operator, or drag the tool tip's gizmo")
+                                      hint="scripted operator; browser: drag the tool tip's gizmo; "
+                                           "laparoscopic: the trainee's instrument")
         self.subject = gui.add_text("Subject code", panel.subject or "",
                                     hint="a pseudonymous code (letters, digits, _ or -)")
         self.set_subject = gui.add_button("Set subject")
+        self.label = gui.add_text("Practice label", panel.label or "",
+                                  hint="free practice without a subject, e.g. 'free: warm-up' "
+                                       "(a space or ':' in it); empty clears it")
+        self.set_label = gui.add_button("Set label")
         self.protocol = gui.add_dropdown("Protocol", (NO_PROTOCOL, *protocols),
                                          initial_value=panel.protocol or NO_PROTOCOL)
         self.start = gui.add_button("Start trial", color="green")
@@ -175,6 +197,7 @@ class ExperimenterPanel:
         with gui.add_folder("Live metrics"):
             self.metrics = gui.add_markdown("*no trial yet*")
         with gui.add_folder("Last trial and learning curve"):
+            self.card = gui.add_markdown("")
             self.summary = gui.add_markdown(summary_text(None))
             self.learning = gui.add_uplot(
                 (np.array([1.0]), np.array([math.nan]), np.array([math.nan])),
@@ -187,6 +210,8 @@ class ExperimenterPanel:
         on(self.input, lambda e: submit(Command("input", e.target.value)))
         self.set_subject.on_click(guard(
             lambda e: submit(Command("subject", self.subject.value.strip()))))
+        self.set_label.on_click(guard(
+            lambda e: submit(Command("label", self.label.value.strip()))))
 
         def pick_protocol(e: Any) -> None:
             if e.target.value != NO_PROTOCOL:
@@ -262,7 +287,7 @@ class ExperimenterPanel:
                     if isinstance(handle, viser.GuiDropdownHandle) and \
                             value not in handle.options:
                         handle.options = (*handle.options, value)
-                    handle.value = value
+                    set_gui_value(handle, value)
             if p.subject != self._shown_subject:  # only on a change: never clobber typing
                 self._shown_subject = p.subject
                 if self.subject.value != (p.subject or ""):
@@ -283,6 +308,10 @@ class ExperimenterPanel:
             if self.fixture.value != keep:
                 set_gui_value(self.fixture, keep)
             self.summary.content = summary_text(p.summary)
+            self.card.content = score_card_markdown(p.scorecard)
+            self.label.visible = self.set_label.visible = p.mode == "free"
+            if p.label is not None and self.label.value != p.label:
+                set_gui_value(self.label, p.label)
             if p.curve:
                 c = np.array(p.curve, dtype=np.float64)
                 self.learning.data = (c[:, 0], c[:, 1], c[:, 2])
@@ -291,7 +320,7 @@ class ExperimenterPanel:
         self._show_f5pl(self.fixture.value)
 
     def show_live(self, info: TrialInfo, frame: TrialFrame, now: float | None = None,
-                  *, force: bool = False) -> None:
+                  *, force: bool = False, outcome: str | None = None) -> None:
         """Collects the per-point latencies and rewrites the live metrics (rate-limited)."""
         if self._lat_trial != info.number:
             self._lat_trial, self._lat_goal, self.latencies = info.number, 0, []
@@ -303,7 +332,7 @@ class ExperimenterPanel:
         if not force and now - self._last_metrics < self.min_interval:
             return
         self._last_metrics = now
-        text = metrics_text(info, frame, self.latencies)
+        text = metrics_text(info, frame, self.latencies, outcome)
         if text != self.metrics_md:
             self.metrics_md = text
             self.metrics.content = text

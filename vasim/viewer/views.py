@@ -20,11 +20,10 @@ Frame: the scene's world frame, metres, ``z`` up (set on the server by the app).
 
 from __future__ import annotations
 
-import html
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -35,7 +34,7 @@ from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import Organ
 from vasim.core.geometry import matrix_z_to
-from vasim.fixtures.types import Arrow, AudioCue, CameraView
+from vasim.fixtures.types import Arrow, CameraView
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]
@@ -94,15 +93,24 @@ class OrganView:
         organ: the organ (mesh in metres, world frame).
     """
 
-    def __init__(self, server: viser.ViserServer, organ: Organ):
+    def __init__(self, server: viser.ViserServer, organ: Organ, *, tones: bool = False):
         self.organ = organ
         self.name = f"/organs/{organ.name}"
         v = np.ascontiguousarray(organ.mesh.vertices, dtype=np.float32)
         f = np.ascontiguousarray(organ.mesh.faces, dtype=np.uint32)
         self.n_vertices = len(v)
+        parts = [(f, rgb255(organ.color))]
+        if tones and organ.kind != "wall":  # the endoscope's tissue look (endoscope.py)
+            from vasim.viewer.endoscope import tissue_patches
+
+            seed = int.from_bytes(organ.name.encode()[:8].ljust(8, b"_"), "little")
+            parts = tissue_patches(organ.mesh.vertices, f, organ.color, seed=seed) or parts
         self.handle = server.scene.add_mesh_simple(
-            self.name, v, f, color=rgb255(organ.color), **organ_style(organ)  # type: ignore[arg-type]  # viser's style kwargs
+            self.name, v, parts[0][0], color=parts[0][1], **organ_style(organ)  # type: ignore[arg-type]
         )
+        self.tones = [server.scene.add_mesh_simple(
+            f"{self.name}/tone{i}", v, fi, color=ci, **organ_style(organ))  # type: ignore[arg-type]
+            for i, (fi, ci) in enumerate(parts[1:], start=1)]
 
     def update(self, vertices: FloatArray) -> None:
         """Moves the vertices (deforming organs).
@@ -120,9 +128,11 @@ class OrganView:
                 f"{self.name}: expected vertices of shape ({self.n_vertices}, 3), got {v.shape}"
             )
         self.handle.vertices = v
+        for h in self.tones:
+            h.vertices = v
 
     def node_names(self) -> list[str]:
-        return [self.name]
+        return [self.name, *(f"{self.name}/tone{i}" for i in range(1, len(self.tones) + 1))]
 
 
 # ---------------------------------------------------------------------------------------
@@ -554,11 +564,15 @@ class CameraController:
         max_rate_hz: maximum camera writes per second.
         near, far: clipping planes [m] (viser's 1 cm default near plane is too far for
             an abdomen).
+        mapper: turns Mag's ``CameraView`` into the pose shown (the trainee's endoscope:
+            ``endoscope.scope_from_mag``, Mag within the port's constraint); None: as is.
     """
 
     def __init__(self, server: viser.ViserServer, default: CameraPose, *,
-                 max_rate_hz: float = 10.0, near: float = 0.002, far: float = 3.0):
+                 max_rate_hz: float = 10.0, near: float = 0.002, far: float = 3.0,
+                 mapper: Callable[[CameraView], CameraPose] | None = None):
         self.server = server
+        self.mapper = mapper
         self.default = default
         self.min_interval = 1.0 / max_rate_hz
         self.near, self.far = near, far
@@ -601,11 +615,25 @@ class CameraController:
                 self._push_all(force=True)
             return
         self._mag = True
-        self._target = CameraPose.from_view(view)
+        self._target = (self.mapper(view) if self.mapper is not None
+                        else CameraPose.from_view(view))
         if now - self._last_push < self.min_interval:
             return
         self._last_push = now
         self._push_all()
+
+    @property
+    def target(self) -> CameraPose:
+        """The pose the pages are being given."""
+        return self._target
+
+    def retarget(self, default: CameraPose) -> None:
+        """A new pose without Mag (e.g. the scope re-aimed at a new trial's task); applied
+        at once unless Mag drives the camera."""
+        self.default = default
+        if not self._mag:
+            self._target = default
+            self._push_all(force=True)
 
     def _push_all(self, *, force: bool = False) -> None:
         with self._lock:
@@ -629,114 +657,18 @@ class CameraController:
         self.writes += 1
 
 
-# ---------------------------------------------------------------------------------------
-# HUD
-
-
-def audio_text(audio: AudioCue | None) -> str:
-    """The AG state as text: ``"off"`` (no AG), ``"silent"`` or pitch/period."""
-    if audio is None:
-        return "off"
-    if audio.silent:
-        return "silent"
-    return f"{audio.pitch_hz:.0f} Hz, every {audio.period_s:.2f} s"
-
-
-@dataclass(frozen=True)
-class HudInfo:
-    """What the HUD shows (plain values; the app builds it from a frame).
-
-    Attributes:
-        schema: schema name. fixtures: active fixture names. task: task name.
-        trial: trial counter. t: time in trial [s]. error_m: |x - g| [m].
-        error_l1: cumulative L1 error for the current goal [m].
-        goal_index, n_points: progress. last_latency: l_i of the last reached point [s].
-        audio: AG cue or None. force_n: |F| [N] or None. zoom: Mag zoom or None.
-        ms: (3,) MS factors or None. done: trial finished.
-    """
-
-    schema: str
-    fixtures: tuple[str, ...]
-    task: str
-    trial: int
-    t: float
-    error_m: float
-    error_l1: float
-    goal_index: int
-    n_points: int
-    last_latency: float | None
-    audio: AudioCue | None
-    force_n: float | None
-    zoom: float | None
-    ms: tuple[float, float, float] | None
-    done: bool
-
-
-def hud_markdown(info: HudInfo) -> str:
-    """The HUD's markdown (every string escaped: markdown is not sanitised by viser)."""
-    esc = html.escape
-    lat = "–" if info.last_latency is None else f"{info.last_latency:.2f} s"
-    goal = min(info.goal_index + 1, info.n_points)
-    status = "done" if info.done else "running"
-    rows = [
-        ("Schema", f"{esc(info.schema)} ({esc(', '.join(info.fixtures)) or 'no fixture'})"),
-        ("Task", f"{esc(info.task)}, trial {info.trial} ({status})"),
-        ("Time", f"{info.t:6.2f} s"),
-        ("Goal", f"{goal} / {info.n_points}"),
-        ("Error", f"{info.error_m * 1e3:.1f} mm, e_i so far {info.error_l1:.2f} m"),
-        ("Last latency", lat),
-        ("Audio (AG)", esc(audio_text(info.audio))),
-    ]
-    if info.force_n is not None:
-        rows.append(("Force (FF)", f"{info.force_n:.2f} N"))
-    if info.ms is not None:
-        rows.append(("MS factors", " / ".join(f"{m:.2f}" for m in info.ms)))
-    if info.zoom is not None:
-        rows.append(("Zoom (Mag)", f"{info.zoom:.2f}×"))
-    # A "|" inside a cell would end it: escape it.
-    body = "\n".join(f"| {k} | {v.replace('|', '&#124;')} |" for k, v in rows)
-    return "| | |\n|---|---|\n" + body
-
-
-class HudView:
-    """A GUI markdown panel with the live trial state; rewritten at most ``max_rate_hz``.
-
-    Args:
-        server: the viser server.
-        max_rate_hz: maximum rewrites per second (each is a message to every browser).
-    """
-
-    def __init__(self, server: viser.ViserServer, *, max_rate_hz: float = 10.0):
-        self.min_interval = 1.0 / max_rate_hz
-        self.handle = server.gui.add_markdown("*waiting for the first frame…*")
-        self.text = ""
-        self._last_t = -math.inf
-
-    def update(self, info: HudInfo, now: float | None = None, *, force: bool = False) -> None:
-        now = time.perf_counter() if now is None else now
-        if not force and now - self._last_t < self.min_interval:
-            return
-        text = hud_markdown(info)
-        self._last_t = now
-        if text != self.text:
-            self.text = text
-            self.handle.content = text
-
-
 __all__ = [
     "ArrowView",
     "CameraController",
     "CameraPose",
     "GhostView",
-    "HudInfo",
-    "HudView",
     "OrganView",
+    "SceneView",
     "ToolView",
     "TrajectoryView",
     "arrow_mesh",
     "arrow_vertices",
-    "audio_text",
-    "hud_markdown",
     "organ_style",
     "rgb255",
+    "set_gui_value",
 ]

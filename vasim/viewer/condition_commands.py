@@ -1,0 +1,148 @@
+"""The experimenter's condition commands of the viewer's controller: schema, task, live
+f5PL editing and the free-practice label (a mixin of
+:class:`vasim.viewer.controller.TrainingController`, split from it to keep modules small;
+it runs on the controller thread like the rest of the controller)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+from vasim.core.errors import ConfigError
+from vasim.fixtures.logistic import Logistic5
+from vasim.fixtures.schema import Schema, load_schema
+from vasim.trials.vf import TrialConfig
+from vasim.viewer.condition import named_edit
+from vasim.viewer.state import PanelState, TrialInfo, f5pl_fields, schema_choices, with_f5pl
+
+DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
+    "trajectory": "trajectory_following",
+    "point": "point_targeting",
+}
+"""Schema switched to when the chosen task does not fit the current task-specific schema."""
+
+
+class ConditionCommands:
+    """Schema, task, f5PL and label commands (see the controller's ``handle``)."""
+
+    panel: PanelState
+    info: TrialInfo
+    _base: TrialConfig
+    _schema_obj: Schema | None
+    _pending: Any
+
+    # Provided by TrainingController.
+    def _publish(self, **changes: Any) -> None:
+        raise NotImplementedError
+
+    def _close_trial(self, reason: str, *, failed: bool = False) -> None:
+        raise NotImplementedError
+
+    def _start_demo(self, config: TrialConfig) -> None:
+        raise NotImplementedError
+
+    def _running_stored(self) -> bool:
+        raise NotImplementedError
+
+    def _launch(self, config: TrialConfig, *, mode: str, schema: Schema | None = None,
+                input_kind: str = "scripted", session: Any = None,
+                scheduled: Any = None) -> TrialInfo:
+        raise NotImplementedError
+
+    def _free_config(self) -> TrialConfig:
+        raise NotImplementedError
+
+    def _set_label(self, value: Any) -> None:
+        """The free-practice label of the next free trials without a subject (**decision**:
+        a label and a subject exclude each other — setting one clears the other — so a
+        trial is a subject's or a labelled practice trial, never both; "" clears it)."""
+        from vasim.study.store.vocabulary import validate_label
+
+        if self.panel.mode == "protocol":
+            raise ConfigError("protocol trials belong to the subject: labels are for free "
+                              "practice", field="label")
+        text = str(value).strip() if value is not None else ""
+        label = validate_label(text) if text else None
+        if self._running_stored() or self._pending is not None:
+            raise ConfigError("stop the running trial before changing the label",
+                              field="label")
+        self._publish(label=label, subject=None if label else self.panel.subject, curve=(),
+                      status=f"free practice labelled {label!r}" if label
+                      else "free practice without a label")
+
+    def _set_schema(self, name: str) -> None:
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol sets the schema; switch to free training to "
+                              "choose one", field="schema")
+        # viser does not check dropdown values against the options, and
+        # load_schema accepts file paths, so any client could make the server read (and
+        # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
+        choices = schema_choices(self._base.schema)
+        if not isinstance(name, str) or name not in choices:
+            shown = repr(name)
+            shown = shown if len(shown) <= 80 else shown[:77] + "..."
+            raise ConfigError(f"unknown schema {shown}: choose one from the Schema menu",
+                              field="schema")
+        if name == p.schema and self._schema_obj is None:
+            return
+        schema = load_schema(name)
+        task = p.task if schema.task in ("any", p.task) else schema.task
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the schema",
+                              field="schema")
+        self._schema_obj = None
+        self._publish(schema=name, task=task, f5pl=f5pl_fields(schema))
+        if p.mode == "demo":
+            self._close_trial("schema changed")
+            variant = self.info.config.variant if task == self.info.config.task else 0
+            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]
+
+    def _set_task(self, task: str) -> None:
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol sets the task", field="task")
+        if task not in DEFAULT_SCHEMA_FOR_TASK:
+            raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
+        if task == p.task:
+            return
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the task", field="task")
+        schema = p.schema
+        if load_schema(schema).task not in ("any", task):
+            schema = DEFAULT_SCHEMA_FOR_TASK[task]
+        if schema != p.schema:
+            self._schema_obj = None
+        self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
+        if p.mode == "demo":
+            self._close_trial("task changed")
+            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]
+
+    def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
+        """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes
+        effect by starting the trial afresh with the edited schema, so every stored trial
+        ran with exactly the schema stored with it (a mid-trial change would not be)."""
+        p = self.panel
+        if p.mode == "protocol":
+            raise ConfigError("the protocol's schemas are fixed; edit f5PL parameters in "
+                              "free training", field="f5pl")
+        if not isinstance(params, Logistic5):
+            raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
+        shipped = load_schema(p.schema)
+        base = self._schema_obj if self._schema_obj is not None else shipped
+        edited = named_edit(with_f5pl(base, instance, params), shipped)
+        self._schema_obj = edited
+        self._publish(f5pl=f5pl_fields(edited),
+                      status=f"{instance}: f5PL a={params.a:g} b={params.b:g} c={params.c:g} "
+                             f"d={params.d:g} g={params.g:g}; trials are stored as schema "
+                             f"{edited.name}")
+        if p.mode == "demo":
+            self._close_trial("f5PL edited")
+            self._start_demo(self.info.config)
+        elif self._running_stored():
+            self._close_trial("f5PL edited")
+            self._launch(self._free_config(), mode="free", schema=edited, input_kind=p.input)
+            self._publish(running=True, summary=None)
+
+
+__all__ = ["DEFAULT_SCHEMA_FOR_TASK", "ConditionCommands"]

@@ -1,0 +1,311 @@
+"""What the trainee reads (issue #19 §4, issue #20 §1, §5): the trial's title, the one-line
+instruction and start cue, the live status (points reached, time and time left), how the
+trial ended, and the score card after it. Pure text builders plus the rate-limited
+:class:`HudView` shell; every string reaches viser markdown escaped (viser does not
+sanitise it).
+
+**One trial number everywhere** (:func:`trial_title`): a stored trial is named by its store
+id ("trial 12") on every page and in every status line; a demo run, which is never
+stored, is "demo run 3 (not stored)" — the server's own counter never poses as a trial id.
+
+**How a trial ended** (:data:`OUTCOME_TEXT`): the store's outcome vocabulary in words; a
+trial that runs out of time says "time ran out", never "done".
+
+**No sum of samples is shown as a length**: the score card and the HUD show distances in
+mm (the current distance to the goal, the mean and maximum distance from the path) and the
+path length (the Euclidean length of the tool track), never the thesis's e_i (a sum of
+per-sample Manhattan errors, whose value depends on the sample rate).
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import viser
+
+from vasim.fixtures.types import AudioCue
+
+OUTCOME_TEXT: dict[str, str] = {
+    "reached_all": "all points reached",
+    "timed_out": "time ran out",
+    "stopped": "stopped by the experimenter",
+    "interrupted": "interrupted",
+    "failed": "failed (an error stopped it)",
+}
+"""A trial's outcome (``vasim.study.store.vocabulary.TRIAL_OUTCOMES``) in words."""
+
+
+def trial_title(trial_id: int | None, number: int) -> str:
+    """The trial's name on every page: its store id, or the demo run's counter.
+
+    >>> trial_title(12, 40), trial_title(None, 3)
+    ('trial 12', 'demo run 3 (not stored)')
+    """
+    return f"trial {trial_id}" if trial_id is not None else f"demo run {number} (not stored)"
+
+
+def frame_outcome(done: bool, goal_index: int, n_points: int) -> str | None:
+    """The outcome a finished frame shows by itself: every point reached, or (a trial only
+    ends on its own when the last point is reached or its time is up) the time ran out."""
+    if not done:
+        return None
+    return "reached_all" if goal_index >= n_points else "timed_out"
+
+
+def instruction(task_name: str, n_points: int, input_kind: str) -> str:
+    """What to do, in one sentence (shown before and during the trial).
+
+    >>> instruction("trajectory/v3", 30, "laparoscopic")[:48]
+    'Guide the instrument tip through the 30 points a'
+    """
+    if input_kind == "scripted":
+        return "Watch: the scripted operator performs the task."
+    if task_name.startswith("point"):
+        return (f"Touch each of the {n_points} targets with the instrument tip, one after "
+                "the other, without pressing on the tissue.")
+    return (f"Guide the instrument tip through the {n_points} points along the path, in "
+            "order, as closely and smoothly as you can.")
+
+
+def audio_text(audio: AudioCue | None) -> str:
+    """The AG state as text: ``"off"`` (no AG), ``"silent"`` or pitch/period."""
+    if audio is None:
+        return "off"
+    if audio.silent:
+        return "silent"
+    return f"{audio.pitch_hz:.0f} Hz, every {audio.period_s:.2f} s"
+
+
+@dataclass(frozen=True)
+class HudInfo:
+    """What the trainee's HUD shows (plain values; the app builds it from a frame).
+
+    Attributes:
+        schema: schema name. fixtures: active fixture names. task: task name.
+        title: :func:`trial_title`. instruction: :func:`instruction`.
+        t: time in trial [s]. time_left: time limit minus ``t`` [s] (None: no limit).
+        error_m: current distance from the tool tip to the goal |x - g| [m].
+        goal_index, n_points: progress. last_latency: l_i of the last reached point [s].
+        audio: AG cue or None. force_n: |F| [N] or None. zoom: Mag zoom or None.
+        ms: (3,) MS factors or None. done: the trial ended.
+        outcome: how it ended (``OUTCOME_TEXT`` key) or None while it runs.
+        countdown_s: seconds until the trial starts (the start cue), or None.
+    """
+
+    schema: str
+    fixtures: tuple[str, ...]
+    task: str
+    title: str
+    t: float
+    error_m: float
+    goal_index: int
+    n_points: int
+    last_latency: float | None
+    audio: AudioCue | None
+    force_n: float | None
+    zoom: float | None
+    ms: tuple[float, float, float] | None
+    done: bool
+    time_left: float | None = None
+    outcome: str | None = None
+    instruction: str = ""
+    countdown_s: float | None = None
+
+
+def state_text(info: HudInfo) -> str:
+    """The trial's state in words: starting, running, or how it ended."""
+    if info.countdown_s is not None:
+        return f"starts in {math.ceil(max(info.countdown_s, 0.0))} s"
+    if info.outcome is not None:
+        return f"ended: {OUTCOME_TEXT.get(info.outcome, info.outcome)}"
+    if info.done:
+        return "ended"
+    return "running"
+
+
+def hud_markdown(info: HudInfo) -> str:
+    """The HUD's markdown (every string escaped: markdown is not sanitised by viser)."""
+    esc = html.escape
+    lat = "–" if info.last_latency is None else f"{info.last_latency:.2f} s"
+    reached = min(info.goal_index, info.n_points)
+    head = f"**{esc(info.title)}** — {esc(state_text(info))}"
+    if info.instruction:
+        head += f"  \n{esc(info.instruction)}"
+    if info.countdown_s is not None:
+        head += "  \n**Get ready…** the clock starts at 0."
+    time_row = f"{info.t:6.1f} s"
+    if info.time_left is not None and info.outcome is None and not info.done:
+        time_row += f" ({max(info.time_left, 0.0):.0f} s left)"
+    rows = [
+        ("Points reached", f"{reached} of {info.n_points}"),
+        ("Time", time_row),
+        ("To the next point", "–" if info.done else f"{info.error_m * 1e3:.1f} mm"),
+        ("Last latency", lat),
+        ("Schema", f"{esc(info.schema)} ({esc(', '.join(info.fixtures)) or 'no fixture'})"),
+        ("Task", esc(info.task)),
+        ("Audio (AG)", esc(audio_text(info.audio))),
+    ]
+    if info.force_n is not None:
+        rows.append(("Force (FF)", f"{info.force_n:.2f} N"))
+    if info.ms is not None:
+        rows.append(("MS factors", " / ".join(f"{m:.2f}" for m in info.ms)))
+    if info.zoom is not None:
+        rows.append(("Zoom (Mag)", f"{info.zoom:.2f}×"))
+    # A "|" inside a cell would end it: escape it.
+    body = "\n".join(f"| {k} | {v.replace('|', '&#124;')} |" for k, v in rows)
+    return head + "\n\n| | |\n|---|---|\n" + body
+
+
+class HudView:
+    """A GUI markdown panel with the live trial state; rewritten at most ``max_rate_hz``.
+
+    Args:
+        server: the viser server.
+        max_rate_hz: maximum rewrites per second (each is a message to every browser).
+    """
+
+    def __init__(self, server: viser.ViserServer, *, max_rate_hz: float = 10.0):
+        self.min_interval = 1.0 / max_rate_hz
+        self.handle = server.gui.add_markdown("*waiting for the first frame…*")
+        self.text = ""
+        self._last_t = -math.inf
+
+    def update(self, info: HudInfo, now: float | None = None, *, force: bool = False) -> None:
+        now = time.perf_counter() if now is None else now
+        if not force and now - self._last_t < self.min_interval:
+            return
+        text = hud_markdown(info)
+        self._last_t = now
+        if text != self.text:
+            self.text = text
+            self.handle.content = text
+
+
+# ---------------------------------------------------------------------------------------
+# The score card
+
+
+SCORE_METRICS: tuple[tuple[str, str, str, float, int], ...] = (
+    # (trial metric name, label, unit, factor from the stored unit, decimals)
+    ("duration", "Time", "s", 1.0, 1),
+    ("points_reached", "Points reached", "", 1.0, 0),
+    ("path_dev_mean_mm", "Mean distance from the path", "mm", 1.0, 1),
+    ("path_dev_max_mm", "Maximum distance from the path", "mm", 1.0, 1),
+    ("contact_count", "Tissue contacts", "", 1.0, 0),
+    ("excessive_force_time", "Excessive-force time", "s", 1.0, 1),
+    ("path_l2", "Path length", "mm", 1e3, 0),
+)
+"""The score card's rows: ``vasim.records.trial_metrics`` names (``path_dev_*_mm`` are read
+by name and shown as "—" while absent), in plain units."""
+
+
+@dataclass(frozen=True)
+class ScoreRow:
+    """One metric of the score card, in its display unit (None: not available)."""
+
+    name: str
+    label: str
+    unit: str
+    value: float | None
+    earlier: float | None
+    benchmark: float | None
+    decimals: int
+
+
+@dataclass(frozen=True)
+class ScoreCard:
+    """The score card of one finished trial.
+
+    Attributes:
+        title: :func:`trial_title`. outcome: ``OUTCOME_TEXT`` key. n_points: POIs.
+        rows: the metrics. n_earlier: the trainee's earlier trials averaged in ``earlier``.
+        n_benchmark: trials behind the benchmark (0: no benchmark).
+    """
+
+    title: str
+    outcome: str | None
+    n_points: int
+    rows: tuple[ScoreRow, ...]
+    n_earlier: int = 0
+    n_benchmark: int = 0
+
+
+def _value(metrics: Mapping[str, float], name: str, factor: float) -> float | None:
+    v = metrics.get(name)
+    if v is None:
+        return None
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f * factor if math.isfinite(f) else None
+
+
+def _mean(rows: Sequence[Mapping[str, float]], name: str, factor: float) -> float | None:
+    vals = [v for r in rows if (v := _value(r, name, factor)) is not None]
+    return sum(vals) / len(vals) if vals else None
+
+
+def score_card(metrics: Mapping[str, float], *, title: str, outcome: str | None,
+               n_points: int, earlier: Sequence[Mapping[str, float]] = (),
+               benchmark: Sequence[Mapping[str, float]] = ()) -> ScoreCard:
+    """The score card of a trial from its ``trial_metrics``.
+
+    Args:
+        metrics: the trial's metrics by name (stored units: s, m, counts).
+        title, outcome, n_points: the trial.
+        earlier: the trainee's earlier comparable trials' metrics; each row shows their mean.
+        benchmark: the benchmark trials' metrics; each row shows their mean (none: no
+            benchmark column).
+    """
+    rows = tuple(
+        ScoreRow(name, label, unit, _value(metrics, name, f), _mean(earlier, name, f),
+                 _mean(benchmark, name, f), dec)
+        for name, label, unit, f, dec in SCORE_METRICS)
+    return ScoreCard(title=title, outcome=outcome, n_points=int(n_points), rows=rows,
+                     n_earlier=len(earlier), n_benchmark=len(benchmark))
+
+
+def _fmt(v: float | None, decimals: int, unit: str) -> str:
+    if v is None:
+        return "—"
+    return f"{v:.{decimals}f} {unit}".rstrip()
+
+
+def score_card_markdown(card: ScoreCard | None) -> str:
+    """The score card as markdown (escaped): a header with how the trial ended, then one row
+    per metric with this trial, the mean of the earlier trials and the benchmark."""
+    if card is None:
+        return ""
+    esc = html.escape
+    ended = OUTCOME_TEXT.get(card.outcome or "", card.outcome or "ended")
+    cols = ["This trial"]
+    if card.n_earlier:
+        cols.append(f"Your earlier {card.n_earlier} (mean)")
+    if card.n_benchmark:
+        cols.append(f"Benchmark ({card.n_benchmark} expert trials)")
+    lines = [f"### Score card — {esc(card.title)}", f"**{esc(ended)}**", "",
+             "| Metric | " + " | ".join(cols) + " |",
+             "|---|" + "---|" * len(cols)]
+    for r in card.rows:
+        this = _fmt(r.value, r.decimals, r.unit)
+        if r.name == "points_reached" and r.value is not None:
+            this = f"{r.value:.0f} of {card.n_points}"
+        cells = [this]
+        if card.n_earlier:
+            cells.append(_fmt(r.earlier, r.decimals, r.unit))
+        if card.n_benchmark:
+            cells.append(_fmt(r.benchmark, r.decimals, r.unit))
+        lines.append(f"| {esc(r.label)} | " + " | ".join(esc(c) for c in cells) + " |")
+    if not card.n_earlier:
+        lines.append("\n*Your first trial of this kind: later trials are compared with it.*")
+    return "\n".join(lines)
+
+
+__all__ = ["OUTCOME_TEXT", "SCORE_METRICS", "HudInfo", "HudView", "ScoreCard", "ScoreRow",
+           "audio_text", "frame_outcome", "hud_markdown", "instruction", "score_card",
+           "score_card_markdown", "state_text", "trial_title"]
