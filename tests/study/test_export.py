@@ -17,7 +17,7 @@ from vasim.records.trial_metrics import TRIAL_METRICS
 from vasim.study.export import EXPORT_TABLES, export_study, read_export, table_columns
 from vasim.study.protocol import parse_protocol
 from vasim.study.session import SessionSettings, record_answers, run_session, start_session
-from vasim.study.store import TrialStore
+from vasim.study.store import SCHEMA_VERSION, TrialStore
 from vasim.trials.vf import TrialConfig, run_trial
 
 PROTOCOL = """
@@ -88,7 +88,7 @@ def test_csv_and_parquet_read_back_equal(study: Path, tmp_path: Path, table: str
     assert len(a) > 0
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["tables"][table]["rows"] == len(a)
-    assert manifest["schema_version"] == 2
+    assert manifest["schema_version"] == SCHEMA_VERSION
 
 
 def test_exported_values_equal_the_store(study: Path, tmp_path: Path) -> None:

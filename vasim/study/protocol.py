@@ -18,6 +18,7 @@ TOML layout (every field is checked; defaults in brackets)::
     reach_radius_m = 0.005              # [0.005] r_reach: the goal advances at |x - p_i| <= r
     max_trial_time_s = 180.0            # [180] simulated time limit of one trial [s]
     excessive_force_n = 2.0             # [2.0] threshold of the excessive-force metrics [N]
+    path_tolerance_m = 0.002            # [0.002] tolerance tube of path_dev_out_frac [m]
 
     [randomisation]
     block_order = "random"              # ["fixed"] | "random" | "latin_square"
@@ -335,6 +336,8 @@ class Protocol:
         name, description: as in the file. task: ``"trajectory"`` or ``"point"``.
         reach_radius: r_reach [m]. max_trial_time: time limit of one trial [s].
         excessive_force_n: threshold of the excessive-force metrics [N].
+        path_tolerance_m: radius of the tolerance tube around the planned path [m]
+            (``path_dev_out_frac``).
         block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
         probe_condition: condition of probe trials (a fixture-free schema).
         probe_variant: variant of probe trials.
@@ -354,6 +357,7 @@ class Protocol:
     reach_radius: float = 0.005
     max_trial_time: float = 180.0
     excessive_force_n: float = 2.0
+    path_tolerance_m: float = 0.002
     block_order: str = "fixed"
     variant_order: str = "fixed"
     probe_condition: str = "none"
@@ -372,6 +376,7 @@ class Protocol:
         _check_positive(self.reach_radius, "reach_radius_m")
         check_trial_time(self.max_trial_time, "max_trial_time_s")
         _check_positive(self.excessive_force_n, "excessive_force_n")
+        _check_positive(self.path_tolerance_m, "path_tolerance_m")
         _check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         _check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
         if not isinstance(self.blocks, tuple) or not self.blocks:
@@ -523,7 +528,8 @@ def _check_condition(cond: object, task: str, name: str) -> None:
 
 # ------------------------------------------------------------------------- loading
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
-        "excessive_force_n", "randomisation", "probe", "blocks", "questionnaires")
+        "excessive_force_n", "path_tolerance_m", "randomisation", "probe", "blocks",
+        "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
           "probes_after")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
@@ -650,6 +656,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "reach_radius": data.get("reach_radius_m", 0.005),
         "max_trial_time": data.get("max_trial_time_s", 180.0),
         "excessive_force_n": data.get("excessive_force_n", 2.0),
+        "path_tolerance_m": data.get("path_tolerance_m", 0.002),
         "block_order": rnd.get("block_order", "fixed"),
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),

@@ -206,7 +206,8 @@ class Session:
     @property
     def metric_params(self) -> MetricParams:
         """The trial-metric constants of the protocol."""
-        return MetricParams(excessive_force_n=self.protocol.excessive_force_n)
+        return MetricParams(excessive_force_n=self.protocol.excessive_force_n,
+                            path_tolerance_m=self.protocol.path_tolerance_m)
 
 
 # ------------------------------------------------------------------------ lifecycle

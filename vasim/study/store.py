@@ -70,7 +70,11 @@ version 2 added to version 1):
 ``point_metrics`` — WITHOUT ROWID, PK (trial_id, point); columns of
     ``metrics.POINT_COLUMNS``: ``point`` INTEGER, ``reached`` INTEGER (0/1), ``t_reached``
     REAL [s] NULL, ``error_l1`` REAL [m] NULL, ``latency`` REAL [s] NULL, ``path_l1``,
-    ``path_l2`` REAL [m] NULL, ``n_samples`` INTEGER.
+    ``path_l2`` REAL [m] NULL, ``n_samples`` INTEGER; v4: ``error_l1_mm_s`` REAL [mm s]
+    NULL (rate-independent e_i), ``path_dev_mean_mm``, ``path_dev_rms_mm``,
+    ``path_dev_max_mm`` REAL [mm] NULL (distance to the planned path), ``path_dev_out_frac``
+    REAL NULL (fraction of time outside the tolerance tube). ``error_l1`` is eq. 6.5, a sum
+    of per-sample distances [m·sample], not a length.
 ``events`` — things that happened during a trial (device NaN, interruption, ...).
     ``id`` INTEGER PK, ``trial_id`` -> trials.id, ``t`` REAL NULL [s] since trial start,
     ``kind`` TEXT, ``detail`` TEXT, ``created_at`` TEXT.
@@ -160,7 +164,7 @@ from vasim.records.trial_meta import SUBJECT_CODE_PATTERN, TrialMeta, validate_s
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 4
 """Schema version written to ``PRAGMA user_version``."""
 
 APPLICATION_ID = 0x76534D31  # b"vSM1"
@@ -398,7 +402,21 @@ CREATE TABLE trial_metrics (
 sample columns (their defaults say "not measured" for version-1 trials) and the schedule link
 of a trial."""
 
-_MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2}
+_SCHEMA_V4 = """
+ALTER TABLE point_metrics ADD COLUMN error_l1_mm_s REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_mean_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_rms_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_max_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_out_frac REAL;
+"""
+"""Version 4: the per-point rate-independent e_i and path-deviation columns
+(``vasim.records.path_deviation``); older rows read NULL (NaN: not measured)."""
+
+_MIGRATIONS: dict[int, str] = {
+    1: _SCHEMA_V1, 2: _SCHEMA_V2,
+    3: "",   # the store-package split's version-3 step (another branch) replaces this
+    4: _SCHEMA_V4,
+}
 """Script that takes a store from version v-1 to v (version 0 = empty file)."""
 
 

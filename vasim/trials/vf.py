@@ -728,6 +728,8 @@ class TrialRunner:
             view["t"], view["x"], view["g"], view["goal_index"], self._points,
             r_reach=self.task.reach_radius,
             t_reached=self._reach_times + [math.nan] * (self._n - len(self._reach_times)),
+            start=self.task.start,
+            tolerance=(metric_params or MetricParams()).path_tolerance_m,
         )
         summary.update({
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,
