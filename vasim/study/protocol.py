@@ -37,6 +37,8 @@ TOML layout (every field is checked; defaults in brackets)::
     probe = true                        # [false] these trials are probe trials
     counterbalance = false              # [true] takes part in the block-order randomisation
     probes_after = 0                    # [0] probe trials appended after the block's trials
+    schema = "vg_seed"                  # [condition] the schema run, when the condition is
+                                        # a label for another schema of the same fixture
 
     [questionnaires.pre]
     demographics = true                 # [false] group, specialisation, experience levels
@@ -286,7 +288,11 @@ class Block:
     """A block of trials under one condition (see the module docstring).
 
     Attributes:
-        name: unique block name. condition: schema name or teleoperation mode.
+        name: unique block name. condition: schema name or teleoperation mode; the label
+            questionnaires and analyses use.
+        schema: the schema file the block runs, when it is not the condition's own (e.g.
+            condition ``"vg"`` run as ``"vg_seed"``, the arrow the seed's subjects saw);
+            None: the condition.
         variants: trajectory variants, in listed order. repetitions: rounds over variants.
         probe: the block's own trials are probe (fixture-free) trials.
         counterbalance: takes part in the block-order randomisation.
@@ -300,6 +306,7 @@ class Block:
     probe: bool = False
     counterbalance: bool = True
     probes_after: int = 0
+    schema: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
@@ -321,6 +328,8 @@ class Block:
         _check_bool(self.probe, "probe")
         _check_bool(self.counterbalance, "counterbalance")
         _check_int(self.probes_after, "probes_after", 0, 1000)
+        if self.schema is not None:
+            _check_str(self.schema, "schema")
 
     @property
     def n_trials(self) -> int:
@@ -396,6 +405,11 @@ class Protocol:
                 raise ConfigError(f"duplicate block name {b.name!r}", field=f"blocks[{i}].name")
             names.add(b.name)
             _check_condition(b.condition, self.task, f"blocks[{i}].condition")
+            if b.schema is not None:
+                _check_condition(b.schema, self.task, f"blocks[{i}].schema")
+                if b.condition in TELEOPERATION_MODES or b.schema in TELEOPERATION_MODES:
+                    raise ConfigError("a teleoperation-mode block has no separate schema",
+                                      field=f"blocks[{i}].schema")
             for j, v in enumerate(b.variants):
                 if v >= n_var:
                     raise ConfigError(
@@ -531,7 +545,7 @@ _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
         "excessive_force_n", "path_tolerance_m", "randomisation", "probe", "blocks",
         "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
-          "probes_after")
+          "probes_after", "schema")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
 
@@ -795,8 +809,10 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
     out: list[ScheduledTrial] = []
     n_probe = 0
 
-    def schema_of(cond: str) -> str | None:
-        return None if cond in TELEOPERATION_MODES else cond
+    def schema_of(b: Block) -> str | None:
+        if b.schema is not None:
+            return b.schema
+        return None if b.condition in TELEOPERATION_MODES else b.condition
 
     for pos, bi in enumerate(block_order(protocol, seed)):
         b = protocol.blocks[bi]
@@ -811,7 +827,7 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
                     n_probe += 1
                 out.append(ScheduledTrial(
                     index=len(out), block=b.name, block_index=pos, trial_in_block=k,
-                    condition=b.condition, schema=schema_of(b.condition), task=protocol.task,
+                    condition=b.condition, schema=schema_of(b), task=protocol.task,
                     variant=v, probe=b.probe, probe_index=n_probe if b.probe else None,
                     repetition=rep))
                 k += 1
