@@ -267,3 +267,19 @@ def test_bad_answers_name_the_item(q: str, change: dict, field: str) -> None:
     del missing["best_vf"]
     with pytest.raises(ConfigError, match="required"):
         validate_answers(p, "post", missing)
+
+
+def test_poi_spacing_is_a_protocol_parameter() -> None:
+    from vasim.trials.vf import TrialConfig, make_task
+
+    d = vf_dict()
+    assert load_protocol("vf_learning_curve").poi_spacing is None   # the task's default
+    d["poi_spacing_m"] = 0.0056
+    d["reach_radius_m"] = 0.0025
+    p = protocol_from_dict(d)
+    assert p.poi_spacing == 0.0056
+    task = make_task(TrialConfig(reach_radius=p.reach_radius, poi_spacing=p.poi_spacing))
+    assert task.n_points == 56 and task.reach_radius == 0.0025
+    d["reach_radius_m"] = 0.005
+    with pytest.raises(ConfigError, match="poi_spacing_m"):
+        protocol_from_dict(d)

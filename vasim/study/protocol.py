@@ -19,6 +19,7 @@ TOML layout (every field is checked; defaults in brackets)::
     max_trial_time_s = 180.0            # [180] simulated time limit of one trial [s]
     excessive_force_n = 2.0             # [2.0] threshold of the excessive-force metrics [N]
     path_tolerance_m = 0.002            # [0.002] tolerance tube of path_dev_out_frac [m]
+    poi_spacing_m = 0.0105              # [task default] arc length between trajectory POIs [m]
 
     [randomisation]
     block_order = "random"              # ["fixed"] | "random" | "latin_square"
@@ -347,6 +348,8 @@ class Protocol:
         excessive_force_n: threshold of the excessive-force metrics [N].
         path_tolerance_m: radius of the tolerance tube around the planned path [m]
             (``path_dev_out_frac``).
+        poi_spacing: arc length between the trajectory task's POIs [m]; None: the task's
+            default (``vasim.tasks.trajectory.POI_SPACING``).
         block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
         probe_condition: condition of probe trials (a fixture-free schema).
         probe_variant: variant of probe trials.
@@ -367,6 +370,7 @@ class Protocol:
     max_trial_time: float = 180.0
     excessive_force_n: float = 2.0
     path_tolerance_m: float = 0.002
+    poi_spacing: float | None = None
     block_order: str = "fixed"
     variant_order: str = "fixed"
     probe_condition: str = "none"
@@ -386,6 +390,11 @@ class Protocol:
         check_trial_time(self.max_trial_time, "max_trial_time_s")
         _check_positive(self.excessive_force_n, "excessive_force_n")
         _check_positive(self.path_tolerance_m, "path_tolerance_m")
+        if self.poi_spacing is not None:
+            _check_positive(self.poi_spacing, "poi_spacing_m")
+            if not self.poi_spacing > 2.0 * self.reach_radius:
+                raise ConfigError(f"must exceed twice reach_radius_m ({self.reach_radius!r}), "
+                                  f"got {self.poi_spacing!r}", field="poi_spacing_m")
         _check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         _check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
         if not isinstance(self.blocks, tuple) or not self.blocks:
@@ -542,8 +551,8 @@ def _check_condition(cond: object, task: str, name: str) -> None:
 
 # ------------------------------------------------------------------------- loading
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
-        "excessive_force_n", "path_tolerance_m", "randomisation", "probe", "blocks",
-        "questionnaires")
+        "excessive_force_n", "path_tolerance_m", "poi_spacing_m", "randomisation", "probe",
+        "blocks", "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
           "probes_after", "schema")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
@@ -671,6 +680,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "max_trial_time": data.get("max_trial_time_s", 180.0),
         "excessive_force_n": data.get("excessive_force_n", 2.0),
         "path_tolerance_m": data.get("path_tolerance_m", 0.002),
+        "poi_spacing": data.get("poi_spacing_m"),
         "block_order": rnd.get("block_order", "fixed"),
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),

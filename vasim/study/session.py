@@ -213,7 +213,7 @@ class Session:
             max_time=s.max_trial_time if s.max_trial_time is not None
             else self.protocol.max_trial_time,
             subject=self.subject, profile=profile,
-            reach_radius=self.protocol.reach_radius,
+            reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
         )
 
     @property

@@ -126,6 +126,8 @@ class TrialConfig:
         subject: subject code (never a name).
         velocity_cutoff_hz: low-pass cutoff of the TCP velocity FF's damping uses [Hz].
         reach_radius: r_reach [m] (a protocol parameter); None: the task's default (5 mm).
+        poi_spacing: arc length between the trajectory's POIs [m] (a protocol parameter);
+            None: the task's default (10.5 mm, 30 POIs).
         profile: the operator profile; None: the ``skill`` preset.
         scene: the virtual abdomen the task lives in: a scene name
             (``protocols/scenes/NAME.toml``) or TOML path, or ``"none"`` for a static task
@@ -151,6 +153,7 @@ class TrialConfig:
     profile: OperatorProfile | None = field(default=None, compare=False)
     reach_radius: float | None = None
     scene: str = "default"
+    poi_spacing: float | None = None
     mode: str | None = None
 
     def __post_init__(self) -> None:
@@ -317,15 +320,16 @@ centre, 100 deg field of view (module docstring)."""
 
 
 def make_task(config: TrialConfig) -> Task:
-    """Builds the task a config names (with its reach radius, if the config sets one)."""
+    """Builds the task a config names (with its reach radius and POI spacing, if the config
+    sets them)."""
+    kw: dict[str, float] = {}
     if config.reach_radius is not None:
-        r = float(config.reach_radius)
-        if config.task == "trajectory":
-            return trajectory_task(config.variant, reach_radius=r)
-        return point_task(reach_radius=r)
+        kw["reach_radius"] = float(config.reach_radius)
     if config.task == "trajectory":
-        return trajectory_task(config.variant)
-    return point_task()
+        if config.poi_spacing is not None:
+            kw["poi_spacing"] = float(config.poi_spacing)
+        return trajectory_task(config.variant, **kw)
+    return point_task(**kw)
 
 
 def make_profile(config: TrialConfig) -> OperatorProfile:
@@ -760,7 +764,8 @@ _MAX_PREALLOCATED = 1_000_000
 def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
     """The trial configuration as plain JSON-able data (stored with the trial)."""
     rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name == "mode" and config.mode is None)}  # as before MRCP trials
+           and not (f.name == "mode" and config.mode is None)  # as before MRCP trials
+           and not (f.name == "poi_spacing" and config.poi_spacing is None)}
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
     return rec
 
