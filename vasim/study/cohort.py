@@ -11,7 +11,10 @@ SQLite never sees concurrent writers. Re-running the same command continues wher
 stopped: trials left 'running' by a killed run are marked 'interrupted' when the store opens
 and run again as new attempts (same trial seed: the same trial).
 
-Models (**decisions**, plausible choices, not fitted to data):
+Models (**decisions**; demographics are plausible choices, not fitted to data; the
+operator's fixture effects, learning, carry-over and questionnaire answers are calibrated to
+the seed's chapter 6, ``vasim.operator.learning`` / ``vasim.operator.questionnaire``, and
+the sessions say so: operator "scripted (calibrated to the seed, synthetic)"):
 
 * Subjects: ``n_surgeons`` surgeons and ``n_subjects - n_surgeons`` residents, assigned to
   the codes by a seeded permutation (codes do not reveal the group). Subject j draws from
