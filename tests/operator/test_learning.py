@@ -30,7 +30,8 @@ def test_assisted_trials_carry_the_fixture_effect_the_seed_reports():
     a = {c: trial_adjustment(BASELINE, c) for c in SEED_EFFECTS}
     # error: FF best, AG and MS next (not significantly different, seed l. 5378-5380)
     assert min(a, key=lambda c: a[c].noise_factor) == "ff"
-    assert a["ag"].noise_factor == a["ms"].noise_factor < a["vg"].noise_factor
+    by_error = sorted(a, key=lambda c: a[c].noise_factor)
+    assert set(by_error[1:3]) == {"ag", "ms"} and set(by_error[3:]) == {"vg", "mag"}
     # time: Mag best, AG next (l. 5380-5381)
     ranked = sorted(a, key=lambda c: a[c].time_factor)
     assert ranked[:2] == ["mag", "ag"]

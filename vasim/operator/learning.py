@@ -28,13 +28,15 @@ Parameters (``FixtureEffect``) and where each comes from (seed line numbers refe
 
 * a_c (``accuracy``): seed l. 5378-5380, "Tukey HSD test shows that FF is the most effective
   VF in reducing cumulative error, but its effect is not significantly different from AG
-  and MS": FF 0.70, AG and MS 0.78, VG and Mag 0.88 (VG "generating confusion more than
-  helping", l. 5420).
+  and MS": FF 0.60, MS 0.68, AG 0.78, Mag 0.88, VG 0.95 (VG "generating confusion more than
+  helping", l. 5420). These sit on top of the motion model's own channels: in the first
+  8-subject calibration cohort (FF 0.70, AG and MS 0.78, VG and Mag 0.88) VG's cue fusion
+  alone made it the most accurate and MS's scaling the least, so VG and MS were moved.
 * v_c (``speed``): l. 5380-5381, "completion time is improved by Mag and ... not
   significantly different from that of AG": Mag 0.80, AG 0.88; l. 5371-5372 "they do not
-  increase the speed of motion" for the others: FF 1.12 (l. 5403, "Higher Forces improve
-  accuracy, but limits the operators movement"; without it the simulated FF pull alone made
-  FF the fastest, against the seed); MS 1.08 (it restricts motion away from the path,
+  increase the speed of motion" for the others: FF 1.04 (l. 5403, "Higher Forces improve
+  accuracy, but limits the operators movement"; with 1.0 the simulated FF pull alone made
+  FF the fastest, against the seed; 1.12 made it the third); MS 1.08 (it restricts motion away from the path,
   l. 5416); VG 1.05 (the confusing arrow, l. 5420).
 * w_c (``practice_weight``): l. 5407-5408, "the use of FF seems to need a short adaptation
   period, property that cannot be associated to all VF": an FF trial counts 1.5 trials of
@@ -58,12 +60,12 @@ are not measurements.
 Example:
     >>> adj = trial_adjustment(["none", "none", "none", "ff", "ff"], "ff")
     >>> round(adj.practice, 2), adj.noise_factor, adj.time_factor
-    (6.0, 0.7, 1.12)
+    (6.0, 0.6, 1.04)
     >>> ff_block = ["none"] * 3 + ["ff"] * 6
-    >>> round(trial_adjustment(ff_block, "none").noise_factor, 4)   # (1 - .4 x .3) x 1.12
-    0.9856
+    >>> round(trial_adjustment(ff_block, "none").noise_factor, 4)   # (1 - .4 x .4) x 1.12
+    0.9408
     >>> round(trial_adjustment(ff_block + ["none"], "none").noise_factor, 4)  # carry-over
-    0.88
+    0.84
 """
 
 from __future__ import annotations
@@ -112,15 +114,15 @@ class FixtureEffect:
 
 
 SEED_EFFECTS: dict[str, FixtureEffect] = {
-    "vg": FixtureEffect(accuracy=0.88, speed=1.05, practice_weight=1.0, carryover=0.3,
+    "vg": FixtureEffect(accuracy=0.95, speed=1.05, practice_weight=1.0, carryover=0.3,
                         dependence=0.04),
     "ag": FixtureEffect(accuracy=0.78, speed=0.88, practice_weight=1.0, carryover=0.3,
                         dependence=0.04),
-    "ms": FixtureEffect(accuracy=0.78, speed=1.08, practice_weight=1.0, carryover=0.3,
+    "ms": FixtureEffect(accuracy=0.68, speed=1.08, practice_weight=1.0, carryover=0.3,
                         dependence=0.04),
     "mag": FixtureEffect(accuracy=0.88, speed=0.80, practice_weight=1.2, carryover=0.3,
                          dependence=0.06),
-    "ff": FixtureEffect(accuracy=0.70, speed=1.12, practice_weight=1.5, carryover=0.4,
+    "ff": FixtureEffect(accuracy=0.60, speed=1.04, practice_weight=1.5, carryover=0.4,
                         dependence=0.12),
 }
 """The calibrated effects of the seed's five fixtures, by condition label (module docstring)."""
