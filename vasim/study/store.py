@@ -158,6 +158,7 @@ import pandas as pd
 from vasim import __version__
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.jsonio import dumps
+from vasim.records.path_deviation import PATH_POINT_COLUMNS
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
 from vasim.records.trial_meta import SUBJECT_CODE_PATTERN, TrialMeta, validate_subject_code
@@ -1472,6 +1473,8 @@ def _int_or_none(v: int | None) -> int | None:
 
 
 def _metric_rows(df: pd.DataFrame) -> list[tuple[Any, ...]]:
+    # the v4 path columns are optional: a frame without them stores NULL (not measured)
+    df = df.assign(**{c: np.nan for c in PATH_POINT_COLUMNS if c not in df.columns})
     missing = [c for c in POINT_COLUMNS if c not in df.columns]
     if missing:
         raise ConfigError(f"point_metrics lacks the columns {missing} "
