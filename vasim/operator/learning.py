@@ -36,8 +36,8 @@ Parameters (``FixtureEffect``) and where each comes from (seed line numbers refe
   significantly different from that of AG": Mag 0.80, AG 0.88; l. 5371-5372 "they do not
   increase the speed of motion" for the others: FF 1.04 (l. 5403, "Higher Forces improve
   accuracy, but limits the operators movement"; with 1.0 the simulated FF pull alone made
-  FF the fastest, against the seed; 1.12 made it the third); MS 1.08 (it restricts motion away from the path,
-  l. 5416); VG 1.05 (the confusing arrow, l. 5420).
+  FF the fastest, against the seed; 1.12 made it the third); MS 1.08 (it restricts motion
+  away from the path, l. 5416); VG 1.05 (the confusing arrow, l. 5420).
 * w_c (``practice_weight``): l. 5407-5408, "the use of FF seems to need a short adaptation
   period, property that cannot be associated to all VF": an FF trial counts 1.5 trials of
   practice; Mag 1.2 ("a tool that surgeons are used to", l. 5410); the others 1.0.
