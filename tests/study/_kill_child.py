@@ -89,7 +89,10 @@ def main(db: str, mode: str) -> None:
         tid = store.begin_trial(TrialMeta(subject="K01", task="trajectory", seed=seed))
         store.finish_trial(tid, buf, metrics, summary)
         print(json.dumps({"trial": tid, "n": len(buf), "samples_sha": samples_sha(buf.to_frame()),
-                          "metrics_sha": metrics_sha(metrics), "summary": summary}), flush=True)
+                          "metrics_sha": metrics_sha(metrics),
+                          # the store's JSON writes NaN (a metric not measured) as null
+                          "summary": {k: None if isinstance(x, float) and x != x else x
+                                      for k, x in summary.items()}}), flush=True)
     tid3 = store.begin_trial(TrialMeta(subject="K01", task="trajectory", seed=3))
     print(json.dumps({"trial3": tid3}), flush=True)
     if mode == "between":

@@ -13,10 +13,14 @@ import pytest
 
 from vasim.cli import main
 from vasim.core.errors import ConfigError
+from vasim.operator.questionnaire import (
+    RATING_WEIGHT,
+    SEED_BEST_SHARE,
+    SEED_MEAN_RATING,
+    SEED_WORST_SHARE,
+)
 from vasim.study.cohort import (
     DEMOGRAPHIC_MODEL,
-    RATING_CENTRE,
-    RATING_SLOPE,
     cohort_subjects,
     draw_demographics,
     measured_benefits,
@@ -120,17 +124,30 @@ def test_measured_benefit_and_rating_model() -> None:
     errors = {1: 3.0, 4: 1.0, 2: 1.0, 3: 3.0, 5: 4.0}  # probe mean 2, vg mean 2, ff 4
     b = measured_benefits(sched, errors)
     assert b["vg"] == pytest.approx(0.0) and b["ff"] == pytest.approx(math.log(0.5))
-    # ratings: 5 + 10 p + N(0, 1), clipped to 0..10; means over many subjects
+    # The answers follow a perceived benefit (vasim.operator.questionnaire), not the
+    # measured error alone: with equal measured benefits the cohort reproduces the seed's
+    # shares among the protocol's conditions (multinomial logit, exact) and mean ratings.
     p = parse_protocol(TINY)
     rng = np.random.default_rng(0)
-    ratings = [simulated_answers(p, "post", rng, perceived={"vg": 0.2, "ff": -0.1})
-               for _ in range(400)]
-    vg = np.mean([r["rating"]["vg"] for r in ratings])
-    ff = np.mean([r["rating"]["ff"] for r in ratings])
-    assert vg == pytest.approx(RATING_CENTRE + RATING_SLOPE * 0.2, abs=0.15)
-    assert ff == pytest.approx(RATING_CENTRE - RATING_SLOPE * 0.1, abs=0.15)
-    assert all(r["best"] == "vg" and r["worst"] == "ff" for r in ratings)
-    sets = Counter(len(r.get("sets", [])) for r in ratings)
+    n = 3000
+    same = [simulated_answers(p, "post", rng, measured={"vg": 0.1, "ff": 0.1})
+            for _ in range(n)]
+    best_vg = SEED_BEST_SHARE["vg"] / (SEED_BEST_SHARE["vg"] + SEED_BEST_SHARE["ff"])
+    worst_vg = SEED_WORST_SHARE["vg"] / (SEED_WORST_SHARE["vg"] + SEED_WORST_SHARE["ff"])
+    se = 0.5 / math.sqrt(n)   # binomial standard error bound
+    assert np.mean([r["best"] == "vg" for r in same]) == pytest.approx(best_vg, abs=4 * se)
+    assert np.mean([r["worst"] == "vg" for r in same]) == pytest.approx(worst_vg, abs=4 * se)
+    for c in ("vg", "ff"):
+        assert np.mean([r["rating"][c] for r in same]) == pytest.approx(
+            SEED_MEAN_RATING[c], abs=0.1)
+    # a subject's own benefit moves the answers: VG cut its error 20 % more than FF did
+    moved = [simulated_answers(p, "post", rng, measured={"vg": 0.2, "ff": 0.0})
+             for _ in range(n)]
+    gap = (np.mean([r["rating"]["vg"] - r["rating"]["ff"] for r in moved])
+           - np.mean([r["rating"]["vg"] - r["rating"]["ff"] for r in same]))
+    assert gap == pytest.approx(RATING_WEIGHT * 0.2, abs=0.15)
+    assert np.mean([r["best"] == "vg" for r in moved]) > best_vg + 0.05
+    sets = Counter(len(r.get("sets", [])) for r in same)
     assert sets[0] > 0 and sets[1] > 0 and sets[2] == 0  # only 2 conditions: one set of 2
 
 

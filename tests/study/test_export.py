@@ -89,7 +89,7 @@ def test_csv_and_parquet_read_back_equal(study: Path, tmp_path: Path, table: str
     assert len(a) > 0
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["tables"][table]["rows"] == len(a)
-    assert manifest["schema_version"] == SCHEMA_VERSION == 3
+    assert manifest["schema_version"] == SCHEMA_VERSION
 
 
 def test_exported_values_equal_the_store(study: Path, tmp_path: Path) -> None:

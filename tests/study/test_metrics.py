@@ -77,6 +77,16 @@ EXPECTED = pd.DataFrame({
     "path_l1": [1.0, 2.0, 2.5],
     "path_l2": [1.0, 1 + math.sqrt(0.5), math.sqrt(0.5) + 0.75 + math.sqrt(0.3125)],
     "n_samples": [3, 3, 4],
+    # rate-independent e_i = e_i x dt (0.5 s) [mm s]
+    "error_l1_mm_s": [750.0, 750.0, 1125.0],
+    # distance to the segment of the goal, start = x(0) = (0,0,0) [mm]:
+    #   g0 (0,0,0)-(1,0,0): rows 0-2 on it -> 0, 0, 0
+    #   g1 (1,0,0)-(1,1,0): rows 3-5 -> 0, 0.5 (x = 1.5), 0
+    #   g2 (1,1,0)-(0,1,0): rows 6-9 -> 0.5 (z), 0, 0.25 (z), 0
+    "path_dev_mean_mm": [0.0, 500.0 / 3, 187.5],
+    "path_dev_rms_mm": [0.0, 1000 * math.sqrt(0.25 / 3), 1000 * math.sqrt(0.3125 / 4)],
+    "path_dev_max_mm": [0.0, 500.0, 500.0],
+    "path_dev_out_frac": [0.0, 1 / 3, 0.5],   # outside the 2 mm tube
 })
 
 
@@ -151,8 +161,10 @@ def test_rows_logged_after_completion_belong_to_no_point():
     x2 = np.vstack([x, [[0.0, 2.0, 0.0]]])  # one more step of L1 length 1
     g2 = np.vstack([g, [[np.nan] * 3]])  # g of a "done" row is not used
     gi2 = np.append(gi, 3)
-    df, s = evaluate_trial(t2, x2, g2, gi2, 3, r_reach=R)
+    # with the points' geometry: the "done" row (1 m off the path) enters no path deviation
+    df, s = evaluate_trial(t2, x2, g2, gi2, P, r_reach=R)
     pd.testing.assert_frame_equal(df, EXPECTED.astype(df.dtypes.to_dict()), rtol=1e-12)
+    assert s["path_dev_max_mm"] == 500.0 and s["error_l1_sum_mm_s"] == 2625.0
     assert s["total_path_l1"] == 6.5 and s["duration"] == 5.5  # whole recording
 
 

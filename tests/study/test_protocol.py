@@ -43,6 +43,36 @@ def test_every_shipped_protocol_loads() -> None:
         assert len(generate_schedule(p, 1)) == p.n_trials
 
 
+SEED_SCHEMA = {"vg": "vg_seed", "ag": "ag_seed"}
+
+
+def test_the_seed_and_revised_protocols_run_their_own_vg_and_ag() -> None:
+    from vasim.fixtures.schema import load_schema
+
+    seed = load_protocol("vf_learning_curve")
+    revised = load_protocol("vf_learning_curve_revised")
+    for proto, vg, ag in ((seed, "vg_seed", "ag_seed"), (revised, "vg", "ag")):
+        runs = {t.condition: t.schema for t in generate_schedule(proto, 3)}
+        assert runs["vg"] == vg and runs["ag"] == ag
+        assert runs["ff"] == "ff" and runs["none"] == "none"
+    assert load_schema("vg_seed").fixtures[0].params.fade is False
+    assert load_schema("vg").fixtures[0].params.fade is True
+    assert load_schema("ag_seed").fixtures[0].params.dead_zone is False
+    assert load_schema("ag").fixtures[0].params.dead_zone is True
+    # the same schedule otherwise
+    a = generate_schedule(seed, 11)
+    b = generate_schedule(revised, 11)
+    assert [(t.condition, t.variant, t.probe) for t in a] == \
+        [(t.condition, t.variant, t.probe) for t in b]
+
+
+def test_a_block_schema_must_exist() -> None:
+    d = vf_dict()
+    d["blocks"][1]["schema"] = "vg_nonexistent"
+    with pytest.raises(ConfigError, match=r"blocks\[1\]\.schema"):
+        protocol_from_dict(d)
+
+
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**63 - 1))
 def test_vf_learning_curve_schedule(seed: int) -> None:
@@ -63,7 +93,10 @@ def test_vf_learning_curve_schedule(seed: int) -> None:
     assert sorted(b[0].condition for b in blocks) == sorted(FIXTURES)
     for pos, b in enumerate(blocks, start=1):
         assisted, probe = b[:6], b[6]
-        assert {t.condition for t in assisted} == {b[0].condition} == {t.schema for t in assisted}
+        assert {t.condition for t in assisted} == {b[0].condition}
+        # the seed's conditions: VG and AG run as the 46 subjects used them
+        assert {t.schema for t in assisted} == {SEED_SCHEMA.get(b[0].condition,
+                                                                b[0].condition)}
         assert sorted(t.variant for t in assisted) == [1, 2, 3, 4, 5, 6]
         assert not any(t.probe for t in assisted) and probe.probe
         assert {t.block_index for t in b} == {pos}
@@ -261,3 +294,19 @@ def test_a_protocol_time_limit_beyond_a_day_is_refused(tmp_path: Path) -> None:
     p.write_text("\n".join(lines) + "\n")
     with pytest.raises(ConfigError, match="max_trial_time_s"):
         load_protocol(p)
+
+
+def test_poi_spacing_is_a_protocol_parameter() -> None:
+    from vasim.trials.vf import TrialConfig, make_task
+
+    d = vf_dict()
+    assert load_protocol("vf_learning_curve").poi_spacing is None   # the task's default
+    d["poi_spacing_m"] = 0.0056
+    d["reach_radius_m"] = 0.0025
+    p = protocol_from_dict(d)
+    assert p.poi_spacing == 0.0056
+    task = make_task(TrialConfig(reach_radius=p.reach_radius, poi_spacing=p.poi_spacing))
+    assert task.n_points == 56 and task.reach_radius == 0.0025
+    d["reach_radius_m"] = 0.005
+    with pytest.raises(ConfigError, match="poi_spacing_m"):
+        protocol_from_dict(d)

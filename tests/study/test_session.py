@@ -18,6 +18,8 @@ import pytest
 
 from vasim.cli import main
 from vasim.core.errors import ConfigError, StoreError
+from vasim.operator.learning import trial_adjustment
+from vasim.operator.profile import OperatorProfile
 from vasim.records.samples import FRAME_COLUMNS
 from vasim.study.protocol import generate_schedule, load_protocol
 from vasim.study.session import (
@@ -107,8 +109,14 @@ def test_session_runs_its_stored_schedule(tmp_path: Path, tiny: Path) -> None:
             assert (tr["status"], tr["attempt"], tr["session_id"]) == ("completed", 1, sid)
             assert (tr["schema"], tr["variant"]) == (t.schema, t.variant)
             cfg = st.trial(int(tr["id"]))["config"]
-            # practice = index in the session; seed from (session seed, index)
-            assert cfg["practice"] == t.index and cfg["seed"] == trial_seed(11, t.index)
+            # practice: the effective practice of the earlier trials' conditions (FF and Mag
+            # trials count more, vasim.operator.learning); seed from (session seed, index)
+            adj = trial_adjustment([e.condition for e in expected[:t.index]], t.condition)
+            assert cfg["practice"] == round(adj.practice)
+            expert = OperatorProfile.expert()   # the fixture's effect on the learnable noise
+            assert cfg["profile"]["noise"] == pytest.approx(expert.noise * adj.noise_factor)
+            assert cfg["profile"]["fitts_b"] == pytest.approx(expert.fitts_b * adj.time_factor)
+            assert cfg["seed"] == trial_seed(11, t.index)
             assert cfg["max_time"] == 0.3 and cfg["reach_radius"] == 0.005
             assert cfg["profile"]["skill"] == pytest.approx(0.9)
         assert st.schedule(sid)["trial_id"].tolist() == trials.sort_index()["id"].tolist()

@@ -498,8 +498,9 @@ def test_v1_store_is_migrated_to_v3_in_place(tmp_path: Path):
     with pytest.raises(StoreError, match="open it writable once"):
         TrialStore(p, readonly=True)
     with TrialStore(p) as st:
-        assert st.schema_version == SCHEMA_VERSION == 3
-        assert [v for v, _ in st.con.execute("SELECT * FROM schema_version")] == [1, 2, 3]
+        assert st.schema_version == SCHEMA_VERSION
+        assert [v for v, _ in st.con.execute("SELECT * FROM schema_version")] == list(
+            range(1, SCHEMA_VERSION + 1))
         tables = {r[0] for r in st.con.execute("SELECT name FROM sqlite_master "
                                                "WHERE type = 'table'")}
         assert {"sessions", "scheduled_trials", "demographics", "answers",
@@ -521,7 +522,7 @@ def test_v1_store_is_migrated_to_v3_in_place(tmp_path: Path):
         st.finish_trial(tid, random_buffer(4), trial_metrics={"path_l1": 1.5})
         assert st.trial_metrics(tid)["value"].tolist() == [1.5]
     with TrialStore(p, readonly=True) as ro:  # reopening: nothing left to migrate
-        assert ro.schema_version == 3
+        assert ro.schema_version == SCHEMA_VERSION
 
 
 def test_a_failed_migration_leaves_the_v1_store_untouched(tmp_path: Path, monkeypatch):
@@ -589,3 +590,31 @@ def test_a_locked_database_is_a_store_error(tmp_path: Path) -> None:
     finally:
         holder.rollback()
         holder.close()
+
+
+def test_v2_point_metrics_gain_the_v4_path_columns_as_not_measured(tmp_path: Path):
+    """A version-2 store's per-point rows keep their values; the v4 path-deviation and
+    rate-independent e columns read NaN (not measured)."""
+    p = tmp_path / "v2.db"
+    con = sqlite3.connect(p, isolation_level=None)
+    con.execute("BEGIN")
+    for v in (1, 2):
+        for stmt in schema_mod.split_sql(schema_mod.MIGRATIONS[v]):
+            con.execute(stmt)
+        con.execute("INSERT INTO schema_version VALUES (?, '2025-01-01T00:00:00+00:00')", (v,))
+    con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
+    con.execute("PRAGMA user_version = 2")
+    con.execute("INSERT INTO subjects VALUES ('S01', '2025-01-01', NULL)")
+    con.execute("INSERT INTO trials (id, subject, task, status, started_at, n_samples) "
+                "VALUES (1, 'S01', 'trajectory', 'completed', '2025-01-01', 0)")
+    con.execute("INSERT INTO point_metrics VALUES (1, 0, 1, 1.5, 2.25, 1.5, 1.0, 1.0, 3)")
+    con.execute("COMMIT")
+    con.close()
+    with TrialStore(p) as st:
+        assert st.schema_version == SCHEMA_VERSION
+        pm = st.point_metrics(1)
+        assert list(pm.columns) == list(POINT_COLUMNS)
+        assert pm.loc[0, "error_l1"] == 2.25 and pm.loc[0, "n_samples"] == 3
+        for c in ("error_l1_mm_s", "path_dev_mean_mm", "path_dev_rms_mm", "path_dev_max_mm",
+                  "path_dev_out_frac"):
+            assert math.isnan(pm.loc[0, c]), c

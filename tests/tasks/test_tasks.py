@@ -178,3 +178,24 @@ def test_trajectory_state_fields() -> None:
     np.testing.assert_allclose(st.goal, t.points[5])
     assert st.lookahead is not None
     assert abs(np.linalg.norm(st.lookahead - t.points[5]) - 0.02) < 0.002
+
+
+def test_poi_spacing_is_a_task_parameter():
+    from vasim.tasks.trajectory import POI_SPACING
+
+    default = trajectory_task(0)
+    assert default.n_points == 30
+    fine = trajectory_task(0, poi_spacing=0.0056, reach_radius=0.0025)
+    # the same polyline resampled: ~56 POIs (the seed's ~56 rows per trial), equal chords
+    assert 54 <= fine.n_points <= 58
+    chords = np.linalg.norm(np.diff(fine.points, axis=0), axis=1)
+    assert chords.min() > 2 * 0.0025 and chords.max() < 0.0056 * 1.05
+    assert fine.length() == pytest.approx(default.length(), rel=0.02)
+    # the same path: the start agrees up to the re-centring on the POIs' centroid (< 1 mm)
+    np.testing.assert_allclose(fine.points[0], default.points[0], atol=1e-3)
+    # a reach sphere may not overlap the next POI's
+    with pytest.raises(ConfigError, match="twice the reach radius"):
+        trajectory_task(0, poi_spacing=0.008)     # default reach radius 5 mm
+    with pytest.raises(ConfigError, match="poi_spacing"):
+        trajectory_task(0, poi_spacing=0.5)
+    assert trajectory_task(3, poi_spacing=POI_SPACING).n_points == 30

@@ -268,9 +268,12 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
         ("points reached", f"{reached}/{len(m)}"),
         ("completion time" if s.get("outcome") == "reached_all" else "duration",
          f"{s['sim_time']:.2f} s"),
-        ("cumulative error", f"sum e_i = {m['error_l1'].sum():.2f} m over {n} samples "
-                             f"(mean |x - g|_1 = {1000 * m['error_l1'].sum() / n:.1f} mm)"),
-        ("mean e_i", f"{m['error_l1'].mean():.3f} m per point"),
+        ("path deviation", f"mean {s['path_dev_mean_mm']:.2f} mm, RMS "
+                           f"{s['path_dev_rms_mm']:.2f} mm, max {s['path_dev_max_mm']:.2f} mm, "
+                           f"{100 * s['path_dev_out_frac']:.1f} % of time outside the tube"),
+        ("cumulative error", f"sum e_i x dt = {s['error_l1_sum_mm_s']:.1f} mm s (eq. 6.5: "
+                             f"{m['error_l1'].sum():.2f} m·sample over {n} samples; mean "
+                             f"|x - g|_1 = {1000 * m['error_l1'].sum() / n:.1f} mm)"),
         ("mean latency l_i", f"{lat.mean():.3f} s" if len(lat) else "-"),
         ("path length", f"{m['path_l1'].sum():.3f} m (Manhattan), "
                         f"{m['path_l2'].sum():.3f} m (Euclidean)"),

@@ -68,6 +68,12 @@ F5PL_ASYMMETRY = Bound(0.0, 100.0, "", "asymmetry g: 1 is the symmetric 4PL")
 TASK_SCALE_M = Bound(1e-3, 0.5, "m",
                      "task size D: from 1 mm to past the Omni's 160 mm workspace x 3")
 """The length D that normalises distances (schema ``scale_m``)."""
+PATH_TOLERANCE_M = Bound(1e-4, 0.05, "m",
+                         "tolerance tube around the planned path: 0.1 mm (sensor noise) to "
+                         "5 cm (wider than any abdominal task's corridor)")
+POI_SPACING_M = Bound(1e-3, 0.1, "m",
+                      "arc length between trajectory POIs: 1 mm to 10 cm (the workspace is "
+                      "about 10 cm across)")
 REACH_RADIUS_M = Bound(1e-4, 0.02, "m",
                        "r_reach is a few mm; 2 cm already covers several trajectory points "
                        "in the Omni's 160 x 120 x 70 mm workspace")

@@ -50,27 +50,46 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from vasim.records.path_deviation import (
+    DEFAULT_PATH_TOLERANCE,
+    PATH_POINT_COLUMNS,
+    PATH_TRIAL_KEYS,
+    point_path_deviation,
+    trial_path_deviation,
+)
 from vasim.tasks.base import DEFAULT_REACH_RADIUS as DEFAULT_REACH_RADIUS
 
 POINT_COLUMNS: tuple[str, ...] = (
     "point", "reached", "t_reached", "error_l1", "latency", "path_l1", "path_l2", "n_samples",
+    *PATH_POINT_COLUMNS,
 )
 """Columns of ``point_metrics``, in order:
 
 * ``point`` (int64): trajectory point index i, 0..N-1.
 * ``reached`` (bool): the point was reached.
 * ``t_reached`` (float64) [s]: reach time t_i since trial start, NaN if unreached.
-* ``error_l1`` (float64) [m]: cumulative Manhattan error e_i (a sum over samples, so it
-  grows with the logging rate; divide by ``n_samples`` for a mean error).
+* ``error_l1`` (float64) [m summed over samples, "m·sample"]: cumulative Manhattan error
+  e_i exactly as eq. 6.5 (a sum over samples, so it grows with the logging rate and with
+  the time spent on the way to p_i: it is not a length; divide by ``n_samples`` for a mean
+  error in m).
 * ``latency`` (float64) [s]: l_i = t_i - t_(i-1), NaN if unreached.
 * ``path_l1``, ``path_l2`` (float64) [m]: Manhattan / Euclidean path length while the goal
   was point i.
 * ``n_samples`` (int64): samples logged with goal_index == i.
+* ``error_l1_mm_s`` (float64) [mm s]: the rate-independent e_i, ``sum_j ||x(j) - g(j)||_1
+  w_j`` (eq. 6.5 times the sample period; ``vasim.records.path_deviation``).
+* ``path_dev_mean_mm``, ``path_dev_rms_mm``, ``path_dev_max_mm`` (float64) [mm]: time mean,
+  RMS and maximum distance of the tool tip to the planned path segment [p_(i-1), p_i]
+  while p_i was the goal (independent of speed).
+* ``path_dev_out_frac`` (float64) [0..1]: fraction of that time outside the tolerance tube.
+
+The path-deviation columns are NaN when ``points`` is given as a count (no geometry); every
+path column is NaN for a point without samples.
 """
 
 SUMMARY_KEYS: tuple[str, ...] = (
     "n_points", "points_reached", "completed", "completion_time", "total_error_l1",
-    "mean_latency", "total_path_l1", "total_path_l2", "duration",
+    "mean_latency", "total_path_l1", "total_path_l2", "duration", *PATH_TRIAL_KEYS,
 )
 """Keys of ``trial_summary``; see its docstring."""
 
@@ -227,6 +246,8 @@ def point_metrics(
     r_reach: float = DEFAULT_REACH_RADIUS,
     t_reached: ArrayLike | None = None,
     t_start: float = 0.0,
+    start: ArrayLike | None = None,
+    tolerance: float = DEFAULT_PATH_TOLERANCE,
 ) -> pd.DataFrame:
     """Per-point metrics of one trial (eq. 6.5), as a tidy DataFrame.
 
@@ -242,6 +263,9 @@ def point_metrics(
         t_reached: (N,) reach times [s] recorded by the runner (NaN = unreached); derived
             with ``reach_times`` when omitted.
         t_start: trial start [s], the reference of the first latency (t_(-1)).
+        start: (3,) the tool's start position [m], first node of the planned path (None:
+            the first sample); used only when ``points`` is an array.
+        tolerance: radius of the tolerance tube of ``path_dev_out_frac`` [m].
 
     Returns:
         DataFrame with one row per point and the columns ``POINT_COLUMNS``.
@@ -290,6 +314,15 @@ def point_metrics(
     path_l1 = np.where(no_data, np.nan, path_l1)
     path_l2 = np.where(no_data, np.nan, path_l2)
 
+    if isinstance(points, (int, np.integer)):
+        path = {c: np.full(N, np.nan) for c in PATH_POINT_COLUMNS}
+        w = np.diff(tt, prepend=float(t_start)) if n else np.zeros(0)
+        path["error_l1_mm_s"] = 1000.0 * np.bincount(
+            gi[active], weights=(err * w)[active], minlength=N)[:N]
+    else:
+        path = point_path_deviation(tt, xx, gg, gi, points, start=start, tolerance=tolerance,
+                                    t_start=t_start)
+    path["error_l1_mm_s"] = np.where(no_data, np.nan, path["error_l1_mm_s"])
     return pd.DataFrame(
         {
             "point": np.arange(N, dtype=np.int64),
@@ -300,6 +333,7 @@ def point_metrics(
             "path_l1": path_l1.astype(np.float64),
             "path_l2": path_l2.astype(np.float64),
             "n_samples": n_samples,
+            **path,
         },
         columns=list(POINT_COLUMNS),
     )
@@ -311,6 +345,7 @@ def trial_summary(
     duration: float | None = None,
     path_l1: float | None = None,
     path_l2: float | None = None,
+    path_deviation: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """Per-trial summary of a ``point_metrics`` frame.
 
@@ -319,14 +354,19 @@ def trial_summary(
         duration: the trial's logged duration [s] (e.g. the last sample time); NaN if None.
         path_l1, path_l2: whole-trial path lengths [m] (``path_lengths(x)``); when None, the
             sums of the per-point paths.
+        path_deviation: ``path_deviation.trial_path_deviation`` of the trial; its keys
+            (``PATH_TRIAL_KEYS``) are NaN when None.
 
     Returns:
         dict with keys ``SUMMARY_KEYS``, plain Python numbers:
         ``n_points`` (int), ``points_reached`` (int), ``completed`` (bool: every point
         reached), ``completion_time`` [s] (reach time of the last point, NaN unless
-        completed), ``total_error_l1`` [m] (sum of e_i over points with data),
+        completed), ``total_error_l1`` [m·sample] (sum of e_i over points with data; a sum
+        of per-sample distances, not a length),
         ``mean_latency`` [s] (mean l_i over reached points, NaN if none),
-        ``total_path_l1``, ``total_path_l2`` [m], ``duration`` [s].
+        ``total_path_l1``, ``total_path_l2`` [m], ``duration`` [s], then
+        ``PATH_TRIAL_KEYS`` (path deviation [mm], ``error_l1_sum_mm_s`` [mm s], final error
+        and overshoot of point targeting [mm]).
 
     Example:
         >>> import pandas as pd
@@ -361,6 +401,9 @@ def trial_summary(
         "total_path_l1": _nansum("path_l1") if path_l1 is None else float(path_l1),
         "total_path_l2": _nansum("path_l2") if path_l2 is None else float(path_l2),
         "duration": math.nan if duration is None else float(duration),
+        **{k: math.nan if path_deviation is None else float(path_deviation[k])
+           for k in PATH_TRIAL_KEYS},
+        "error_l1_sum_mm_s": _nansum("error_l1_mm_s"),   # needs no geometry
     }
 
 
@@ -374,12 +417,16 @@ def evaluate_trial(
     r_reach: float = DEFAULT_REACH_RADIUS,
     t_reached: ArrayLike | None = None,
     t_start: float = 0.0,
+    start: ArrayLike | None = None,
+    tolerance: float = DEFAULT_PATH_TOLERANCE,
 ) -> tuple[pd.DataFrame, dict[str, Any]]:
     """``point_metrics`` plus ``trial_summary`` with whole-trial path and duration.
 
     ``duration`` is the last sample time minus ``t_start`` (0 for an empty trial); the total
     paths cover the whole recording (``path_lengths(x)``), including any motion logged after
-    the last point was reached.
+    the last point was reached. With ``points`` an array, the path-deviation measures of
+    ``vasim.records.path_deviation`` (planned path from ``start``, tube radius ``tolerance``
+    [m]) fill the path columns and summary keys.
 
     Example:
         >>> df, s = evaluate_trial([0.5, 1.0], [[0, 0, 0], [0, 0, 1]], [[0, 0, 1]] * 2,
@@ -388,8 +435,14 @@ def evaluate_trial(
         (True, 1.0, 1.0, 1.0)
     """
     df = point_metrics(t, x, g, goal_index, points, r_reach=r_reach, t_reached=t_reached,
-                       t_start=t_start)
+                       t_start=t_start, start=start, tolerance=tolerance)
     tt = np.asarray(t, dtype=np.float64)
-    l1, l2 = path_lengths(np.asarray(x, dtype=np.float64).reshape(-1, 3))
+    xx = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+    l1, l2 = path_lengths(xx)
     duration = float(tt[-1] - t_start) if tt.size else 0.0
-    return df, trial_summary(df, duration=duration, path_l1=l1, path_l2=l2)
+    dev = None
+    if not isinstance(points, (int, np.integer)):
+        dev = trial_path_deviation(tt, xx, g, goal_index, points, start=start,
+                                   tolerance=tolerance, t_start=t_start)
+    return df, trial_summary(df, duration=duration, path_l1=l1, path_l2=l2,
+                             path_deviation=dev)

@@ -64,6 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
 from vasim.core.errors import ConfigError
+from vasim.records.path_deviation import PATH_TRIAL_KEYS
 from vasim.records.samples import IN_VIEW_UNKNOWN
 
 FloatArray = NDArray[np.float64]
@@ -82,6 +83,10 @@ class MetricParams:
         excessive_force_n: force threshold of the excessive-force metrics [N], > 0.
         force_source: ``"contact"`` (tissue contact force, ``f_contact``) or
             ``"rendered"`` (the force rendered to the operator, ``force``).
+        path_tolerance_m: radius of the tolerance tube of ``path_dev_out_frac`` [m], > 0
+            (protocol ``path_tolerance_m``; **Decision**: 2 mm, the order of the path
+            deviations the seed's subjects' tracks show (3-4 mm mean), so the fraction
+            separates fixtures instead of saturating at 0 or 1).
 
     Raises:
         ConfigError: naming the field and the bad value.
@@ -93,6 +98,7 @@ class MetricParams:
     movement_off_speed: float = 0.005
     excessive_force_n: float = 2.0
     force_source: Literal["contact", "rendered"] = "contact"
+    path_tolerance_m: float = 0.002
 
     def __post_init__(self) -> None:
         fc = self.filter_cutoff_hz
@@ -103,7 +109,8 @@ class MetricParams:
                 or not 1 <= self.filter_order <= 8:
             raise ConfigError(f"must be an integer in [1, 8], got {self.filter_order!r}",
                               field="filter_order")
-        for name in ("movement_on_speed", "movement_off_speed", "excessive_force_n"):
+        for name in ("movement_on_speed", "movement_off_speed", "excessive_force_n",
+                     "path_tolerance_m"):
             v = getattr(self, name)
             if not (_is_number(v) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"must be a finite number > 0, got {v!r}", field=name)
@@ -126,7 +133,17 @@ TRIAL_METRICS: dict[str, tuple[str, str]] = {
     "completed": ("0/1", "1 when every POI was reached"),
     "completion_time": ("s", "reach time of the last POI (NaN unless completed)"),
     "duration": ("s", "logged duration: last sample time minus trial start"),
-    "total_error_l1": ("m", "sum of the cumulative Manhattan errors e_i (eq. 6.5)"),
+    "total_error_l1": ("m·sample", "sum of the cumulative Manhattan errors e_i (eq. 6.5): a "
+                                   "sum over logged samples, grows with time and rate"),
+    "error_l1_sum_mm_s": ("mm s", "rate-independent e: sum of e_i times the sample period"),
+    "path_dev_mean_mm": ("mm", "time-mean distance of the tool tip to the planned path "
+                               "(polyline start -> POIs; independent of speed)"),
+    "path_dev_rms_mm": ("mm", "RMS distance of the tool tip to the planned path"),
+    "path_dev_max_mm": ("mm", "largest distance of the tool tip to the planned path"),
+    "path_dev_out_frac": ("1", "fraction of time outside the tolerance tube around the path "
+                               "(MetricParams.path_tolerance_m, default 2 mm)"),
+    "final_error_mm": ("mm", "point targeting: distance of the last sample to the POI"),
+    "overshoot_mm": ("mm", "point targeting: largest travel past the POI along the approach"),
     "mean_latency": ("s", "mean latency l_i over the reached points"),
     "path_l1": ("m", "Manhattan length of the whole TCP track"),
     "path_l2": ("m", "Euclidean length of the whole TCP track"),
@@ -433,7 +450,8 @@ def trial_metrics(
             ``delicate``, ``clutch``, ``in_view`` optional (their buffer defaults).
         summary: ``metrics.trial_summary`` of the trial (e_i / l_i aggregates); its keys
             ``n_points``, ``points_reached``, ``completed``, ``completion_time``,
-            ``total_error_l1``, ``mean_latency`` are copied (NaN when absent).
+            ``total_error_l1``, ``mean_latency`` and the path-deviation keys
+            (``path_deviation.PATH_TRIAL_KEYS``) are copied (NaN when absent).
         t_start: trial start [s] (reference of the first sample's duration).
         params: metric constants.
 
@@ -471,7 +489,7 @@ def trial_metrics(
 
     out: dict[str, float] = {k: math.nan for k in TRIAL_METRICS}
     for key in ("n_points", "points_reached", "completed", "completion_time",
-                "total_error_l1", "mean_latency"):
+                "total_error_l1", "mean_latency", *PATH_TRIAL_KEYS):
         out[key] = from_summary(key)
     # Target displacement is measured by the abdomen physics (vasim.abdomen.quality), not
     # from the samples: copied from the runner's summary.

@@ -11,7 +11,10 @@ SQLite never sees concurrent writers. Re-running the same command continues wher
 stopped: trials left 'running' by a killed run are marked 'interrupted' when the store opens
 and run again as new attempts (same trial seed: the same trial).
 
-Models (**decisions**, plausible choices, not fitted to data):
+Models (**decisions**; demographics are plausible choices, not fitted to data; the
+operator's fixture effects, learning, carry-over and questionnaire answers are calibrated to
+the seed's chapter 6, ``vasim.operator.learning`` / ``vasim.operator.questionnaire``, and
+the sessions say so: operator "scripted (calibrated to the seed, synthetic)"):
 
 * Subjects: ``n_surgeons`` surgeons and ``n_subjects - n_surgeons`` residents, assigned to
   the codes by a seeded permutation (codes do not reveal the group). Subject j draws from
@@ -29,16 +32,17 @@ Models (**decisions**, plausible choices, not fitted to data):
   - robotic_experience: none .6, observed .2, assisted .1, performed .1 | none .7,
     observed .25, assisted .05.
 
-* Post-questionnaire answers from the subject's own measured benefit: for each assisted
-  condition c, ``b_c = ln(E_probe / E_c)`` with E the mean cumulative error
-  (``total_error_l1``) of the subject's completed trials of c and of its fixture-free probe
-  trials (b > 0: the fixture reduced the error). The perceived benefit is
-  ``p_c = b_c + N(0, 0.15^2)`` (``PERCEPTION_SD``). A 0-10 rating is
-  ``clip(round(5 + 10 p_c + N(0, 1)), min, max)`` (``RATING_CENTRE``, ``RATING_SLOPE``,
-  ``RATING_NOISE_SD``); "best" is the condition of largest p, "worst" of smallest p (an
-  unlabelled condition choice: uniform). Proposed schemas: 0, 1 or 2 proposals with
-  probabilities 0.2, 0.5, 0.3 (``PROPOSALS_P``, capped by ``max_entries``), proposal m
-  (1-based) = the ``min_size + m - 1`` conditions of largest p. Likert items:
+* Post-questionnaire answers from a *perceived* benefit (``vasim.operator.questionnaire``,
+  calibrated to the seed's subjective results): for each assisted condition c the measured
+  benefit ``b_c = ln(E_probe / E_c)``, E the mean path deviation (``path_dev_mean_mm``,
+  accuracy independent of speed; ``total_error_l1`` for trials stored without it) of the
+  subject's completed trials of c and of its fixture-free probe trials (b > 0: the fixture
+  reduced the error), moves the answers around each fixture's noticeability, comfort and
+  rating centre: "best" and "worst" are multinomial-logit choices whose cohort shares are
+  the seed's, the 0-10 rating is centred on the seed's mean rating (an unlabelled
+  condition choice: uniform). Proposed schemas: 0, 1 or 2 proposals with probabilities
+  0.2, 0.5, 0.3 (``PROPOSALS_P``, capped by ``max_entries``), proposal m (1-based) = the
+  ``min_size + m - 1`` conditions of largest best-utility. Likert items:
   ``clip(round(N(3.5, 1)), 1, 5)`` (no performance model); choice and integer items:
   uniform; free text: left unanswered (empty if required).
 
@@ -71,6 +75,7 @@ import pandas as pd
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
+from vasim.operator.questionnaire import Perception, perceive
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
@@ -113,14 +118,6 @@ DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]
 }
 """Group -> demographic field -> (values, probabilities) (module docstring)."""
 
-PERCEPTION_SD = 0.15
-"""Noise of the perceived benefit p_c around the measured log error ratio b_c."""
-RATING_CENTRE = 5.0
-"""Rating of a fixture perceived as neither helping nor hindering (p = 0)."""
-RATING_SLOPE = 10.0
-"""Rating points per unit of perceived log error ratio."""
-RATING_NOISE_SD = 1.0
-"""Noise of a rating [rating points]."""
 PROPOSALS_P = (0.2, 0.5, 0.3)
 """Probabilities of proposing 0, 1, 2 schemas."""
 LIKERT_MEAN, LIKERT_SD = 3.5, 1.0
@@ -261,7 +258,7 @@ def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
 
 # ------------------------------------------------------------------------ questionnaires
 def _item_answer(item: QuestionItem, rng: np.random.Generator,
-                 perceived: Mapping[str, float]) -> Any:
+                 perceived: Mapping[str, Perception]) -> Any:
     """A simulated answer to one item (module docstring); None = left unanswered."""
     t = item.type
     if t == "choice":
@@ -273,18 +270,16 @@ def _item_answer(item: QuestionItem, rng: np.random.Generator,
     if t == "text":
         return "" if item.required else None
     conds = list(item.conditions)
-    p = {c: perceived.get(c, 0.0) for c in conds}
-    ranked = sorted(conds, key=lambda c: -p[c])
+    p = {c: perceived[c] for c in conds}
+    ranked = sorted(conds, key=lambda c: -p[c].best_utility)
     if t == "condition_choice":
         if item.select == "best":
             return ranked[0]
         if item.select == "worst":
-            return ranked[-1]
+            return max(conds, key=lambda c: p[c].worst_utility)
         return conds[int(rng.integers(len(conds)))]
     if t == "condition_rating":
-        return {c: int(np.clip(round(RATING_CENTRE + RATING_SLOPE * p[c]
-                                     + rng.normal(0.0, RATING_NOISE_SD)), item.min, item.max))
-                for c in conds}
+        return {c: int(np.clip(round(p[c].rating), item.min, item.max)) for c in conds}
     # condition_sets
     k = int(rng.choice(len(PROPOSALS_P), p=PROPOSALS_P))
     out = []
@@ -298,13 +293,15 @@ def _item_answer(item: QuestionItem, rng: np.random.Generator,
 
 def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Generator, *,
                       demographics: Demographics | None = None,
-                      perceived: Mapping[str, float] | None = None) -> dict[str, Any]:
+                      measured: Mapping[str, float] | None = None) -> dict[str, Any]:
     """A simulated subject's answers to one questionnaire (module docstring's models).
 
     Args:
         protocol: the protocol. questionnaire: "pre" or "post". rng: the subject's stream.
         demographics: the subject's demographics (asked in "pre").
-        perceived: perceived benefit p_c per condition (``perceived_benefits``).
+        measured: measured benefit b_c per condition (``measured_benefits``; missing
+            conditions count 0), from which each condition's ``Perception`` is drawn once
+            per questionnaire (``vasim.operator.questionnaire.perceive``).
     """
     q = getattr(protocol, questionnaire)
     out: dict[str, Any] = {}
@@ -314,8 +311,10 @@ def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Gen
                    laparoscopy_experience=d.laparoscopy_experience,
                    simulator_experience=d.simulator_experience,
                    robotic_experience=d.robotic_experience)
+    conds = list(dict.fromkeys(c for item in q.items for c in item.conditions))
+    perceived = perceive({c: (measured or {}).get(c, 0.0) for c in conds}, rng)
     for item in q.items:
-        a = _item_answer(item, rng, perceived or {})
+        a = _item_answer(item, rng, perceived)
         if a is not None:
             out[item.id] = a
     return out
@@ -326,7 +325,7 @@ def measured_benefits(schedule: pd.DataFrame, errors: Mapping[int, float]) -> di
 
     Args:
         schedule: the session's ``TrialStore.schedule`` frame. errors: trial id -> its
-            ``total_error_l1`` [m].
+            error measure (``path_dev_mean_mm`` [mm], or ``total_error_l1``).
 
     Returns:
         condition -> b_c (0 where a mean is missing or not positive).
@@ -359,12 +358,15 @@ def _record_post(store: TrialStore, session: Session, subject: SimulatedSubject)
     sched = store.schedule(session.id)
     ids = [int(t) for t in sched["trial_id"].dropna()]
     tm = store.trial_metrics()
-    tm = tm[(tm["metric"] == "total_error_l1") & tm["trial_id"].isin(ids)]
+    tm = tm[tm["trial_id"].isin(ids)]
+    metric = "path_dev_mean_mm"
+    if tm.loc[tm["metric"] == metric, "value"].notna().sum() == 0:
+        metric = "total_error_l1"   # trials stored before the path-deviation measures
+    tm = tm[tm["metric"] == metric]
     errors = dict(zip(tm["trial_id"].astype(int), tm["value"].astype(float), strict=True))
     b = measured_benefits(sched, errors)
     rng = _stream(subject.session_seed, 8)
-    perceived = {c: v + rng.normal(0.0, PERCEPTION_SD) for c, v in b.items()}
-    answers = simulated_answers(session.protocol, "post", rng, perceived=perceived)
+    answers = simulated_answers(session.protocol, "post", rng, measured=b)
     record_answers(store, session.id, "post", answers, source=f"simulated {subject.code}")
 
 

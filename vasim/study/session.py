@@ -14,8 +14,14 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
 * Trial seeds: the operator seed of scheduled trial i is ``trial_seed(session seed, i)``,
   independent of the attempt, so a re-run after a crash repeats the trial the crash
   interrupted and a simulated session's data do not depend on its crash history.
-* Practice: the scripted operator's practice P of scheduled trial i is i, the number of
-  earlier trials of the session (its learning advances with the trial index).
+* Practice and fixture effects: the scripted operator of scheduled trial i runs with the
+  adjustment ``vasim.operator.learning.trial_adjustment`` of the conditions of trials
+  0..i-1 and its own condition: the practice P is the rounded effective practice (a trial
+  under FF or Mag counts more), and the profile's learnable noise and Fitts constants carry
+  the fixture's calibrated effect while assisted, and its carry-over and guidance
+  dependence in VF-free trials (the seed's hypotheses, chapter 6). A session run by the
+  scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
+  (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
   the operator profile resolved (not just the preset name), so a resumed session runs with
   the same person even if the presets change.
@@ -57,6 +63,7 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
+from vasim.operator.learning import OPERATOR_LABEL, trial_adjustment
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import validate_subject_code
 from vasim.records.trial_metrics import MetricParams
@@ -207,6 +214,12 @@ class Session:
         if scheduled.schema is None:
             self.protocol.check_runnable()
         s = self.settings
+        profile = s.resolved_profile()
+        practice = scheduled.index
+        if s.operator == "scripted":
+            adj = trial_adjustment([t.condition for t in self.schedule[:scheduled.index]],
+                                   scheduled.condition)
+            profile, practice = adj.apply(profile), round(adj.practice)
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
         return TrialConfig(
@@ -215,17 +228,18 @@ class Session:
             schema="none" if mode is not None else str(scheduled.schema), mode=mode,
             operator=s.operator,
             skill=s.skill, seed=trial_seed(self.seed, scheduled.index, repeat),
-            practice=scheduled.index, dt=s.dt,
+            practice=practice, dt=s.dt,
             max_time=s.max_trial_time if s.max_trial_time is not None
             else self.protocol.max_trial_time,
-            subject=self.subject, profile=s.resolved_profile(),
-            reach_radius=self.protocol.reach_radius,
+            subject=self.subject, profile=profile,
+            reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
         )
 
     @property
     def metric_params(self) -> MetricParams:
         """The trial-metric constants of the protocol."""
-        return MetricParams(excessive_force_n=self.protocol.excessive_force_n)
+        return MetricParams(excessive_force_n=self.protocol.excessive_force_n,
+                            path_tolerance_m=self.protocol.path_tolerance_m)
 
 
 # ------------------------------------------------------------------------ lifecycle
@@ -257,7 +271,8 @@ def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
                           "with load_protocol or parse_protocol")
     return store.create_session(
         SessionMeta(subject=subject, protocol=protocol.name, protocol_toml=text, seed=seed,
-                    operator=settings.operator, config=settings.to_record()),
+                    operator=OPERATOR_LABEL if settings.operator == "scripted"
+                    else settings.operator, config=settings.to_record()),
         [t.as_row() for t in schedule])
 
 

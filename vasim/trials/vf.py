@@ -123,6 +123,8 @@ class TrialConfig:
         label: a free-practice label (``TrialMeta.label``), or None.
         velocity_cutoff_hz: low-pass cutoff of the TCP velocity FF's damping uses [Hz].
         reach_radius: r_reach [m] (a protocol parameter); None: the task's default (5 mm).
+        poi_spacing: arc length between the trajectory's POIs [m] (a protocol parameter);
+            None: the task's default (10.5 mm, 30 POIs).
         profile: the operator profile; None: the ``skill`` preset.
         scene: the virtual abdomen the task lives in: a scene name
             (``protocols/scenes/NAME.toml``) or TOML path, or ``"none"`` for a static task
@@ -148,6 +150,7 @@ class TrialConfig:
     profile: OperatorProfile | None = field(default=None, compare=False)
     reach_radius: float | None = None
     scene: str = "default"
+    poi_spacing: float | None = None
     mode: str | None = None
     label: str | None = None
 
@@ -245,14 +248,17 @@ class TrialResult:
 
 
 def make_task(config: TrialConfig) -> Task:
-    """Builds the task a config names (with its reach radius, if the config sets one)."""
+    """Builds the task a config names (with its reach radius and POI spacing, if the config
+    sets them)."""
+    kw: dict[str, float] = {}
     if config.reach_radius is not None:
-        r = float(config.reach_radius)
-        if config.task == "trajectory":
-            return trajectory_task(config.variant, reach_radius=r)
-        return point_task(reach_radius=r)
+        kw["reach_radius"] = float(config.reach_radius)
     if config.task == "trajectory":
-        return trajectory_task(config.variant)
+        if config.poi_spacing is not None:
+            kw["poi_spacing"] = float(config.poi_spacing)
+        return trajectory_task(config.variant, **kw)
+    if config.reach_radius is not None:
+        return point_task(reach_radius=float(config.reach_radius))
     return point_task()
 
 
@@ -656,6 +662,8 @@ class TrialRunner:
             view["t"], view["x"], view["g"], view["goal_index"], self._points,
             r_reach=self.task.reach_radius,
             t_reached=self._reach_times + [math.nan] * (self._n - len(self._reach_times)),
+            start=self.task.start,
+            tolerance=(metric_params or MetricParams()).path_tolerance_m,
         )
         summary.update({
             "finished": bool(self._i >= self._n), "sim_time": self._t, "steps": self._k + 1,

@@ -27,6 +27,7 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.fixtures.logistic import Logistic5
+from vasim.records.path_deviation import path_distances
 from vasim.trials.vf import TrialFrame
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
 from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
@@ -105,9 +106,23 @@ def summary_text(summary: dict[str, Any] | None) -> str:
 
 def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
                  outcome: str | None = None) -> str:
-    """Live metrics: the trial (its store id, how it ended), time in trial and its limit,
-    distance to the goal, latency per reached point (markdown)."""
-    err = float(np.linalg.norm(np.asarray(frame.tcp) - np.asarray(frame.goal))) * 1e3
+    """Live metrics (markdown): the trial (its store id, how it ended), time in trial and
+    its limit, current distance of the tool tip to the planned path and to the goal [mm],
+    points reached, latency per reached point [s].
+
+    The distance to the path is ``vasim.records.path_deviation.path_distances`` (the segment
+    of the current goal and the one before it); "—" once every point is reached. No sum of
+    samples (e_i) is shown here: it is not a length.
+    """
+    tcp = np.asarray(frame.tcp, dtype=np.float64).reshape(3)
+    goal_mm = float(np.linalg.norm(tcp - np.asarray(frame.goal))) * 1e3
+    n_pts = int(np.asarray(info.points).reshape(-1, 3).shape[0])
+    if frame.goal_index < n_pts:
+        path_mm = float(path_distances(tcp[None, :], [int(frame.goal_index)], info.points,
+                                       info.start)[0]) * 1e3
+        path_txt = f"{path_mm:.1f} mm"
+    else:
+        path_txt = "—"
     lat = ", ".join(f"{x:.2f}" for x in latencies[-8:]) or "—"
     more = f" (last 8 of {len(latencies)})" if len(latencies) > 8 else ""
     outcome = outcome or frame_outcome(frame.done, frame.goal_index, frame.n_points)
@@ -117,7 +132,8 @@ def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
     return (f"| | |\n|---|---|\n"
             f"| Trial | {md_escape(info.title)} ({md_escape(info.mode)}, {md_escape(state)}) |\n"
             f"| Time | {frame.t:.2f} s of {limit:.0f} s |\n"
-            f"| Distance to the goal | {err:.1f} mm |\n"
+            f"| Distance to path | {path_txt} |\n"
+            f"| Distance to goal | {goal_mm:.1f} mm |\n"
             f"| Points | {min(frame.goal_index, frame.n_points)} / {frame.n_points} |\n"
             f"| Latency per point [s] | {lat}{more} |")
 

@@ -20,6 +20,8 @@ TOML layout (every field is checked; defaults in brackets)::
     excessive_force_n = 2.0             # [2.0] threshold of the excessive-force metrics [N]
     repeat_timed_out = false            # [false] a trial that hits its time limit is run
                                         # again (a new attempt) instead of counting as done
+    path_tolerance_m = 0.002            # [0.002] tolerance tube of path_dev_out_frac [m]
+    poi_spacing_m = 0.0105              # [task default] arc length between trajectory POIs [m]
 
     [randomisation]
     block_order = "random"              # ["fixed"] | "random" | "latin_square"

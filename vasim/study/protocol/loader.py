@@ -21,10 +21,11 @@ from vasim.study.protocol.model import Block, Protocol
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
-        "excessive_force_n", "repeat_timed_out", "randomisation", "probe", "blocks",
+        "excessive_force_n", "repeat_timed_out", "path_tolerance_m", "poi_spacing_m",
+        "randomisation", "probe", "blocks",
         "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
-          "probes_after")
+          "probes_after", "schema")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
 
@@ -116,6 +117,8 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "max_trial_time": data.get("max_trial_time_s", 180.0),
         "excessive_force_n": data.get("excessive_force_n", 2.0),
         "repeat_timed_out": data.get("repeat_timed_out", False),
+        "path_tolerance_m": data.get("path_tolerance_m", 0.002),
+        "poi_spacing": data.get("poi_spacing_m"),
         "block_order": rnd.get("block_order", "fixed"),
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),

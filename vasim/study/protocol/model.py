@@ -14,6 +14,8 @@ from typing import Any, Literal
 
 from vasim.core.bounds import (
     FORCE_N,
+    PATH_TOLERANCE_M,
+    POI_SPACING_M,
     PROBES_AFTER,
     REACH_RADIUS_M,
     REPETITIONS,
@@ -48,7 +50,11 @@ class Block:
     """A block of trials under one condition (see the module docstring).
 
     Attributes:
-        name: unique block name. condition: schema name or teleoperation mode.
+        name: unique block name. condition: schema name or teleoperation mode; the label
+            questionnaires and analyses use.
+        schema: the schema file the block runs, when it is not the condition's own (e.g.
+            condition ``"vg"`` run as ``"vg_seed"``, the arrow the seed's subjects saw);
+            None: the condition.
         variants: trajectory variants, in listed order. repetitions: rounds over variants.
         probe: the block's own trials are probe (fixture-free) trials.
         counterbalance: takes part in the block-order randomisation.
@@ -62,11 +68,14 @@ class Block:
     probe: bool = False
     counterbalance: bool = True
     probes_after: int = 0
+    schema: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
             raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
         check_str(self.condition, "condition")
+        if self.schema is not None:
+            check_str(self.schema, "schema")
         if not isinstance(self.variants, tuple):
             raise fail(self.variants, "an array of integers", field="variants")
         if not self.variants:
@@ -96,6 +105,10 @@ class Protocol:
         name, description: as in the file. task: ``"trajectory"`` or ``"point"``.
         reach_radius: r_reach [m]. max_trial_time: time limit of one trial [s].
         excessive_force_n: threshold of the excessive-force metrics [N].
+        path_tolerance_m: radius of the tolerance tube around the planned path [m]
+            (``path_dev_out_frac``).
+        poi_spacing: arc length between the trajectory task's POIs [m]; None: the task's
+            default (``vasim.tasks.trajectory.POI_SPACING``).
         repeat_timed_out: a scheduled trial whose attempt timed out (outcome
             ``'timed_out'``) is run again: ``vasim.study.session`` begins a new attempt.
         block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
@@ -118,6 +131,8 @@ class Protocol:
     max_trial_time: float = 180.0
     excessive_force_n: float = 2.0
     repeat_timed_out: bool = False
+    path_tolerance_m: float = 0.002
+    poi_spacing: float | None = None
     block_order: str = "fixed"
     variant_order: str = "fixed"
     probe_condition: str = "none"
@@ -136,6 +151,12 @@ class Protocol:
         check_number(self.max_trial_time, "max_trial_time_s", gt=0.0, bound=TRIAL_TIME_S)
         check_number(self.excessive_force_n, "excessive_force_n", gt=0.0, bound=FORCE_N)
         check_bool(self.repeat_timed_out, "repeat_timed_out")
+        check_number(self.path_tolerance_m, "path_tolerance_m", gt=0.0, bound=PATH_TOLERANCE_M)
+        if self.poi_spacing is not None:
+            check_number(self.poi_spacing, "poi_spacing_m", gt=0.0, bound=POI_SPACING_M)
+            if not self.poi_spacing > 2.0 * self.reach_radius:
+                raise fail(self.poi_spacing, f"more than twice reach_radius_m "
+                           f"({self.reach_radius!r})", field="poi_spacing_m")
         check_choice(self.block_order, "randomisation.block_order", BLOCK_ORDERS)
         check_choice(self.variant_order, "randomisation.variant_order", VARIANT_ORDERS)
         if not isinstance(self.blocks, tuple) or not self.blocks:
@@ -155,6 +176,11 @@ class Protocol:
                            field=f"blocks[{i}].name")
             names.add(b.name)
             _check_condition(b.condition, self.task, f"blocks[{i}].condition")
+            if b.schema is not None:
+                _check_condition(b.schema, self.task, f"blocks[{i}].schema")
+                if b.condition in TELEOPERATION_MODES or b.schema in TELEOPERATION_MODES:
+                    raise fail(b.schema, "no schema (a teleoperation-mode block runs its "
+                               "mode)", field=f"blocks[{i}].schema")
             for j, v in enumerate(b.variants):
                 if v >= n_var:
                     raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",

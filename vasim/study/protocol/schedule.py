@@ -15,7 +15,7 @@ import pandas as pd
 
 from vasim.core.bounds import SEED
 from vasim.core.config import check_int, is_int
-from vasim.study.protocol.model import Protocol
+from vasim.study.protocol.model import Block, Protocol
 from vasim.trials.kinds import TELEOPERATION_MODES
 
 
@@ -142,7 +142,10 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
     out: list[ScheduledTrial] = []
     n_probe = 0
 
-    def schema_of(cond: str) -> str | None:
+    def schema_of(b: Block) -> str | None:
+        if b.schema is not None:
+            return b.schema
+        cond = b.condition
         return None if cond in TELEOPERATION_MODES else cond
 
     for pos, bi in enumerate(block_order(protocol, seed)):
@@ -158,7 +161,7 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
                     n_probe += 1
                 out.append(ScheduledTrial(
                     index=len(out), block=b.name, block_index=pos, trial_in_block=k,
-                    condition=b.condition, schema=schema_of(b.condition), task=protocol.task,
+                    condition=b.condition, schema=schema_of(b), task=protocol.task,
                     variant=v, probe=b.probe, probe_index=n_probe if b.probe else None,
                     repetition=rep))
                 k += 1

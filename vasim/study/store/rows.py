@@ -11,6 +11,7 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError
 from vasim.core.jsonio import dumps
+from vasim.records.path_deviation import PATH_POINT_COLUMNS
 from vasim.records.point_metrics import POINT_COLUMNS
 
 
@@ -50,6 +51,8 @@ def point_metric_rows(df: pd.DataFrame) -> list[tuple[Any, ...]]:
     Raises:
         ConfigError: a missing column.
     """
+    # the v4 path columns are optional: a frame without them stores NULL (not measured)
+    df = df.assign(**{c: np.nan for c in PATH_POINT_COLUMNS if c not in df.columns})
     missing = [c for c in POINT_COLUMNS if c not in df.columns]
     if missing:
         raise ConfigError(f"point_metrics lacks the columns {missing} "

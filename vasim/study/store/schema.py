@@ -26,7 +26,7 @@ opened read-only is never migrated: a version-2 store is read as it is (``outcom
 by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL); a version-1 store must be opened
 writable once.
 
-Schema, version 3 (units in brackets; times of day are ISO 8601 UTC text; "v2" and "v3" mark
+Schema, version 4 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v4" mark
 what versions 2 and 3 added):
 
 ``schema_version``
@@ -76,7 +76,11 @@ what versions 2 and 3 added):
 ``point_metrics`` — WITHOUT ROWID, PK (trial_id, point); columns of
     ``metrics.POINT_COLUMNS``: ``point`` INTEGER, ``reached`` INTEGER (0/1), ``t_reached``
     REAL [s] NULL, ``error_l1`` REAL [m] NULL, ``latency`` REAL [s] NULL, ``path_l1``,
-    ``path_l2`` REAL [m] NULL, ``n_samples`` INTEGER.
+    ``path_l2`` REAL [m] NULL, ``n_samples`` INTEGER; v4: ``error_l1_mm_s`` REAL [mm s]
+    NULL (rate-independent e_i), ``path_dev_mean_mm``, ``path_dev_rms_mm``,
+    ``path_dev_max_mm`` REAL [mm] NULL (distance to the planned path), ``path_dev_out_frac``
+    REAL NULL (fraction of time outside the tolerance tube). ``error_l1`` is eq. 6.5, a sum
+    of per-sample distances [m·sample], not a length.
 ``events`` — things that happened during a trial (device NaN, interruption, ...).
     ``id`` INTEGER PK, ``trial_id`` -> trials.id, ``t`` REAL NULL [s] since trial start,
     ``kind`` TEXT, ``detail`` TEXT, ``created_at`` TEXT.
@@ -142,7 +146,7 @@ from vasim.study.store.vocabulary import (
     TRIAL_OUTCOMES,
 )
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """Schema version written to ``PRAGMA user_version``."""
 
 APPLICATION_ID = 0x76534D31  # b"vSM1"
@@ -417,7 +421,17 @@ CREATE INDEX trials_outcome ON trials(outcome);
 with a nullable ``subject`` and the new ``label`` and ``outcome`` columns; ``outcome`` of
 the existing rows from ``OUTCOME_FROM_V2_SQL``."""
 
-MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3}
+_SCHEMA_V4 = """
+ALTER TABLE point_metrics ADD COLUMN error_l1_mm_s REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_mean_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_rms_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_max_mm REAL;
+ALTER TABLE point_metrics ADD COLUMN path_dev_out_frac REAL;
+"""
+"""Version 4: the per-point rate-independent e_i and path-deviation columns
+(``vasim.records.path_deviation``); older rows read NULL (NaN: not measured)."""
+
+MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3, 4: _SCHEMA_V4}
 """Script that takes a store from version v-1 to v (version 0 = empty file)."""
 
 REBUILDS: frozenset[int] = frozenset({3})
