@@ -235,6 +235,11 @@ def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(monkeypatch, cap
         assert viewer_cli.serve(_serve_args(host=host)) == 0
         assert "warning" not in capsys.readouterr().err
         assert _FakeApp.instances[-1].kw["token"] is None
+    # --optics reaches the app (the trainee's 0 or 30 deg endoscope).
+    viewer_cli.serve(_serve_args(optics=30))
+    assert _FakeApp.instances[-1].kw["optics"] == 30.0
+    assert main(["serve", "--optics", "45", "--duration", "0"]) == 2
+    capsys.readouterr()
     # --task point without --schema picks the point-targeting VFS.
     viewer_cli.serve(_serve_args(task="point"))
     assert _FakeApp.instances[-1].schema == "point_targeting"

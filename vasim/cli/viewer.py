@@ -47,6 +47,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    metavar="PORT",
                    help="TCP port of the experimenter's page (default: --port + 1; the "
                         "trainee's page is on --port)")
+    p.add_argument("--optics", type=int, choices=[0, 30], default=0,
+                   help="the trainee's endoscope optics in degrees (0: forward-viewing, "
+                        "30: angled; default 0; stored with every trial)")
     p.add_argument("--scene", default="default",
                    help="abdomen scene of every trial, a name in protocols/scenes or a file "
                         "(default: default; none: a static task without physics); or an "
@@ -137,7 +140,8 @@ def serve(args: argparse.Namespace) -> int:
             check_db(Path(args.db))
         app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
                         scene=scene, db=getattr(args, "db", None), token=token,
-                        experimenter_port=getattr(args, "experimenter_port", None))
+                        experimenter_port=getattr(args, "experimenter_port", None),
+                        optics=float(getattr(args, "optics", 0)))
         db = getattr(args, "db", None)
         stored = f"trials stored in {db}" if db else "demo only: no --db"
         what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"

@@ -174,7 +174,7 @@ def check_number(value: object, field: str | None = None, *, bound: Bound | None
     if not is_number(value):
         raise fail(value, expected, field=field, file=file)
     try:
-        x = float(value)  # type: ignore[arg-type]
+        x = float(value)  # type: ignore[arg-type]  # is_number proved it a real number
     except OverflowError:  # an int beyond the float range
         raise fail(value, expected, field=field, file=file) from None
     if not math.isfinite(x):
@@ -195,7 +195,7 @@ def check_int(value: object, field: str | None = None, *, bound: Bound | None = 
     expected = f"an integer {rng}".rstrip()
     if not is_int(value):
         raise fail(value, expected, field=field, file=file)
-    v = int(value)  # type: ignore[call-overload]
+    v = int(value)  # type: ignore[call-overload]  # is_int proved it an integer
     if ((bound is not None and not bound.low <= v <= bound.high)
             or (lo is not None and v < lo) or (hi is not None and v > hi)):
         raise fail(value, expected, field=field, file=file)

@@ -426,7 +426,7 @@ class PybulletWorld:
                      for i in range(qs.shape[0])]
             if modelled:
                 packed = self._packed([names[j] for j in modelled])
-                frames_b = np.concatenate([models[j][1] for j in modelled])  # type: ignore[index]
+                frames_b = np.concatenate([models[j][1] for j in modelled])  # type: ignore[index]  # model
                 dist = np.empty((qs.shape[0], len(modelled)))
                 swept_distances(frames_a, sweep_a.pts, sweep_a.count, sweep_a.scale,
                                 sweep_a.ball, sweep_a.centre, sweep_a.radius, frames_b,
@@ -477,7 +477,7 @@ class PybulletWorld:
         scales, balls, bounding centres and radii), their link starts and margins."""
         key = tuple(names)
         if key not in self._packs:
-            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]
+            sweeps = [self._sweep_of(n)[0] for n in names]  # type: ignore[index]  # names
             counts = [s.pts.shape[0] for s in sweeps]
             self._packs[key] = (
                 np.concatenate([s.pts for s in sweeps]),

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from vasim.core.config import show
 from vasim.core.errors import ConfigError
 
 SUBJECT_CODE_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
@@ -34,7 +35,7 @@ def validate_subject_code(code: object) -> str:
     """
     if not isinstance(code, str) or not _SUBJECT_RE.fullmatch(code):
         raise ConfigError(
-            f"invalid subject code {code!r}: use 1-32 letters, digits, '_' or '-' "
+            f"invalid subject code {show(code)}: use 1-32 letters, digits, '_' or '-' "
             "(a pseudonymous code, never a name)",
             field="subject",
         )

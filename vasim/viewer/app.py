@@ -620,7 +620,7 @@ class ViewerApp(ErrorReporter):
             force_n=None if out.force is None else float(np.linalg.norm(out.force.force)),
             zoom=None if out.camera is None else float(out.camera.zoom),
             # The runtime reports a ghost exactly when the schema has MS.
-            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]
+            ms=None if out.ghost is None else tuple(float(m) for m in out.ms_factors),  # type: ignore[arg-type]  # 3 MS factors
             done=frame.done or outcome is not None,
         )
 

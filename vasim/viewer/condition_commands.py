@@ -96,7 +96,7 @@ class ConditionCommands:
         if p.mode == "demo":
             self._close_trial("schema changed")
             variant = self.info.config.variant if task == self.info.config.task else 0
-            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]
+            self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]  # strs
 
     def _set_task(self, task: str) -> None:
         p = self.panel
@@ -116,7 +116,7 @@ class ConditionCommands:
         self._publish(task=task, schema=schema, f5pl=f5pl_fields(load_schema(schema)))
         if p.mode == "demo":
             self._close_trial("task changed")
-            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]
+            self._start_demo(replace(self._base, schema=schema, task=task, variant=0))  # type: ignore[arg-type]  # strs
 
     def _apply_f5pl(self, instance: str, params: Logistic5) -> None:
         """Edits one fixture's f5PL (free training and demo). **decision**: the edit takes

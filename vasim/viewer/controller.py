@@ -163,8 +163,8 @@ class TrainingController(ConditionCommands):
         endoscope aims per task); None: ``screen`` for every trial."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
-        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]
-                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]
+        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]  # valid
+                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]  # str c
         self.panel = PanelState(schema=schema, task=task,
                                 f5pl=f5pl_fields(load_schema(schema)))
         self.info: TrialInfo = self._launch(self._base, mode="demo")
@@ -417,7 +417,7 @@ class TrainingController(ConditionCommands):
         p = self.panel
         base = self._base
         subject = p.subject or base.subject
-        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]
+        return replace(base, schema=p.schema, task=p.task,  # type: ignore[arg-type]  # panel strs
                        variant=base.variant if p.task == "trajectory" else 0,
                        subject=subject, label=None if subject else p.label,
                        seed=base.seed + self._number)
@@ -442,7 +442,7 @@ class TrainingController(ConditionCommands):
                                   "protocol": "protocol: enter the subject code and pick a "
                                               "protocol, then Start"}[value])
             if value == "demo":
-                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]
+                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]  # panel
             elif value == "protocol" and p.subject and p.protocol:
                 self._publish(curve=(), **self._select_session())
         elif kind == "schema":

@@ -186,7 +186,7 @@ def tissue_patches(vertices: FloatArray, faces: NDArray[np.integer], color: tupl
         sel = np.asarray(faces, dtype=np.uint32)[which == i]
         if len(sel):
             out.append((sel, tuple(round(float(x) * 255) for x in tone)))
-    return out  # type: ignore[return-value]
+    return out  # type: ignore[return-value]  # RGB triples of 3 ints
 
 
 class ScopeLight:

@@ -84,7 +84,7 @@ def learning_curve(st: Any, session_id: int | None, subject: str | None,
             continue
         row = wide.loc[tid]
         out.append((n, *(float(row.get(m, math.nan)) for m in CURVE_METRICS)))
-    return tuple(out)  # type: ignore[arg-type]
+    return tuple(out)  # type: ignore[arg-type]  # (n, *metrics) rows
 
 
 def open_session(st: Any, subject: str | None, protocol: str | None,

@@ -106,10 +106,10 @@ class OrganView:
             seed = int.from_bytes(organ.name.encode()[:8].ljust(8, b"_"), "little")
             parts = tissue_patches(organ.mesh.vertices, f, organ.color, seed=seed) or parts
         self.handle = server.scene.add_mesh_simple(
-            self.name, v, parts[0][0], color=parts[0][1], **organ_style(organ)  # type: ignore[arg-type]
+            self.name, v, parts[0][0], color=parts[0][1], **organ_style(organ)  # type: ignore[arg-type]  # viser
         )
         self.tones = [server.scene.add_mesh_simple(
-            f"{self.name}/tone{i}", v, fi, color=ci, **organ_style(organ))  # type: ignore[arg-type]
+            f"{self.name}/tone{i}", v, fi, color=ci, **organ_style(organ))  # type: ignore[arg-type]  # viser
             for i, (fi, ci) in enumerate(parts[1:], start=1)]
 
     def update(self, vertices: FloatArray) -> None:

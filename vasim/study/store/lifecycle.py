@@ -111,7 +111,7 @@ class TrialLifecycle(StoreConnection):
 
     def _claim_scheduled(self, con: sqlite3.Connection, meta: TrialMeta) -> int:
         """Checks a scheduled trial can start and counts the attempt; returns its number."""
-        sid, idx = int(meta.session_id), int(meta.schedule_index)  # type: ignore[arg-type]
+        sid, idx = int(meta.session_id), int(meta.schedule_index)  # type: ignore[arg-type]  # check
         srow = con.execute("SELECT status, subject FROM sessions WHERE id = ?",
                            (sid,)).fetchone()
         if srow is None:

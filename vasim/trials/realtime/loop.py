@@ -104,7 +104,7 @@ class RealtimeTrial:
             elif physics == "thread":
                 self.physics_log = PhysicsLog()
                 self._world = RecordingWorld(abdomen, self.physics_log)
-                self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]
+                self.physics_thread = PhysicsThread(self._world)  # type: ignore[arg-type]  # Record
                 self.runner.set_physics_feed(ThreadFeed(self.physics_thread,
                                                          self.physics_log))
                 self.plant.on_done.append(self._world.freeze)

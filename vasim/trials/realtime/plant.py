@@ -171,7 +171,7 @@ class TrialPlant:
         self._kt_prev: tuple[float, ...] | None = None
         self._x_prev: tuple[float, ...] = tuple(runner._x)
         self.input = MasterIncrement()
-        runner.operator = self.input  # type: ignore[assignment]
+        runner.operator = self.input  # type: ignore[assignment]  # the increment source plays the o
         self.coupled = CoupledToolPlant(coupling, dt=dt)
         self.on_done: list[Any] = []
         self._prev: tuple[float, float, float] | None = None
