@@ -177,6 +177,7 @@ def test_short_trial_runs(installed: tuple[Path, dict[str, str]], tmp_path: Path
     out = _run([str(bindir / "vasim"), "trial", "--scene", "none", "--max-time", "2",
                 "--schema", "none", "--seed", "1"], cwd=tmp_path, env=env)
     fields = {line[:18].strip(): line[18:].strip() for line in out.splitlines()}
-    assert fields["completion time"] == "2.00 s"
+    assert fields["duration"] == "2.00 s"                 # not a completion time: ...
+    assert fields["outcome"].startswith("timed out after 2.0 s with")  # ... it timed out
     assert fields["samples"] == "2000 at 1000 Hz"
     assert fields["schema"] == "none [no fixtures]"

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 from scipy.optimize import minimize_scalar
 
-from vasim.mrcp import dh
+from vasim.mrcp import closed_form_ik, dh
 from vasim.mrcp.backend import (
     HULL_MARGIN,
     PybulletArm,
@@ -349,7 +349,7 @@ def test_closed_form_ik_at_the_shoulder_singularity(closed_form_arm: PybulletArm
                                                     ) -> None:
     qs = _shoulder_singular(np.array(q))
     p, r = closed_form_arm.tcp_pose(qs)
-    assert len(dh.puma_ik(RX, p, r)) == 8            # was 0 (rho2 ~ -1e-18 from round-off)
+    assert len(closed_form_ik.puma_ik(RX, p, r)) == 8            # was 0 (round-off)
     sol = closed_form_arm.ik(p, r)
     assert sol is not None and RX.within_limits(sol)
     p2, r2 = closed_form_arm.tcp_pose(sol)
@@ -361,7 +361,7 @@ def test_an_empty_closed_form_within_reach_falls_back_to_the_numeric_search(
         closed_form_arm: PybulletArm, monkeypatch: pytest.MonkeyPatch) -> None:
     q = np.array([0.3, -1.2, 2.6, 0.4, 1.0, -0.5])
     p, r = closed_form_arm.tcp_pose(q)
-    monkeypatch.setattr(dh, "puma_ik", lambda *args, **kwargs: [])
+    monkeypatch.setattr(closed_form_ik, "puma_ik", lambda *args, **kwargs: [])
     assert closed_form_arm._closed_form_ik(p, r, RX.home, 1e-6, 1e-6) == (None, False)
     sol = closed_form_arm.ik(p, r)
     assert sol is not None

@@ -15,7 +15,8 @@ POINTS = np.array([[0.01, 0.0, 0.0], [0.02, 0.0, 0.0]])
 
 def _text(tcp, goal_index):
     info = SimpleNamespace(number=2, mode="demo", trial_id=None, points=POINTS,
-                           start=np.zeros(3))
+                           start=np.zeros(3), title="demo run 2 (not stored)",
+                           config=SimpleNamespace(max_time=180.0))
     goal = POINTS[min(goal_index, 1)]
     frame = SimpleNamespace(t=1.25, tcp=np.asarray(tcp, float), goal=goal,
                             goal_index=goal_index, n_points=2, done=goal_index >= 2)
@@ -27,7 +28,7 @@ def test_distances_to_path_and_goal_in_mm():
     assert "| Distance to path | 5.0 mm |" in text
     goal_mm = 1000 * np.linalg.norm([0.005, 0.003, 0.004])
     assert f"| Distance to goal | {goal_mm:.1f} mm |" in text
-    assert "| Points | 0 / 2 |" in text and "| Time | 1.25 s |" in text
+    assert "| Points | 0 / 2 |" in text and "| Time | 1.25 s of 180 s |" in text
     assert "e_i" not in text and "error_l1" not in text
 
 

@@ -66,13 +66,16 @@ class StudyData:
     @property
     def synthetic(self) -> bool:
         """Whether the cohort is simulated: a session's stored ``operator`` is the scripted
-        operator (``vasim study simulate``).
+        operator (``vasim study simulate``; stored as ``scripted`` or, calibrated,
+        ``scripted (calibrated to the seed, synthetic)``).
 
         **Decision**: one scripted session makes the whole report synthetic because its
         numbers then mix simulated trials into every pooled statistic.
         """
+        ops = self.sessions["operator"].astype(str)
+        # "scripted" (older stores) or "scripted (calibrated to the seed, synthetic)"
         return bool(len(self.sessions)) and bool(
-            (self.sessions["operator"].astype(str) == SCRIPTED_OPERATOR).any())
+            ((ops == SCRIPTED_OPERATOR) | ops.str.startswith(SCRIPTED_OPERATOR + " ")).any())
 
     @property
     def data_label(self) -> str:
