@@ -108,7 +108,10 @@ def test_vg_and_ff_schema_draws_both_arrows_and_the_ghost(app: ViewerApp) -> Non
     assert wait_for(both, timeout=5.0), seen
     assert wait_for(lambda: app.ghost.handle.visible)
     text = app.hud.text
-    assert "trajectory_following" in text and "Points reached" in text and "Audio (AG)" in text
+    assert "Points reached" in text and "From the path" in text and "To the next point" in text
+    # The condition's internals stay on the experimenter's page (issue #19 §4).
+    assert "trajectory_following" not in text and "Audio (AG)" not in text
+    assert "MS factors" not in text and "Zoom" not in text
 
 
 def test_schema_change_through_the_queue_takes_effect(app: ViewerApp) -> None:
@@ -348,17 +351,20 @@ def test_arrow_vertices_span_start_to_end() -> None:
     assert proj.min() > -1e-6 and proj.max() < np.linalg.norm(end - start) + 1e-6
 
 
-def test_hud_text_escapes_and_names_the_audio_state() -> None:
+def test_hud_text_escapes_and_shows_only_what_a_trainee_needs() -> None:
     from vasim.viewer.trainee import HudInfo
 
-    info = HudInfo(schema="<b>x</b>", fixtures=("vg",), task="trajectory/v0",
-                   title="trial 7", t=1.0, error_m=0.004, goal_index=2, n_points=30,
-                   last_latency=0.8, audio=AudioCue(600.0, 0.3, 0.0), force_n=None,
-                   zoom=None, ms=None, done=False, time_left=179.0)
+    info = HudInfo(schema="vg", fixtures=("vg",), task="trajectory/v0",
+                   title="trial 7 <b>", t=1.0, error_m=0.004, goal_index=2, n_points=30,
+                   last_latency=0.8, audio=AudioCue(600.0, 0.3, 0.0), force_n=1.5,
+                   zoom=2.0, ms=(0.5, 0.5, 0.5), done=False, time_left=179.0,
+                   path_m=0.0015)
     md = hud_markdown(info)
     assert "<b>" not in md and "&lt;b&gt;" in md
-    assert "2 of 30" in md and "4.0 mm" in md and "0.80 s" in md and "silent" in md
-    assert "**trial 7** — running" in md and "(179 s left)" in md
+    assert "2 of 30" in md and "4.0 mm" in md and "1.5 mm" in md and "0.80 s" in md
+    assert "**trial 7 &lt;b&gt;** — running" in md and "(179 s left)" in md
+    for internal in ("silent", "1.50 N", "0.50 / 0.50", "2.00×", "vg"):
+        assert internal not in md, internal
     ended = hud_markdown(dataclasses.replace(info, done=True, outcome="timed_out"))
     assert "ended: time ran out" in ended and "done" not in ended
     assert audio_text(None) == "off"

@@ -53,6 +53,7 @@ from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_p
 from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.laparoscopic import InputMapping
+from vasim.records.path_deviation import path_distances
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
 from vasim.viewer.access import access_policy, guarded_server, viewer_url
@@ -615,6 +616,10 @@ class ViewerApp(ErrorReporter):
                              else 1, ctl.panel.input)),
             countdown_s=None if until is None else until - time.monotonic(),
             error_m=float(np.linalg.norm(frame.tcp - frame.goal)),
+            path_m=(float(path_distances(np.asarray(frame.tcp, dtype=np.float64)[None, :],
+                                         [int(frame.goal_index)], info.points,
+                                         info.start)[0])
+                    if 0 <= frame.goal_index < len(info.points) else None),
             goal_index=frame.goal_index, n_points=frame.n_points,
             last_latency=frame.last_latency, audio=out.audio,
             force_n=None if out.force is None else float(np.linalg.norm(out.force.force)),

@@ -94,6 +94,8 @@ class HudInfo:
         ms: (3,) MS factors or None. done: the trial ended.
         outcome: how it ended (``OUTCOME_TEXT`` key) or None while it runs.
         countdown_s: seconds until the trial starts (the start cue), or None.
+        path_m: current distance from the tool tip to the planned path [m], or None (every
+            point reached, or no path).
     """
 
     schema: str
@@ -114,6 +116,7 @@ class HudInfo:
     outcome: str | None = None
     instruction: str = ""
     countdown_s: float | None = None
+    path_m: float | None = None
 
 
 def state_text(info: HudInfo) -> str:
@@ -140,21 +143,18 @@ def hud_markdown(info: HudInfo) -> str:
     time_row = f"{info.t:6.1f} s"
     if info.time_left is not None and info.outcome is None and not info.done:
         time_row += f" ({max(info.time_left, 0.0):.0f} s left)"
+    # **Decision** (issue #19 §4, #15 §1): the trainee sees only what a trainee understands
+    # and acts on — progress, time, how far the tip is from the path and from the next
+    # point. The condition's internals (schema, AG cue, FF force, MS factors, Mag zoom) are
+    # on the experimenter's page; they would tell a study's trainee what is being tested.
     rows = [
         ("Points reached", f"{reached} of {info.n_points}"),
         ("Time", time_row),
+        ("From the path", "–" if info.done or info.path_m is None
+         else f"{info.path_m * 1e3:.1f} mm"),
         ("To the next point", "–" if info.done else f"{info.error_m * 1e3:.1f} mm"),
         ("Last latency", lat),
-        ("Schema", f"{esc(info.schema)} ({esc(', '.join(info.fixtures)) or 'no fixture'})"),
-        ("Task", esc(info.task)),
-        ("Audio (AG)", esc(audio_text(info.audio))),
     ]
-    if info.force_n is not None:
-        rows.append(("Force (FF)", f"{info.force_n:.2f} N"))
-    if info.ms is not None:
-        rows.append(("MS factors", " / ".join(f"{m:.2f}" for m in info.ms)))
-    if info.zoom is not None:
-        rows.append(("Zoom (Mag)", f"{info.zoom:.2f}×"))
     # A "|" inside a cell would end it: escape it.
     body = "\n".join(f"| {k} | {v.replace('|', '&#124;')} |" for k, v in rows)
     return head + "\n\n| | |\n|---|---|\n" + body
