@@ -5,6 +5,7 @@ it runs on the controller thread like the rest of the controller)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -31,26 +32,13 @@ class ConditionCommands:
     _schema_obj: Schema | None
     _pending: Any
 
-    # Provided by TrainingController.
-    def _publish(self, **changes: Any) -> None:
-        raise NotImplementedError
-
-    def _close_trial(self, reason: str, *, failed: bool = False) -> None:
-        raise NotImplementedError
-
-    def _start_demo(self, config: TrialConfig) -> None:
-        raise NotImplementedError
-
-    def _running_stored(self) -> bool:
-        raise NotImplementedError
-
-    def _launch(self, config: TrialConfig, *, mode: str, schema: Schema | None = None,
-                input_kind: str = "scripted", session: Any = None,
-                scheduled: Any = None) -> TrialInfo:
-        raise NotImplementedError
-
-    def _free_config(self) -> TrialConfig:
-        raise NotImplementedError
+    # Provided by TrainingController (declared here for the type checker only).
+    _publish: Callable[..., None]
+    _close_trial: Callable[..., None]
+    _start_demo: Callable[[TrialConfig], None]
+    _running_stored: Callable[[], bool]
+    _launch: Callable[..., TrialInfo]
+    _free_config: Callable[[], TrialConfig]
 
     def _set_label(self, value: Any) -> None:
         """The free-practice label of the next free trials without a subject (**decision**:
