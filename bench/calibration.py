@@ -22,15 +22,14 @@ by construction; it is for planning (power, dry runs), not evidence.
 
 Usage: ``python -m bench.calibration [--subjects N] [--db PATH] [--workers W]``.
 
-Last run (2026-11-25, 8 subjects / 5 surgeons, seed 7, the calibration in
-``vasim.operator.learning`` as committed): all six fixture and trial effects significant
-(e: F(5,35) = 5.16, F(7,49) = 28.97; path deviation: 15.48, 5.05; latency: 5.28, 30.87;
-every p < 0.002); path deviation FF best (3.64 mm) n.s. from AG (p_adj 0.95) and MS (0.16);
-latency Mag best (0.46 s) n.s. from AG (0.23); eq. 6.5's e: Mag best (it follows latency,
-r(e, latency) = 0.997 at the default 10.5 mm POI spacing), FF n.s. from AG and MS; best
-Mag 62 % / FF 12 % / AG 25 %, worst MS 50 % / VG 38 % / AG 12 %, ratings FF 6.75, Mag 5.62,
-AG 5.62, VG 5.62, MS 4.62 (8 subjects: one subject is 12.5 %). The 46-subject run was not
-made.
+Last run (2026-11-25, 46 subjects / 31 surgeons, seed 7, 7.4 min with 2 workers, the
+calibration in ``vasim.operator.learning`` as committed): all six fixture and trial effects
+significant (e: F(5,225) = 32.3, F(7,315) = 136.6; path deviation: 59.5, 25.2; latency: 33.8,
+144.3; every p < 1e-24); eq. 6.5's e: Mag best (it follows latency, r(e, latency) = 0.996
+at the default 10.5 mm POI spacing); path deviation Mag 3.71 / FF 3.73 mm (FF vs AG p_adj
+0.85, vs MS 0.003); latency Mag best (0.49 s), vs AG p_adj 0.005; best Mag 39 / FF 26 /
+AG 22 / VG 9 / MS 4 %, worst MS 41 / VG 41 / AG 11 / Mag 7 / FF 0 %, ratings FF 7.24,
+Mag 6.80, AG 6.52, VG 5.57, MS 4.54.
 """
 
 from __future__ import annotations
