@@ -153,6 +153,21 @@ def _durations(t: ArrayLike, n: int, t_start: float) -> FloatArray:
     return np.diff(tt, prepend=float(t_start))
 
 
+def _prepared(t: ArrayLike, x: ArrayLike, g: ArrayLike, goal_index: ArrayLike,
+              points: ArrayLike, start: ArrayLike | None, t_start: float, tolerance: float,
+              ) -> tuple[FloatArray, FloatArray, NDArray[np.int64], int, FloatArray, FloatArray]:
+    """The samples as arrays — x, g (n, 3), goal index (n,), the number of POIs, each
+    sample's duration w and its distance d to the path — after checking ``tolerance``."""
+    if not tolerance >= 0:
+        raise ValueError(f"tolerance must be >= 0 m, got {tolerance!r}")
+    xx = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+    gg = np.asarray(g, dtype=np.float64).reshape(-1, 3)
+    gi = np.asarray(goal_index, dtype=np.int64).reshape(-1)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    w = _durations(t, xx.shape[0], t_start)
+    return xx, gg, gi, p.shape[0], w, path_distances(xx, gi, p, start)
+
+
 def point_path_deviation(
     t: ArrayLike, x: ArrayLike, g: ArrayLike, goal_index: ArrayLike, points: ArrayLike, *,
     start: ArrayLike | None = None, tolerance: float = DEFAULT_PATH_TOLERANCE,
@@ -173,15 +188,8 @@ def point_path_deviation(
     Raises:
         ValueError: on a negative tolerance or inconsistent shapes.
     """
-    if not tolerance >= 0:
-        raise ValueError(f"tolerance must be >= 0 m, got {tolerance!r}")
-    xx = np.asarray(x, dtype=np.float64).reshape(-1, 3)
-    gg = np.asarray(g, dtype=np.float64).reshape(-1, 3)
-    gi = np.asarray(goal_index, dtype=np.int64).reshape(-1)
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n_pts = p.shape[0]
-    w = _durations(t, xx.shape[0], t_start)
-    d = path_distances(xx, gi, p, start)
+    xx, gg, gi, n_pts, w, d = _prepared(t, x, g, goal_index, points, start, t_start,
+                                        tolerance)
     err = np.abs(xx - gg).sum(axis=1)
     out = {c: np.full(n_pts, np.nan) for c in PATH_POINT_COLUMNS}
     for i in range(n_pts):
@@ -222,15 +230,8 @@ def trial_path_deviation(
         >>> round(m["path_dev_mean_mm"], 9), round(m["path_dev_max_mm"], 9)
         (1.0, 1.0)
     """
-    if not tolerance >= 0:
-        raise ValueError(f"tolerance must be >= 0 m, got {tolerance!r}")
-    xx = np.asarray(x, dtype=np.float64).reshape(-1, 3)
-    gg = np.asarray(g, dtype=np.float64).reshape(-1, 3)
-    gi = np.asarray(goal_index, dtype=np.int64).reshape(-1)
-    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    n_pts = p.shape[0]
-    w = _durations(t, xx.shape[0], t_start)
-    d = path_distances(xx, gi, p, start)
+    xx, gg, gi, n_pts, w, d = _prepared(t, x, g, goal_index, points, start, t_start,
+                                        tolerance)
     active = gi < n_pts
     mean, rms, mx, frac = _weighted(d[active], w[active], tolerance)
     err = np.abs(xx - gg).sum(axis=1)
@@ -242,7 +243,7 @@ def trial_path_deviation(
         "final_error_mm": math.nan, "overshoot_mm": math.nan,
     }
     if n_pts == 1 and xx.shape[0]:
-        target = p[-1]
+        target = np.asarray(points, dtype=np.float64).reshape(-1, 3)[-1]
         s0 = xx[0] if start is None else np.asarray(start, dtype=np.float64).reshape(3)
         u = target - s0
         nu = float(np.linalg.norm(u))
