@@ -8,10 +8,15 @@ matrix), (b) brute force (every link pair queried in pybullet, the seed's baseli
 phase), with the speed-ups. Every configuration's answer is checked identical across the
 three (the run stops if not).
 
-**Decision** (the seed says "9216 different joint positions are used to generate robot
-configurations" and no more): the 9,216 configurations of the pair are the first 9,216
-points of a scrambled Halton sequence (scipy, seed 0) over the twelve joints of the two robots,
-each within its imposed limits: a uniform, reproducible cover of the pair's joint space.
+The 9,216 configurations are :func:`vasim.mrcp.rpq.seed_test_bed_pairs`: 96 per robot (a
+4 x 4 x 6 grid over θ1, θ2, θ3, the wrist at home), every pair of them (the decision is
+written there).
+
+Then why the shares still differ from the seed's: the share at each distance for two
+samplings (the grid; a scrambled Halton sample over both robots' twelve joints, the
+previous test bed) and three link bulks (the shipped hulls, and every link's radius grown
+by 30 and 60 mm: the seed's test bed used 23,012-triangle CAD models of the real housings,
+this model approximates them by hulls of spheres).
 
 First, the per-call costs of the robot world the kernel leans on (FK, Jacobian, IK tracking,
 distance and collision queries), median over random in-limit configurations.
@@ -23,7 +28,6 @@ per distance).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 
@@ -31,11 +35,16 @@ import numpy as np
 import pybullet as pb
 from scipy.stats import qmc
 
-from vasim.mrcp.backend import PybulletWorld, pose_matrix
-from vasim.mrcp.dh import RobotModel, load_robot, rot_z
-from vasim.mrcp.rpq import RPQ
+from vasim.mrcp.dh import RobotModel, load_robot
+from vasim.mrcp.rpq import (
+    RPQ,
+    SEED_TABLE_A1,
+    collision_share,
+    facing_pair,
+    inflated,
+    seed_test_bed_pairs,
+)
 
-SEED_TABLE_A1 = {400: 52.78, 500: 38.30, 600: 27.13, 700: 12.16, 800: 1.52}   # % collisions
 N_CONFIGURATIONS = 9216
 
 
@@ -43,19 +52,27 @@ def log(msg: str) -> None:
     print(f"[bench.mrcp_rpq] {msg}", file=sys.stderr, flush=True)
 
 
-def test_bed(robot: RobotModel, n: int = N_CONFIGURATIONS) -> np.ndarray:
-    """``(n, 2, joints)``: configurations of the two robots (scrambled Halton, seed 0)."""
+def halton_pairs(robot: RobotModel, n: int = N_CONFIGURATIONS) -> np.ndarray:
+    """``(n, 2, joints)``: the previous test bed, a scrambled Halton sample (seed 0) over
+    both robots' joints within their imposed limits."""
     k = robot.n_joints
     u = qmc.Halton(d=2 * k, scramble=True, seed=0).random(n)
     lo, up = np.tile(robot.lower, 2), np.tile(robot.upper, 2)
     return (lo + u * (up - lo)).reshape(n, 2, k)
 
 
-def facing_pair(robot: RobotModel, distance: float) -> PybulletWorld:
-    world = PybulletWorld()
-    world.add_robot("a", robot, pose_matrix([-distance / 2, 0.0, 0.0]))
-    world.add_robot("b", robot, pose_matrix([distance / 2, 0.0, 0.0], rot_z(math.pi)))
-    return world
+def why_shares_differ(robot: RobotModel, step: int) -> None:
+    """Prints the collision shares per distance for two samplings x three link bulks."""
+    print("why the shares differ from the seed's (collision %, 400/500/600/700/800 mm):")
+    print(f"  {'seed Table A.1':<44} " + " ".join(f"{v:6.2f}" for v in SEED_TABLE_A1.values()))
+    for label, pairs in (("96 x 96 grid (the test bed)", seed_test_bed_pairs(robot)),
+                         ("Halton over 12 joints", halton_pairs(robot))):
+        for extra in (0.0, 0.03, 0.06):
+            model = inflated(robot, extra)
+            shares = [collision_share(model, mm / 1000.0, pairs[::step])
+                      for mm in SEED_TABLE_A1]
+            name = f"{label}, links +{extra * 1000:.0f} mm"
+            print(f"  {name:<44} " + " ".join(f"{v:6.2f}" for v in shares), flush=True)
 
 
 def run_distance(robot: RobotModel, distance: float, pairs: np.ndarray) -> dict:
@@ -143,7 +160,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--quick", action="store_true", help="every 16th pair only")
     args = parser.parse_args([] if argv is None else argv)
     robot = load_robot("rx60b")
-    pairs = test_bed(robot)
+    pairs = seed_test_bed_pairs(robot)
     if args.quick:
         pairs = pairs[::16]
     warm = facing_pair(robot, 0.6)      # compile / load the kernels outside the timing
@@ -153,12 +170,12 @@ def main(argv: list[str] | None = None) -> None:
     log(f"{len(pairs)} configurations per distance")
     quick = ", every 16th (--quick)" if args.quick else ""
     print(f"two RX60B facing each other, {len(pairs)} joint configurations per distance "
-          f"(scrambled Halton over both robots' joints{quick})")
+          f"(96 per robot: a 4 x 4 x 6 grid over θ1-θ3, every pair{quick})")
     print(f"{'distance':>8} {'collisions':>10} {'%':>7} {'seed %':>7} | {'RPQ us':>7} "
           f"{'brute us':>8} {'x brute':>7} | {'pybullet us':>11} {'x pybullet':>10} | "
           f"{'L4 %':>5} {'matrix skip %':>13} {'hulls/query':>11}")
     tot = {"rpq": 0.0, "bf": 0.0, "pb": 0.0}
-    for mm in (400, 500, 600, 700, 800):
+    for mm in SEED_TABLE_A1:
         r = run_distance(robot, mm / 1000.0, pairs)
         tot["rpq"] += r["rpq_us"]
         tot["bf"] += r["bf_us"]
@@ -171,6 +188,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"answers identical (RPQ = brute force = pybullet whole-body) on every "
           f"configuration; overall speed-up over brute force x{tot['bf'] / tot['rpq']:.1f}, "
           f"over pybullet's whole-body query x{tot['pb'] / tot['rpq']:.2f}")
+    why_shares_differ(robot, 16 if args.quick else 1)
 
 
 if __name__ == "__main__":
