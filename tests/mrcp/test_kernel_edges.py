@@ -195,8 +195,21 @@ def test_cli_refuses_bad_values_before_running(tmp_path: Path,
         assert message in err and "Traceback" not in err, extra
 
 
-def test_cli_json_is_strict(capsys: pytest.CaptureFixture[str]) -> None:
-    """NTT is inf whenever RSel has no useful time left: the JSON says null, not Infinity."""
+def test_cli_json_is_strict(capsys: pytest.CaptureFixture[str],
+                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """NTT is inf whenever RSel has no useful time left: the JSON says null, not Infinity.
+
+    (Since issue #17 no scenario's short run hands over at an infinite NTT, so the run's
+    transfer list gets one more, with the NTT an RSel at texec = 0 gives.)"""
+    from vasim.mrcp.scenarios.runner import RunResult
+
+    real = RunResult.transfers
+
+    def with_inf(self: RunResult) -> list[dict[str, object]]:
+        return [*real(self), {"t_start": 1.0, "from": "R0", "to": "R1", "point": 0,
+                              "ntt": math.inf, "cause": "rj", "t_done": None}]
+
+    monkeypatch.setattr(RunResult, "transfers", with_inf)
     assert main(["mrcp", "run", "cube_translation", "--coarse", "--duration", "6",
                  "--json"]) == 0
 

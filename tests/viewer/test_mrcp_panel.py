@@ -233,7 +233,7 @@ def test_station_geometry_reads_obstacles_as_pybullet_holds_them() -> None:
         setup.close()
     assert g.robot_names == ("R0", "R1") and all(r.in_task for r in g.robots)
     table = {o.name: o for o in g.obstacles}["table"]
-    assert np.allclose(table.mesh.extents, [0.60, 0.80, 0.04])  # half extents 0.30/0.40/0.02
+    assert np.allclose(table.mesh.extents, [0.44, 0.80, 0.04])  # half extents 0.22/0.40/0.02
     assert np.allclose(g.task.extents, [0.10] * 3)  # the 100 mm cube
     assert g.task_points.shape == (6, 3)
 
