@@ -121,3 +121,48 @@ def test_weight_matrix_starts_distal_first_and_learns() -> None:
     w1 = rpq.weight_matrix("a", "b")
     assert np.any(w1 > w0)
     assert rpq.stats.collisions == 1
+
+
+def test_seed_test_bed_is_96_by_96_pairs_spanning_the_arm_joints() -> None:
+    from vasim.mrcp.rpq import seed_test_bed_configurations, seed_test_bed_pairs
+
+    one = seed_test_bed_configurations(RX)
+    pairs = seed_test_bed_pairs(RX)
+    assert one.shape == (96, 6) and pairs.shape == (9216, 2, 6)      # Table A.1's count
+    assert len({(tuple(a), tuple(b)) for a, b in pairs}) == 9216       # all distinct
+    for j, k in enumerate((4, 4, 6)):       # the grid reaches both ends of each range
+        vals = np.unique(one[:, j])
+        assert len(vals) == k and vals[0] == RX.lower[j] and vals[-1] == RX.upper[j]
+    np.testing.assert_array_equal(one[:, 3:], np.tile(RX.home[3:], (96, 1)))
+    # a's configuration is the slow index, b's the fast one: every b with every a
+    np.testing.assert_array_equal(pairs[:96, 1], one)
+    np.testing.assert_array_equal(pairs[::96, 0], one)
+
+
+def test_test_bed_shares_fall_with_distance_and_grow_with_link_bulk() -> None:
+    """The measured reasons behind bench/mrcp_rpq's table: fewer collisions the farther
+    apart the robots, more the bulkier the links (every 8th pair: 1,152)."""
+    from vasim.mrcp.rpq import collision_share, inflated, seed_test_bed_pairs
+
+    pairs = seed_test_bed_pairs(RX)[::8]
+    thin = [collision_share(RX, d, pairs) for d in (0.4, 0.6, 0.8)]
+    bulky = [collision_share(inflated(RX, 0.06), d, pairs) for d in (0.4, 0.6, 0.8)]
+    assert thin[0] > thin[1] > thin[2] and bulky[0] > bulky[1] > bulky[2]
+    assert all(b > t for b, t in zip(bulky, thin, strict=True))
+    # the shipped hulls stay well under the seed's 52.78 % at 400 mm; +60 mm links reach it
+    assert thin[0] < 35.0 < bulky[0]
+
+
+def test_rpq_matches_brute_force_on_the_seed_test_bed() -> None:
+    from vasim.mrcp.rpq import seed_test_bed_pairs
+
+    world = facing(0.4)
+    rpq = RPQ(world)
+    hits = 0
+    for qa, qb in seed_test_bed_pairs(RX)[::37]:
+        world.set_configuration("a", qa)
+        world.set_configuration("b", qb)
+        truth = rpq.brute_force("a", "b")
+        hits += truth
+        assert rpq.collide("a", "b") is truth
+    assert 0 < hits < 250
