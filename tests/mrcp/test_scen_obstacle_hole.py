@@ -45,3 +45,17 @@ def test_the_seeds_sequence_cr_cr_then_r0s_theta5_limit() -> None:
     # Nobody ever touched the wall or the other robot (candidates included).
     assert not [s.t for s in res.samples if s.colliding]
     assert not res.events("rsel_hold") and not res.events("transfer_abort")
+
+
+def test_the_operators_script_holds_passes_and_rolls_as_documented() -> None:
+    from vasim.mrcp.scenarios.obstacle_hole import HOLD, ROLL_MAX, SPEED, Y_END, bar_y
+
+    assert SPEED * 6.0 == 2 * Y_END                              # a pass takes 6 s
+    assert bar_y(0.0) == bar_y(HOLD) == -Y_END                   # the initial hold
+    assert abs(bar_y(HOLD + 3.0)) < 1e-12                        # mid first pass: y = 0
+    assert bar_y(HOLD + 6.0) == Y_END and abs(bar_y(HOLD + 9.0)) < 1e-12
+    t3 = HOLD + 12.0                                             # the third pass starts
+    assert bar_roll(t3) == 0.0 and bar_roll(t3 - 5.0) == 0.0
+    assert abs(bar_roll(t3 + 1.0) - np.radians(12.0)) < 1e-12    # 12 deg/s
+    assert bar_roll(t3 + 5.0) == ROLL_MAX == np.radians(30.0)    # capped
+    assert bar_y(HOLD + 18.0) == bar_y(20.5) == Y_END            # ends through the hole
