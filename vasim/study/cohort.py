@@ -81,12 +81,16 @@ from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
-from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
+from vasim.study.gates import apply_gates
+from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial, gated_blocks
 from vasim.study.session import (
     Session,
     SessionSettings,
     load_session,
     record_answers,
+    record_sitting,
+    sitting_begins,
+    sitting_record,
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
@@ -461,14 +465,28 @@ def prepare_sessions(store: TrialStore, protocol: Protocol,
 
 
 def _jobs(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]]) -> list[_Job]:
+    """Each running session's pending trials, up to and including its first pending trial
+    of a gated block (the trials after it wait for the gate's decision)."""
     jobs = []
     for subj, sid in sessions:
         session = load_session(store, sid)
         if session.status != "running":
             continue
+        gated = {b.name for b in gated_blocks(session.protocol)}
         for st in session.pending:
             jobs.append(_Job(session, subj, st, session.trial_config(st)))
+            if st.block in gated and not st.probe:
+                break
     return jobs
+
+
+def _after_trial(store: TrialStore, job: _Job) -> None:
+    """A simulated later sitting's record (no real waiting) and the gate's decision."""
+    delay = sitting_begins(job.session, job.scheduled)
+    if delay is not None:
+        rec = sitting_record(store, job.session, job.scheduled, delay, True)
+        record_sitting(store, job.session, job.scheduled, rec)
+    apply_gates(store, job.session.id)
 
 
 def _finish_sessions(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]],
@@ -532,38 +550,61 @@ def simulate_cohort(
         sessions = prepare_sessions(store, protocol, subjects, cohort_seed=seed,
                                     max_trial_time=max_trial_time)
         _finish_sessions(store, sessions)
-        jobs = _jobs(store, sessions)
         total = sum(len(load_session(store, sid).schedule) for _, sid in sessions)
-        initial = total - len(jobs)
-        if max_trials_per_subject is not None:
-            taken: Counter[int] = Counter()
-            kept = []
-            for job in jobs:
-                if taken[job.session.id] < max_trials_per_subject:
-                    taken[job.session.id] += 1
-                    kept.append(job)
-            jobs = kept
-        remaining = Counter(job.session.id for job in jobs)
+        initial = total - sum(len(load_session(store, sid).pending) for _, sid in sessions)
         bar = progress_bar(total, f"cohort {protocol.name}", "trial", initial=initial,
                            enabled=progress)
         trials, sim = 0, 0.0
+        taken: Counter[int] = Counter()
         try:
             runner = _run_in_process if n_workers == 0 else _run_in_pool
-            for job, out in runner(store, jobs, n_workers):
-                trials += 1
-                sim += out["sim_time"]
-                bar.update(1)
-                bar.set_postfix_str(f"{job.subject.code} trial {job.scheduled.index + 1} "
-                                    f"{job.scheduled.condition}")
-                remaining[job.session.id] -= 1
-                if remaining[job.session.id] == 0:  # this subject's last trial: answers
-                    _finish_sessions(store, sessions, only={job.session.id})
+            for phase in _phases(protocol, sessions):
+                while True:   # rounds: a gated trial's decision comes before what follows
+                    for _, sid in phase:   # decisions a killed run left undone
+                        apply_gates(store, sid)
+                    jobs = _jobs(store, phase)
+                    if max_trials_per_subject is not None:
+                        left = {j.session.id: max_trials_per_subject - taken[j.session.id]
+                                for j in jobs}
+                        kept = []
+                        for j in jobs:
+                            if left[j.session.id] > 0:
+                                left[j.session.id] -= 1
+                                kept.append(j)
+                        jobs = kept
+                    if not jobs:
+                        break
+                    remaining = Counter(job.session.id for job in jobs)
+                    for job, out in runner(store, jobs, n_workers):
+                        trials += 1
+                        taken[job.session.id] += 1
+                        sim += out["sim_time"]
+                        _after_trial(store, job)
+                        bar.total = max(bar.total, initial + trials)
+                        bar.update(1)
+                        bar.set_postfix_str(f"{job.subject.code} trial "
+                                            f"{job.scheduled.index + 1} "
+                                            f"{job.scheduled.condition}")
+                        remaining[job.session.id] -= 1
+                        if remaining[job.session.id] == 0:  # answers once it is complete
+                            _finish_sessions(store, sessions, only={job.session.id})
             done = _finish_sessions(store, sessions)
         finally:
             bar.close()
     return CohortReport(subjects=len(subjects), sessions_completed=done, trials_run=trials,
                         sim_seconds=sim, wall_seconds=time.perf_counter() - t0,
                         workers=n_workers)
+
+
+def _phases(protocol: Protocol, sessions: Sequence[tuple[SimulatedSubject, int]],
+            ) -> list[list[tuple[SimulatedSubject, int]]]:
+    """The sessions in the order they run: all at once, or with a gated protocol the
+    gates' expert groups first (their trials are the trainees' benchmark)."""
+    experts = {b.gate.expert_group for b in gated_blocks(protocol) if b.gate is not None}
+    if not experts:
+        return [list(sessions)]
+    return [[x for x in sessions if x[0].group in experts],
+            [x for x in sessions if x[0].group not in experts]]
 
 
 _SCHEMAS: dict[str, Schema] = {}
