@@ -236,6 +236,25 @@ def gate_records(store: Any, session_id: int) -> list[tuple[int, dict[str, Any]]
     return [(int(t), json.loads(d)) for t, d in rows]
 
 
+GATE_FRAME_COLUMNS: tuple[str, ...] = (
+    "session_id", "subject", "trial_id", "block", "trial_index", "n_trials", "passed",
+    "streak", "action", "record")
+"""Columns of :func:`gate_frame` (``record``: the decision's JSON)."""
+
+
+def gate_frame(store: Any, session_ids: Sequence[int]) -> pd.DataFrame:
+    """Every stored gate decision of the sessions, one row each (``GATE_FRAME_COLUMNS``),
+    in session and schedule order (for the report)."""
+    rows = []
+    for sid in session_ids:
+        subject = store.session(int(sid))["subject"]
+        for tid, rec in gate_records(store, int(sid)):
+            rows.append((int(sid), subject, tid, rec["block"], rec["trial_index"],
+                         rec["n_trials"], bool(rec["passed"]), rec["streak"], rec["action"],
+                         json.dumps(rec, sort_keys=True)))
+    return pd.DataFrame(rows, columns=list(GATE_FRAME_COLUMNS))
+
+
 def _metrics_of(store: Any, ids: Sequence[int], metrics: Sequence[str]) -> pd.DataFrame:
     if not ids:
         return pd.DataFrame(columns=list(metrics), dtype=float)
@@ -319,6 +338,7 @@ def apply_gates(store: Any, session_id: int) -> int:
     return added
 
 
-__all__ = ["GATE_EVENT", "HIGHER_IS_BETTER", "GateDecision", "MetricBenchmark",
-           "apply_gates", "benchmark_of", "decide", "expert_benchmark", "expert_trials",
-           "gate_record", "gate_records", "judge", "subject_group"]
+__all__ = ["GATE_EVENT", "GATE_FRAME_COLUMNS", "HIGHER_IS_BETTER", "GateDecision",
+           "MetricBenchmark", "apply_gates", "benchmark_of", "decide", "expert_benchmark",
+           "expert_trials", "gate_frame", "gate_record", "gate_records", "judge",
+           "subject_group"]
