@@ -556,9 +556,12 @@ def simulate_cohort(
                            enabled=progress)
         trials, sim = 0, 0.0
         taken: Counter[int] = Counter()
+        done_first: list[tuple[SimulatedSubject, int]] = []
         try:
             runner = _run_in_process if n_workers == 0 else _run_in_pool
             for phase in _phases(protocol, sessions):
+                if any(load_session(store, sid).status == "running" for _, sid in done_first):
+                    break   # the benchmark's experts are not done (max_trials_per_subject)
                 while True:   # rounds: a gated trial's decision comes before what follows
                     for _, sid in phase:   # decisions a killed run left undone
                         apply_gates(store, sid)
@@ -588,6 +591,7 @@ def simulate_cohort(
                         remaining[job.session.id] -= 1
                         if remaining[job.session.id] == 0:  # answers once it is complete
                             _finish_sessions(store, sessions, only={job.session.id})
+                done_first = phase
             done = _finish_sessions(store, sessions)
         finally:
             bar.close()
