@@ -362,7 +362,7 @@ def gate_card(record: Mapping[str, object],
         v = values.get(m)
         rows.append(GateRow(
             name=str(m), label=label, unit=unit, decimals=dec,
-            value=None if v is None else float(v) * f,  # type: ignore[arg-type]
+            value=None if v is None else float(v) * f,
             limit=float(b["limit"]) * f, mean=float(b["mean"]) * f,
             sd=float(b["sd"]) * f, higher_is_better=bool(b["higher_is_better"]),
             passed=bool(passes.get(m, False))))
@@ -372,7 +372,7 @@ def gate_card(record: Mapping[str, object],
         assert isinstance(vals, Mapping)
         curve.append((i, bool(r.get("passed")),
                       tuple(None if vals.get(row.name) is None
-                            else float(vals[row.name]) * _display(row.name)[2]  # type: ignore[arg-type]
+                            else float(vals[row.name]) * _display(row.name)[2]
                             for row in rows)))
 
     def num(key: str) -> int:

@@ -7,7 +7,7 @@ The rules are described in :mod:`vasim.study.protocol`.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -275,16 +275,8 @@ def extend_gated_block(protocol: Protocol,
             continue
         if t.index == last.index + 1:
             out.append(new)
-        moved = {"index": t.index + 1}
-        if t.block == b.name:
-            moved["trial_in_block"] = t.trial_in_block + 1
-        out.append(_replaced(t, **moved))
+        out.append(replace(t, index=t.index + 1,
+                           trial_in_block=t.trial_in_block + (t.block == b.name)))
     if len(out) == len(schedule):
         out.append(new)
     return out
-
-
-def _replaced(t: ScheduledTrial, **changes: int) -> ScheduledTrial:
-    from dataclasses import replace
-
-    return replace(t, **changes)
