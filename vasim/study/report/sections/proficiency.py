@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from vasim.records.trial_metrics import TRIAL_METRICS
 from vasim.study.report.common import SectionOut, prov_row
 from vasim.study.report.data import StudyData
 from vasim.study.report.figures import PALETTE, _new_figure, figure_png
@@ -41,7 +42,9 @@ def gate_outcomes(gates: pd.DataFrame) -> pd.DataFrame:
                      "first_pass_trial": int(passed["n_trials"].iloc[0]) if len(passed)
                      else None,
                      "trial_ids": ",".join(str(int(t)) for t in g["trial_id"])})
-    return pd.DataFrame(rows, columns=cols)
+    out = pd.DataFrame(rows, columns=cols)
+    out["first_pass_trial"] = pd.array(out["first_pass_trial"].tolist(), dtype="Int64")
+    return out
 
 
 def gate_benchmarks(gates: pd.DataFrame) -> pd.DataFrame:
@@ -96,7 +99,8 @@ def curves_figure(curves: pd.DataFrame) -> bytes:
             ax.axhline(lim, color="black", ls="--", lw=1, label="limit (mean ± k·SD)")
             ax.legend(loc="best", fontsize=8)
         ax.set_xlabel(f"trial of block {block}")
-        ax.set_ylabel(metric)
+        unit = TRIAL_METRICS.get(str(metric), ("", ""))[0]
+        ax.set_ylabel(f"{metric} [{unit}]" if unit else str(metric))
     return figure_png(fig)
 
 
