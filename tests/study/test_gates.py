@@ -222,3 +222,29 @@ def test_insert_scheduled_matches_the_pure_extension(tmp_path: Path) -> None:
         with pytest.raises(StoreError, match="cannot insert scheduled trial 0"):
             st_.insert_scheduled(sid, {**new.as_row(), "trial_index": 0},
                                  event_trial_id=tid, kind="gate", detail="{}")
+
+
+def test_a_cohort_run_in_pieces_makes_the_same_decisions(tmp_path: Path) -> None:
+    protocol = parse_protocol(GATED, source="gated_tiny.toml")
+    kw = {"n_subjects": 3, "n_surgeons": 2, "seed": 3, "workers": 0, "progress": False}
+    simulate_cohort(tmp_path / "whole.db", protocol, **kw)
+    first = simulate_cohort(tmp_path / "parts.db", protocol, max_trials_per_subject=2, **kw)
+    with TrialStore(tmp_path / "parts.db") as st_:
+        trainee = [int(s) for s, subj in zip(st_.sessions()["id"], st_.sessions()["subject"],
+                                            strict=True)
+                   if st_.demographics().set_index("subject")["subject_group"][subj]
+                   != "surgeon"]
+        # the experts were cut short: the trainee waits for a complete benchmark
+        assert first.trials_run == 4 and all(
+            st_.sessions().set_index("id").loc[t, "n_completed"] == 0 for t in trainee)
+    for _ in range(10):
+        if simulate_cohort(tmp_path / "parts.db", protocol, max_trials_per_subject=1,
+                           **kw).trials_run == 0:
+            break
+
+    def decisions(db: Path) -> list[list[tuple]]:
+        with TrialStore(db) as st_:
+            return [[(r["n_trials"], r["action"], r["values"], r["benchmark"])
+                     for _, r in gate_records(st_, int(s))] for s in st_.sessions()["id"]]
+
+    assert decisions(tmp_path / "parts.db") == decisions(tmp_path / "whole.db")

@@ -106,3 +106,22 @@ def test_report_puts_acquisition_retention_and_transfer_side_by_side(tmp_path: P
                                                         "transfer"}
     assert any(b.__class__.__name__ == "FigureBlock" for b in section.blocks)
     assert len(prov) == len(cells)
+
+
+def test_cli_stops_at_the_sitting_and_resumes_with_a_simulated_delay(tmp_path: Path,
+                                                                     capsys) -> None:
+    from vasim.cli import main
+
+    db = str(tmp_path / "c.db")
+    assert main(["study", "run", "--protocol", "vf_retention", "--subject", "C01", "--db", db,
+                 "--seed", "1", "--max-time", "0.1", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "13/17 trials completed, status running" in out
+    assert "the next sitting (block 'retention') begins 7 d after the last trial" in out
+    assert main(["study", "resume", "--db", db, "--subject", "C01", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "due 20" in err and "--simulate-delay" in err and err.count("\n") == 1
+    assert main(["study", "resume", "--db", db, "--subject", "C01", "--no-progress",
+                 "--simulate-delay"]) == 0
+    out = capsys.readouterr().out
+    assert "4 trial(s) run" in out and "17/17 trials completed, status completed" in out
