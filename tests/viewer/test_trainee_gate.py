@@ -104,3 +104,53 @@ def test_the_viewer_reads_the_stored_decision_of_a_trial(tmp_path: Path) -> None
         assert [n for n, _, _ in card.curve] == [1, 2, 3]
         assert trial_gate_card(st, None) is None
         assert math.isclose(card.rows[0].limit, 220.0)
+
+
+def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None:
+    """The viewer's protocol session: after a gated trial the controller stores the gate's
+    decision and the trainee's score card carries it (surgeons simulated beforehand)."""
+    import time
+
+    from vasim.study.cohort import simulate_cohort
+    from vasim.study.gates import gate_records
+    from vasim.study.protocol import load_protocol
+    from vasim.viewer.controller import Command, TrainingController
+
+    db = tmp_path / "v.sqlite"
+    simulate_cohort(db, load_protocol("vf_proficiency"), n_subjects=2, n_surgeons=2, seed=1,
+                    workers=0, progress=False, max_trial_time=0.5)
+    c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.5)
+
+    def drive(cond, timeout: float = 30.0) -> bool:
+        t_end = time.monotonic() + timeout
+        while time.monotonic() < t_end:
+            c.poll()
+            if cond():
+                return True
+            time.sleep(0.01)
+        return cond()
+
+    try:
+        for cmd in (Command("mode", "protocol"), Command("subject", "T01"),
+                    Command("protocol", "vf_proficiency")):
+            c.handle(cmd)
+        for _ in range(7):        # 2 baseline + 4 FF + the first gated practice trial
+            c.handle(Command("start"))
+            assert drive(lambda: c.info.trial_id is not None and not c.panel.running)
+        sid = c.panel.session_id
+        tid = c.info.trial_id
+        assert sid is not None and tid is not None
+        with TrialStore(db, readonly=True) as st:
+            recs = dict(gate_records(st, sid))
+        assert list(recs) == [tid] and recs[tid]["action"] == "continue"
+        card = c.panel.scorecard
+        assert card is not None and card.gate is not None and card.gate.n_trials == 1
+        rows = {r.name: r for r in card.gate.rows}
+        bench = recs[tid]["benchmark"]
+        assert rows["duration"].limit == pytest.approx(bench["duration"]["limit"])
+        assert rows["path_dev_mean_mm"].value == pytest.approx(
+            recs[tid]["values"]["path_dev_mean_mm"])
+        assert card.gate.passed == recs[tid]["passed"]
+        assert bench["duration"]["n"] == 6          # 2 surgeons x 3 practice trials
+    finally:
+        c.close()
