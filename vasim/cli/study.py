@@ -600,15 +600,22 @@ def _count(n: int, noun: str) -> str:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
-    from vasim.study.protocol import generate_schedule, load_protocol
+    from vasim.study.protocol import block_of, day_offsets, generate_schedule, load_protocol
 
     protocol = load_protocol(args.protocol)
     rows = generate_schedule(protocol, args.seed)
     print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
     print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
+    days = day_offsets(protocol, rows)
     for t in rows:
         probe = f"VF-free #{t.probe_index}" if t.probe else ""
-        print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}")
+        b = block_of(protocol, t.block)
+        extra = [b.phase] if b.phase != "acquisition" else []
+        extra += [f"day {days[t.index]:g}"] if days[t.index] else []
+        if b.gate is not None and not t.probe:
+            extra.append(f"gated: repeats up to {b.gate.max_trials}")
+        note = f"  ({', '.join(extra)})" if extra else ""
+        print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}{note}")
     return 0
 
 

@@ -453,10 +453,11 @@ def sitting_begins(session: Session, st: ScheduledTrial) -> float | None:
 
 
 def sitting_record(store: TrialStore, session: Session, st: ScheduledTrial, delay: float,
-                   simulate: bool) -> dict[str, Any]:
-    """The record of a later sitting about to begin at ``st`` (the ``'sitting'`` event):
+                   simulate: bool, at: str | None = None) -> dict[str, Any]:
+    """The record of a later sitting beginning at ``st`` (the ``'sitting'`` event):
     sitting number, block, nominal delay and day [d], simulated or not, and the real time
-    elapsed since the previous trial ended [d]."""
+    elapsed [d] from the end of the previous trial to ``at`` (an ISO time, e.g. the
+    trial's ``started_at``; None: now)."""
     rec: dict[str, Any] = {"sitting": sitting_numbers(session.protocol,
                                                       session.schedule)[st.index],
                            "block": st.block, "delay_days": delay,
@@ -465,7 +466,8 @@ def sitting_record(store: TrialStore, session: Session, st: ScheduledTrial, dela
     tid = session.completed[st.index - 1] if st.index else None
     if tid is not None:
         last = pd.Timestamp(store.trial(tid)["ended_at"])
-        rec["elapsed_days"] = (pd.Timestamp.now(tz=last.tz) - last).total_seconds() / 86_400
+        then = pd.Timestamp.now(tz=last.tz) if at is None else pd.Timestamp(at)
+        rec["elapsed_days"] = (then - last).total_seconds() / 86_400
         rec["previous_ended_at"] = last.isoformat()
     return rec
 

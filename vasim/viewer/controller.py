@@ -95,6 +95,25 @@ page's default input for a person)."""
 
 
 
+def _record_sitting(st: Any, session_id: int, index: int) -> None:
+    """A browser session's trial that began a later sitting (a retention block's delay) gets
+    its ``'sitting'`` event, with the real time elapsed (``vasim.study.session``)."""
+    from vasim.study.session import (
+        load_session,
+        record_sitting,
+        sitting_begins,
+        sitting_record,
+    )
+
+    s = load_session(st, session_id)
+    scheduled = s.schedule[index]
+    delay = sitting_begins(s, scheduled)
+    tid = s.completed[index]
+    if delay is not None and tid is not None:
+        rec = sitting_record(st, s, scheduled, delay, False, at=st.trial(tid)["started_at"])
+        record_sitting(st, s, scheduled, rec)
+
+
 class TrainingController(ConditionCommands):
     """Server-side state of the viewer (module docstring). Not thread-safe by design: one
     controller thread calls ``handle``/``poll``/``close``; other threads read the published
@@ -336,6 +355,7 @@ class TrainingController(ConditionCommands):
             from vasim.study.gates import apply_gates  # a gated block's decision (#18 §4)
 
             try:
+                _record_sitting(self.store(), self.panel.session_id, info.schedule_index)
                 apply_gates(self.store(), self.panel.session_id)
             except VasimError as exc:
                 log.warning("the proficiency gate of %s: %s", info.title, exc)
