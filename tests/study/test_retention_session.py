@@ -106,6 +106,14 @@ def test_report_puts_acquisition_retention_and_transfer_side_by_side(tmp_path: P
                                                         "transfer"}
     assert any(b.__class__.__name__ == "FigureBlock" for b in section.blocks)
     assert len(prov) == len(cells)
+    # the learning-curve analysis keeps to the acquisition trials (0.3 s trials reach no
+    # point, so they are all listed as excluded: analysed or excluded, never retention)
+    from vasim.study.report.analysis import analyse_vf
+
+    vf = analyse_vf(data)
+    seen = set(vf.trials["trial_id"]) | set(vf.excluded["trial_id"])
+    acq = data.analysed[data.analysed["block"].isin(("baseline", "ff", "mag"))]
+    assert seen == set(acq["trial_id"]) and len(seen) == 3 * 13
 
 
 def test_cli_stops_at_the_sitting_and_resumes_with_a_simulated_delay(tmp_path: Path,
