@@ -77,8 +77,8 @@ class RetentionModel:
         """R(a) = (1 + a / tau) ** -psi: the fraction of a trial's practice kept after
         ``age_days`` [d] (1 at age 0).
 
-        >>> round(RetentionModel().retained(7.0), 4)
-        0.7320
+        >>> round(RetentionModel().retained(7.0), 3)
+        0.732
         """
         if not math.isfinite(age_days) or age_days < 0:
             raise ValueError(f"age_days must be a finite number >= 0, got {age_days!r}")
