@@ -81,16 +81,14 @@ from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
-from vasim.study.gates import apply_gates
+from vasim.study.gates import apply_gates, expert_groups
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial, gated_blocks
 from vasim.study.session import (
     Session,
     SessionSettings,
+    after_simulated_trial,
     load_session,
     record_answers,
-    record_sitting,
-    sitting_begins,
-    sitting_record,
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
@@ -480,15 +478,6 @@ def _jobs(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]]) -
     return jobs
 
 
-def _after_trial(store: TrialStore, job: _Job) -> None:
-    """A simulated later sitting's record (no real waiting) and the gate's decision."""
-    delay = sitting_begins(job.session, job.scheduled)
-    if delay is not None:
-        rec = sitting_record(store, job.session, job.scheduled, delay, True)
-        record_sitting(store, job.session, job.scheduled, rec)
-    apply_gates(store, job.session.id)
-
-
 def _finish_sessions(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]],
                      only: set[int] | None = None) -> int:
     """Completes the sessions with no pending trial and records their post answers."""
@@ -582,7 +571,7 @@ def simulate_cohort(
                         trials += 1
                         taken[job.session.id] += 1
                         sim += out["sim_time"]
-                        _after_trial(store, job)
+                        after_simulated_trial(store, job.session, job.scheduled)
                         bar.total = max(bar.total, initial + trials)
                         bar.update(1)
                         bar.set_postfix_str(f"{job.subject.code} trial "
@@ -602,13 +591,11 @@ def simulate_cohort(
 
 def _phases(protocol: Protocol, sessions: Sequence[tuple[SimulatedSubject, int]],
             ) -> list[list[tuple[SimulatedSubject, int]]]:
-    """The sessions in the order they run: all at once, or with a gated protocol the
-    gates' expert groups first (their trials are the trainees' benchmark)."""
-    experts = {b.gate.expert_group for b in gated_blocks(protocol) if b.gate is not None}
-    if not experts:
-        return [list(sessions)]
-    return [[x for x in sessions if x[0].group in experts],
-            [x for x in sessions if x[0].group not in experts]]
+    """All sessions at once, or the gates' expert groups first (``gates.expert_groups``)."""
+    first = expert_groups(protocol)
+    return [list(sessions)] if not first else [
+        [x for x in sessions if x[0].group in first],
+        [x for x in sessions if x[0].group not in first]]
 
 
 _SCHEMAS: dict[str, Schema] = {}

@@ -227,6 +227,13 @@ def expert_trials(store: Any, protocol: Protocol, block: Block, exclude: str,
     return out
 
 
+def expert_groups(protocol: Protocol) -> frozenset[str]:
+    """The groups whose trials are a benchmark of the protocol's gates: a simulated cohort
+    runs their sessions first (empty without a gate)."""
+    return frozenset(b.gate.expert_group for b in gated_blocks(protocol)
+                     if b.gate is not None)
+
+
 def gate_records(store: Any, session_id: int) -> list[tuple[int, dict[str, Any]]]:
     """The stored decisions of a session: ``(trial id, record)`` in trial order."""
     rows = store.con.execute(
@@ -340,5 +347,5 @@ def apply_gates(store: Any, session_id: int) -> int:
 
 __all__ = ["GATE_EVENT", "GATE_FRAME_COLUMNS", "HIGHER_IS_BETTER", "GateDecision",
            "MetricBenchmark", "apply_gates", "benchmark_of", "decide", "expert_benchmark",
-           "expert_trials", "gate_frame", "gate_record", "gate_records", "judge",
+           "expert_groups", "expert_trials", "gate_frame", "gate_record", "gate_records", "judge",
            "subject_group"]

@@ -497,6 +497,18 @@ def record_sitting(store: TrialStore, session: Session, st: ScheduledTrial,
         store.add_event(int(tid), SITTING_EVENT, json.dumps(dict(rec), sort_keys=True))
 
 
+def after_simulated_trial(store: TrialStore, session: Session, st: ScheduledTrial) -> int:
+    """What follows a simulated trial (``vasim study simulate``): the record of a later
+    sitting it began (a simulated delay: no real waiting) and the gates' decisions
+    (``vasim.study.gates.apply_gates``); returns the trials the gates added."""
+    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
+
+    delay = sitting_begins(session, st)
+    if delay is not None:
+        record_sitting(store, session, st, sitting_record(store, session, st, delay, True))
+    return apply_gates(store, session.id)
+
+
 def _timed_out_attempts(store: TrialStore, session_id: int, index: int) -> int:
     """Completed attempts at a scheduled trial whose outcome was 'timed_out'."""
     t = store.trials("completed", outcome="timed_out")
@@ -606,6 +618,7 @@ __all__ = [
     "Session",
     "SessionSettings",
     "abort_session",
+    "after_simulated_trial",
     "find_session",
     "load_answers_file",
     "load_session",

@@ -65,6 +65,7 @@ from vasim.viewer.history import (
     CURVE_METRICS,
     learning_curve,
     open_session,
+    record_browser_sitting,
     session_progress,
     trial_score_card,
 )
@@ -93,25 +94,6 @@ INPUTS: tuple[str, ...] = ("scripted", "browser", "laparoscopic")
 option), or the trainee's laparoscopic instrument (mouse, keyboard, gamepad; the trainee
 page's default input for a person)."""
 
-
-
-def _record_sitting(st: Any, session_id: int, index: int) -> None:
-    """A browser session's trial that began a later sitting (a retention block's delay) gets
-    its ``'sitting'`` event, with the real time elapsed (``vasim.study.session``)."""
-    from vasim.study.session import (
-        load_session,
-        record_sitting,
-        sitting_begins,
-        sitting_record,
-    )
-
-    s = load_session(st, session_id)
-    scheduled = s.schedule[index]
-    delay = sitting_begins(s, scheduled)
-    tid = s.completed[index]
-    if delay is not None and tid is not None:
-        rec = sitting_record(st, s, scheduled, delay, False, at=st.trial(tid)["started_at"])
-        record_sitting(st, s, scheduled, rec)
 
 
 class TrainingController(ConditionCommands):
@@ -355,7 +337,8 @@ class TrainingController(ConditionCommands):
             from vasim.study.gates import apply_gates  # a gated block's decision (#18 §4)
 
             try:
-                _record_sitting(self.store(), self.panel.session_id, info.schedule_index)
+                record_browser_sitting(self.store(), self.panel.session_id,
+                                       info.schedule_index)
                 apply_gates(self.store(), self.panel.session_id)
             except VasimError as exc:
                 log.warning("the proficiency gate of %s: %s", info.title, exc)

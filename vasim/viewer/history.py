@@ -80,6 +80,26 @@ def trial_gate_card(st: Any, trial_id: int | None) -> GateCard | None:
     return gate_card(rec, earlier)
 
 
+def record_browser_sitting(st: Any, session_id: int, index: int) -> None:
+    """A browser session's trial that began a later sitting (a retention block's delay) gets
+    its ``'sitting'`` event, with the real gap from the previous trial's end to its start
+    (``vasim.study.session.sitting_record``)."""
+    from vasim.study.session import (
+        load_session,
+        record_sitting,
+        sitting_begins,
+        sitting_record,
+    )
+
+    s = load_session(st, session_id)
+    scheduled = s.schedule[index]
+    delay = sitting_begins(s, scheduled)
+    tid = s.completed[index]
+    if delay is not None and tid is not None:
+        rec = sitting_record(st, s, scheduled, delay, False, at=st.trial(tid)["started_at"])
+        record_sitting(st, s, scheduled, rec)
+
+
 def learning_curve(st: Any, session_id: int | None, subject: str | None,
                    label: str | None = None) -> tuple[tuple[int, float, float], ...]:
     """The learning curve so far, ``(n, completion_time, mean_latency)`` per trial: the
@@ -150,4 +170,5 @@ def session_progress(st: Any, session_id: int, running_index: int | None) -> dic
 
 
 __all__ = ["BENCHMARK_LEVEL", "CURVE_METRICS", "learning_curve", "open_session",
-           "session_progress", "trial_gate_card", "trial_score_card"]
+           "record_browser_sitting", "session_progress", "trial_gate_card",
+           "trial_score_card"]
