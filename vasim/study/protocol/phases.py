@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING
 from vasim.core.bounds import (
     GATE_CONSECUTIVE,
     GATE_K,
-    REPETITIONS,
+    GATE_MAX_TRIALS,
     RETENTION_DELAY_DAYS,
     TRIALS_PER_SESSION,
 )
@@ -104,7 +104,7 @@ class Gate:
         for i, m in enumerate(self.metrics):
             if m not in known:
                 raise fail(m, f"a trial metric ({', '.join(known)})", field=f"metrics[{i}]")
-        check_int(self.max_trials, "max_trials", bound=REPETITIONS)
+        check_int(self.max_trials, "max_trials", bound=GATE_MAX_TRIALS)
         object.__setattr__(self, "k", check_number(self.k, "k", bound=GATE_K))
         check_int(self.consecutive, "consecutive", bound=GATE_CONSECUTIVE)
         check_choice(self.expert_group, "expert_group", EXPERT_GROUPS)
