@@ -349,6 +349,9 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="protocol name, when the subject has several running sessions")
     r.add_argument("--answers", type=Path, default=None,
                    help="TOML file with [post] (and [pre]) answers to record")
+    r.add_argument("--simulate-delay", action="store_true",
+                   help="begin a later sitting (a retention block's delay) now, recording a "
+                        "simulated delay instead of waiting for it")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_resume)
 
@@ -458,6 +461,24 @@ def _session_line(store: object, session_id: int) -> str:
             f"status {row['status']}")
 
 
+def _print_next_sitting(store: object, session_id: int) -> None:
+    """When a running session stopped at a later sitting: when it is due and how to go on."""
+    from vasim.study.session import load_session, sitting_begins
+    from vasim.study.store import TrialStore
+
+    assert isinstance(store, TrialStore)
+    s = load_session(store, session_id)
+    if s.status != "running" or not s.pending:
+        return
+    st = s.pending[0]
+    delay = sitting_begins(s, st)
+    if delay is None:
+        return
+    print(f"the next sitting (block {st.block!r}) begins {delay:g} d after the last trial: "
+          f"`vasim study resume --db {store.path} --session {session_id}` then (or now "
+          "with --simulate-delay)")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from vasim.records.trial_meta import validate_subject_code
     from vasim.study.protocol import load_protocol
@@ -484,6 +505,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if store.session(sid)["status"] == "completed":
             recorded += _record_file_answers(store, sid, args.answers, ("post",))
         print(_session_line(store, sid))
+        _print_next_sitting(store, sid)
         if recorded:
             print(f"questionnaires recorded: {', '.join(recorded)}")
     return 0
@@ -499,13 +521,15 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         if store.recovered:
             print(f"marked interrupted (writer gone): trials {store.recovered}",
                   file=sys.stderr)
-        n = run_session(store, sid, progress=_progress(args))
+        n = run_session(store, sid, progress=_progress(args),
+                        simulate_delay=args.simulate_delay)
         recorded = []
         if store.session(sid)["status"] == "completed":
             recorded = _record_file_answers(store, sid, args.answers, ("pre", "post"),
                                             skip_answered=True)
         print(f"{n} trial(s) run")
         print(_session_line(store, sid))
+        _print_next_sitting(store, sid)
         if recorded:
             print(f"questionnaires recorded: {', '.join(recorded)}")
     return 0
@@ -576,15 +600,22 @@ def _count(n: int, noun: str) -> str:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
-    from vasim.study.protocol import generate_schedule, load_protocol
+    from vasim.study.protocol import block_of, day_offsets, generate_schedule, load_protocol
 
     protocol = load_protocol(args.protocol)
     rows = generate_schedule(protocol, args.seed)
     print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
     print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
+    days = day_offsets(protocol, rows)
     for t in rows:
         probe = f"VF-free #{t.probe_index}" if t.probe else ""
-        print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}")
+        b = block_of(protocol, t.block)
+        extra = [b.phase] if b.phase != "acquisition" else []
+        extra += [f"day {days[t.index]:g}"] if days[t.index] else []
+        if b.gate is not None and not t.probe:
+            extra.append(f"gated: repeats up to {b.gate.max_trials}")
+        note = f"  ({', '.join(extra)})" if extra else ""
+        print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}{note}")
     return 0
 
 

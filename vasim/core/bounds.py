@@ -136,6 +136,14 @@ TRIALS_PER_SESSION = Bound(1, 10_000, "",
                            "a session of 10,000 trials takes days (the thesis' ~40)")
 SUBJECTS = Bound(1, 10_000, "", "a simulated cohort; the thesis' studies had ~10-40 subjects")
 SURGEONS = Bound(0, 10_000, "", "surgeons among a simulated cohort")
+RETENTION_DELAY_DAYS = Bound(0.0, 3650.0, "d",
+                             "a retention interval; skill-decay studies span days to years "
+                             "(Arthur et al. 1998: up to ~ 5 years)")
+GATE_K = Bound(0.0, 10.0, "", "k of a benchmark mean ± k·SD (proficiency studies use 1-2)")
+GATE_CONSECUTIVE = Bound(1, 100, "", "passes in a row a gate asks (the FLS proficiency "
+                         "curriculum, Ritter & Scott 2007: 2 consecutive)")
+GATE_MAX_TRIALS = Bound(1, 1000, "", "a gated block's cap of trials (proficiency curricula "
+                        "reach their benchmarks within tens of repetitions)")
 PRACTICE_TRIALS = Bound(0, 100_000, "", "earlier trials of one subject")
 VARIANT = Bound(0, 6, "", "the trajectory's original and six mirrored/rotated variants")
 PORT = Bound(0, 65_535, "", "a TCP port (0: any free port)")

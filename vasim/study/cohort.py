@@ -81,10 +81,12 @@ from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
-from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial
+from vasim.study.gates import apply_gates, expert_groups
+from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial, gated_blocks
 from vasim.study.session import (
     Session,
     SessionSettings,
+    after_simulated_trial,
     load_session,
     record_answers,
     start_session,
@@ -461,13 +463,18 @@ def prepare_sessions(store: TrialStore, protocol: Protocol,
 
 
 def _jobs(store: TrialStore, sessions: Sequence[tuple[SimulatedSubject, int]]) -> list[_Job]:
+    """Each running session's pending trials, up to and including its first pending trial
+    of a gated block (the trials after it wait for the gate's decision)."""
     jobs = []
     for subj, sid in sessions:
         session = load_session(store, sid)
         if session.status != "running":
             continue
+        gated = {b.name for b in gated_blocks(session.protocol)}
         for st in session.pending:
             jobs.append(_Job(session, subj, st, session.trial_config(st)))
+            if st.block in gated and not st.probe:
+                break
     return jobs
 
 
@@ -532,38 +539,63 @@ def simulate_cohort(
         sessions = prepare_sessions(store, protocol, subjects, cohort_seed=seed,
                                     max_trial_time=max_trial_time)
         _finish_sessions(store, sessions)
-        jobs = _jobs(store, sessions)
         total = sum(len(load_session(store, sid).schedule) for _, sid in sessions)
-        initial = total - len(jobs)
-        if max_trials_per_subject is not None:
-            taken: Counter[int] = Counter()
-            kept = []
-            for job in jobs:
-                if taken[job.session.id] < max_trials_per_subject:
-                    taken[job.session.id] += 1
-                    kept.append(job)
-            jobs = kept
-        remaining = Counter(job.session.id for job in jobs)
+        initial = total - sum(len(load_session(store, sid).pending) for _, sid in sessions)
         bar = progress_bar(total, f"cohort {protocol.name}", "trial", initial=initial,
                            enabled=progress)
         trials, sim = 0, 0.0
+        taken: Counter[int] = Counter()
+        done_first: list[tuple[SimulatedSubject, int]] = []
         try:
             runner = _run_in_process if n_workers == 0 else _run_in_pool
-            for job, out in runner(store, jobs, n_workers):
-                trials += 1
-                sim += out["sim_time"]
-                bar.update(1)
-                bar.set_postfix_str(f"{job.subject.code} trial {job.scheduled.index + 1} "
-                                    f"{job.scheduled.condition}")
-                remaining[job.session.id] -= 1
-                if remaining[job.session.id] == 0:  # this subject's last trial: answers
-                    _finish_sessions(store, sessions, only={job.session.id})
+            for phase in _phases(protocol, sessions):
+                if any(load_session(store, sid).status == "running" for _, sid in done_first):
+                    break   # the benchmark's experts are not done (max_trials_per_subject)
+                while True:   # rounds: a gated trial's decision comes before what follows
+                    for _, sid in phase:   # decisions a killed run left undone
+                        apply_gates(store, sid)
+                    jobs = _jobs(store, phase)
+                    if max_trials_per_subject is not None:
+                        left = {j.session.id: max_trials_per_subject - taken[j.session.id]
+                                for j in jobs}
+                        kept = []
+                        for j in jobs:
+                            if left[j.session.id] > 0:
+                                left[j.session.id] -= 1
+                                kept.append(j)
+                        jobs = kept
+                    if not jobs:
+                        break
+                    remaining = Counter(job.session.id for job in jobs)
+                    for job, out in runner(store, jobs, n_workers):
+                        trials += 1
+                        taken[job.session.id] += 1
+                        sim += out["sim_time"]
+                        after_simulated_trial(store, job.session, job.scheduled)
+                        bar.total = max(bar.total, initial + trials)
+                        bar.update(1)
+                        bar.set_postfix_str(f"{job.subject.code} trial "
+                                            f"{job.scheduled.index + 1} "
+                                            f"{job.scheduled.condition}")
+                        remaining[job.session.id] -= 1
+                        if remaining[job.session.id] == 0:  # answers once it is complete
+                            _finish_sessions(store, sessions, only={job.session.id})
+                done_first = phase
             done = _finish_sessions(store, sessions)
         finally:
             bar.close()
     return CohortReport(subjects=len(subjects), sessions_completed=done, trials_run=trials,
                         sim_seconds=sim, wall_seconds=time.perf_counter() - t0,
                         workers=n_workers)
+
+
+def _phases(protocol: Protocol, sessions: Sequence[tuple[SimulatedSubject, int]],
+            ) -> list[list[tuple[SimulatedSubject, int]]]:
+    """All sessions at once, or the gates' expert groups first (``gates.expert_groups``)."""
+    first = expert_groups(protocol)
+    return [list(sessions)] if not first else [
+        [x for x in sessions if x[0].group in first],
+        [x for x in sessions if x[0].group not in first]]
 
 
 _SCHEMAS: dict[str, Schema] = {}

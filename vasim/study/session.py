@@ -64,14 +64,18 @@ import pandas as pd
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.operator.learning import OPERATOR_LABEL, trial_adjustment
+from vasim.operator.retention import practice_weights, weighted_adjustment
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import validate_subject_code
 from vasim.records.trial_metrics import MetricParams
 from vasim.study.protocol import (
     Protocol,
     ScheduledTrial,
+    block_of,
+    day_offsets,
     generate_schedule,
     parse_protocol,
+    sitting_numbers,
     validate_answers,
 )
 from vasim.study.store import SessionMeta, TrialStore
@@ -217,8 +221,12 @@ class Session:
         profile = s.resolved_profile()
         practice = scheduled.index
         if s.operator == "scripted":
-            adj = trial_adjustment([t.condition for t in self.schedule[:scheduled.index]],
-                                   scheduled.condition)
+            history = [t.condition for t in self.schedule[:scheduled.index]]
+            if self.spans_days_or_paths:
+                adj = weighted_adjustment(history, scheduled.condition,
+                                          self.practice_weights(scheduled))
+            else:
+                adj = trial_adjustment(history, scheduled.condition)
             profile, practice = adj.apply(profile), round(adj.practice)
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
@@ -234,6 +242,27 @@ class Session:
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
         )
+
+    @property
+    def spans_days_or_paths(self) -> bool:
+        """The protocol has later sittings or transfer blocks (retention and transfer of
+        the simulated operator apply, ``vasim.operator.retention``)."""
+        return any(b.delay_days > 0 or b.phase == "transfer" for b in self.protocol.blocks)
+
+    def practice_weights(self, scheduled: ScheduledTrial) -> list[float]:
+        """The weight of each earlier trial's practice at ``scheduled``
+        (``retention.practice_weights``).
+
+        **Decision**: the simulated operator forgets over the protocol's nominal delays
+        (the simulated date of each sitting, ``day_offsets``), whether or not a real
+        delay passed; a transfer block's trials are on an untrained trajectory.
+        """
+        days = day_offsets(self.protocol, self.schedule)
+        earlier = self.schedule[:scheduled.index]
+        untrained = block_of(self.protocol, scheduled.block).phase == "transfer"
+        return practice_weights([days[scheduled.index] - days[t.index] for t in earlier],
+                                [t.variant == scheduled.variant for t in earlier],
+                                untrained=untrained)
 
     @property
     def metric_params(self) -> MetricParams:
@@ -326,13 +355,23 @@ def find_session(store: TrialStore, *, subject: str | None = None,
 
 
 def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
-                max_trials: int | None = None) -> int:
+                max_trials: int | None = None, simulate_delay: bool = False) -> int:
     """Runs a session's pending scheduled trials in order; completes it when none is left.
+
+    A protocol with later sittings (blocks with ``delay_days``) runs one sitting per call:
+    the call stops before the first trial of the next sitting; the call that begins a
+    later sitting (``vasim study resume``) checks that its delay has passed since the
+    previous trial ended, or with ``simulate_delay`` records a simulated delay and does
+    not wait. Either way the first trial of the sitting gets a ``'sitting'`` event saying
+    which (``record_sitting``). After each trial of a gated block the gate decides
+    (``vasim.study.gates.apply_gates``); a decision that adds a trial extends the stored
+    schedule.
 
     Args:
         store: the study store (the only writer of this session).
         session_id: the session. progress: progress output over the session's trials.
         max_trials: stop after this many trials (None: run to the end).
+        simulate_delay: begin a later sitting at once, recording a simulated delay.
 
     Returns:
         The number of trials run (completed).
@@ -354,18 +393,27 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
         raise StoreError(f"session {session.id} is being run: trial {int(busy['id'].iloc[0])} "
                          f"is 'running' (process {busy['pid'].iloc[0]} on "
                          f"{busy['host'].iloc[0]})")
+    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
+
     if _release_timed_out(store, session):
         session = load_session(store, session.id)
-    pending = session.pending
-    if max_trials is not None:
-        pending = pending[:max_trials]
+    apply_gates(store, session.id)          # a decision a crash left undone
+    session = load_session(store, session.id)
     n_total = len(session.schedule)
     bar = progress_bar(n_total, f"{session.subject} {session.protocol.name}", "trial",
                        initial=n_total - len(session.pending), enabled=progress)
     done = 0
+    n_run = 0
     try:
-        for st in pending:
-            bar.set_postfix_str(f"trial {st.index + 1}/{n_total} {st.condition}"
+        while session.pending and (max_trials is None or n_run < max_trials):
+            st = session.pending[0]
+            begins = sitting_begins(session, st)
+            note: dict[str, Any] = {}
+            if begins is not None:
+                if n_run:
+                    break                       # this sitting is over: resume later
+                note = _check_delay(store, session, st, begins, simulate_delay)
+            bar.set_postfix_str(f"trial {st.index + 1}/{len(session.schedule)} {st.condition}"
                                 f"{' (VF-free)' if st.probe else ''} v{st.variant}")
             while True:
                 repeat = _timed_out_attempts(store, session.id, st.index)
@@ -375,12 +423,90 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
                 done += 1
                 if not _release_timed_out(store, session, st.index):
                     break
+            if begins is not None:
+                record_sitting(store, session, st, note)
+            n_run += 1
             bar.update(1)
+            if apply_gates(store, session.id):
+                bar.total += 1
+            session = load_session(store, session.id)
     finally:
         bar.close()
     if not load_session(store, session.id).pending:
         store.set_session_status(session.id, "completed")
     return done
+
+
+SITTING_EVENT = "sitting"
+"""``events.kind`` on the first trial of a later sitting (its delay, simulated or real)."""
+
+
+def sitting_begins(session: Session, st: ScheduledTrial) -> float | None:
+    """The delay [d] before ``st`` when it begins a later sitting, else None."""
+    if st.index == 0:
+        return None
+    numbers = sitting_numbers(session.protocol, session.schedule)
+    if numbers[st.index] == numbers[st.index - 1]:
+        return None
+    days = day_offsets(session.protocol, session.schedule)
+    return days[st.index] - days[st.index - 1]
+
+
+def sitting_record(store: TrialStore, session: Session, st: ScheduledTrial, delay: float,
+                   simulate: bool, at: str | None = None) -> dict[str, Any]:
+    """The record of a later sitting beginning at ``st`` (the ``'sitting'`` event):
+    sitting number, block, nominal delay and day [d], simulated or not, and the real time
+    elapsed [d] from the end of the previous trial to ``at`` (an ISO time, e.g. the
+    trial's ``started_at``; None: now)."""
+    rec: dict[str, Any] = {"sitting": sitting_numbers(session.protocol,
+                                                      session.schedule)[st.index],
+                           "block": st.block, "delay_days": delay,
+                           "day": day_offsets(session.protocol, session.schedule)[st.index],
+                           "simulated": bool(simulate), "elapsed_days": None}
+    tid = session.completed[st.index - 1] if st.index else None
+    if tid is not None:
+        last = pd.Timestamp(store.trial(tid)["ended_at"])
+        then = pd.Timestamp.now(tz=last.tz) if at is None else pd.Timestamp(at)
+        rec["elapsed_days"] = (then - last).total_seconds() / 86_400
+        rec["previous_ended_at"] = last.isoformat()
+    return rec
+
+
+def _check_delay(store: TrialStore, session: Session, st: ScheduledTrial, delay: float,
+                 simulate: bool) -> dict[str, Any]:
+    """The sitting's record; refuses a real sitting whose delay has not passed."""
+    rec = sitting_record(store, session, st, delay, simulate)
+    if not simulate and rec["elapsed_days"] is not None and rec["elapsed_days"] < delay:
+        last = pd.Timestamp(rec["previous_ended_at"])
+        due = last + pd.Timedelta(days=delay)
+        raise StoreError(
+            f"session {session.id} of subject {session.subject!r}: sitting "
+            f"{rec['sitting']} (block {st.block!r}) begins {delay:g} d after the previous "
+            f"trial (ended {last.isoformat()}), due {due.isoformat()}; resume then, or pass "
+            "--simulate-delay to record a simulated delay")
+    return rec
+
+
+def record_sitting(store: TrialStore, session: Session, st: ScheduledTrial,
+                   rec: Mapping[str, Any]) -> None:
+    """Stores the ``'sitting'`` event on the trial that began a later sitting."""
+    import json
+
+    tid = store.schedule(session.id)["trial_id"].iloc[st.index]
+    if not pd.isna(tid):
+        store.add_event(int(tid), SITTING_EVENT, json.dumps(dict(rec), sort_keys=True))
+
+
+def after_simulated_trial(store: TrialStore, session: Session, st: ScheduledTrial) -> int:
+    """What follows a simulated trial (``vasim study simulate``): the record of a later
+    sitting it began (a simulated delay: no real waiting) and the gates' decisions
+    (``vasim.study.gates.apply_gates``); returns the trials the gates added."""
+    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
+
+    delay = sitting_begins(session, st)
+    if delay is not None:
+        record_sitting(store, session, st, sitting_record(store, session, st, delay, True))
+    return apply_gates(store, session.id)
 
 
 def _timed_out_attempts(store: TrialStore, session_id: int, index: int) -> int:
@@ -488,15 +614,20 @@ def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
 __all__ = [
     "BROWSER_HINT",
     "OPERATORS",
+    "SITTING_EVENT",
     "Session",
     "SessionSettings",
     "abort_session",
+    "after_simulated_trial",
     "find_session",
     "load_answers_file",
     "load_session",
     "new_seed",
     "record_answers",
+    "record_sitting",
     "run_session",
+    "sitting_begins",
+    "sitting_record",
     "start_session",
     "trial_seed",
 ]

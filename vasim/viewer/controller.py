@@ -65,6 +65,7 @@ from vasim.viewer.history import (
     CURVE_METRICS,
     learning_curve,
     open_session,
+    record_browser_sitting,
     session_progress,
     trial_score_card,
 )
@@ -332,10 +333,20 @@ class TrainingController(ConditionCommands):
             self._stored.finish(res, timing=self._timing(info.trial_id))
         self._stored_done = True
         changes: dict[str, Any] = {"running": False, "summary": summary}
+        if info.schedule_index is not None and self.panel.session_id is not None:
+            from vasim.study.gates import apply_gates  # a gated block's decision (#18 §4)
+
+            try:
+                record_browser_sitting(self.store(), self.panel.session_id,
+                                       info.schedule_index)
+                apply_gates(self.store(), self.panel.session_id)
+            except VasimError as exc:
+                log.warning("the proficiency gate of %s: %s", info.title, exc)
+                changes["status"] = f"proficiency gate not decided: {exc}"
         if info.trial_id is not None:
             changes["curve"] = self._curve()
             changes["scorecard"] = self._score_card(res.trial_metrics)
-            changes["status"] = (f"{info.title} stored "
+            changes.setdefault("status", f"{info.title} stored "
                                  f"({summary.get('points_reached')}/{summary.get('n_points')}"
                                  f" points, {summary.get('duration', 0.0):.1f} s)")
         if info.schedule_index is not None:

@@ -9,7 +9,7 @@ import math
 from typing import Any
 
 from vasim.viewer.state import TrialInfo
-from vasim.viewer.trainee import ScoreCard, score_card
+from vasim.viewer.trainee import GateCard, ScoreCard, gate_card, score_card
 
 CURVE_METRICS: tuple[str, ...] = ("completion_time", "mean_latency")
 """Per-trial metrics of the learning curve (seconds both: one axis)."""
@@ -55,7 +55,49 @@ def trial_score_card(st: Any, info: TrialInfo, metrics: dict[str, float],
     experts = set(demo[demo["laparoscopy_experience"] == BENCHMARK_LEVEL]["subject"])
     bench = [int(i) for i in df[same & df["subject"].isin(experts)]["id"]]
     return score_card(metrics, title=info.title, outcome=outcome, n_points=len(info.points),
-                      earlier=_rows(st, earlier), benchmark=_rows(st, bench))
+                      earlier=_rows(st, earlier), benchmark=_rows(st, bench),
+                      gate=trial_gate_card(st, info.trial_id))
+
+
+def trial_gate_card(st: Any, trial_id: int | None) -> GateCard | None:
+    """The proficiency gate's verdict on a stored trial of a gated block: its stored
+    decision (``vasim.study.gates``) with the block's earlier decisions in the session as
+    the trainee's curve; None for a trial without a decision (or an expert's)."""
+    from vasim.study.gates import gate_records
+
+    if trial_id is None:
+        return None
+    row = st.trial(trial_id)
+    if row.get("session_id") is None:
+        return None
+    records = gate_records(st, int(row["session_id"]))
+    mine = [r for tid, r in records if tid == trial_id]
+    if not mine:
+        return None
+    rec = mine[-1]
+    earlier = [r for tid, r in records if r.get("block") == rec.get("block")
+               and r.get("n_trials", 0) < rec.get("n_trials", 0)]
+    return gate_card(rec, earlier)
+
+
+def record_browser_sitting(st: Any, session_id: int, index: int) -> None:
+    """A browser session's trial that began a later sitting (a retention block's delay) gets
+    its ``'sitting'`` event, with the real gap from the previous trial's end to its start
+    (``vasim.study.session.sitting_record``)."""
+    from vasim.study.session import (
+        load_session,
+        record_sitting,
+        sitting_begins,
+        sitting_record,
+    )
+
+    s = load_session(st, session_id)
+    scheduled = s.schedule[index]
+    delay = sitting_begins(s, scheduled)
+    tid = s.completed[index]
+    if delay is not None and tid is not None:
+        rec = sitting_record(st, s, scheduled, delay, False, at=st.trial(tid)["started_at"])
+        record_sitting(st, s, scheduled, rec)
 
 
 def learning_curve(st: Any, session_id: int | None, subject: str | None,
@@ -128,4 +170,5 @@ def session_progress(st: Any, session_id: int, running_index: int | None) -> dic
 
 
 __all__ = ["BENCHMARK_LEVEL", "CURVE_METRICS", "learning_curve", "open_session",
-           "session_progress", "trial_score_card"]
+           "record_browser_sitting", "session_progress", "trial_gate_card",
+           "trial_score_card"]

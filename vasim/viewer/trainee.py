@@ -224,6 +224,7 @@ class ScoreCard:
         title: :func:`trial_title`. outcome: ``OUTCOME_TEXT`` key. n_points: POIs.
         rows: the metrics. n_earlier: the trainee's earlier trials averaged in ``earlier``.
         n_benchmark: trials behind the benchmark (0: no benchmark).
+        gate: the proficiency gate's verdict on this trial (a gated block), or None.
     """
 
     title: str
@@ -232,6 +233,56 @@ class ScoreCard:
     rows: tuple[ScoreRow, ...]
     n_earlier: int = 0
     n_benchmark: int = 0
+    gate: GateCard | None = None
+
+
+@dataclass(frozen=True)
+class GateRow:
+    """One gate metric on the score card, in its display unit.
+
+    Attributes:
+        name: trial metric. label, unit, decimals: as the score card shows it.
+        value: this trial's value (None: not available). limit: the benchmark's limit
+        (mean ± k·SD). mean, sd: the experts'. higher_is_better: direction. passed: this
+        trial passes it.
+    """
+
+    name: str
+    label: str
+    unit: str
+    decimals: int
+    value: float | None
+    limit: float
+    mean: float
+    sd: float
+    higher_is_better: bool
+    passed: bool
+
+
+@dataclass(frozen=True)
+class GateCard:
+    """The gate's verdict after a trial of a gated block (issue #18 §4).
+
+    Attributes:
+        block: the block. rows: each gate metric against the benchmark. passed: this trial
+        passes every metric. streak, consecutive: passes in a row so far and needed.
+        n_trials, max_trials: the block's trials so far and its cap. action: the stored
+        decision (``vasim.study.gates.GateDecision.action``). k: the benchmark's width.
+        n_expert: expert trials behind the benchmark. curve: the trainee's block so far,
+        ``(trial in block (1-based), passed, values by metric)`` per trial.
+    """
+
+    block: str
+    rows: tuple[GateRow, ...]
+    passed: bool
+    streak: int
+    consecutive: int
+    n_trials: int
+    max_trials: int
+    action: str
+    k: float
+    n_expert: int
+    curve: tuple[tuple[int, bool, tuple[float | None, ...]], ...] = ()
 
 
 def _value(metrics: Mapping[str, float], name: str, factor: float) -> float | None:
@@ -252,7 +303,8 @@ def _mean(rows: Sequence[Mapping[str, float]], name: str, factor: float) -> floa
 
 def score_card(metrics: Mapping[str, float], *, title: str, outcome: str | None,
                n_points: int, earlier: Sequence[Mapping[str, float]] = (),
-               benchmark: Sequence[Mapping[str, float]] = ()) -> ScoreCard:
+               benchmark: Sequence[Mapping[str, float]] = (),
+               gate: GateCard | None = None) -> ScoreCard:
     """The score card of a trial from its ``trial_metrics``.
 
     Args:
@@ -261,13 +313,106 @@ def score_card(metrics: Mapping[str, float], *, title: str, outcome: str | None,
         earlier: the trainee's earlier comparable trials' metrics; each row shows their mean.
         benchmark: the benchmark trials' metrics; each row shows their mean (none: no
             benchmark column).
+        gate: the proficiency gate's verdict (:func:`gate_card`), shown under the rows.
     """
     rows = tuple(
         ScoreRow(name, label, unit, _value(metrics, name, f), _mean(earlier, name, f),
                  _mean(benchmark, name, f), dec)
         for name, label, unit, f, dec in SCORE_METRICS)
     return ScoreCard(title=title, outcome=outcome, n_points=int(n_points), rows=rows,
-                     n_earlier=len(earlier), n_benchmark=len(benchmark))
+                     n_earlier=len(earlier), n_benchmark=len(benchmark), gate=gate)
+
+
+_GATE_ACTION_TEXT = {
+    "continue": "keep going: the block's planned trials continue",
+    "extend": "one more trial added: the gate asks for {need} passes in a row",
+    "passed": "gate passed: {need} passes in a row — the block is done",
+    "cap": "the block reached its cap of {cap} trials without passing the gate",
+    "expert": "expert: not gated (your trials are part of the benchmark)",
+}
+"""The stored decision in words (``{need}``: passes in a row, ``{cap}``: the cap)."""
+
+
+def _display(name: str) -> tuple[str, str, float, int]:
+    """Label, unit, factor and decimals of a trial metric as the score card shows it."""
+    for n, label, unit, factor, dec in SCORE_METRICS:
+        if n == name:
+            return label, unit, factor, dec
+    return name.replace("_", " "), "", 1.0, 2
+
+
+def gate_card(record: Mapping[str, object],
+              earlier: Sequence[Mapping[str, object]] = ()) -> GateCard | None:
+    """The score card's gate part from a stored decision (``vasim.study.gates``'
+    ``gate_record``) and the block's earlier decisions (the trainee's curve).
+
+    Returns:
+        None for an expert's trial (no benchmark).
+    """
+    bench = record.get("benchmark")
+    if not isinstance(bench, Mapping):
+        return None
+    values = record.get("values")
+    passes = record.get("passes")
+    assert isinstance(values, Mapping) and isinstance(passes, Mapping)
+    rows = []
+    for m, b in bench.items():
+        assert isinstance(b, Mapping)
+        label, unit, f, dec = _display(str(m))
+        v = values.get(m)
+        rows.append(GateRow(
+            name=str(m), label=label, unit=unit, decimals=dec,
+            value=None if v is None else float(v) * f,
+            limit=float(b["limit"]) * f, mean=float(b["mean"]) * f,
+            sd=float(b["sd"]) * f, higher_is_better=bool(b["higher_is_better"]),
+            passed=bool(passes.get(m, False))))
+    curve = []
+    for i, r in enumerate([*earlier, record], start=1):
+        vals = r.get("values")
+        assert isinstance(vals, Mapping)
+        curve.append((i, bool(r.get("passed")),
+                      tuple(None if vals.get(row.name) is None
+                            else float(vals[row.name]) * _display(row.name)[2]
+                            for row in rows)))
+
+    def num(key: str) -> int:
+        v = record.get(key)
+        return int(v) if isinstance(v, int | float) else 0
+
+    k = record.get("k")
+    return GateCard(block=str(record.get("block")), rows=tuple(rows),
+                    passed=bool(record.get("passed")), streak=num("streak"),
+                    consecutive=num("consecutive"), n_trials=num("n_trials"),
+                    max_trials=num("max_trials"), action=str(record.get("action")),
+                    k=float(k) if isinstance(k, int | float) else 0.0,
+                    n_expert=num("expert_trials"), curve=tuple(curve))
+
+
+def gate_markdown(g: GateCard) -> str:
+    """The gate part of the score card: each metric against the benchmark with its
+    verdict, the streak, the decision and the trainee's curve over the block (escaped)."""
+    esc = html.escape
+    lines = [f"#### Proficiency gate — {esc(g.block)}",
+             f"**{'PASSED' if g.passed else 'not passed'}** this trial · {g.streak} in a row "
+             f"({g.consecutive} needed) · trial {g.n_trials} of at most {g.max_trials}", "",
+             "| Metric | This trial | Benchmark (experts) | Limit | Passed |",
+             "|---|---|---|---|---|"]
+    for r in g.rows:
+        side = "≥" if r.higher_is_better else "≤"
+        bench = f"{_fmt(r.mean, r.decimals, r.unit)} ± {_fmt(r.sd, r.decimals, r.unit)}"
+        lines.append(f"| {esc(r.label)} | {esc(_fmt(r.value, r.decimals, r.unit))} | "
+                     f"{esc(bench)} | {side} {esc(_fmt(r.limit, r.decimals, r.unit))} | "
+                     f"{'yes' if r.passed else 'no'} |")
+    text = _GATE_ACTION_TEXT.get(g.action, g.action).format(need=g.consecutive,
+                                                            cap=g.max_trials)
+    lines += ["", f"*{esc(text)}* (benchmark: {g.n_expert} expert trials, mean "
+                  f"± {g.k:g} SD)", "", "Your curve in this block:", "",
+              "| Trial | " + " | ".join(esc(r.label) for r in g.rows) + " | Passed |",
+              "|---|" + "---|" * len(g.rows) + "---|"]
+    for n, ok, vals in g.curve:
+        cells = [esc(_fmt(v, r.decimals, r.unit)) for v, r in zip(vals, g.rows, strict=True)]
+        lines.append(f"| {n} | " + " | ".join(cells) + f" | {'yes' if ok else 'no'} |")
+    return "\n".join(lines)
 
 
 def _fmt(v: float | None, decimals: int, unit: str) -> str:
@@ -303,9 +448,12 @@ def score_card_markdown(card: ScoreCard | None) -> str:
         lines.append(f"| {esc(r.label)} | " + " | ".join(esc(c) for c in cells) + " |")
     if not card.n_earlier:
         lines.append("\n*Your first trial of this kind: later trials are compared with it.*")
+    if card.gate is not None:
+        lines += ["", gate_markdown(card.gate)]
     return "\n".join(lines)
 
 
-__all__ = ["OUTCOME_TEXT", "SCORE_METRICS", "HudInfo", "HudView", "ScoreCard", "ScoreRow",
-           "audio_text", "frame_outcome", "hud_markdown", "instruction", "score_card",
+__all__ = ["OUTCOME_TEXT", "SCORE_METRICS", "GateCard", "GateRow", "HudInfo", "HudView",
+           "ScoreCard", "ScoreRow", "audio_text", "frame_outcome", "gate_card",
+           "gate_markdown", "hud_markdown", "instruction", "score_card",
            "score_card_markdown", "state_text", "trial_title"]

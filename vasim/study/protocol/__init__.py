@@ -40,6 +40,9 @@ TOML layout (every field is checked; defaults in brackets)::
     probe = true                        # [false] these trials are probe trials
     counterbalance = false              # [true] takes part in the block-order randomisation
     probes_after = 0                    # [0] probe trials appended after the block's trials
+    phase = "acquisition"               # ["acquisition"] | "retention" | "transfer", and
+    delay_days = 0.0                    # [0] a later sitting; [blocks.gate]: a proficiency
+                                        # gate (vasim.study.protocol.phases)
 
     [questionnaires.pre]
     demographics = true                 # [false] group, specialisation, experience levels
@@ -110,6 +113,7 @@ from vasim.study.protocol.model import (
     Protocol,
     TaskKind,
 )
+from vasim.study.protocol.phases import PHASES, Gate, gated_blocks
 from vasim.study.protocol.questionnaires import (
     ITEM_TYPES,
     LIKERT_POINTS,
@@ -120,8 +124,13 @@ from vasim.study.protocol.questionnaires import (
 )
 from vasim.study.protocol.schedule import (
     ScheduledTrial,
+    block_of,
     block_order,
+    day_offsets,
+    extend_gated_block,
+    gated_trials,
     generate_schedule,
+    sitting_numbers,
     williams_square,
 )
 from vasim.trials.kinds import TELEOPERATION_MODES
@@ -131,23 +140,31 @@ __all__ = [
     "ITEM_TYPES",
     "LIKERT_POINTS",
     "N_VARIANTS",
+    "PHASES",
     "TASKS",
     "TELEOPERATION_MODES",
     "VARIANT_ORDERS",
     "AnswerRow",
     "Block",
+    "Gate",
     "Protocol",
     "QuestionItem",
     "Questionnaire",
     "ScheduledTrial",
     "TaskKind",
     "available_protocols",
+    "block_of",
     "block_order",
+    "day_offsets",
+    "extend_gated_block",
+    "gated_blocks",
+    "gated_trials",
     "generate_schedule",
     "load_protocol",
     "parse_protocol",
     "protocol_from_dict",
     "protocol_path",
+    "sitting_numbers",
     "validate_answers",
     "williams_square",
 ]

@@ -18,6 +18,7 @@ from vasim.core.config import (
 from vasim.core.errors import ConfigError
 from vasim.core.resources import available_files, data_file, read_data_file, studies_dir
 from vasim.study.protocol.model import Block, Protocol
+from vasim.study.protocol.phases import Gate
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
@@ -25,7 +26,8 @@ _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
         "randomisation", "probe", "blocks",
         "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
-          "probes_after", "schema")
+          "probes_after", "schema", "phase", "delay_days", "gate")
+_GATE = ("metrics", "k", "consecutive", "max_trials", "expert_group")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
 
@@ -88,6 +90,14 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         path = f"blocks[{i}]"
         check_keys(raw, _BLOCK, path, file=source, required=("name", "condition"))
         bkw = {k: _tuple(v) for k, v in raw.items()}
+        if "gate" in raw:
+            gate = _table(raw, "gate", path, source, _GATE)
+            check_keys(gate, _GATE, f"{path}.gate", file=source,
+                       required=("metrics", "max_trials"))
+            try:
+                bkw["gate"] = Gate(**{k: _tuple(v) for k, v in gate.items()})
+            except ConfigError as exc:
+                raise rewrap(exc, f"{path}.gate", source) from exc
         try:
             blocks.append(Block(**bkw))
         except ConfigError as exc:

@@ -30,6 +30,7 @@ from vasim.core.config import (
     check_str,
     fail,
 )
+from vasim.study.protocol.phases import Gate, check_block_phase, check_protocol_phases
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 from vasim.trials.kinds import TELEOPERATION_MODES
 
@@ -59,6 +60,10 @@ class Block:
         probe: the block's own trials are probe (fixture-free) trials.
         counterbalance: takes part in the block-order randomisation.
         probes_after: probe trials appended after the block's trials.
+        phase: ``"acquisition"``, ``"retention"`` or ``"transfer"``
+            (:mod:`vasim.study.protocol.phases`). delay_days: the block begins a new
+            sitting this many days after the previous trial [d] (0: same sitting).
+        gate: the block's proficiency gate, or None.
     """
 
     name: str
@@ -69,6 +74,9 @@ class Block:
     counterbalance: bool = True
     probes_after: int = 0
     schema: str | None = None
+    phase: str = "acquisition"
+    delay_days: float = 0.0
+    gate: Gate | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
@@ -90,6 +98,7 @@ class Block:
         check_bool(self.probe, "probe")
         check_bool(self.counterbalance, "counterbalance")
         check_int(self.probes_after, "probes_after", bound=PROBES_AFTER)
+        check_block_phase(self)
 
     @property
     def n_trials(self) -> int:
@@ -191,6 +200,7 @@ class Protocol:
             if b.probes_after and b.condition in TELEOPERATION_MODES:
                 raise fail(b.probes_after, "0 (teleoperation-mode blocks have no "
                            "fixture-free probes)", field=f"blocks[{i}].probes_after")
+        check_protocol_phases(self)
         n_trials = sum(b.n_trials for b in self.blocks)
         if n_trials > TRIALS_PER_SESSION.high:
             raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "

@@ -7,7 +7,7 @@ The rules are described in :mod:`vasim.study.protocol`.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -173,4 +173,110 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
                 task=protocol.task, variant=protocol.probe_variant, probe=True,
                 probe_index=n_probe, repetition=rep))
             k += 1
+    return out
+
+
+# ----------------------------------------------------------- sittings, phases and gates
+def block_of(protocol: Protocol, name: str) -> Block:
+    """The protocol's block called ``name``.
+
+    Raises:
+        KeyError: no such block.
+    """
+    for b in protocol.blocks:
+        if b.name == name:
+            return b
+    raise KeyError(f"protocol {protocol.name!r} has no block {name!r}")
+
+
+def day_offsets(protocol: Protocol, schedule: list[ScheduledTrial] | tuple[ScheduledTrial, ...],
+                ) -> tuple[float, ...]:
+    """The day of each scheduled trial relative to the session's first sitting [d].
+
+    A block with ``delay_days`` > 0 begins a new sitting that many days after the trial
+    before it; every trial of the block and those after it share the new day until the next
+    delayed block. A pure function of the schedule (blocks in schedule order).
+
+    Example:
+        >>> from vasim.study.protocol import load_protocol
+        >>> p = load_protocol("vf_retention")
+        >>> s = generate_schedule(p, 1)
+        >>> sorted(set(day_offsets(p, s)))
+        [0.0, 7.0]
+    """
+    out: list[float] = []
+    day = 0.0
+    seen: set[str] = set()
+    for t in schedule:
+        if t.block not in seen:
+            seen.add(t.block)
+            day += block_of(protocol, t.block).delay_days
+        out.append(day)
+    return tuple(out)
+
+
+def sitting_numbers(protocol: Protocol,
+                    schedule: list[ScheduledTrial] | tuple[ScheduledTrial, ...],
+                    ) -> tuple[int, ...]:
+    """The 1-based sitting of each scheduled trial (a new one at every delayed block)."""
+    out: list[int] = []
+    n = 1
+    seen: set[str] = set()
+    for t in schedule:
+        if t.block not in seen:
+            seen.add(t.block)
+            if out and block_of(protocol, t.block).delay_days > 0:
+                n += 1
+        out.append(n)
+    return tuple(out)
+
+
+def gated_trials(schedule: list[ScheduledTrial] | tuple[ScheduledTrial, ...],
+                 block: Block) -> list[ScheduledTrial]:
+    """The trials of a gated ``block`` the gate judges (its own, not its appended probes)."""
+    return [t for t in schedule if t.block == block.name and t.condition == block.condition
+            and t.probe == block.probe]
+
+
+def extend_gated_block(protocol: Protocol,
+                       schedule: list[ScheduledTrial] | tuple[ScheduledTrial, ...],
+                       block_name: str) -> list[ScheduledTrial]:
+    """The schedule with one more trial of a gated block (pure; what the store applies).
+
+    The new trial follows the block's last own trial (before its appended probes): its
+    variant continues the block's cycle over ``variants`` (listed order), its repetition is
+    the round it falls in; the trials after it move one index on (and the block's appended
+    probes one ``trial_in_block`` on). Probe numbers are unchanged (a gated block is not a
+    probe block).
+
+    Raises:
+        ConfigError: the block has no gate, or is at its cap.
+    """
+    from vasim.core.errors import ConfigError
+
+    b = block_of(protocol, block_name)
+    if b.gate is None:
+        raise ConfigError(f"block {block_name!r} has no gate", field="block")
+    own = gated_trials(schedule, b)
+    if len(own) >= b.gate.max_trials:
+        raise ConfigError(f"block {block_name!r} is at its cap of {b.gate.max_trials} trials",
+                          field="block")
+    last = own[-1]
+    k = len(own)
+    new = ScheduledTrial(
+        index=last.index + 1, block=b.name, block_index=last.block_index, trial_in_block=k,
+        condition=last.condition, schema=last.schema, task=last.task,
+        variant=b.variants[k % len(b.variants)], probe=False, probe_index=None,
+        repetition=k // len(b.variants))
+    out: list[ScheduledTrial] = []
+    for t in schedule:
+        if t.index <= last.index:
+            out.append(t)
+            continue
+        if t.index == last.index + 1:
+            out.append(new)
+        out.append(replace(t, index=t.index + 1,
+                           trial_in_block=t.trial_in_block + (t.block == b.name)))
+    if len(out) == len(schedule):
+        out.append(new)
     return out

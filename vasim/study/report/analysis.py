@@ -98,8 +98,17 @@ def vf_trial_outcomes(analysed: pd.DataFrame, points: pd.DataFrame) -> pd.DataFr
 
 
 def analyse_vf(data: StudyData) -> VfAnalysis:
-    """Builds :class:`VfAnalysis` from the store's data (see the module decisions)."""
-    vf = vf_trial_outcomes(data.analysed, data.points)
+    """Builds :class:`VfAnalysis` from the store's data (see the module decisions).
+
+    **Decision** (issue #18 §2): the trials of retention and transfer blocks are left out
+    (delayed or on untrained trajectories, they are not the learning curve's probes; the
+    section "Acquisition, retention and transfer" analyses them).
+    """
+    analysed = data.analysed
+    if data.protocol is not None:
+        acquisition = {b.name for b in data.protocol.blocks if b.phase == "acquisition"}
+        analysed = analysed[analysed["block"].isin(acquisition)].reset_index(drop=True)
+    vf = vf_trial_outcomes(analysed, data.points)
     vf["practice"] = (vf["trial_index"].astype(np.int64) + 1) if len(vf) else \
         pd.Series(dtype=np.int64)
     vf["baseline"] = baseline_flags(vf) if len(vf) else pd.Series(dtype=bool)

@@ -29,7 +29,9 @@ from vasim.study.report.sections.fixture import fixture_effect_section
 from vasim.study.report.sections.groups import group_section
 from vasim.study.report.sections.learning import learning_curve_section
 from vasim.study.report.sections.mrcp import mrcp_section
+from vasim.study.report.sections.proficiency import proficiency_section
 from vasim.study.report.sections.questionnaires import questionnaire_section
+from vasim.study.report.sections.retention import retention_section
 from vasim.study.report.sections.traceability import traceability_section
 from vasim.study.report.summary import build_summary
 from vasim.study.report.writing import page_meta, write_files
@@ -57,7 +59,8 @@ class ReportResult:
 
 # ------------------------------------------------------------------------------- assembly
 STEPS: tuple[str, ...] = ("read store", "cohort", "learning curves", "fixture effect",
-                          "box plots", "groups", "questionnaires", "MRCP", "write")
+                          "box plots", "groups", "questionnaires", "MRCP",
+                          "retention and transfer", "proficiency gates", "write")
 """The progress-bar steps of :func:`build_report`."""
 
 
@@ -152,7 +155,16 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
         run(STEPS[5], lambda: group_section(data, vf))
         run(STEPS[6], lambda: questionnaire_section(data))
         run(STEPS[7], lambda: mrcp_section(data))
-        step(STEPS[8])
+        if data.protocol is not None and any(b.phase != "acquisition"
+                                             for b in data.protocol.blocks):
+            run(STEPS[8], lambda: retention_section(data))
+        else:
+            bar.update()
+        if data.protocol is not None and any(b.gate is not None for b in data.protocol.blocks):
+            run(STEPS[9], lambda: proficiency_section(data))
+        else:
+            bar.update()
+        step(STEPS[-1])
         sections.append(traceability_section(
             [b for s in sections for b in s.blocks if isinstance(b, TableBlock) and b.name]))
         sections = [labelled(s, data.data_label) for s in sections]

@@ -46,6 +46,9 @@ class StudyData:
         answers: questionnaire answers of the protocol's sessions (``ANSWER_COLUMNS``).
         protocols_present: every protocol with a session in the store.
         schema_version: the store's schema version (None for an empty file).
+        gates: the stored proficiency-gate decisions of the sessions
+            (``vasim.study.gates.gate_frame``).
+        sittings: the stored later-sitting records (``session_id, trial_id, record``).
     """
 
     db: Path
@@ -62,6 +65,8 @@ class StudyData:
     answers: pd.DataFrame = field(repr=False)
     protocols_present: tuple[str, ...]
     schema_version: int | None
+    gates: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
+    sittings: pd.DataFrame = field(default_factory=pd.DataFrame, repr=False)
 
     @property
     def synthetic(self) -> bool:
@@ -214,9 +219,19 @@ def _read_store(store: TrialStore, protocol: str | None) -> StudyData:
     demo = demo[demo["subject"].isin(set(sessions["subject"]))].reset_index(drop=True)
     answers = store.answers()
     answers = answers[answers["session_id"].isin(sids)].reset_index(drop=True)
+    from vasim.study.gates import gate_frame
+    from vasim.study.session import SITTING_EVENT
+
+    sittings = pd.DataFrame(store.con.execute(
+        "SELECT q.session_id, e.trial_id, e.detail FROM events e JOIN scheduled_trials q ON "
+        "q.trial_id = e.trial_id JOIN sessions s ON s.id = q.session_id WHERE s.protocol = ? "
+        "AND e.kind = ? ORDER BY q.session_id, q.trial_index", (name, SITTING_EVENT)
+    ).fetchall(), columns=["session_id", "trial_id", "record"])
     return StudyData(db=path, protocol_name=name, protocol=parsed, notes=tuple(notes),
                      sessions=sessions, schedule=sched, trials=trials, n_outside=n_outside,
                      points=points, metrics=metrics, demographics=demo, answers=answers,
-                     protocols_present=present, schema_version=version)
+                     protocols_present=present, schema_version=version,
+                     gates=gate_frame(store, [int(i) for i in sessions["id"]]),
+                     sittings=sittings)
 
 

@@ -186,6 +186,60 @@ class SessionWriters(StoreConnection):
                         "VALUES (?, NULL, 'repeated', ?, ?)", (int(row[0]), reason, now()))
         return int(row[0])
 
+    def insert_scheduled(self, session_id: int, row: Mapping[str, Any], *,
+                         event_trial_id: int, kind: str, detail: str) -> None:
+        """Inserts one scheduled trial into a running session (a proficiency gate adding a
+        trial), in one transaction with the event that records why: the scheduled trials
+        from ``row["trial_index"]`` on move one index on (and those of the same block one
+        ``trial_in_block`` on), ``sessions.n_trials`` grows by one.
+
+        Args:
+            session_id: the session. row: the new trial's ``scheduled_trials`` columns
+                (as ``create_session``'s rows). event_trial_id, kind, detail: the event
+                stored on the trial whose result made the decision.
+
+        Raises:
+            StoreError: unknown or not running session, an index out of range, or a trial
+                row already linked to an index that would move.
+        """
+        cols = [c for c in SCHEDULE_COLUMNS if c not in ("session_id", "trial_id", "attempts")]
+        missing = [c for c in cols if c not in row]
+        if missing:
+            raise StoreError(f"the scheduled trial to insert lacks {missing}")
+        sid, idx = row_id(session_id, "session_id"), row_id(row["trial_index"], "trial_index")
+        values = tuple(int(row[c]) if isinstance(row[c], bool | np.bool_) else row[c]
+                       for c in cols)
+        with self._transaction() as con:
+            srow = con.execute("SELECT status, n_trials FROM sessions WHERE id = ?",
+                               (sid,)).fetchone()
+            if srow is None:
+                raise StoreError(f"trial store {self.path}: no session {sid}")
+            if srow[0] != "running":
+                raise StoreError(f"trial store {self.path}: session {sid} is {srow[0]!r}, "
+                                 "not 'running'")
+            if not 0 < idx <= srow[1]:
+                raise StoreError(f"trial store {self.path}: cannot insert scheduled trial "
+                                 f"{idx} into session {sid} of {srow[1]} trials")
+            later = con.execute("SELECT count(*) FROM trials WHERE session_id = ? AND "
+                                "schedule_index >= ?", (sid, idx)).fetchone()[0]
+            if later:
+                raise StoreError(f"trial store {self.path}: session {sid} already has trials "
+                                 f"at scheduled index {idx} or later; cannot insert there")
+            moving = con.execute("SELECT trial_index FROM scheduled_trials WHERE session_id = ? "
+                                 "AND trial_index >= ? ORDER BY trial_index DESC",
+                                 (sid, idx)).fetchall()
+            for (i,) in moving:   # from the end: the primary key never collides
+                con.execute("UPDATE scheduled_trials SET trial_index = trial_index + 1, "
+                            "trial_in_block = trial_in_block + (block = ?) "
+                            "WHERE session_id = ? AND trial_index = ?",
+                            (row["block"], sid, i))
+            con.execute(f"INSERT INTO scheduled_trials (session_id, {', '.join(cols)}) "
+                        f"VALUES ({sid}, {', '.join('?' * len(cols))})", values)
+            con.execute("UPDATE sessions SET n_trials = n_trials + 1 WHERE id = ?", (sid,))
+            con.execute("INSERT INTO events (trial_id, t, kind, detail, created_at) "
+                        "VALUES (?, NULL, ?, ?, ?)",
+                        (row_id(event_trial_id, "event_trial_id"), kind, detail, now()))
+
     def set_demographics(self, subject: str, demographics: Demographics, *,
                          session_id: int | None = None) -> None:
         """Stores (or replaces) a subject's demographics.
