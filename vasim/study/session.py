@@ -67,6 +67,12 @@ from vasim.operator.learning import OPERATOR_LABEL, trial_adjustment
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import validate_subject_code
 from vasim.records.trial_metrics import MetricParams
+from vasim.study.gain_plan import (
+    condition_effects,
+    learning_gain,
+    schedule_gains,
+    trial_gain,
+)
 from vasim.study.protocol import (
     Protocol,
     ScheduledTrial,
@@ -216,9 +222,12 @@ class Session:
         s = self.settings
         profile = s.resolved_profile()
         practice = scheduled.index
+        gain = trial_gain(self.protocol, scheduled)  # faded/adaptive fixtures (issue #18)
         if s.operator == "scripted":
-            adj = trial_adjustment([t.condition for t in self.schedule[:scheduled.index]],
-                                   scheduled.condition)
+            history = self.schedule[:scheduled.index]
+            adj = trial_adjustment([t.condition for t in history], scheduled.condition,
+                                   condition_effects(self.protocol), gain=learning_gain(gain),
+                                   history_gains=schedule_gains(self.protocol, history))
             profile, practice = adj.apply(profile), round(adj.practice)
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
@@ -233,6 +242,7 @@ class Session:
             else self.protocol.max_trial_time,
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
+            gain=gain,
         )
 
     @property

@@ -25,7 +25,8 @@ _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
         "randomisation", "probe", "blocks",
         "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
-          "probes_after", "schema")
+          "probes_after", "schema",
+          "gain_schedule", "adaptive")  # fading and adaptive fixtures (issue #18 item 1)
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
 
