@@ -53,6 +53,8 @@ def combine_effects(effects: Sequence[FixtureEffect]) -> FixtureEffect:
     """
     if not effects:
         raise ValueError("combine_effects needs at least one fixture effect")
+    if len(effects) == 1:  # a single fixture is its own combination (exactly)
+        return effects[0]
     acc = math.prod(e.accuracy for e in effects)
     kept = math.prod(1.0 - e.carryover * (1.0 - e.accuracy) for e in effects)
     benefit = 1.0 - acc
