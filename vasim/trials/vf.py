@@ -55,7 +55,6 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.abdomen.anatomy import trocar_points
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
 from vasim.core.errors import ConfigError
 from vasim.fixtures.gain import GainRule, rule_from_record
@@ -72,6 +71,7 @@ from vasim.tasks import Task, point_task, trajectory_task
 from vasim.tasks.base import polyline_lookahead
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
+from vasim.trials.ports import tool_trocar
 
 if TYPE_CHECKING:
     from vasim.abdomen.snapshot import AbdomenSnapshot
@@ -79,31 +79,6 @@ if TYPE_CHECKING:
 
 TaskName = Literal["trajectory", "point"]
 
-def tool_trocar(task: str, start: np.ndarray) -> np.ndarray:
-    """(3,) the port the instrument enters through: the tool's fulcrum [m].
-
-    Trajectory following: the working port on the side the trajectory starts (the
-    patient's right port for x < 0). Point targeting: the instrument port whose shaft
-    points least toward the camera (Mag's view direction), so the shaft does not hide the
-    POI in the magnified view.
-    """
-    from vasim.abdomen.anatomy import TROCAR_NAMES
-    from vasim.fixtures.mag import MagParams
-
-    ports = trocar_points()
-    if task == "trajectory":
-        side = "working_right" if float(start[0]) < 0 else "working_left"
-        return ports[TROCAR_NAMES.index(side)]
-    w = np.asarray(MagParams().view_dir, dtype=np.float64)
-    best, score = ports[TROCAR_NAMES.index("working_right")], np.inf
-    for name, port in zip(TROCAR_NAMES, ports, strict=True):
-        if name == "camera":
-            continue
-        d = port - np.asarray(start, dtype=np.float64)
-        s = float(d @ w) / float(np.linalg.norm(d) * np.linalg.norm(w))
-        if s < score:
-            best, score = port, s
-    return best
 SkillName = Literal["novice", "intermediate", "expert"]
 
 
