@@ -19,7 +19,10 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   0..i-1 and its own condition: the practice P is the rounded effective practice (a trial
   under FF or Mag counts more), and the profile's learnable noise and Fitts constants carry
   the fixture's calibrated effect while assisted, and its carry-over and guidance
-  dependence in VF-free trials (the seed's hypotheses, chapter 6). A session run by the
+  dependence in VF-free trials (the seed's hypotheses, chapter 6); a faded or adaptive
+  trial carries its gain (``vasim.study.gain_plan``: the benefit scales with it) and a
+  combined schema the combination of its fixtures' effects (``vasim.operator.combined``).
+  A session run by the
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
