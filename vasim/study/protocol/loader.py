@@ -25,10 +25,12 @@ _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
         "randomisation", "probe", "blocks",
         "questionnaires")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
-          "probes_after", "schema",
-          "gain_schedule", "adaptive")  # fading and adaptive fixtures (issue #18 item 1)
+          "probes_after", "schema")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
+
+_BLOCK_GAIN = ("gain_schedule", "adaptive")
+"""Block keys of the fading and adaptive fixtures (issue #18 item 1)."""
 
 
 def available_protocols() -> tuple[str, ...]:
@@ -87,7 +89,8 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
     blocks = []
     for i, raw in enumerate(raw_blocks):
         path = f"blocks[{i}]"
-        check_keys(raw, _BLOCK, path, file=source, required=("name", "condition"))
+        check_keys(raw, _BLOCK + _BLOCK_GAIN, path, file=source,
+                   required=("name", "condition"))
         bkw = {k: _tuple(v) for k, v in raw.items()}
         try:
             blocks.append(Block(**bkw))
