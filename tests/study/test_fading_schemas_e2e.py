@@ -57,6 +57,16 @@ def test_vf_fading_simulates_and_reports(tmp_path: Path):
                                          "mag_faded", "mag_adaptive"}
     html = (out / "index.html").read_text(encoding="utf-8")
     assert "FF faded" in html and "Mag adaptive" in html
+    stages = pd.read_csv(out / "tables" / "vf_gain_stages.csv")
+    faded = stages[stages["condition"] == "FF faded"]
+    assert faded["planned_gain"].astype(float).tolist() == [1.0, 0.5]
+    assert faded["gain_mean"].tolist() == [1.0, 0.5]
+    adaptive = stages[stages["condition"] == "Mag adaptive"]
+    assert set(adaptive["planned_gain"]) == {"adaptive"}
+    assert adaptive["gain_mean"].between(0.25, 1.0).all()
+    after = pd.read_csv(out / "tables" / "vf_probe_after_block.csv")
+    assert list(after["block_condition"]) == ["Mag", "Mag faded", "Mag adaptive", "FF",
+                                              "FF faded", "FF adaptive"]
     with TrialStore(db, readonly=True) as st:
         sched = pd.concat([st.schedule(int(s)) for s in st.sessions()["id"]])
         for cond, expected in (("ff_faded", [1.0, 0.5]), ("mag_faded", [1.0, 0.5]),
@@ -77,6 +87,7 @@ def test_vf_schemas_simulates_and_reports(tmp_path: Path):
                     ("repetitions = 3", "repetitions = 1"))
     _, out = simulate_and_report(protocol, tmp_path)
     levels(out, ["none", "VG", "AG", "Mag", "FF", "AG+Mag", "Mag+FF", "VG+AG"])
+    assert not (out / "tables" / "vf_gain_stages.csv").exists()  # no faded/adaptive block
     choices = pd.read_csv(out / "tables" / "questionnaire_choices.csv")
     best_schema = choices[choices["item"] == "best_schema"]
     assert list(best_schema["value"]) == ["ag_mag", "mag_ff", "vg_ag"]
