@@ -107,3 +107,18 @@ def test_a_probe_block_has_no_gain():
     with pytest.raises(ConfigError) as err:
         parse_protocol(text, source="g.toml")
     assert err.value.field == "blocks[0].probe"
+
+
+def test_the_schedule_command_shows_each_trials_gain(capsys):
+    from vasim.cli import main
+
+    assert main(["study", "schedule", "--protocol", "vf_fading", "--seed", "7"]) == 0
+    lines = capsys.readouterr().out.splitlines()[2:]
+    faded = [line.split("  ")[-1].strip() for line in lines if " ff_faded " in line
+             and "VF-free" not in line]
+    assert faded == ["gain 100 %"] * 2 + ["gain 75 %"] * 2 + ["gain 50 %"] * 2 + [
+        "gain 25 %"] * 2
+    assert all(line.endswith("adaptive 25-100 %") for line in lines
+               if " mag_adaptive " in line and "VF-free" not in line)
+    constant = [line for line in lines if line.split()[1] == "ff"]
+    assert len(constant) == 9 and not any("gain" in line for line in constant)

@@ -582,8 +582,10 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     rows = generate_schedule(protocol, args.seed)
     print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
     print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
+    from vasim.study.gain_plan import gain_text
+
     for t in rows:
-        probe = f"VF-free #{t.probe_index}" if t.probe else ""
+        probe = f"VF-free #{t.probe_index}" if t.probe else gain_text(protocol, t)
         print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}")
     return 0
 

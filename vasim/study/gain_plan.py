@@ -60,6 +60,24 @@ def schedule_gains(protocol: Protocol, schedule: Sequence[ScheduledTrial]) -> li
     return [learning_gain(trial_gain(protocol, t)) for t in schedule]
 
 
+def gain_text(protocol: Protocol, scheduled: ScheduledTrial) -> str:
+    """How ``vasim study schedule`` shows a trial's gain: ``"gain 75 %"`` for a schedule's
+    stage, ``"adaptive 25-100 %"`` for the rule, ``""`` outside faded/adaptive blocks.
+
+    >>> from vasim.study.protocol import generate_schedule, load_protocol
+    >>> p = load_protocol("vf_fading")
+    >>> sorted({gain_text(p, t) for t in generate_schedule(p, 7)})
+    ['', 'adaptive 25-100 %', 'gain 100 %', 'gain 25 %', 'gain 50 %', 'gain 75 %']
+    """
+    rule = trial_gain(protocol, scheduled)
+    if isinstance(rule, AdaptiveRule):
+        return f"adaptive {rule.gain_min * 100:.0f}-{rule.gain_max * 100:.0f} %"
+    block = next(b for b in protocol.blocks if b.name == scheduled.block)
+    if scheduled.probe or not block.has_gain:
+        return ""
+    return f"gain {rule * 100:.0f} %"
+
+
 def condition_effects(protocol: Protocol) -> dict[str, FixtureEffect]:
     """The calibrated effects by condition label for ``protocol`` (module docstring).
 
@@ -78,4 +96,4 @@ def condition_effects(protocol: Protocol) -> dict[str, FixtureEffect]:
     return out
 
 
-__all__ = ["condition_effects", "learning_gain", "schedule_gains", "trial_gain"]
+__all__ = ["condition_effects", "gain_text", "learning_gain", "schedule_gains", "trial_gain"]
