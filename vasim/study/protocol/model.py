@@ -30,10 +30,14 @@ from vasim.core.config import (
     check_number,
     check_str,
     fail,
-    rewrap,
 )
-from vasim.core.errors import ConfigError
-from vasim.fixtures.gain import AdaptiveRule, GainRule, check_stages, scheduled_gain
+from vasim.fixtures.gain import (
+    AdaptiveRule,
+    GainRule,
+    check_stages,
+    rule_from_record,
+    scheduled_gain,
+)
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 from vasim.trials.kinds import TELEOPERATION_MODES
 
@@ -133,10 +137,7 @@ def _check_gain_fields(b: Block) -> None:
         if not isinstance(b.adaptive, Mapping):
             raise fail(b.adaptive, "a table of gain_min, gain_max, tau_s, deviation_full_m, "
                        "initial", field="adaptive")
-        try:
-            object.__setattr__(b, "adaptive", AdaptiveRule.from_mapping(b.adaptive))
-        except ConfigError as exc:
-            raise rewrap(exc, "adaptive") from exc
+        object.__setattr__(b, "adaptive", rule_from_record(b.adaptive, "adaptive"))
     if b.gain_schedule is not None and b.adaptive is not None:
         raise fail(b.gain_schedule, "either gain_schedule or adaptive, not both",
                    field="gain_schedule")
