@@ -29,10 +29,10 @@ from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.schema import load_schema
 from vasim.operator.combined import label_effects
 from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
-from vasim.study.protocol import Protocol, ScheduledTrial
+from vasim.study.protocol import Block, Protocol, ScheduledTrial
 from vasim.trials.kinds import TELEOPERATION_MODES
 
-_EFFECTS: dict[tuple[str, str | None], dict[str, FixtureEffect]] = {}
+_EFFECTS: dict[tuple[Block, ...], dict[str, FixtureEffect]] = {}
 
 
 def trial_gain(protocol: Protocol, scheduled: ScheduledTrial) -> GainRule:
@@ -81,9 +81,10 @@ def gain_text(protocol: Protocol, scheduled: ScheduledTrial) -> str:
 def condition_effects(protocol: Protocol) -> dict[str, FixtureEffect]:
     """The calibrated effects by condition label for ``protocol`` (module docstring).
 
-    Cached per protocol (name and text); the returned mapping must not be modified.
+    Cached per protocol blocks (what it depends on); the returned mapping must not be
+    modified.
     """
-    key = (protocol.name, protocol.text)
+    key = protocol.blocks
     out = _EFFECTS.get(key)
     if out is None:
         components: dict[str, tuple[str, ...]] = {}
