@@ -606,9 +606,11 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     rows = generate_schedule(protocol, args.seed)
     print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
     print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
+    from vasim.study.gain_plan import gain_text
+
     days = day_offsets(protocol, rows)
     for t in rows:
-        probe = f"VF-free #{t.probe_index}" if t.probe else ""
+        probe = f"VF-free #{t.probe_index}" if t.probe else gain_text(protocol, t)
         b = block_of(protocol, t.block)
         extra = [b.phase] if b.phase != "acquisition" else []
         extra += [f"day {days[t.index]:g}"] if days[t.index] else []

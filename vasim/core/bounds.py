@@ -60,6 +60,13 @@ FIXTURE_DAMPING_NS = Bound(0.0, 10.0, "N s per unit d_norm",
 WALL_STIFFNESS_N_PER_M = Bound(0.0, 10_000.0, "N/m",
                                "4x the Omni's 2.31 N/mm maximum renderable stiffness")
 """Stiffness of virtual walls in N/m."""
+# fixture gain (fading and assist-as-needed, vasim.fixtures.gain)
+GAIN = Bound(0.0, 1.0, "", "a fixture gain: 0 no assistance, 1 the schema as written")
+GAIN_STAGES = Bound(1, 100, "", "stages of a fading schedule (4 in the fading literature)")
+GAIN_TIME_CONSTANT_S = Bound(0.0, 600.0, "s",
+                             "the assist-as-needed lag: seconds, at most a few trials")
+GAIN_DEVIATION_M = Bound(0.0, 0.1, "m",
+                         "path deviation of full assistance: millimetres (the task is ~0.1 m)")
 F5PL_VALUE = Bound(-1000.0, 1000.0, "",
                    "f5PL end values a, d are factors/gains of order 0.01-10")
 F5PL_SLOPE = Bound(0.0, 50.0, "", "Hill slope b: 50 is already a step function")

@@ -157,7 +157,9 @@ def _effect(cond: str, effects: Mapping[str, FixtureEffect]) -> FixtureEffect:
 
 
 def trial_adjustment(history: Sequence[str], condition: str,
-                     effects: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> TrialAdjustment:
+                     effects: Mapping[str, FixtureEffect] = SEED_EFFECTS, *,
+                     gain: float = 1.0, history_gains: Sequence[float] | None = None,
+                     ) -> TrialAdjustment:
     """The adjustment of a trial under ``condition`` after the trials ``history``.
 
     Args:
@@ -165,6 +167,11 @@ def trial_adjustment(history: Sequence[str], condition: str,
             (``"none"`` for VF-free trials).
         condition: this trial's condition label.
         effects: fixture effects by label (default: the seed's calibration).
+        gain: the fixture gain G in [0, 1] of this trial (``vasim.fixtures.gain``; 1 = the
+            schema as written): the assisted factors move toward 1, ``1 - G (1 - a_c)`` and
+            ``1 + G (v_c - 1)`` (``vasim.operator.combined`` states the rule).
+        history_gains: the gain of each trial of ``history`` (None: all 1); the guidance
+            dependence after an assisted trial scales with its gain.
 
     Returns:
         ``TrialAdjustment`` (module docstring's equations).
@@ -173,13 +180,17 @@ def trial_adjustment(history: Sequence[str], condition: str,
                    for h in history)
     if condition != VF_FREE:
         e = _effect(condition, effects)
+        if gain != 1.0:  # the gain hook (issue #18); G = 1 keeps the calibrated numbers
+            return TrialAdjustment(practice, 1.0 - gain * (1.0 - e.accuracy),
+                                   1.0 + gain * (e.speed - 1.0))
         return TrialAdjustment(practice, e.accuracy, e.speed)
     noise = 1.0
     for f in dict.fromkeys(h for h in history if h != VF_FREE):   # practised fixtures
         e = _effect(f, effects)
         noise *= 1.0 - e.carryover * (1.0 - e.accuracy)
     if history and history[-1] != VF_FREE:
-        noise *= 1.0 + _effect(history[-1], effects).dependence
+        g_last = 1.0 if not history_gains else history_gains[-1]
+        noise *= 1.0 + g_last * _effect(history[-1], effects).dependence  # 1.0 * x == x
     return TrialAdjustment(practice, noise, 1.0)
 
 

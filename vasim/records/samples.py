@@ -31,6 +31,8 @@ column          dtype     shape   meaning
 ``clutch``      int8      (n,)    clutch engaged: master decoupled from the tool (0/1)
 ``in_view``     int8      (n,)    tool tip inside the endoscope camera's field of view:
                                   1 yes, 0 no, -1 not determined (the default)
+``gain``        float64   (n,)    fixture gain G in force at the step (1 = the schema
+                                  as written; ``vasim.fixtures.gain``); store v5
 ==============  ========  ======  ==================================================
 
 The last five columns came with schema version 2 of the store; their defaults (no contact
@@ -79,6 +81,7 @@ COLUMN_SPECS: tuple[tuple[str, type, tuple[str, ...]], ...] = (
     ("delicate", np.int8, ("delicate",)),
     ("clutch", np.int8, ("clutch",)),
     ("in_view", np.int8, ("in_view",)),
+    ("gain", np.float64, ("gain",)),
 )
 """Every buffer column: name, numpy dtype, and its flat (frame / SQL) column names."""
 
@@ -94,16 +97,17 @@ FRAME_DTYPES: dict[str, type] = {
 """numpy dtype of each flat column."""
 
 OPTIONAL_COLUMNS: tuple[str, ...] = ("f_contact", "tau_contact", "delicate", "clutch",
-                                     "in_view")
-"""Buffer columns added with store schema version 2; ``from_columns`` fills them with their
-defaults when a source (e.g. an older export) lacks them."""
+                                     "in_view", "gain")
+"""Buffer columns added with store schema version 2 (``gain``: version 5); ``from_columns``
+fills them with their defaults when a source (e.g. an older export) lacks them."""
 
 IN_VIEW_UNKNOWN = -1
 """``in_view`` value of a sample whose visibility was not determined."""
 
 _DEFAULT_FILL = {"force": 0.0, "ms": 1.0, "zoom": 1.0, "audio_pitch": 0.0,
                  "audio_period": 0.0, "audio_volume": 0.0, "contact": 0, "f_contact": 0.0,
-                 "tau_contact": 0.0, "delicate": 0, "clutch": 0, "in_view": IN_VIEW_UNKNOWN}
+                 "tau_contact": 0.0, "delicate": 0, "clutch": 0, "in_view": IN_VIEW_UNKNOWN,
+                 "gain": 1.0}
 """The value of a column nobody wrote."""
 
 
@@ -134,6 +138,7 @@ class SampleBuffer:
         "_f",
         "_fc",
         "_g",
+        "_gain",
         "_gi",
         "_in_view",
         "_k",
@@ -192,6 +197,7 @@ class SampleBuffer:
         self._delicate = arrays["delicate"]
         self._clutch = arrays["clutch"]
         self._in_view = arrays["in_view"]
+        self._gain = arrays["gain"]
 
     def reserve(self, capacity: int) -> None:
         """Grows the buffer to hold at least ``capacity`` rows (call before a trial)."""
@@ -239,6 +245,7 @@ class SampleBuffer:
         delicate: int = 0,
         clutch: int = 0,
         in_view: int = IN_VIEW_UNKNOWN,
+        gain: float = 1.0,
     ) -> None:
         """Appends one sample (the hot path of the logging loop; no per-call allocation).
 
@@ -253,6 +260,7 @@ class SampleBuffer:
             tau_contact: (3,) tissue contact torque [N m], ``None`` = zeros.
             delicate: contact with a delicate structure (0/1). clutch: clutch engaged (0/1).
             in_view: tool tip in the camera's field of view (1/0; -1 = not determined).
+            gain: the fixture gain in force (1 = the schema as written).
         """
         i = self._n
         if i == self._cap:
@@ -280,6 +288,8 @@ class SampleBuffer:
             self._clutch[i] = clutch
         if in_view != IN_VIEW_UNKNOWN:
             self._in_view[i] = in_view
+        if gain != 1.0:
+            self._gain[i] = gain
         self._n = i + 1
 
     def extend(
@@ -301,12 +311,13 @@ class SampleBuffer:
         delicate: ArrayLike | None = None,
         clutch: ArrayLike | None = None,
         in_view: ArrayLike | None = None,
+        gain: ArrayLike | None = None,
     ) -> None:
         """Appends m samples at once (replays, simulated cohorts, tests).
 
         Args are the columns of ``append`` as arrays: scalars ``(m,)``, vectors ``(m, 3)``.
         A column left ``None`` takes its default (force 0, ms 1, zoom 1, audio 0,
-        contact 0, contact force and torque 0, delicate 0, clutch 0, in_view -1). Scalars
+        contact 0, contact force and torque 0, delicate 0, clutch 0, in_view -1, gain 1). Scalars
         broadcast.
 
         Raises:
@@ -316,7 +327,8 @@ class SampleBuffer:
                  "ms": ms, "zoom": zoom, "audio_pitch": audio_pitch,
                  "audio_period": audio_period, "audio_volume": audio_volume,
                  "contact": contact, "f_contact": f_contact, "tau_contact": tau_contact,
-                 "delicate": delicate, "clutch": clutch, "in_view": in_view}
+                 "delicate": delicate, "clutch": clutch, "in_view": in_view,
+                 "gain": gain}
         m = int(np.shape(k)[0]) if np.ndim(k) else 1
         cols: dict[str, NDArray[Any]] = {}
         for name, dtype, parts in COLUMN_SPECS:
@@ -373,7 +385,7 @@ class SampleBuffer:
             dict: ``k (n,)``, ``t (n,)``, ``x (n, 3)``, ``g (n, 3)``, ``goal_index (n,)``,
             ``force (n, 3)``, ``ms (n, 3)``, ``zoom``, ``audio_pitch``, ``audio_period``,
             ``audio_volume`` ``(n,)``, ``contact (n,)``, ``f_contact (n, 3)``,
-            ``tau_contact (n, 3)``, ``delicate``, ``clutch``, ``in_view`` ``(n,)``.
+            ``tau_contact (n, 3)``, ``delicate``, ``clutch``, ``in_view``, ``gain`` ``(n,)``.
         """
         n = self._n
         out: dict[str, NDArray[Any]] = {}

@@ -11,7 +11,8 @@ Tables (one row per ...):
     logged step of every trial (completed and interrupted): ``trial_id`` then the flat
     sample columns of ``vasim.records.samples.FRAME_COLUMNS`` (``k``, ``t`` [s], ``x_*`` [m],
     ``g_*`` [m], ``goal_index``, ``f_*`` [N], ``ms_*``, ``zoom``, ``audio_*``, ``contact``,
-    ``fc_*`` [N], ``tc_*`` [N m], ``delicate``, ``clutch``, ``in_view``). Written trial by
+    ``fc_*`` [N], ``tc_*`` [N m], ``delicate``, ``clutch``, ``in_view``, ``gain`` (the
+    fixture gain in force, 1 = the schema as written)). Written trial by
     trial (a cohort's samples do not fit in memory at once).
 ``trials``
     trial row, every status (the audit table): ``trial_id, subject`` (NULL for a trial

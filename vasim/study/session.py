@@ -19,7 +19,10 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   0..i-1 and its own condition: the practice P is the rounded effective practice (a trial
   under FF or Mag counts more), and the profile's learnable noise and Fitts constants carry
   the fixture's calibrated effect while assisted, and its carry-over and guidance
-  dependence in VF-free trials (the seed's hypotheses, chapter 6). A session run by the
+  dependence in VF-free trials (the seed's hypotheses, chapter 6); a faded or adaptive
+  trial carries its gain (``vasim.study.gain_plan``: the benefit scales with it) and a
+  combined schema the combination of its fixtures' effects (``vasim.operator.combined``).
+  A session run by the
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
@@ -54,7 +57,7 @@ from __future__ import annotations
 import secrets
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -63,11 +66,17 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
-from vasim.operator.learning import OPERATOR_LABEL, trial_adjustment
+from vasim.operator.learning import OPERATOR_LABEL, VF_FREE, trial_adjustment
 from vasim.operator.retention import practice_weights, weighted_adjustment
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import validate_subject_code
 from vasim.records.trial_metrics import MetricParams
+from vasim.study.gain_plan import (
+    condition_effects,
+    learning_gain,
+    schedule_gains,
+    trial_gain,
+)
 from vasim.study.protocol import (
     Protocol,
     ScheduledTrial,
@@ -220,13 +229,27 @@ class Session:
         s = self.settings
         profile = s.resolved_profile()
         practice = scheduled.index
+        gain = trial_gain(self.protocol, scheduled)  # faded/adaptive fixtures (issue #18)
         if s.operator == "scripted":
-            history = [t.condition for t in self.schedule[:scheduled.index]]
+            history = self.schedule[:scheduled.index]
+            labels = [t.condition for t in history]
+            g = learning_gain(gain)
             if self.spans_days_or_paths:
-                adj = weighted_adjustment(history, scheduled.condition,
-                                          self.practice_weights(scheduled))
+                # Forgetting and transfer (vasim.operator.retention) weight the practice;
+                # the gain hook's rule (learning.trial_adjustment) is applied on top.
+                # **Decision**: in a protocol with later sittings the guidance dependence
+                # after a faded trial is not scaled by that trial's gain (the retention
+                # model counts each earlier trial by its forgetting weight only).
+                adj = weighted_adjustment(labels, scheduled.condition,
+                                          self.practice_weights(scheduled),
+                                          condition_effects(self.protocol))
+                if g != 1.0 and scheduled.condition != VF_FREE:
+                    adj = replace(adj, noise_factor=1.0 - g * (1.0 - adj.noise_factor),
+                                  time_factor=1.0 + g * (adj.time_factor - 1.0))
             else:
-                adj = trial_adjustment(history, scheduled.condition)
+                adj = trial_adjustment(labels, scheduled.condition,
+                                       condition_effects(self.protocol), gain=g,
+                                       history_gains=schedule_gains(self.protocol, history))
             profile, practice = adj.apply(profile), round(adj.practice)
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
@@ -241,6 +264,7 @@ class Session:
             else self.protocol.max_trial_time,
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
+            gain=gain,
         )
 
     @property

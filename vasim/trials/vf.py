@@ -55,9 +55,10 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.abdomen.anatomy import trocar_points
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
 from vasim.core.errors import ConfigError
+from vasim.fixtures.gain import GainRule, rule_from_record
+from vasim.fixtures.gain_runtime import GainedRuntime
 from vasim.fixtures.runtime import FixtureOutputs, SchemaRuntime
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
@@ -70,6 +71,7 @@ from vasim.tasks import Task, point_task, trajectory_task
 from vasim.tasks.base import polyline_lookahead
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
+from vasim.trials.ports import tool_trocar
 
 if TYPE_CHECKING:
     from vasim.abdomen.snapshot import AbdomenSnapshot
@@ -77,31 +79,6 @@ if TYPE_CHECKING:
 
 TaskName = Literal["trajectory", "point"]
 
-def tool_trocar(task: str, start: np.ndarray) -> np.ndarray:
-    """(3,) the port the instrument enters through: the tool's fulcrum [m].
-
-    Trajectory following: the working port on the side the trajectory starts (the
-    patient's right port for x < 0). Point targeting: the instrument port whose shaft
-    points least toward the camera (Mag's view direction), so the shaft does not hide the
-    POI in the magnified view.
-    """
-    from vasim.abdomen.anatomy import TROCAR_NAMES
-    from vasim.fixtures.mag import MagParams
-
-    ports = trocar_points()
-    if task == "trajectory":
-        side = "working_right" if float(start[0]) < 0 else "working_left"
-        return ports[TROCAR_NAMES.index(side)]
-    w = np.asarray(MagParams().view_dir, dtype=np.float64)
-    best, score = ports[TROCAR_NAMES.index("working_right")], np.inf
-    for name, port in zip(TROCAR_NAMES, ports, strict=True):
-        if name == "camera":
-            continue
-        d = port - np.asarray(start, dtype=np.float64)
-        s = float(d @ w) / float(np.linalg.norm(d) * np.linalg.norm(w))
-        if s < score:
-            best, score = port, s
-    return best
 SkillName = Literal["novice", "intermediate", "expert"]
 
 
@@ -134,6 +111,8 @@ class TrialConfig:
             the needle task on the MRCP slave station (``vasim.trials.teleop``, 18 ms
             control cycle), where ``task``, ``variant``, ``schema``, ``dt`` and
             ``velocity_cutoff_hz`` are not used.
+        gain: the fixture gain (``vasim.fixtures.gain``): a constant in [0, 1] (1: the
+            schema as written) or an ``AdaptiveRule``; logged per sample (``gain``).
     """
 
     task: TaskName = "trajectory"
@@ -153,8 +132,12 @@ class TrialConfig:
     poi_spacing: float | None = None
     mode: str | None = None
     label: str | None = None
+    gain: GainRule = 1.0
 
     def __post_init__(self) -> None:
+        # the fixture gain (vasim.fixtures.gain): a constant, or the adaptive rule (a stored
+        # record's table becomes the rule)
+        object.__setattr__(self, "gain", rule_from_record(self.gain, "gain"))
         if self.mode is not None and self.mode not in TELEOPERATION_MODES:
             raise ConfigError(f"unknown teleoperation mode {self.mode!r} (expected one of "
                               f"{', '.join(TELEOPERATION_MODES)} or None)", field="mode")
@@ -328,7 +311,8 @@ class TrialRunner:
             raise ConfigError(
                 f"schema {self.schema.name!r} is for {self.schema.task!r} tasks, "
                 f"not {self.task.kind!r}", field="schema")
-        self.runtime = SchemaRuntime(self.schema)
+        self.runtime = (SchemaRuntime(self.schema) if config.gain == 1.0
+                        else GainedRuntime(self.schema, config.gain))
         self.operator = ScriptedOperator(make_profile(config), self.task, seed=config.seed,
                                          practice=config.practice)
         capacity = min(int(config.max_time / config.dt) + 2, _MAX_PREALLOCATED)
@@ -600,18 +584,19 @@ class TrialRunner:
         elif self._contact:
             self._fc, self._contact = (0.0, 0.0, 0.0), 0
             self._kt = None
+        gain = getattr(rt, "gain", 1.0)  # a GainedRuntime's gain of this render
         if self._mag_camera:
             view = self._tip_in_mag_view(x)
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
                                 cues[5], cues[6], self._contact, self._fc, self._tc,
-                                self._delicate, 0, view)
+                                self._delicate, 0, view, gain)
         elif self._contact or self._delicate:
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
                                 cues[5], cues[6], self._contact, self._fc, self._tc,
-                                self._delicate)
+                                self._delicate, gain=gain)
         else:
             self.samples.append(k, t, x, g, i, cues[0:3], self._ms, cues[3], cues[4],
-                                cues[5], cues[6], 0)
+                                cues[5], cues[6], 0, gain=gain)
         self.done = self._i >= self._n or t >= self.config.max_time - 1e-12
 
     def _tip_in_mag_view(self, x: tuple[float, ...]) -> int:
@@ -675,6 +660,8 @@ class TrialRunner:
             "nonfinite_inputs": self._n_bad_input,
             "scene": self.config.scene,
         })
+        if self.config.gain != 1.0:  # a faded or adaptive trial: its mean gain in force
+            summary["gain_mean"] = float(np.mean(view["gain"])) if len(view["gain"]) else 1.0
         if self.abdomen is not None:
             summary.update({f"tissue_{k}": v
                             for k, v in self.abdomen.quality.as_dict().items()})

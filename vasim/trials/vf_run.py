@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from vasim.core.progress import progress_bar
+from vasim.fixtures.gain import rule_record
 from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import TrialMeta
@@ -28,6 +29,10 @@ def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, ob
            and not (f.name in ("mode", "label", "poi_spacing")
                     and getattr(config, f.name) is None)}
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
+    if config.gain == 1.0:  # the schema as written: the record stays as it was
+        rec.pop("gain", None)
+    else:
+        rec["gain"] = rule_record(config.gain)
     return rec
 
 

@@ -43,6 +43,11 @@ TOML layout (every field is checked; defaults in brackets)::
     phase = "acquisition"               # ["acquisition"] | "retention" | "transfer", and
     delay_days = 0.0                    # [0] a later sitting; [blocks.gate]: a proficiency
                                         # gate (vasim.study.protocol.phases)
+    # fading / adaptive fixtures (issue #18; vasim.fixtures.gain), one of the two; the block
+    # then needs `schema` and its condition is a label of its own (e.g. "ff_faded"):
+    gain_schedule = [1.0, 0.75, 0.5]    # [none] gains in [0, 1], equal runs of trials, in order
+    adaptive = { gain_min = 0.25, gain_max = 1.0, tau_s = 2.0, deviation_full_m = 0.003,
+                 initial = 0.5 }        # [none] assist-as-needed (initial: [gain_max])
 
     [questionnaires.pre]
     demographics = true                 # [false] group, specialisation, experience levels

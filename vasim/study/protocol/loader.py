@@ -31,6 +31,9 @@ _GATE = ("metrics", "k", "consecutive", "max_trials", "expert_group")
 _ITEM = ("id", "type", "prompt", "required", "options", "conditions", "select", "min",
          "max", "anchors", "max_entries", "min_size", "max_length")
 
+_BLOCK_GAIN = ("gain_schedule", "adaptive")
+"""Block keys of the fading and adaptive fixtures (issue #18 item 1)."""
+
 
 def available_protocols() -> tuple[str, ...]:
     """Names of the protocol files shipped in ``protocols/studies/``, sorted."""
@@ -88,7 +91,8 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
     blocks = []
     for i, raw in enumerate(raw_blocks):
         path = f"blocks[{i}]"
-        check_keys(raw, _BLOCK, path, file=source, required=("name", "condition"))
+        check_keys(raw, _BLOCK + _BLOCK_GAIN, path, file=source,
+                   required=("name", "condition"))
         bkw = {k: _tuple(v) for k, v in raw.items()}
         if "gate" in raw:
             gate = _table(raw, "gate", path, source, _GATE)

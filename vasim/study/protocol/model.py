@@ -8,6 +8,7 @@ The file layout is described in :mod:`vasim.study.protocol`.
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from functools import cache
 from typing import Any, Literal
@@ -29,6 +30,13 @@ from vasim.core.config import (
     check_number,
     check_str,
     fail,
+)
+from vasim.fixtures.gain import (
+    AdaptiveRule,
+    GainRule,
+    check_stages,
+    rule_from_record,
+    scheduled_gain,
 )
 from vasim.study.protocol.phases import Gate, check_block_phase, check_protocol_phases
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
@@ -64,6 +72,11 @@ class Block:
             (:mod:`vasim.study.protocol.phases`). delay_days: the block begins a new
             sitting this many days after the previous trial [d] (0: same sitting).
         gate: the block's proficiency gate, or None.
+        gain_schedule: fading (issue #18): the fixture gain of the block's own trials in
+            stages, e.g. ``(1.0, 0.75, 0.5, 0.25)`` (``vasim.fixtures.gain.scheduled_gain``);
+            None: gain 1. adaptive: assist-as-needed (``vasim.fixtures.gain.AdaptiveRule``;
+            a TOML table is converted); None: none. A block with either names its own
+            condition label (e.g. ``"ff_faded"``) and the ``schema`` it runs.
     """
 
     name: str
@@ -77,10 +90,14 @@ class Block:
     phase: str = "acquisition"
     delay_days: float = 0.0
     gate: Gate | None = None
+    # -- fading and adaptive fixtures (issue #18 item 1) --
+    gain_schedule: tuple[float, ...] | None = None
+    adaptive: AdaptiveRule | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not _NAME_RE.fullmatch(self.name):
             raise fail(self.name, "a name of letters, digits, '_', '-', '.'", field="name")
+        _check_gain_fields(self)
         check_str(self.condition, "condition")
         if self.schema is not None:
             check_str(self.schema, "schema")
@@ -104,6 +121,41 @@ class Block:
     def n_trials(self) -> int:
         """Trials of the block, appended probes included."""
         return len(self.variants) * self.repetitions + self.probes_after
+
+    @property
+    def has_gain(self) -> bool:
+        """The block fades or adapts its fixtures' gain."""
+        return self.gain_schedule is not None or self.adaptive is not None
+
+    def trial_gain(self, trial_in_block: int) -> GainRule:
+        """The gain of the block's own trial ``trial_in_block`` (0-based): the adaptive
+        rule, the schedule's stage, or 1.0 (appended probes are fixture-free anyway)."""
+        if self.adaptive is not None:
+            return self.adaptive
+        if self.gain_schedule is not None:
+            return scheduled_gain(self.gain_schedule, trial_in_block,
+                                  len(self.variants) * self.repetitions)
+        return 1.0
+
+
+def _check_gain_fields(b: Block) -> None:
+    """The fading/adaptive fields of a block (issue #18 item 1), converted and checked."""
+    if b.gain_schedule is not None:
+        object.__setattr__(b, "gain_schedule", check_stages(b.gain_schedule, "gain_schedule"))
+    if b.adaptive is not None and not isinstance(b.adaptive, AdaptiveRule):
+        if not isinstance(b.adaptive, Mapping):
+            raise fail(b.adaptive, "a table of gain_min, gain_max, tau_s, deviation_full_m, "
+                       "initial", field="adaptive")
+        object.__setattr__(b, "adaptive", rule_from_record(b.adaptive, "adaptive"))
+    if b.gain_schedule is not None and b.adaptive is not None:
+        raise fail(b.gain_schedule, "either gain_schedule or adaptive, not both",
+                   field="gain_schedule")
+    if b.has_gain and b.probe:
+        raise fail(True, "false (a probe block is fixture-free: it has no gain)",
+                   field="probe")
+    if b.has_gain and b.schema is None:
+        raise fail(None, "the schema the faded/adaptive condition runs (schema = \"ff\"; "
+                   f"the condition {b.condition!r} is its own label)", field="schema")
 
 
 @dataclass(frozen=True)
@@ -184,7 +236,10 @@ class Protocol:
                 raise fail(b.name, "a block name not used before (duplicate block name)",
                            field=f"blocks[{i}].name")
             names.add(b.name)
-            _check_condition(b.condition, self.task, f"blocks[{i}].condition")
+            if b.has_gain:  # its own label (e.g. ff_faded): not a schema, not a mode
+                _check_gain_label(b, self.task, f"blocks[{i}]")
+            else:
+                _check_condition(b.condition, self.task, f"blocks[{i}].condition")
             if b.schema is not None:
                 _check_condition(b.schema, self.task, f"blocks[{i}].schema")
                 if b.condition in TELEOPERATION_MODES or b.schema in TELEOPERATION_MODES:
@@ -299,6 +354,25 @@ def _schema_has_fixtures(name: str) -> bool:
     if name in TELEOPERATION_MODES:
         return True
     return bool(load_schema(name).fixtures)
+
+
+def _check_gain_label(b: Block, task: str, path: str) -> None:
+    """A faded/adaptive block's condition is a label of its own (neither a schema nor a
+    teleoperation mode: its trials must not mix with the constant schema's in analyses)
+    and its schema has fixtures to scale."""
+    from vasim.fixtures.schema import available_schemas
+
+    if not _NAME_RE.fullmatch(b.condition):
+        raise fail(b.condition, "a label of letters, digits, '_', '-', '.'",
+                   field=f"{path}.condition")
+    if b.condition in available_schemas() or b.condition in TELEOPERATION_MODES:
+        raise fail(b.condition, "a label of its own for a faded/adaptive condition, not a "
+                   "schema or mode name (e.g. 'ff_faded')", field=f"{path}.condition")
+    assert b.schema is not None
+    _check_condition(b.schema, task, f"{path}.schema")
+    if not _schema_has_fixtures(b.schema) or b.schema in TELEOPERATION_MODES:
+        raise fail(b.schema, "a schema with fixtures (a gain scales them)",
+                   field=f"{path}.schema")
 
 
 def _check_condition(cond: object, task: str, name: str) -> None:

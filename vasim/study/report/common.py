@@ -76,22 +76,55 @@ def ids_text(values: Iterable[Any]) -> str:
 
 def fixture_label(condition: str) -> str:
     """Display name of a condition: ``"mag"`` -> ``"Mag"``, modes ``"mrcp_cam"`` ->
-    ``"MRCP+Cam"``; unknown names are returned unchanged.
+    ``"MRCP+Cam"``, a combined schema ``"ag_mag"`` -> ``"AG+Mag"``, a faded or adaptive
+    condition ``"ff_faded"`` -> ``"FF faded"`` (issue #18); unknown names are returned
+    unchanged.
 
     >>> fixture_label("mag"), fixture_label("mrcp_cam"), fixture_label("custom")
     ('Mag', 'MRCP+Cam', 'custom')
+    >>> fixture_label("ag_mag"), fixture_label("mag_adaptive")
+    ('AG+Mag', 'Mag adaptive')
     """
-    return FIXTURE_LABELS.get(condition, MODE_LABELS.get(condition, condition))
+    known = FIXTURE_LABELS.get(condition, MODE_LABELS.get(condition))
+    if known is not None:
+        return known
+    base, kind = _derived(condition)
+    if kind:
+        return f"{fixture_label(base)} {kind}"
+    parts = condition.split("_")
+    if len(parts) > 1 and all(p in FIXTURE_LABELS and p != "none" for p in parts):
+        return "+".join(FIXTURE_LABELS[p] for p in parts)
+    return condition
+
+
+_DERIVED_KINDS: tuple[str, ...] = ("faded", "adaptive")
+"""Suffixes of the faded and adaptive conditions (``ff_faded``), in report order."""
+
+
+def _derived(condition: str) -> tuple[str, str]:
+    """(base condition, "faded"/"adaptive") of a derived label, else (condition, "")."""
+    base, _, kind = condition.rpartition("_")
+    if base and kind in _DERIVED_KINDS:
+        return base, kind
+    return condition, ""
 
 
 def ordered_conditions(present: Iterable[str], order: Sequence[str]) -> list[str]:
-    """The present conditions in ``order``, unknown ones after it, sorted.
+    """The present conditions in ``order``, unknown ones after it, sorted; a faded or
+    adaptive condition follows its base condition (``ff``, ``ff_faded``, ``ff_adaptive``).
 
     >>> ordered_conditions(["ff", "x", "none", "vg"], FIXTURE_ORDER)
     ['none', 'vg', 'ff', 'x']
+    >>> ordered_conditions(["ff_adaptive", "mag", "ff_faded", "ff", "none"], FIXTURE_ORDER)
+    ['none', 'mag', 'ff', 'ff_faded', 'ff_adaptive']
     """
-    seen = set(present)
-    return [c for c in order if c in seen] + sorted(seen - set(order))
+    def key(c: str) -> tuple[int, int, str]:
+        base, kind = _derived(c)
+        rank = _DERIVED_KINDS.index(kind) + 1 if kind else 0
+        return (order.index(base) if base in order else len(order), rank,
+                c if base not in order else "")
+
+    return sorted(set(present), key=key)
 
 
 def subjects_text(subjects: Iterable[str], limit: int = 40) -> str:

@@ -35,6 +35,9 @@ from vasim.study.store.vocabulary import (
     validate_outcome,
 )
 
+_SAMPLE_DEFAULTS = {"gain": "1.0"}
+"""What a sample column added by a later schema version reads in an older store."""
+
 
 class StoreReaders(StoreConnection):
     """The readers of ``TrialStore`` (they work on a read-only store too)."""
@@ -102,8 +105,8 @@ class StoreReaders(StoreConnection):
     def _sample_columns(self, trial_id: int) -> dict[str, np.ndarray]:
         tid = row_id(trial_id)
         rows = self.con.execute(
-            f"SELECT {', '.join(FRAME_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY k",
-            (tid,)).fetchall()
+            f"SELECT {', '.join(self._sample_exprs())} FROM samples WHERE trial_id = ? "
+            "ORDER BY k", (tid,)).fetchall()
         if not rows:
             return {c: np.empty(0, dtype=FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
         # one 2-D float conversion (None -> NaN) is ~3x faster than per-column arrays; the
@@ -115,6 +118,18 @@ class StoreReaders(StoreConnection):
             col = block[:, j]
             out[c] = col.copy() if dtype is np.float64 else col.astype(dtype)
         return out
+
+    def _sample_exprs(self) -> tuple[str, ...]:
+        """SELECT expressions of ``FRAME_COLUMNS``: a column an older store (opened
+        read-only, hence not migrated) lacks reads as its migration default (``gain``: 1.0,
+        schema version 5)."""
+        exprs = getattr(self, "_sample_exprs_cache", None)
+        if exprs is None:
+            have = {r[1] for r in self.con.execute("PRAGMA table_info(samples)")}
+            exprs = tuple(c if c in have else f"{_SAMPLE_DEFAULTS.get(c, 'NULL')} AS {c}"
+                          for c in FRAME_COLUMNS)
+            self._sample_exprs_cache = exprs
+        return exprs
 
     def point_metrics(self, trial_id: int) -> pd.DataFrame:
         """A trial's per-point metrics, columns ``metrics.POINT_COLUMNS``, by point."""

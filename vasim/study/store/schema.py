@@ -26,8 +26,8 @@ opened read-only is never migrated: a version-2 store is read as it is (``outcom
 by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL); a version-1 store must be opened
 writable once.
 
-Schema, version 4 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v4" mark
-what versions 2 and 3 added):
+Schema, version 5 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v5" mark
+what versions 2 to 5 added):
 
 ``schema_version``
     ``version`` INTEGER PK, ``applied_at`` TEXT.
@@ -71,8 +71,9 @@ what versions 2 and 3 added):
     REAL [N] tissue contact force (default 0), ``tc_x, tc_y, tc_z`` REAL [N m] tissue contact
     torque (default 0), ``delicate`` INTEGER (0/1, contact with a delicate structure),
     ``clutch`` INTEGER (0/1), ``in_view`` INTEGER (1 tool tip in the camera's field of
-    view, 0 outside, -1 not determined: the value every version-1 row reads). See
-    ``vasim.records.samples``.
+    view, 0 outside, -1 not determined: the value every version-1 row reads); v5: ``gain``
+    REAL (the fixture gain in force, ``vasim.fixtures.gain``; 1.0 = the schema as written,
+    what every older row reads). See ``vasim.records.samples``.
 ``point_metrics`` — WITHOUT ROWID, PK (trial_id, point); columns of
     ``metrics.POINT_COLUMNS``: ``point`` INTEGER, ``reached`` INTEGER (0/1), ``t_reached``
     REAL [s] NULL, ``error_l1`` REAL [m] NULL, ``latency`` REAL [s] NULL, ``path_l1``,
@@ -146,7 +147,7 @@ from vasim.study.store.vocabulary import (
     TRIAL_OUTCOMES,
 )
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """Schema version written to ``PRAGMA user_version``."""
 
 APPLICATION_ID = 0x76534D31  # b"vSM1"
@@ -431,7 +432,15 @@ ALTER TABLE point_metrics ADD COLUMN path_dev_out_frac REAL;
 """Version 4: the per-point rate-independent e_i and path-deviation columns
 (``vasim.records.path_deviation``); older rows read NULL (NaN: not measured)."""
 
-MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3, 4: _SCHEMA_V4}
+_SCHEMA_V5 = """
+ALTER TABLE samples ADD COLUMN gain REAL NOT NULL DEFAULT 1.0;
+"""
+"""Version 5: the fixture gain in force at each sample (``vasim.fixtures.gain``: fading
+schedules and assist-as-needed); every older row reads 1.0, the schema as written, which is
+what every trial before version 5 ran."""
+
+MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3, 4: _SCHEMA_V4,
+                              5: _SCHEMA_V5}
 """Script that takes a store from version v-1 to v (version 0 = empty file)."""
 
 REBUILDS: frozenset[int] = frozenset({3})

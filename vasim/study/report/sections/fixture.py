@@ -32,6 +32,7 @@ from vasim.study.report.html_page import (
     TextList,
 )
 from vasim.study.report.models import fixture_mixed_model
+from vasim.study.report.sections.gain import gain_blocks
 
 SEED_REPORTED: dict[tuple[str, str], str] = {
     ("cum_error", "fixture"): "F(5, 98131) = 35.030", ("cum_error", "trial"):
@@ -209,6 +210,7 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
             "for power 0.9.", display="details",
             columns=("dv", "factor", "group1", "group2", "n", "mean_diff", "t", "p", "p_holm",
                      "cohen_dz")))
+    out.blocks.extend(gain_blocks(data, vf))  # faded and adaptive conditions (issue #18)
     prov += _mixed_model_block(vf, out)
     rep, rprov = _seed_replication(data, vf, out)
     prov += rprov
