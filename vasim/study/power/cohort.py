@@ -110,7 +110,10 @@ class CohortTrials:
     n_trials: int
 
 
-def _schedule_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
+def schedule_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """The schedule frame ``load_study`` reads from a store, from scheduled-trial rows
+    (``ScheduledTrial.as_row()`` + ``session_id, trial_id, attempts, subject``): store
+    dtypes, ordered by session and trial index, with ``stage``."""
     df = pd.DataFrame(rows, columns=[*SCHEDULE_COLUMNS, "subject"])
     for c in ("session_id", "trial_index", "block_index", "trial_in_block", "variant",
               "repetition", "attempts"):
@@ -155,7 +158,7 @@ def simulate_in_memory(protocol: Protocol, subjects: Sequence[SimulatedSubject],
     points["reached"] = points["reached"].astype(bool)
     metrics = pd.DataFrame.from_dict(metric_rows, orient="index").astype(float)
     metrics.index = pd.Index(metrics.index.astype(np.int64), name="trial_id")
-    return CohortTrials(schedule=_schedule_frame(sched_rows), points=points, metrics=metrics,
+    return CohortTrials(schedule=schedule_frame(sched_rows), points=points, metrics=metrics,
                         sim_seconds=sim, n_trials=tid)
 
 
@@ -281,5 +284,6 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
 
 
 __all__ = ["CohortOutcome", "CohortTrials", "cohort_subjects_of", "cohort_tests",
-           "simulate_in_memory", "simulate_to_store", "study_data", "subject_session",
+           "schedule_frame", "simulate_in_memory", "simulate_to_store", "study_data",
+           "subject_session",
            "trial_configs"]

@@ -84,6 +84,7 @@ def power_table(cohorts: pd.DataFrame, *, alpha: float, p_column: str = "p_gg"
         rej = int(np.sum(p < alpha))   # NaN < alpha is False: not computed = not rejected
         est = rej / m
         lo, hi = proportion_confint(rej, m, alpha=0.05, method="wilson")
+        lo, hi = min(float(lo), est), max(float(hi), est)   # rounding at 0 or m rejections
         rows.append({"dv": dv, "factor": factor,
                      "test": TEST_NAMES.get((str(dv), str(factor)), f"{factor} on {dv}"),
                      "n_subjects": int(n), "cohorts": m, "rejections": rej,
