@@ -51,6 +51,7 @@ class PowerResult:
         wall_seconds: the run's wall-clock time [s]. cpu_seconds: the tasks' summed wall
             time [s]. sim_seconds: simulated trial time [s]. n_trials: trials run.
         workers: CPUs Ray offered. address: the cluster joined (None: a local Ray).
+        ray_seconds: time to start or join Ray [s] (part of ``wall_seconds``).
     """
 
     cohorts: pd.DataFrame
@@ -61,6 +62,7 @@ class PowerResult:
     n_trials: int
     workers: int
     address: str | None
+    ray_seconds: float = 0.0
 
     @property
     def cohorts_per_second(self) -> float:
@@ -132,6 +134,7 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
         keep = os.path.abspath(kd)
     t0 = time.perf_counter()
     cpus = init_ray(address, workers)
+    t_ray = time.perf_counter() - t0
     bar = progress_bar(design.n_cohorts, f"power {protocol.name}", "cohort",
                        enabled=progress)
     try:
@@ -167,7 +170,7 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
     table = power_table(cohorts, alpha=design.alpha, p_column=design.p_column)
     return PowerResult(cohorts=cohorts, power=table, wall_seconds=time.perf_counter() - t0,
                        cpu_seconds=cpu, sim_seconds=sim, n_trials=trials, workers=cpus,
-                       address=address)
+                       address=address, ray_seconds=t_ray)
 
 
 __all__ = ["PowerResult", "init_ray", "run_power"]
