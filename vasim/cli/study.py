@@ -435,8 +435,9 @@ def _register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
                    help="p-value a test rejects on: Greenhouse-Geisser (default) or "
                         "uncorrected")
     r.add_argument("--coarse", action="store_true",
-                   help="2 ms control step instead of 1 ms (planning only; validated: the "
-                        "per-trial measures' means within 10 %%)")
+                   help="2 ms control step instead of 1 ms, ~1.5x faster: dry runs and the "
+                        "practice effect only (the per-trial means stay within 10 %%, but the "
+                        "fixture effects shrink: README 'Power planning')")
     r.add_argument("--seed", type=bounded_int(SEED), default=7, help="base seed (default 7)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
@@ -454,7 +455,13 @@ def _register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> 
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
-    from vasim.study.power.design import COARSE_DT, FULL_DT, PowerDesign, parse_subjects
+    from vasim.study.power.design import (
+        COARSE_DT,
+        COARSE_WARNING,
+        FULL_DT,
+        PowerDesign,
+        parse_subjects,
+    )
     from vasim.study.power.driver import run_power
     from vasim.study.power.output import format_table, write_outputs
     from vasim.study.protocol import load_protocol
@@ -474,13 +481,17 @@ def _cmd_power(args: argparse.Namespace) -> int:
           f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
           f" p; {args.cohorts} cohorts per N; ± = Monte Carlo standard error)")
     print(format_table(res.power))
+    if args.coarse:
+        print(f"warning: {COARSE_WARNING}")
     print(f"{res.n_trials} trials ({res.sim_seconds:.0f} s simulated) in "
           f"{res.wall_seconds:.1f} s wall on {res.workers} CPU(s) "
           f"({'cluster ' + res.address if res.address else 'local Ray'}): "
           f"{res.cohorts_per_second:.3g} cohorts/s")
     if args.out is not None:
         title = (f"{protocol.name}: power of the primary tests, {args.cohorts} cohorts per N, "
-                 f"effect scale {args.effect_scale:g}, alpha {args.alpha:g}")
+                 f"effect scale {args.effect_scale:g}, alpha {args.alpha:g}"
+                 + (" (coarse 2 ms step: fixture power underestimated)" if args.coarse
+                    else ""))
         for path in write_outputs(args.out, res.power, res.cohorts, title=title):
             print(f"wrote {path}")
     return 0
