@@ -73,7 +73,8 @@ def ray_throughput() -> None:
         rates[workers] = (n / res.wall_seconds, steady)
         print(f"  {workers} worker(s): {n} cohorts ({res.n_trials} trials) in "
               f"{res.wall_seconds:.1f} s wall (Ray start {res.ray_seconds:.1f} s, tasks "
-              f"{res.cpu_seconds:.1f} s): {n / res.wall_seconds:.4f} cohorts/s, "
+              f"{res.task_seconds:.1f} s wall / {res.cpu_seconds:.1f} s CPU): "
+              f"{n / res.wall_seconds:.4f} cohorts/s, "
               f"{steady:.4f} without the start", flush=True)
     print(f"  2 vs 1 workers: {rates[2][0] / rates[1][0]:.2f}x "
           f"({rates[2][1] / rates[1][1]:.2f}x without Ray's start)")

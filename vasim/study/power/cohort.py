@@ -232,13 +232,15 @@ class CohortOutcome:
     Attributes:
         tests: :data:`~vasim.study.power.estimate.COHORT_COLUMNS` rows, one per primary
             test. wall_seconds: the task's wall-clock time [s]. sim_seconds: simulated
-            time [s]. n_trials: trials run.
+            time [s]. n_trials: trials run. cpu_seconds: the task's process CPU time [s]
+            (below ``wall_seconds`` when the task waited for a core).
     """
 
     tests: pd.DataFrame
     wall_seconds: float
     sim_seconds: float
     n_trials: int
+    cpu_seconds: float = 0.0
 
 
 def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: int,
@@ -253,7 +255,7 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
     Returns:
         A :class:`CohortOutcome`.
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     seed = cohort_seed(design.seed, n_subjects, k)
     subjects = cohort_subjects_of(protocol, n_subjects, seed)
     if keep_dir is None:
@@ -280,7 +282,7 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
                         "p_unc": tests["p_unc"], "p_gg": tests["p_gg"], "np2": tests["np2"],
                         "reason": tests["reason"]}, columns=list(COHORT_COLUMNS))
     return CohortOutcome(out, wall_seconds=time.perf_counter() - t0, sim_seconds=sim,
-                         n_trials=n_trials)
+                         n_trials=n_trials, cpu_seconds=time.process_time() - c0)
 
 
 __all__ = ["CohortOutcome", "CohortTrials", "cohort_subjects_of", "cohort_tests",

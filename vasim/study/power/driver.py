@@ -16,8 +16,8 @@ cohort_tests`), collects them as they finish with a progress bar over cohorts
 * The protocol is parsed once on the driver and handed to the tasks through the object
   store (``ray.put``); fixture schemas and scenes are read by each worker from its own
   vasim installation. On a cluster every node must therefore run the same vasim (same
-  commit, its ``protocols/`` included), which the driver checks: each node reports its
-  vasim version in the first task's result, and a mismatch is an error.
+  commit, its ``protocols/`` included), which the driver checks: every task returns its
+  node's vasim version, and a mismatch is an error.
 * On a local Ray, ``workers`` (``--workers``) sets Ray's CPUs (default: the machine's
   cores); with ``--address`` the cluster's own resources decide and ``workers`` is ignored.
 * Results are returned in order of completion and sorted afterwards, so the table does not
@@ -48,8 +48,10 @@ class PowerResult:
     Attributes:
         cohorts: one row per cohort and primary test (``COHORT_COLUMNS``).
         power: :func:`~vasim.study.power.estimate.power_table` of it.
-        wall_seconds: the run's wall-clock time [s]. cpu_seconds: the tasks' summed wall
-            time [s]. sim_seconds: simulated trial time [s]. n_trials: trials run.
+        wall_seconds: the run's wall-clock time [s]. task_seconds: the tasks' summed wall
+            time [s]. cpu_seconds: the tasks' summed process CPU time [s] (below
+            ``task_seconds`` when they waited for cores). sim_seconds: simulated trial
+            time [s]. n_trials: trials run.
         workers: CPUs Ray offered. address: the cluster joined (None: a local Ray).
         ray_seconds: time to start or join Ray [s] (part of ``wall_seconds``).
     """
@@ -57,6 +59,7 @@ class PowerResult:
     cohorts: pd.DataFrame
     power: pd.DataFrame
     wall_seconds: float
+    task_seconds: float
     cpu_seconds: float
     sim_seconds: float
     n_trials: int
@@ -143,7 +146,7 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
         pending = [task.remote(ref_p, ref_d, n, k, keep)
                    for n in design.subjects for k in range(design.cohorts)]
         frames: list[pd.DataFrame] = []
-        cpu = sim = 0.0
+        waited = cpu = sim = 0.0
         trials = 0
         mine = _vasim_version()
         while pending:
@@ -153,7 +156,8 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
                 raise ConfigError(f"a Ray node runs vasim {version}, this driver {mine}: "
                                   "install the same vasim on every node", field="--address")
             frames.append(outcome.tests)
-            cpu += outcome.wall_seconds
+            waited += outcome.wall_seconds
+            cpu += outcome.cpu_seconds
             sim += outcome.sim_seconds
             trials += outcome.n_trials
             if on_cohort is not None:
@@ -169,8 +173,8 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
         ["n_subjects", "cohort", "factor", "dv"]).reset_index(drop=True)
     table = power_table(cohorts, alpha=design.alpha, p_column=design.p_column)
     return PowerResult(cohorts=cohorts, power=table, wall_seconds=time.perf_counter() - t0,
-                       cpu_seconds=cpu, sim_seconds=sim, n_trials=trials, workers=cpus,
-                       address=address, ray_seconds=t_ray)
+                       task_seconds=waited, cpu_seconds=cpu, sim_seconds=sim,
+                       n_trials=trials, workers=cpus, address=address, ray_seconds=t_ray)
 
 
 __all__ = ["PowerResult", "init_ray", "run_power"]
