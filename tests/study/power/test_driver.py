@@ -92,3 +92,30 @@ def test_bad_subject_spec_fails_before_ray_starts(tiny_protocol_path: Path,
     err = capsys.readouterr().err
     assert "--subjects" in err and "START 60 > STOP 10" in err
     assert not _ray_daemons()
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--cohorts", "0"], "got 0, expected an integer in [1, 100000]"),
+    (["--cohorts", "1e308"], "expected an integer"),
+    (["--effect-scale", "nan"], "expected a finite number in [0, 5]"),
+    (["--effect-scale", "-1"], "expected a finite number in [0, 5]"),
+    (["--alpha", "0.9"], "got 0.9, expected a finite number in [1e-06, 0.5]"),
+    (["--workers", "1000"], "got 1000, expected an integer in [0, "),
+    (["--workers", "0"], "got 0, expected at least 1 Ray worker"),
+    (["--subjects", "1:5"], "got 1, expected an integer"),
+    (["--subjects", "10:60:0"], "STEP 0, expected a step >= 1"),
+    (["--effect-scale", "3"], "fixture 'ff' would get an invalid effect"),
+])
+def test_bad_power_arguments_are_one_line_errors(tiny_protocol_path: Path, args: list[str],
+                                                 needle: str,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    base = {"--subjects": "4", "--cohorts": "2"}
+    for k, v in zip(args[::2], args[1::2], strict=True):
+        base[k] = v
+    argv = ["study", "power", "--protocol", str(tiny_protocol_path)]
+    for k, v in base.items():
+        argv += [k, v]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and needle in err, err
+    assert not _ray_daemons()

@@ -93,6 +93,9 @@ def init_ray(address: str | None, workers: int | None) -> int:
     """
     import ray
 
+    if workers is not None and workers < 1:
+        raise ConfigError(f"got {workers!r}, expected at least 1 Ray worker (a power run "
+                          "always runs on Ray)", field="--workers")
     try:
         if address:
             ray.init(address=address, log_to_driver=False)
