@@ -3,6 +3,7 @@ effects and the design's validation (vasim/study/power/design.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -114,3 +115,18 @@ def test_design_validates_its_fields() -> None:
         with pytest.raises(ConfigError) as info:
             PowerDesign(**args)  # type: ignore[arg-type]
         assert info.value.field == field, kwargs
+
+
+def test_power_needs_a_vf_protocol_with_probes() -> None:
+    from vasim.study.power.design import check_power_protocol
+    from vasim.study.protocol import load_protocol
+
+    check_power_protocol(load_protocol("vf_learning_curve"))
+    with pytest.raises(ConfigError, match="no virtual-fixture condition") as info:
+        check_power_protocol(load_protocol("mrcp_vs_stdt"))
+    assert info.value.field == "--protocol"
+    vf = load_protocol("vf_learning_curve")
+    no_probes = dataclasses.replace(vf, blocks=tuple(
+        dataclasses.replace(b, probe=False, probes_after=0) for b in vf.blocks))
+    with pytest.raises(ConfigError, match="no VF-free"):
+        check_power_protocol(no_probes)

@@ -35,6 +35,8 @@ from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
 from vasim.core.config import check_int, check_number
 from vasim.core.errors import ConfigError
 from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.study.protocol import Protocol
+from vasim.trials.kinds import TELEOPERATION_MODES
 
 FULL_DT = 1e-3
 """The control step of every stored trial [s] (the haptic 1 kHz)."""
@@ -175,6 +177,24 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
     return out
 
 
+def check_power_protocol(protocol: Protocol) -> None:
+    """Refuses a protocol without the VF study's factors: the primary tests need a fixture
+    condition and VF-free probe trials (a teleoperation-mode study has neither).
+
+    Raises:
+        ConfigError: (field ``--protocol``) naming the protocol and what it lacks.
+    """
+    conds = {b.condition for b in protocol.blocks}
+    vf = conds - set(TELEOPERATION_MODES)
+    if not vf - {"none"}:
+        raise ConfigError(f"protocol {protocol.name!r} has no virtual-fixture condition "
+                          f"(conditions: {', '.join(sorted(conds))}); power planning covers "
+                          "the VF study's fixture and practice tests", field="--protocol")
+    if not any(b.probe or b.probes_after > 0 for b in protocol.blocks):
+        raise ConfigError(f"protocol {protocol.name!r} has no VF-free (probe) trial; the "
+                          "fixture and practice tests need one", field="--protocol")
+
+
 @dataclass(frozen=True)
 class PowerDesign:
     """What a power run simulates and how it decides (validated on construction).
@@ -232,4 +252,5 @@ class PowerDesign:
 
 
 __all__ = ["COARSE_DT", "COARSE_TOLERANCE", "COARSE_WARNING", "FULL_DT", "SURGEON_SHARE",
-           "PowerDesign", "cohort_seed", "parse_subjects", "scaled_effects", "surgeons_for"]
+           "PowerDesign", "check_power_protocol", "cohort_seed", "parse_subjects",
+           "scaled_effects", "surgeons_for"]

@@ -36,7 +36,7 @@ import pandas as pd
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.study.power.cohort import CohortOutcome, cohort_tests
-from vasim.study.power.design import PowerDesign
+from vasim.study.power.design import PowerDesign, check_power_protocol
 from vasim.study.power.estimate import power_table
 from vasim.study.protocol import Protocol
 
@@ -131,6 +131,7 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
     import ray
 
     protocol.check_runnable()
+    check_power_protocol(protocol)
     keep = None
     if keep_dir is not None:
         kd = os.fspath(keep_dir)
