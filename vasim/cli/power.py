@@ -32,6 +32,10 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=1.0,
                    help="x the operator's calibrated fixture effects (1: the seed's; 0: "
                         "none, the fixture tests' type-I error; 0.5: half)")
+    r.add_argument("--effects", type=Path, default=None, metavar="FILE.toml",
+                   help="fixture effects by condition label ([ff] accuracy = 0.8, speed, "
+                        "practice_weight, carryover, dependence); unset fields keep the "
+                        "calibration; --effect-scale applies on top")
     r.add_argument("--alpha", type=bounded_float(ALPHA), default=0.05,
                    help="significance level (default 0.05)")
     r.add_argument("--p", choices=["gg", "uncorrected"], default="gg",
@@ -60,11 +64,13 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
+    from vasim.operator.learning import SEED_EFFECTS
     from vasim.study.power.design import (
         COARSE_DT,
         COARSE_WARNING,
         FULL_DT,
         PowerDesign,
+        load_effects,
         parse_subjects,
     )
     from vasim.study.power.driver import run_power
@@ -73,16 +79,18 @@ def _cmd_power(args: argparse.Namespace) -> int:
 
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
+    base = load_effects(args.effects) if args.effects is not None else SEED_EFFECTS
     design = PowerDesign(subjects=parse_subjects(args.subjects), cohorts=args.cohorts,
                          seed=args.seed, effect_scale=args.effect_scale, alpha=args.alpha,
                          dt=COARSE_DT if args.coarse else FULL_DT,
                          max_trial_time=args.max_time,
-                         p_column="p_gg" if args.p == "gg" else "p_unc")
+                         p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
     res = run_power(protocol, design, address=args.address, workers=args.workers,
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
     print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator "
-          f"calibrated to the seed, effect scale {args.effect_scale:g}, {step} step, "
+          f"calibrated to the seed{', effects of ' + str(args.effects) if args.effects else ''}"
+          f", effect scale {args.effect_scale:g}, {step} step, "
           f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
           f" p; {args.cohorts} cohorts per N; ± = Monte Carlo standard error)")
     print(format_table(res.power))

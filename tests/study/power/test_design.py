@@ -130,3 +130,29 @@ def test_power_needs_a_vf_protocol_with_probes() -> None:
         dataclasses.replace(b, probe=False, probes_after=0) for b in vf.blocks))
     with pytest.raises(ConfigError, match="no VF-free"):
         check_power_protocol(no_probes)
+
+
+def test_effects_file_sets_single_fixtures_then_the_scale_applies(tmp_path) -> None:
+    from vasim.study.power.design import load_effects, parse_effects
+
+    path = tmp_path / "effects.toml"
+    path.write_text("[ff]\naccuracy = 0.8\n[combo]\nspeed = 0.5\n", encoding="utf-8")
+    base = load_effects(path)
+    assert base["ff"].accuracy == 0.8 and base["ff"].speed == SEED_EFFECTS["ff"].speed
+    assert base["mag"] == SEED_EFFECTS["mag"]
+    assert base["combo"].speed == 0.5 and base["combo"].accuracy == 1.0   # from no effect
+    d = PowerDesign(subjects=(4,), cohorts=1, effect_scale=0.5, base_effects=base)
+    assert math.isclose(d.effects["ff"].accuracy, 0.9)       # 1 + 0.5 (0.8 - 1)
+    assert math.isclose(d.effects["combo"].speed, 0.75)
+    for text, field in [("[ff]\nacuracy = 0.8\n", "ff.acuracy"),
+                        ("[ff]\naccuracy = 'x'\n", "ff.accuracy"),
+                        ("[ff]\naccuracy = 0.0\n", "ff"),           # FixtureEffect: > 0
+                        ("[ff]\ncarryover = 1.5\n", "ff"),
+                        ("ff = 3\n", "ff"),
+                        ("[ff\n", None)]:
+        with pytest.raises(ConfigError) as info:
+            parse_effects(text, file="e.toml")
+        assert info.value.field == field and str(info.value.file) == "e.toml", text
+    with pytest.raises(ConfigError) as info:
+        load_effects(tmp_path / "missing.toml")
+    assert info.value.field == "--effects"

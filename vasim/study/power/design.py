@@ -16,7 +16,9 @@ integration step.
   ``practice_weight = 1 + s (w - 1)``, ``dependence = s delta``; the carry-over fraction
   rho is kept (it is a fraction of the accuracy gain, which already scales). s = 1 is the
   calibration, s = 0 a null fixture effect (every fixture like VF-free; the power of the
-  fixture tests is then their type-I error), s = 0.5 half the effects.
+  fixture tests is then their type-I error), s = 0.5 half the effects. An effects file
+  (``--effects FILE.toml``, :func:`parse_effects`) sets single fixtures' effects first;
+  the scale then applies to them.
 * Integration step (:data:`FULL_DT`, :data:`COARSE_DT`): the 1 kHz control step of every
   stored trial, or the validated coarse planning step (``--coarse``, see
   :data:`COARSE_DT`).
@@ -28,11 +30,12 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
-from vasim.core.config import check_int, check_number
+from vasim.core.config import check_int, check_keys, check_number, parse_toml
 from vasim.core.errors import ConfigError
 from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
 from vasim.study.protocol import Protocol
@@ -195,6 +198,62 @@ def check_power_protocol(protocol: Protocol) -> None:
                           "fixture and practice tests need one", field="--protocol")
 
 
+EFFECT_FIELDS: tuple[str, ...] = ("accuracy", "speed", "practice_weight", "carryover",
+                                  "dependence")
+"""The fields of an effects file's table (``FixtureEffect``'s)."""
+
+
+def parse_effects(text: str, *, file: str | Path | None = None,
+                  base: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> dict[str, FixtureEffect]:
+    """Fixture effects from an effects file (``--effects FILE.toml``): one table per
+    condition label, any of :data:`EFFECT_FIELDS`; a field left out keeps ``base``'s (the
+    calibration), a label ``base`` lacks starts from "no effect".
+
+    Example file::
+
+        [ff]            # what if FF removed 20 % of the error instead of 40 %?
+        accuracy = 0.8
+        [mag]
+        speed = 0.9
+
+    Raises:
+        ConfigError: naming the file and the field (``ff.accuracy``): invalid TOML, a
+            non-table, an unknown field, or a value ``FixtureEffect`` refuses.
+
+    Example:
+        >>> e = parse_effects("[ff]\\naccuracy = 0.8\\n")
+        >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed, e["mag"].speed
+        (0.8, True, 0.8)
+    """
+    data = parse_toml(text, file=file, kind="effects")
+    out = dict(base)
+    for label, table in data.items():
+        t = check_keys(table, EFFECT_FIELDS, str(label), file=file)
+        values = {k: getattr(out.get(label, FixtureEffect()), k) for k in EFFECT_FIELDS}
+        for k, v in t.items():
+            values[k] = check_number(v, f"{label}.{k}", file=file)
+        try:
+            out[str(label)] = FixtureEffect(**values)
+        except ValueError as exc:
+            raise ConfigError(str(exc), file=file, field=str(label)) from None
+    return out
+
+
+def load_effects(path: str | Path) -> dict[str, FixtureEffect]:
+    """:func:`parse_effects` of a file.
+
+    Raises:
+        ConfigError: the file cannot be read, or :func:`parse_effects`'s errors.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read the effects file: {exc}", file=p,
+                          field="--effects") from None
+    return parse_effects(text, file=p)
+
+
 @dataclass(frozen=True)
 class PowerDesign:
     """What a power run simulates and how it decides (validated on construction).
@@ -205,7 +264,9 @@ class PowerDesign:
             ``scaled_effects``. alpha: significance level. dt: control step [s]
             (:data:`FULL_DT` or :data:`COARSE_DT`). max_trial_time: trial time limit [s]
             (None: the protocol's). p_column: the p-value a test rejects on, ``"p_gg"``
-            (Greenhouse-Geisser) or ``"p_unc"``.
+            (Greenhouse-Geisser) or ``"p_unc"``. base_effects: the fixture effects before
+            scaling (the calibration, or an effects file's, :func:`load_effects`).
+        effects: ``scaled_effects(effect_scale, base_effects)``: what the operator gets.
 
     **Decision**: a test rejects when its Greenhouse-Geisser p < alpha (``p_column``
     default ``"p_gg"``), because the report prints p_gg beside every F and sphericity
@@ -222,6 +283,7 @@ class PowerDesign:
     dt: float = FULL_DT
     max_trial_time: float | None = None
     p_column: str = "p_gg"
+    base_effects: Mapping[str, FixtureEffect] = field(default_factory=lambda: SEED_EFFECTS)
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -243,7 +305,8 @@ class PowerDesign:
                 math.isfinite(self.max_trial_time) and self.max_trial_time > 0):
             raise ConfigError(f"got {self.max_trial_time!r}, expected a time > 0 s",
                               field="--max-time")
-        object.__setattr__(self, "effects", scaled_effects(self.effect_scale))
+        object.__setattr__(self, "effects",
+                           scaled_effects(self.effect_scale, self.base_effects))
 
     @property
     def n_cohorts(self) -> int:
@@ -251,6 +314,19 @@ class PowerDesign:
         return self.cohorts * len(self.subjects)
 
 
-__all__ = ["COARSE_DT", "COARSE_TOLERANCE", "COARSE_WARNING", "FULL_DT", "SURGEON_SHARE",
-           "PowerDesign", "check_power_protocol", "cohort_seed", "parse_subjects",
-           "scaled_effects", "surgeons_for"]
+__all__ = [
+    "COARSE_DT",
+    "COARSE_TOLERANCE",
+    "COARSE_WARNING",
+    "EFFECT_FIELDS",
+    "FULL_DT",
+    "SURGEON_SHARE",
+    "PowerDesign",
+    "check_power_protocol",
+    "cohort_seed",
+    "load_effects",
+    "parse_effects",
+    "parse_subjects",
+    "scaled_effects",
+    "surgeons_for",
+]
