@@ -71,6 +71,7 @@ def test_power_end_to_end_on_a_local_ray(tiny_protocol_path: Path, tmp_path: Pat
         assert math.isclose(r.mc_se, math.sqrt(r.power * (1 - r.power) / 2))
     assert "fixture effect on path deviation" in text and "cohorts/s" in text
     assert "N=4" in text and "±" in text
+    assert "warning: coarse 2 ms step" in text and "underestimated" in text
 
 
 def test_ray_is_shut_down_when_a_run_fails(tiny_protocol: Protocol) -> None:
