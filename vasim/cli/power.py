@@ -85,6 +85,8 @@ def _cmd_power(args: argparse.Namespace) -> int:
                          dt=COARSE_DT if args.coarse else FULL_DT,
                          max_trial_time=args.max_time,
                          p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
+    if args.out is not None:   # before the run: a bad --out must not waste the cohorts
+        args.out.mkdir(parents=True, exist_ok=True)
     res = run_power(protocol, design, address=args.address, workers=args.workers,
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"

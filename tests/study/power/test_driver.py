@@ -120,3 +120,15 @@ def test_bad_power_arguments_are_one_line_errors(tiny_protocol_path: Path, args:
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and needle in err, err
     assert not _ray_daemons()
+
+
+def test_an_out_folder_under_a_file_fails_before_ray_starts(
+        tiny_protocol_path: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for flag in ("--out", "--keep-cohorts"):
+        code = main(["study", "power", "--protocol", str(tiny_protocol_path), "--subjects",
+                     "4", "--cohorts", "1", flag, str(afile / "x")])
+        err = capsys.readouterr().err
+        assert code == 2 and "afile" in err and err.count("\n") == 1, (flag, err)
+        assert not _ray_daemons()
