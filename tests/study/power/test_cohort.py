@@ -4,6 +4,7 @@ by the report's loader gives; scaled effects re-derive the session's configurati
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from vasim.study.power.cohort import (
 )
 from vasim.study.power.design import COARSE_DT, PowerDesign, scaled_effects
 from vasim.study.protocol import Protocol
+from vasim.study.report.build import build_report
 from vasim.study.report.data import load_study
 
 
@@ -48,8 +50,18 @@ def test_in_memory_cohort_equals_the_stored_one(tiny_protocol: Protocol,
     assert "path_dev_mean_mm" in common
     np.testing.assert_allclose(memory.metrics[common].to_numpy(float),
                                stored.metrics[common].to_numpy(float), rtol=1e-12)
-    # the kept database says which power cohort it is
     assert stored.sessions["status"].eq("completed").all()
+    # and `vasim report` on the kept database prints the very tests power counted
+    build_report(db, tmp_path / "report", progress=False)
+    summary = json.loads((tmp_path / "report" / "summary.json").read_text())
+    key = {"cum_error": "error", "latency": "latency", "path_deviation": "path_deviation"}
+    for r in mem.tests.itertuples():
+        t = summary["measures"][key[r.dv]]["fixture" if r.factor == "fixture" else "practice"]
+        if np.isnan(r.F):
+            assert t["F"] is None
+        else:
+            assert np.isclose(t["F"], r.F, rtol=1e-12) and np.isclose(t["p_gg"], r.p_gg)
+            assert np.isclose(t["p"], r.p_unc, rtol=1e-12)
 
 
 def test_scaled_effects_rederive_the_session_configurations(tiny_protocol: Protocol) -> None:
