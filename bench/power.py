@@ -75,9 +75,11 @@ def ray_throughput() -> None:
               f"{res.wall_seconds:.1f} s wall (Ray start {res.ray_seconds:.1f} s, tasks "
               f"{res.task_seconds:.1f} s wall / {res.cpu_seconds:.1f} s CPU): "
               f"{n / res.wall_seconds:.4f} cohorts/s, "
-              f"{steady:.4f} without the start", flush=True)
+              f"{steady:.4f} without the start, {n / res.cpu_seconds:.4f} per task CPU s",
+              flush=True)
     print(f"  2 vs 1 workers: {rates[2][0] / rates[1][0]:.2f}x "
-          f"({rates[2][1] / rates[1][1]:.2f}x without Ray's start)")
+          f"({rates[2][1] / rates[1][1]:.2f}x without Ray's start); tasks' wall >> CPU means "
+          "they waited for cores other processes held")
 
 
 def validate(k: int) -> None:
