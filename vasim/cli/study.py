@@ -7,6 +7,7 @@
 * ``list``: sessions with their progress;
 * ``export``: tidy tables (CSV / Parquet) for analysis;
 * ``simulate``: a synthetic cohort (parallel workers, one writer, resumable);
+* ``power``: power of the primary tests against the subject count (simulated cohorts on Ray);
 * ``schedule``: print the schedule a protocol and seed give (nothing is stored);
 * ``answer``: record a session's questionnaire answers from a TOML file;
 * ``abort``: close a session for good.
@@ -20,6 +21,7 @@ import sys
 from pathlib import Path
 
 from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
+from vasim.cli.power import register_power
 from vasim.core.bounds import (
     ID,
     PRACTICE_TRIALS,
@@ -385,6 +387,8 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="trial time limit [s] (default: the protocol's)")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
+
+    register_power(ss)   # vasim/cli/power.py
 
     r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
     r.add_argument("--protocol", required=True)

@@ -12,7 +12,7 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError
 from vasim.study import stats
-from vasim.study.report.analysis import VfAnalysis, complete_subjects, excluded_text
+from vasim.study.report.analysis import VfAnalysis, excluded_text
 from vasim.study.report.common import (
     LABEL_PAIRED,
     LABEL_TUKEY,
@@ -32,6 +32,7 @@ from vasim.study.report.html_page import (
     TextList,
 )
 from vasim.study.report.models import fixture_mixed_model
+from vasim.study.report.primary import factor_anova_data
 from vasim.study.report.sections.gain import gain_blocks
 
 SEED_REPORTED: dict[tuple[str, str], str] = {
@@ -57,7 +58,8 @@ def _rm_block(cells: pd.DataFrame, factor: str, levels: Sequence[Any], out: Sect
         out.notes.append(f"factor {factor}: {len(levels)} level(s) with data "
                          f"({', '.join(map(str, levels)) or 'none'}); an RM-ANOVA needs 2")
         return anovas, tukeys, paireds, prov
-    kept, missing = complete_subjects(cells, factor, levels)
+    data, missing = factor_anova_data(cells, factor, levels)  # shared with power planning
+    kept = data
     if missing:
         out.notes.append(excluded_text(factor, {
             s: [f"{factor} {v}" if v.isdigit() else v for v in m]
@@ -67,8 +69,6 @@ def _rm_block(cells: pd.DataFrame, factor: str, levels: Sequence[Any], out: Sect
         out.notes.append(f"factor {factor}: {n} subject(s) with every cell; an RM-ANOVA "
                          "needs at least 2: not computed")
         return anovas, tukeys, paireds, prov
-    data = kept.copy()
-    data[factor] = pd.Categorical(data[factor].astype(str), categories=[str(v) for v in levels])
     for r in kept.itertuples(index=False):
         ids = getattr(r, trial_col)
         ids = ids.split() if isinstance(ids, str) else [ids]

@@ -1,0 +1,115 @@
+"""``vasim study power``: power of the VF study's primary tests against the subject count,
+from Monte Carlo cohorts of the calibrated operator on Ray (issue #18 item 5;
+:mod:`vasim.study.power`). Registered by :mod:`vasim.cli.study` under ``vasim study``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from vasim.cli.args import bounded_float, bounded_int, workers
+from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, TRIAL_TIME_S
+
+
+def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """``vasim study power`` (issue #18 item 5; :mod:`vasim.study.power`)."""
+    r = ss.add_parser(
+        "power", help="power of the primary tests against N, from simulated cohorts (Ray)",
+        description=(
+            "Simulate --cohorts cohorts of the calibrated scripted operator at each subject "
+            "count of --subjects, analyse each with the report's primary RM-ANOVAs (fixture "
+            "effect and practice effect on cumulative error, latency and path deviation) "
+            "and print the power of each test (share of cohorts with p < alpha) with its "
+            "Monte Carlo standard error sqrt(p(1-p)/cohorts); --out gets power.csv, "
+            "power_cohorts.csv and power.png. Runs on a local Ray (127.0.0.1) or the "
+            "cluster --address names; no study database is written unless --keep-cohorts."))
+    r.add_argument("--protocol", required=True,
+                   help="protocol name (protocols/studies) or TOML path")
+    r.add_argument("--subjects", required=True,
+                   help="subject counts: START:STOP:STEP (e.g. 10:60:5), N1,N2,... or N")
+    r.add_argument("--cohorts", type=bounded_int(COHORTS), default=200,
+                   help="Monte Carlo cohorts per N (default 200: power to +-0.035 at 0.5)")
+    r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=1.0,
+                   help="x the operator's calibrated fixture effects (1: the seed's; 0: "
+                        "none, the fixture tests' type-I error; 0.5: half)")
+    r.add_argument("--effects", type=Path, default=None, metavar="FILE.toml",
+                   help="fixture effects by condition label ([ff] accuracy = 0.8, speed, "
+                        "practice_weight, carryover, dependence); unset fields keep the "
+                        "calibration; --effect-scale applies on top")
+    r.add_argument("--alpha", type=bounded_float(ALPHA), default=0.05,
+                   help="significance level (default 0.05)")
+    r.add_argument("--p", choices=["gg", "uncorrected"], default="gg",
+                   help="p-value a test rejects on: Greenhouse-Geisser (default) or "
+                        "uncorrected")
+    r.add_argument("--coarse", action="store_true",
+                   help="2 ms control step instead of 1 ms, ~1.5x faster: dry runs and the "
+                        "practice effect only (the per-trial means stay within 10 %%, but the "
+                        "fixture effects shrink: README 'Power planning')")
+    r.add_argument("--seed", type=bounded_int(SEED), default=7, help="base seed (default 7)")
+    r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
+                   help="trial time limit [s] (default: the protocol's)")
+    r.add_argument("--address", default=None,
+                   help="Ray cluster to join (ray://HEAD:10001, or auto on a node); "
+                        "default: a local Ray on this machine")
+    r.add_argument("--workers", type=workers, default=None,
+                   help="CPUs of the local Ray (default: number of cores)")
+    r.add_argument("--out", type=Path, default=None,
+                   help="folder for power.csv, power_cohorts.csv and power.png")
+    r.add_argument("--keep-cohorts", type=Path, default=None, metavar="DIR",
+                   help="write each cohort's study database into DIR (default: none)")
+    r.add_argument("--no-progress", action="store_true",
+                   help="no progress output (default: a bar on a terminal, a line every 15 s "
+                        "in a log file)")
+    r.set_defaults(func=_cmd_power)
+
+
+def _cmd_power(args: argparse.Namespace) -> int:
+    from vasim.operator.learning import SEED_EFFECTS
+    from vasim.study.power.design import (
+        COARSE_DT,
+        COARSE_WARNING,
+        FULL_DT,
+        PowerDesign,
+        load_effects,
+        parse_subjects,
+    )
+    from vasim.study.power.driver import run_power
+    from vasim.study.power.output import format_table, write_outputs
+    from vasim.study.protocol import load_protocol
+
+    protocol = load_protocol(args.protocol)
+    protocol.check_runnable()
+    base = load_effects(args.effects) if args.effects is not None else SEED_EFFECTS
+    design = PowerDesign(subjects=parse_subjects(args.subjects), cohorts=args.cohorts,
+                         seed=args.seed, effect_scale=args.effect_scale, alpha=args.alpha,
+                         dt=COARSE_DT if args.coarse else FULL_DT,
+                         max_trial_time=args.max_time,
+                         p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
+    if args.out is not None:   # before the run: a bad --out must not waste the cohorts
+        args.out.mkdir(parents=True, exist_ok=True)
+    res = run_power(protocol, design, address=args.address, workers=args.workers,
+                    keep_dir=args.keep_cohorts, progress=not args.no_progress)
+    step = "coarse 2 ms" if args.coarse else "full 1 ms"
+    print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator "
+          f"calibrated to the seed{', effects of ' + str(args.effects) if args.effects else ''}"
+          f", effect scale {args.effect_scale:g}, {step} step, "
+          f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
+          f" p; {args.cohorts} cohorts per N; ± = Monte Carlo standard error)")
+    print(format_table(res.power))
+    if args.coarse:
+        print(f"warning: {COARSE_WARNING}")
+    print(f"{res.n_trials} trials ({res.sim_seconds:.0f} s simulated) in "
+          f"{res.wall_seconds:.1f} s wall on {res.workers} CPU(s) "
+          f"({'cluster ' + res.address if res.address else 'local Ray'}): "
+          f"{res.cohorts_per_second:.3g} cohorts/s")
+    if args.out is not None:
+        title = (f"{protocol.name}: power of the primary tests, {args.cohorts} cohorts per N, "
+                 f"effect scale {args.effect_scale:g}, alpha {args.alpha:g}"
+                 + (" (coarse 2 ms step: fixture power underestimated)" if args.coarse
+                    else ""))
+        for path in write_outputs(args.out, res.power, res.cohorts, title=title):
+            print(f"wrote {path}")
+    return 0
+
+
+__all__ = ["register_power"]
