@@ -76,10 +76,9 @@ def test_kernel_cycles_are_the_same_with_and_without_the_batch() -> None:
     records = []
     for batched in (True, False):
         st = rx60b_station(4)
-        cfg = KernelConfig(indices=six_indices(st), ntt_threshold=1e9)
+        cfg = KernelConfig(indices=six_indices(st), ntt_threshold=1e9, batch_ik=batched)
         k = MRCPKernel(st.arms, st.world, st.task_points, next(iter(st.arms)), 0, st.start,
                        config=cfg)
-        k.batch_ik = batched
         recs = [k.step((i + 1) * cfg.dt, st.path((i + 1) * cfg.dt)) for i in range(12)]
         records.append(recs)
     evaluated = 0

@@ -95,8 +95,9 @@ def test_compiled_refine_is_the_python_loop_bit_for_bit(arm: PybulletArm) -> Non
             assert (got is not None) == ok_ref
             if got is not None:
                 assert np.array_equal(got, ref)
-            _, status = _ik_kernels.pose_dls(RX.table, RX.tcp, BASE, start, pos, rot,
-                                             RX.lower, RX.upper, 1e-6, 1e-6, iterations, 1e-6)
+            _, status, _ = _ik_kernels.pose_dls(RX.table, RX.tcp, BASE, start, pos, rot,
+                                                RX.lower, RX.upper, 1e-6, 1e-6, iterations,
+                                                1e-6)
             runs += 1
             converged += ok_ref
             handed_back += status == _ik_kernels.NEEDS_PYTHON
@@ -110,8 +111,8 @@ def test_compiled_refine_final_configurations_equal_the_python_loop(arm: Pybulle
         pos, rot = dh.fk(RX, q, BASE)
         start = np.clip(q + rng.normal(0.0, 0.3, 6), RX.lower, RX.upper)
         ref, ok_ref = _reference_refine(start, pos, rot, 1e-6, 1e-6, 60)
-        got, status = _ik_kernels.pose_dls(RX.table, RX.tcp, BASE, start, pos, rot, RX.lower,
-                                           RX.upper, 1e-6, 1e-6, 60, 1e-6)
+        got, status, _ = _ik_kernels.pose_dls(RX.table, RX.tcp, BASE, start, pos, rot,
+                                              RX.lower, RX.upper, 1e-6, 1e-6, 60, 1e-6)
         if status != _ik_kernels.NEEDS_PYTHON:
             assert (status == _ik_kernels.REACHED) == ok_ref
             assert np.array_equal(got, ref)      # the last iterate too, reached or not

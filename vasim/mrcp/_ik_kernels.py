@@ -7,7 +7,7 @@ iteration as the Python loop it replaces, bit for bit (issue #17 §5: that loop,
 
 * error ``e = [p* - p(q); ω(R(q) → R*)]`` (world frame, ``ω`` the axis-angle vector of
   :func:`vasim.mrcp.arm.rotation_error`; near π, where that takes scipy's route, the
-  kernel hands back to the Python loop);
+  kernel hands that one step to Python and resumes after it);
 * converged when ``|e_p| <= tol_p`` and ``|e_ω| <= tol_r`` (checked before every step);
 * given up when, from step 8 on, ``|e|`` is above 0.7 x its value 5 steps earlier;
 * step ``dq = Jᵀ (J Jᵀ + λ I)⁻¹ e`` (numpy's BLAS products and LAPACK solve: numba calls
@@ -72,12 +72,17 @@ def rotation_error(cur: np.ndarray, rot: np.ndarray, out: np.ndarray
 @njit(cache=True, nogil=True)
 def pose_dls(table: np.ndarray, tcp: np.ndarray, base: np.ndarray, q0: np.ndarray,
              target: np.ndarray, rot: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-             tol_p: float, tol_r: float, iterations: int, damping: float
-             ) -> tuple[np.ndarray, int]:  # pragma: no cover - compiled
+             tol_p: float, tol_r: float, iterations: int, damping: float, start: int = 0,
+             history: np.ndarray | None = None
+             ) -> tuple[np.ndarray, int, int]:  # pragma: no cover - compiled
     """Full-pose damped least squares from ``q0`` (see the module docstring): the final
-    configuration and :data:`REACHED` (within ``tol_p`` [m] of ``target`` ``(3,)`` and
-    ``tol_r`` [rad] of ``rot`` ``(3, 3)``), :data:`FAILED`, or :data:`NEEDS_PYTHON` (a
-    rotation error near π: the caller reruns the Python loop).
+    configuration, :data:`REACHED` (within ``tol_p`` [m] of ``target`` ``(3,)`` and
+    ``tol_r`` [rad] of ``rot`` ``(3, 3)``), :data:`FAILED` or :data:`NEEDS_PYTHON` (a
+    rotation error near π at that step), and the step it stopped at.
+
+    ``start`` / ``history`` resume a run at step ``start`` with the error norms of the
+    earlier steps (``(iterations,)``, filled in place): after :data:`NEEDS_PYTHON` the
+    caller makes that one step in Python and resumes here at the next.
 
     Bit for bit the Python loop's arithmetic (the same BLAS / LAPACK products and solve,
     norms summed in order: the tests compare them exactly), so every scenario's outcome
@@ -87,23 +92,23 @@ def pose_dls(table: np.ndarray, tcp: np.ndarray, base: np.ndarray, q0: np.ndarra
     q = np.minimum(np.maximum(q0, lower), upper)
     frames = np.empty((n + 2, 4, 4))
     jac = np.empty((6, n))
-    history = np.empty(iterations)
+    hist = np.empty(iterations) if history is None else history
     err = np.empty(6)
     er = np.empty(3)
-    for it in range(iterations):
+    for it in range(start, iterations):
         _chain_kernel(table, tcp, base, q, frames)
         _jacobian_kernel(frames, jac)
         for r in range(3):
             err[r] = target[r] - frames[n + 1, r, 3]
         if not rotation_error(np.ascontiguousarray(frames[n + 1, :3, :3]), rot, er):
-            return q, NEEDS_PYTHON
+            return q, NEEDS_PYTHON, it
         err[3], err[4], err[5] = er[0], er[1], er[2]
         if _norm(err[:3]) <= tol_p and _norm(er) <= tol_r:
-            return q, REACHED
+            return q, REACHED, it
         norm = _norm(err)
-        history[it] = norm
-        if it >= 8 and norm > 0.7 * history[it - 5]:     # stagnating: give this start up
-            return q, FAILED
+        hist[it] = norm
+        if it >= 8 and norm > 0.7 * hist[it - 5]:     # stagnating: give this start up
+            return q, FAILED, it
         jj = jac @ jac.T
         for a in range(6):
             jj[a, a] += damping
@@ -112,7 +117,7 @@ def pose_dls(table: np.ndarray, tcp: np.ndarray, base: np.ndarray, q0: np.ndarra
         if step > 0.5:
             dq *= 0.5 / step
         q = _wrap_clip(q + dq, lower, upper)
-    return q, FAILED
+    return q, FAILED, iterations
 
 
 @njit(cache=True, nogil=True)
@@ -148,9 +153,9 @@ def trajectory_ik(tables: np.ndarray, tcps: np.ndarray, bases: np.ndarray,
                 s = configs[p, 0].copy()
                 continue
             if full_pose[p]:
-                q, status = pose_dls(tables[a], tcps[a], bases[a], s, positions[p, k],
-                                     rotations[p, k], lowers[a], uppers[a], tol_p, tol_r,
-                                     pose_iterations, 1e-6)
+                q, status, _ = pose_dls(tables[a], tcps[a], bases[a], s, positions[p, k],
+                                        rotations[p, k], lowers[a], uppers[a], tol_p, tol_r,
+                                        pose_iterations, 1e-6)
                 ok = status == REACHED
             else:
                 q, ok = _position_dls_kernel(tables[a], tcps[a], bases[a], s, positions[p, k],

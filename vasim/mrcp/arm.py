@@ -402,40 +402,48 @@ class PybulletArm:
         **Decision** (issue #17 §5, cost): the full-pose iteration is compiled, with the
         Python loop's arithmetic bit for bit (the same BLAS products and LAPACK solve), so
         every run is unchanged; about 2 µs a step instead of 40 µs (the 8-robot scenario
-        spent 80 % of its cycle in the Python loop). A rotation error near π (scipy's
-        route in :func:`rotation_error`) hands the start back to :meth:`_refine_python`.
+        spent 80 % of its cycle in the Python loop). A step whose rotation error is near π
+        (scipy's route in :func:`rotation_error`) is made here in Python
+        (:meth:`_python_step`) and the compiled loop resumes after it.
         """
         if rot is None:     # the same iteration, compiled (dh.position_dls)
             return dh.position_dls(self.robot, q0, target, self.base, tol_p, iterations)
-        q, status = _ik_kernels.pose_dls(
-            self.robot.table, self.robot.tcp, self.base, np.ascontiguousarray(q0, dtype=float),
-            target, np.ascontiguousarray(rot), self.robot.lower, self.robot.upper,
-            float(tol_p), float(tol_r), int(iterations), 1e-6)
-        if status == _ik_kernels.NEEDS_PYTHON:
-            return self._refine_python(q0, target, rot, tol_p, tol_r, iterations)
-        return q if status == _ik_kernels.REACHED else None
-
-    def _refine_python(self, q0: FloatArray, target: FloatArray, rot: FloatArray,
-                       tol_p: float, tol_r: float, iterations: int = 60) -> FloatArray | None:
-        """The full-pose iteration of :meth:`_refine` in Python (any rotation error)."""
-        lower, upper = self.robot.lower, self.robot.upper
-        q = np.clip(np.array(q0, dtype=float), lower, upper)
-        history: list[float] = []
-        for it in range(iterations):
-            pos, cur, jac = dh.fk_and_jacobian(self.robot, q, self.base)
-            err = np.concatenate([target - pos, rotation_error(cur, rot)])
-            if np.linalg.norm(err[:3]) <= tol_p and np.linalg.norm(err[3:]) <= tol_r:
-                return q
-            norm = float(np.linalg.norm(err))
-            history.append(norm)
-            if it >= 8 and norm > 0.7 * history[-6]:     # stagnating: give this start up
+        history = np.empty(iterations)
+        q = np.ascontiguousarray(q0, dtype=float)
+        rot = np.ascontiguousarray(rot, dtype=float)
+        it = 0
+        while True:
+            q, status, it = _ik_kernels.pose_dls(
+                self.robot.table, self.robot.tcp, self.base, q, target, rot, self.robot.lower,
+                self.robot.upper, float(tol_p), float(tol_r), int(iterations), 1e-6, it,
+                history)
+            if status != _ik_kernels.NEEDS_PYTHON:
+                return q if status == _ik_kernels.REACHED else None
+            q, status = self._python_step(q, target, rot, tol_p, tol_r, it, history)
+            if status != _ik_kernels.NEEDS_PYTHON:      # decided at that step
+                return q if status == _ik_kernels.REACHED else None
+            it += 1
+            if it >= iterations:
                 return None
-            dq = jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), err)
-            step = float(np.max(np.abs(dq)))
-            if step > 0.5:
-                dq *= 0.5 / step
-            q = dh.wrap_clip(q + dq, lower, upper)
-        return None
+
+    def _python_step(self, q: FloatArray, target: FloatArray, rot: FloatArray, tol_p: float,
+                     tol_r: float, it: int, history: FloatArray) -> tuple[FloatArray, int]:
+        """Step ``it`` of :meth:`_refine` in Python (any rotation error): ``(q, REACHED)``,
+        ``(q, FAILED)`` (stagnating) or the next configuration and ``NEEDS_PYTHON`` (go on);
+        ``history[it]`` is filled."""
+        pos, cur, jac = dh.fk_and_jacobian(self.robot, q, self.base)
+        err = np.concatenate([target - pos, rotation_error(cur, rot)])
+        if np.linalg.norm(err[:3]) <= tol_p and np.linalg.norm(err[3:]) <= tol_r:
+            return q, _ik_kernels.REACHED
+        norm = float(np.linalg.norm(err))
+        history[it] = norm
+        if it >= 8 and norm > 0.7 * history[it - 5]:     # stagnating: give this start up
+            return q, _ik_kernels.FAILED
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), err)
+        step = float(np.max(np.abs(dq)))
+        if step > 0.5:
+            dq *= 0.5 / step
+        return dh.wrap_clip(q + dq, self.robot.lower, self.robot.upper), _ik_kernels.NEEDS_PYTHON
 
     def close(self) -> None:
         self._client.close()

@@ -249,9 +249,6 @@ class MRCPKernel:
         self._seeds: dict[Key, FloatArray] = {}
         self._last_goals: dict[Key, float] = {}
         self._cooldown: dict[Key, float] = {}
-        self.batch_ik = True
-        """Batch the pairs' first IK attempts across robots (:meth:`_first_attempts`);
-        False: one ``arm.ik`` call per point (the same configurations; for comparisons)."""
 
     # ------------------------------------------------------------------ geometry helpers
     def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
@@ -368,7 +365,7 @@ class MRCPKernel:
         compiled arithmetic, so the configurations are unchanged; a point whose attempt
         fails, and the rest of its pair, go through ``arm.ik`` as before.
         """
-        if self.config.trajectory_ik != "exact" or not self.batch_ik:
+        if self.config.trajectory_ik != "exact" or not self.config.batch_ik:
             return {}
         reqs = [TrajectoryRequest(self.arms[r], self._seeds.get((r, q), q_meas[r]),
                                   q_meas[r] if r == self.rsel else None, mean[:, q],
