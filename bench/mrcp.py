@@ -210,7 +210,8 @@ def batch_speedup(n: int = 8, cycles: int = SPEEDUP_CYCLES) -> tuple[float, floa
     """CPU p50 [ms] of the ``n``-robot default cycle with the trajectory IK batched across
     robots and with one ``arm.ik`` call per point, alternating runs (the same cycles: the
     batch changes no configuration), and their ratio."""
-    on, off = [], []
+    on: list[float] = []
+    off: list[float] = []
     for _ in range(2):
         for batched, out in ((False, off), (True, on)):
             out.extend(time_cycles(rx60b_station(n), cycles, batch_ik=batched)[1])
