@@ -24,8 +24,26 @@ ends).
 Prints wall-clock median and p99 per configuration, the same for the CPU time of the thread
 running the cycle (``time.thread_time``: on a shared machine the wall time includes waiting
 for a core, the thread's CPU time does not), the wall / CPU ratio of the medians (how much
-the other load stretched the cycle) and both p99s over the 18 ms budget.
+the other load stretched the cycle) and both p99s over the 18 ms budget; wall time is the
+figure that counts on an unloaded host (the header prints the load average: run it when
+``uptime`` shows < 0.5).
 ``VASIM_BENCH_MRCP_N`` sets the timed cycles per configuration (default 150).
+
+Then (issue #17 §4-5):
+
+* the speed-up of batching the trajectory IK across robots (8 RX60B, default variant,
+  ``KernelConfig(batch_ik=...)``: the same cycles, alternating runs);
+* the ``eight_robots`` scenario's whole cycle as ``vasim mrcp run`` and the browser run it
+  (full-pose grasps: the pose IK dominates), with the compiled pose IK and with the Python
+  loop it replaced, and its real-time factor (simulated s per wall s and per CPU s);
+* the browser panel's real-time factor: ``vasim serve --scene mrcp:eight_robots`` (viser
+  server, view thread at 30 Hz, no page attached) over a few seconds.
+
+**Decision** (GPU, issue #17 §4): no GPU path. The machine has none, and the work left per
+cycle is a few hundred small, branchy problems (link-pair branch and bound, 6 x 6 DLS
+steps, 4-point trajectories) whose cost is dominated by the Python between them, not by
+arithmetic a GPU would speed up; the transfer latency of a GPU call (tens of µs) would
+exceed most of the compiled calls it replaced.
 """
 
 from __future__ import annotations
