@@ -34,8 +34,9 @@ Then (issue #17 §4-5):
 * the speed-up of batching the trajectory IK across robots (8 RX60B, default variant,
   ``KernelConfig(batch_ik=...)``: the same cycles, alternating runs);
 * the ``eight_robots`` scenario's whole cycle as ``vasim mrcp run`` and the browser run it
-  (full-pose grasps: the pose IK dominates), with the compiled pose IK and with the Python
-  loop it replaced, and its real-time factor (simulated s per wall s and per CPU s);
+  (full-pose grasps: the pose IK dominates), now and with the pose IK of before issue #17
+  §5 (the Python loop, the search also out of reach, no batch; the same run), and its
+  real-time factor (simulated s per wall s and per CPU s);
 * the browser panel's real-time factor: ``vasim serve --scene mrcp:eight_robots`` (viser
   server, view thread at 30 Hz, no page attached) over a few seconds.
 
@@ -48,13 +49,14 @@ exceed most of the compiled calls it replaced.
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -238,13 +240,17 @@ def batch_speedup(n: int = 8, cycles: int = SPEEDUP_CYCLES) -> tuple[float, floa
 
 
 @contextmanager
-def _python_pose_ik() -> Iterator[None]:
-    """The full-pose IK refinement as the Python loop the compiled one replaced (every step
-    by ``PybulletArm._python_step``; the same results, tests/mrcp/test_world_ik_compiled)."""
-    from vasim.mrcp import _ik_kernels
+def _before_issue_17_5() -> Iterator[None]:
+    """The pose IK as it was before issue #17 §5: the Python refinement loop (every step by
+    ``PybulletArm._python_step``, the arithmetic the compiled loop repeats bit for bit) and
+    the numeric search also where the wrist centre is out of reach (the wrist-centre test
+    answers "inside"); with ``batch_ik=False`` (see :func:`scenario_cycles`) the same
+    configurations as now at the cost of then."""
+    from vasim.mrcp import _ik_kernels, closed_form_ik
     from vasim.mrcp.arm import PybulletArm
 
     compiled = PybulletArm._refine
+    outside = closed_form_ik.wrist_centre_outside
 
     def python(self: Any, q0: Any, target: Any, rot: Any, tol_p: float, tol_r: float,
                iterations: int = 60) -> Any:
@@ -259,20 +265,26 @@ def _python_pose_ik() -> Iterator[None]:
         return None
 
     PybulletArm._refine = python  # type: ignore[method-assign]
+    closed_form_ik.wrist_centre_outside = lambda *args, **kwargs: -math.inf
     try:
         yield
     finally:
         PybulletArm._refine = compiled  # type: ignore[method-assign]
+        closed_form_ik.wrist_centre_outside = outside
 
 
 def scenario_cycles(name: str = "eight_robots", duration: float = SCENARIO_S,
-                    python_ik: bool = False) -> tuple[list[float], list[float], float]:
+                    before: bool = False) -> tuple[list[float], list[float], float]:
     """Per-cycle wall and thread-CPU times [ms] of a scenario as ``vasim mrcp run`` (and the
-    browser's panel) runs it — kernel, operator, invariant checks — and its period [s]."""
+    browser's panel) runs it — kernel, operator, invariant checks — and its period [s];
+    ``before``: with the pose IK of before issue #17 §5 (:func:`_before_issue_17_5`, IK not
+    batched)."""
     from vasim.mrcp.scenarios import SCENARIOS, ScenarioOptions
     from vasim.mrcp.scenarios.runner import run_setup
 
     setup = SCENARIOS[name].build(ScenarioOptions(seed=0, duration=duration))
+    if before:
+        setup.config = replace(setup.config, batch_ik=False)
     wall: list[float] = []
     cpu: list[float] = []
     last = [time.perf_counter(), time.thread_time()]
@@ -283,7 +295,7 @@ def scenario_cycles(name: str = "eight_robots", duration: float = SCENARIO_S,
         cpu.append((c - last[1]) * 1e3)
         last[0], last[1] = w, c
 
-    with _python_pose_ik() if python_ik else nullcontext():
+    with _before_issue_17_5() if before else nullcontext():
         last[0], last[1] = time.perf_counter(), time.thread_time()
         run_setup(name, setup, duration, tick)
     return wall[WARMUP:], cpu[WARMUP:], float(setup.config.dt)
@@ -344,12 +356,16 @@ def main() -> None:
           f"(the same cycles)", flush=True)
     print(f"scenario eight_robots (full-pose grasps, 3 indices; the runner's whole cycle), "
           f"{SCENARIO_S:g} s simulated, period 18 ms:")
-    for label, python_ik in (("compiled pose IK", False), ("Python pose IK", True)):
-        wall, cpu, dt = scenario_cycles(python_ik=python_ik)
-        print(f"  {label:16s} wall p50/p99 {statistics.median(wall):6.2f} / {_pct(wall, 99):6.2f}"
+    cpu50 = {}
+    for label, before in (("now", False), ("before #17 §5", True)):
+        wall, cpu, dt = scenario_cycles(before=before)
+        cpu50[before] = statistics.median(cpu)
+        print(f"  {label:13s} wall p50/p99 {statistics.median(wall):6.2f} / {_pct(wall, 99):6.2f}"
               f" ms, cpu p50/p99 {statistics.median(cpu):6.2f} / {_pct(cpu, 99):6.2f} ms; "
               f"real-time factor {dt * 1e3 * len(wall) / sum(wall):.2f} (wall), "
               f"{dt * 1e3 * len(cpu) / sum(cpu):.2f} (cpu)", flush=True)
+    print(f"  speed-up of the cycle (cpu p50): {cpu50[True] / cpu50[False]:.2f}x "
+          f"(compiled pose IK, no search out of reach, IK batched; the same run)", flush=True)
     print(f"browser panel (vasim serve --scene mrcp:eight_robots, no page attached), "
           f"{BROWSER_S:g} s: real-time factor {browser_realtime():.2f}; load average "
           f"{os.getloadavg()[0]:.1f}", flush=True)
