@@ -92,3 +92,15 @@ def test_kernel_cycles_are_the_same_with_and_without_the_batch() -> None:
                                                         and np.isnan(b.evaluations[key].tus))
             evaluated += 1
     assert evaluated == 12 * 16
+
+
+def test_an_arm_that_overrides_ik_is_not_batched() -> None:
+    class Shifted(PybulletArm):          # a different ik: its first attempt is not known
+        def ik(self, position, rotation=None, q_seed=None, **kw):  # type: ignore[no-untyped-def, override]
+            return None
+
+    arm = Shifted(RX)
+    p, r = arm.tcp_pose(RX.home)
+    assert arm.first_attempt() is None and PybulletArm(RX).first_attempt() is not None
+    req = TrajectoryRequest(arm, RX.home, None, np.array([p]), [r])
+    assert solve_first_attempts([req]) == [None]

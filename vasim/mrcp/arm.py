@@ -251,11 +251,14 @@ class PybulletArm:
         return (self.robot.table, self.robot.tcp,
                 np.ascontiguousarray(self.base, dtype=float))
 
-    def first_attempt(self) -> FirstAttempt:
+    def first_attempt(self) -> FirstAttempt | None:
         """What :meth:`ik` tries first with a seed and its default tolerances, as data
         (:mod:`vasim.mrcp.batch_ik` makes those attempts for many trajectories in one
         compiled call): damped least squares from the seed, 4 full-pose steps on a
-        PUMA-like arm (60 otherwise), 60 position-only steps."""
+        PUMA-like arm (60 otherwise), 60 position-only steps. None for a subclass that
+        overrides :meth:`ik` (its first attempt is unknown here)."""
+        if type(self).ik is not PybulletArm.ik:
+            return None
         if self._first is None:
             self._first = FirstAttempt(
                 self.robot.table, self.robot.tcp, np.ascontiguousarray(self.base, dtype=float),
