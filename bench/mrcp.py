@@ -24,19 +24,41 @@ ends).
 Prints wall-clock median and p99 per configuration, the same for the CPU time of the thread
 running the cycle (``time.thread_time``: on a shared machine the wall time includes waiting
 for a core, the thread's CPU time does not), the wall / CPU ratio of the medians (how much
-the other load stretched the cycle) and both p99s over the 18 ms budget.
+the other load stretched the cycle) and both p99s over the 18 ms budget; wall time is the
+figure that counts on an unloaded host (the header prints the load average: run it when
+``uptime`` shows < 0.5).
 ``VASIM_BENCH_MRCP_N`` sets the timed cycles per configuration (default 150).
+
+Then (issue #17 §4-5):
+
+* the speed-up of batching the trajectory IK across robots (8 RX60B, default variant,
+  ``KernelConfig(batch_ik=...)``: the same cycles, alternating runs);
+* the ``eight_robots`` scenario's whole cycle as ``vasim mrcp run`` and the browser run it
+  (full-pose grasps: the pose IK dominates), now and with the pose IK of before issue #17
+  §5 (the Python loop, the search also out of reach, no batch; the same run), and its
+  real-time factor (simulated s per wall s and per CPU s);
+* the browser panel's real-time factor: ``vasim serve --scene mrcp:eight_robots`` (viser
+  server, view thread at 30 Hz, no page attached) over a few seconds.
+
+**Decision** (GPU, issue #17 §4): no GPU path. The machine has none, and the work left per
+cycle is a few hundred small, branchy problems (link-pair branch and bound, 6 x 6 DLS
+steps, 4-point trajectories) whose cost is dominated by the Python between them, not by
+arithmetic a GPU would speed up; the transfer latency of a GPU call (tens of µs) would
+exceed most of the compiled calls it replaced.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import statistics
 import sys
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, nullcontext
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +69,9 @@ from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 BUDGET_MS = 18.0
 CYCLES = int(os.environ.get("VASIM_BENCH_MRCP_N", "150"))
 WARMUP = 20
+SPEEDUP_CYCLES = 60          # per run, 2 alternating runs per variant
+SCENARIO_S = 3.0             # simulated seconds of the eight_robots scenario per variant
+BROWSER_S = 8.0              # wall seconds of the served scenario
 
 
 @dataclass
@@ -168,7 +193,8 @@ def six_indices(st: Station) -> tuple[IndexSpec, ...]:
 
 
 def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
-                distance_points: str = "all") -> tuple[list[float], list[float], int]:
+                distance_points: str = "all", batch_ik: bool = True
+                ) -> tuple[list[float], list[float], int]:
     """Per-cycle wall and thread-CPU times [ms] of ``cycles`` full TOp cycles, and the
     (robot, point) evaluations per cycle.
 
@@ -176,7 +202,7 @@ def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
         RuntimeError: if a timed cycle is not a full evaluation cycle (a fault).
     """
     cfg = KernelConfig(indices=six_indices(st), ntt_threshold=1e9, trajectory_ik=trajectory_ik,
-                       distance_points=distance_points)
+                       distance_points=distance_points, batch_ik=batch_ik)
     rsel = next(iter(st.arms))
     k = MRCPKernel(st.arms, st.world, st.task_points, rsel, 0, st.start, config=cfg)
     wall, cpu = [], []
@@ -194,6 +220,104 @@ def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
             cpu.append(dc)
             pairs = len(rec.evaluations)
     return wall, cpu, pairs
+
+
+def _pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q))
+
+
+def batch_speedup(n: int = 8, cycles: int = SPEEDUP_CYCLES) -> tuple[float, float, float]:
+    """CPU p50 [ms] of the ``n``-robot default cycle with the trajectory IK batched across
+    robots and with one ``arm.ik`` call per point, alternating runs (the same cycles: the
+    batch changes no configuration), and their ratio."""
+    on: list[float] = []
+    off: list[float] = []
+    for _ in range(2):
+        for batched, out in ((False, off), (True, on)):
+            out.extend(time_cycles(rx60b_station(n), cycles, batch_ik=batched)[1])
+    c_on, c_off = statistics.median(on), statistics.median(off)
+    return c_on, c_off, c_off / c_on
+
+
+@contextmanager
+def _before_issue_17_5() -> Iterator[None]:
+    """The pose IK as it was before issue #17 §5: the Python refinement loop (every step by
+    ``PybulletArm._python_step``, the arithmetic the compiled loop repeats bit for bit) and
+    the numeric search also where the wrist centre is out of reach (the wrist-centre test
+    answers "inside"); with ``batch_ik=False`` (see :func:`scenario_cycles`) the same
+    configurations as now at the cost of then."""
+    from vasim.mrcp import _ik_kernels, closed_form_ik
+    from vasim.mrcp.arm import PybulletArm
+
+    compiled = PybulletArm._refine
+    outside = closed_form_ik.wrist_centre_outside
+
+    def python(self: Any, q0: Any, target: Any, rot: Any, tol_p: float, tol_r: float,
+               iterations: int = 60) -> Any:
+        if rot is None:
+            return compiled(self, q0, target, rot, tol_p, tol_r, iterations)
+        history = np.empty(iterations)
+        q = np.clip(np.asarray(q0, dtype=float), self.robot.lower, self.robot.upper)
+        for it in range(iterations):
+            q, status = self._python_step(q, target, rot, tol_p, tol_r, it, history)
+            if status != _ik_kernels.NEEDS_PYTHON:
+                return q if status == _ik_kernels.REACHED else None
+        return None
+
+    PybulletArm._refine = python  # type: ignore[method-assign]
+    closed_form_ik.wrist_centre_outside = lambda *args, **kwargs: -math.inf
+    try:
+        yield
+    finally:
+        PybulletArm._refine = compiled  # type: ignore[method-assign]
+        closed_form_ik.wrist_centre_outside = outside
+
+
+def scenario_cycles(name: str = "eight_robots", duration: float = SCENARIO_S,
+                    before: bool = False) -> tuple[list[float], list[float], float]:
+    """Per-cycle wall and thread-CPU times [ms] of a scenario as ``vasim mrcp run`` (and the
+    browser's panel) runs it — kernel, operator, invariant checks — and its period [s];
+    ``before``: with the pose IK of before issue #17 §5 (:func:`_before_issue_17_5`, IK not
+    batched)."""
+    from vasim.mrcp.scenarios import SCENARIOS, ScenarioOptions
+    from vasim.mrcp.scenarios.runner import run_setup
+
+    setup = SCENARIOS[name].build(ScenarioOptions(seed=0, duration=duration))
+    if before:
+        setup.config = replace(setup.config, batch_ik=False)
+    wall: list[float] = []
+    cpu: list[float] = []
+    last = [time.perf_counter(), time.thread_time()]
+
+    def tick(_sample: Any) -> None:
+        w, c = time.perf_counter(), time.thread_time()
+        wall.append((w - last[0]) * 1e3)
+        cpu.append((c - last[1]) * 1e3)
+        last[0], last[1] = w, c
+
+    with _before_issue_17_5() if before else nullcontext():
+        last[0], last[1] = time.perf_counter(), time.thread_time()
+        run_setup(name, setup, duration, tick)
+    return wall[WARMUP:], cpu[WARMUP:], float(setup.config.dt)
+
+
+def browser_realtime(name: str = "eight_robots", seconds: float = BROWSER_S) -> float:
+    """Real-time factor (simulated s per wall s) of ``vasim serve --scene mrcp:<name>``'s
+    scenario thread over ``seconds`` after its first cycles (the server runs, the view
+    thread poses the station at 30 Hz; no browser attached)."""
+    from vasim.viewer.mrcp_panel import MrcpViewerApp
+
+    app = MrcpViewerApp(port=0, scenario=name).start()
+    try:
+        t_end = time.perf_counter() + 60.0
+        while app.live.cycles < WARMUP and time.perf_counter() < t_end:
+            time.sleep(0.05)
+        c0, w0 = app.live.cycles, time.perf_counter()
+        time.sleep(seconds)
+        c1, w1 = app.live.cycles, time.perf_counter()
+        return (c1 - c0) * app.live.dt / (w1 - w0)
+    finally:
+        app.stop()
 
 
 def main() -> None:
@@ -226,6 +350,25 @@ def main() -> None:
             print(f"{name:8s} {variant:7s} {n:6d} {pairs:5d} {w50:9.2f} {w99:9.2f} {c50:8.2f} "
                   f"{c99:8.2f} {w50 / c50:8.2f} {c99 / BUDGET_MS:8.2f} {w99 / BUDGET_MS:9.2f}",
                   flush=True)
+    c_on, c_off, ratio = batch_speedup()
+    print(f"8 RX60B default, trajectory IK batched across robots (one compiled call a cycle) "
+          f"vs one arm.ik call per point: cpu p50 {c_on:.2f} vs {c_off:.2f} ms = {ratio:.2f}x "
+          f"(the same cycles)", flush=True)
+    print(f"scenario eight_robots (full-pose grasps, 3 indices; the runner's whole cycle), "
+          f"{SCENARIO_S:g} s simulated, period 18 ms:")
+    cpu50 = {}
+    for label, before in (("now", False), ("before #17 §5", True)):
+        wall, cpu, dt = scenario_cycles(before=before)
+        cpu50[before] = statistics.median(cpu)
+        print(f"  {label:13s} wall p50/p99 {statistics.median(wall):6.2f} / {_pct(wall, 99):6.2f}"
+              f" ms, cpu p50/p99 {statistics.median(cpu):6.2f} / {_pct(cpu, 99):6.2f} ms; "
+              f"real-time factor {dt * 1e3 * len(wall) / sum(wall):.2f} (wall), "
+              f"{dt * 1e3 * len(cpu) / sum(cpu):.2f} (cpu)", flush=True)
+    print(f"  speed-up of the cycle (cpu p50): {cpu50[True] / cpu50[False]:.2f}x "
+          f"(compiled pose IK, no search out of reach, IK batched; the same run)", flush=True)
+    print(f"browser panel (vasim serve --scene mrcp:eight_robots, no page attached), "
+          f"{BROWSER_S:g} s: real-time factor {browser_realtime():.2f}; load average "
+          f"{os.getloadavg()[0]:.1f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ import logging
 import math
 from collections.abc import Iterator
 from dataclasses import replace
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -42,6 +43,7 @@ from vasim.viewer.mrcp_view import (
     link_poses,
     pose7,
     robot_role,
+    station_frame,
     station_geometry,
     task_pose,
 )
@@ -223,6 +225,22 @@ def test_link_poses_match_the_compiled_forward_kinematics() -> None:
     r6 = Rotation.from_quat(np.r_[poses[6, 4:], poses[6, 3]]).as_matrix()
     assert np.allclose(poses[6, :3] + r6 @ robot.tcp, tcp, atol=1e-9)
     assert np.allclose(r6, rot, atol=1e-9)
+
+
+def test_station_frame_poses_every_robot_as_link_poses_does() -> None:
+    # the per-cycle frame takes the compiled chain and one quaternion call for all robots
+    setup = get_scenario("eight_robots").build(ScenarioOptions(coarse=True))
+    try:
+        g = station_geometry("eight_robots", setup)
+        sample = SimpleNamespace(task_position=np.array([0.0, 0.0, 0.05]), task_rotation=None,
+                                 rsel="R0", cutp=0, holders=("R0",), rcnt=None, state="TOp")
+        frame = station_frame(g, setup.world, sample)
+        assert sorted(frame.links) == [f"R{i}" for i in range(8)]
+        for r in g.robots:
+            expected = link_poses(r.model, r.base, setup.world.configuration(r.name))
+            np.testing.assert_allclose(frame.links[r.name], expected, atol=1e-12)
+    finally:
+        setup.close()
 
 
 def test_station_geometry_reads_obstacles_as_pybullet_holds_them() -> None:

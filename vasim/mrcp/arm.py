@@ -42,7 +42,8 @@ from scipy.stats import qmc
 
 from vasim.core import geometry
 from vasim.core.errors import ConfigError
-from vasim.mrcp import closed_form_ik, dh
+from vasim.mrcp import _ik_kernels, closed_form_ik, dh
+from vasim.mrcp.batch_ik import FirstAttempt
 from vasim.mrcp.dh import RobotModel
 from vasim.mrcp.interfaces import FloatArray
 from vasim.mrcp.urdf import write_urdf
@@ -168,6 +169,8 @@ class PybulletArm:
                           for j in robot.joints[1:]) + float(np.linalg.norm(robot.tcp)) + 1e-9
         self._closed_form = closed_form and closed_form_ik.is_puma_like(robot)
         self._offsets = robot.table[3]
+        self._tcp_norm = float(np.linalg.norm(robot.tcp))
+        self._first: FirstAttempt | None = None
         unit = qmc.Halton(d=self._n, scramble=True, seed=1).random(64)
         self._spread = robot.lower + unit * (robot.upper - robot.lower)
 
@@ -248,6 +251,21 @@ class PybulletArm:
         return (self.robot.table, self.robot.tcp,
                 np.ascontiguousarray(self.base, dtype=float))
 
+    def first_attempt(self) -> FirstAttempt | None:
+        """What :meth:`ik` tries first with a seed and its default tolerances, as data
+        (:mod:`vasim.mrcp.batch_ik` makes those attempts for many trajectories in one
+        compiled call): damped least squares from the seed, 4 full-pose steps on a
+        PUMA-like arm (60 otherwise), 60 position-only steps. None for a subclass that
+        overrides :meth:`ik` (its first attempt is unknown here)."""
+        if type(self).ik is not PybulletArm.ik:
+            return None
+        if self._first is None:
+            self._first = FirstAttempt(
+                self.robot.table, self.robot.tcp, np.ascontiguousarray(self.base, dtype=float),
+                self.robot.lower, self.robot.upper, 4 if self._closed_form else 60, 60,
+                1e-6, 1e-6)
+        return self._first
+
     def jacobian_batch(self, q: FloatArray) -> FloatArray:
         """``(m, 6, n)`` TCP Jacobians for ``(m, n)`` samples (numpy DH kinematics)."""
         return dh.jacobian_batch(self.robot, np.atleast_2d(q), self.base)
@@ -317,6 +335,13 @@ class PybulletArm:
             q, complete = self._closed_form_ik(target, rot, seed, tol_position, tol_rotation)
             if q is not None or complete:
                 return q
+            # **Decision** (issue #17 §5, cost): no numeric search where none can succeed:
+            # a wrist centre outside the reachable set by more than the tolerances allow
+            # (see closed_form_ik.wrist_centre_outside) has no solution; the search (18
+            # starts, pybullet's among them) was ~1 ms per such pose, several a cycle
+            slack = 2.0 * (tol_position + self._tcp_norm * tol_rotation) + 1e-9
+            if closed_form_ik.wrist_centre_outside(self.robot, target, rot, self.base) > slack:
+                return None
         q = self._refine(seed, target, rot, tol_position, tol_rotation)
         if q is not None:
             return q
@@ -372,42 +397,56 @@ class PybulletArm:
 
     def _refine(self, q0: FloatArray, target: FloatArray, rot: FloatArray | None,
                 tol_p: float, tol_r: float, iterations: int = 60) -> FloatArray | None:
+        """Damped least squares from ``q0`` on the compiled DH chain: position only
+        (:func:`vasim.mrcp.dh.position_dls`) or the full pose
+        (:func:`vasim.mrcp._ik_kernels.pose_dls`); None when it stagnates or runs out of
+        ``iterations``.
+
+        **Decision** (issue #17 §5, cost): the full-pose iteration is compiled, with the
+        Python loop's arithmetic bit for bit (the same BLAS products and LAPACK solve), so
+        every run is unchanged; about 2 µs a step instead of 40 µs (the 8-robot scenario
+        spent 80 % of its cycle in the Python loop). A step whose rotation error is near π
+        (scipy's route in :func:`rotation_error`) is made here in Python
+        (:meth:`_python_step`) and the compiled loop resumes after it.
+        """
         if rot is None:     # the same iteration, compiled (dh.position_dls)
             return dh.position_dls(self.robot, q0, target, self.base, tol_p, iterations)
-        lower, upper = self.robot.lower, self.robot.upper
-        q = np.clip(np.array(q0, dtype=float), lower, upper)
-        damping = 1e-6
-        history: list[float] = []
-        for it in range(iterations):
-            pos, cur, jac = dh.fk_and_jacobian(self.robot, q, self.base)
-            ep = target - pos
-            err = ep if rot is None else np.concatenate([ep, rotation_error(cur, rot)])
-            if np.linalg.norm(ep) <= tol_p and (rot is None or np.linalg.norm(err[3:]) <= tol_r):
-                return q
-            norm = float(np.linalg.norm(err))
-            history.append(norm)
-            if it >= 8 and norm > 0.7 * history[-6]:     # stagnating: give this start up
+        history = np.empty(iterations)
+        q = np.ascontiguousarray(q0, dtype=float)
+        rot = np.ascontiguousarray(rot, dtype=float)
+        it = 0
+        while True:
+            q, status, it = _ik_kernels.pose_dls(
+                self.robot.table, self.robot.tcp, self.base, q, target, rot, self.robot.lower,
+                self.robot.upper, float(tol_p), float(tol_r), int(iterations), 1e-6, it,
+                history)
+            if status != _ik_kernels.NEEDS_PYTHON:
+                return q if status == _ik_kernels.REACHED else None
+            q, status = self._python_step(q, target, rot, tol_p, tol_r, it, history)
+            if status != _ik_kernels.NEEDS_PYTHON:      # decided at that step
+                return q if status == _ik_kernels.REACHED else None
+            it += 1
+            if it >= iterations:
                 return None
-            j = jac[:3] if rot is None else jac
-            dq = j.T @ np.linalg.solve(j @ j.T + damping * np.eye(j.shape[0]), err)
-            step = float(np.max(np.abs(dq)))
-            if step > 0.5:
-                dq *= 0.5 / step
-            q = np.clip(self._wrap_into_limits(q + dq), lower, upper)
-        return None
 
-    def _wrap_into_limits(self, q: FloatArray) -> FloatArray:
-        out = q.copy()
-        lo, up = self.robot.lower, self.robot.upper
-        for i in range(self._n):
-            for k in (-1, 1, -2, 2):
-                if lo[i] <= out[i] <= up[i]:
-                    break
-                cand = q[i] + k * 2.0 * math.pi
-                if lo[i] <= cand <= up[i]:
-                    out[i] = cand
-                    break
-        return out
+    def _python_step(self, q: FloatArray, target: FloatArray, rot: FloatArray, tol_p: float,
+                     tol_r: float, it: int, history: FloatArray) -> tuple[FloatArray, int]:
+        """Step ``it`` of :meth:`_refine` in Python (any rotation error): ``(q, REACHED)``,
+        ``(q, FAILED)`` (stagnating) or the next configuration and ``NEEDS_PYTHON`` (go on);
+        ``history[it]`` is filled."""
+        pos, cur, jac = dh.fk_and_jacobian(self.robot, q, self.base)
+        err = np.concatenate([target - pos, rotation_error(cur, rot)])
+        if np.linalg.norm(err[:3]) <= tol_p and np.linalg.norm(err[3:]) <= tol_r:
+            return q, _ik_kernels.REACHED
+        norm = float(np.linalg.norm(err))
+        history[it] = norm
+        if it >= 8 and norm > 0.7 * history[it - 5]:     # stagnating: give this start up
+            return q, _ik_kernels.FAILED
+        dq = jac.T @ np.linalg.solve(jac @ jac.T + 1e-6 * np.eye(6), err)
+        step = float(np.max(np.abs(dq)))
+        if step > 0.5:
+            dq *= 0.5 / step
+        return dh.wrap_clip(q + dq, self.robot.lower, self.robot.upper), _ik_kernels.NEEDS_PYTHON
 
     def close(self) -> None:
         self._client.close()

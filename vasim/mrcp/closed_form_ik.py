@@ -104,6 +104,39 @@ def puma_ik(robot: RobotModel, position: FloatArray, rotation: FloatArray,
     return out
 
 
+def wrist_centre_outside(robot: RobotModel, position: FloatArray, rotation: FloatArray,
+                         base: FloatArray | None = None) -> float:
+    """A lower bound [m] of how far the wrist centre of a pose lies outside the set of wrist
+    centres a PUMA-like arm reaches (joint limits ignored); <= 0 inside, ``-inf`` for an arm
+    without that structure.
+
+    The wrist centre ``w = p - R tcp`` (base frame, shoulder height removed) is reachable
+    exactly when ``wx^2 + wy^2 >= d3^2`` (theta1 exists) and ``r_min <= |w| <= r_max`` with
+    ``|w|^2 = a2^2 + a3^2 + d3^2 + d4^2 + 2 a2 K``, ``|K| <= sqrt(a3^2 + d4^2)`` (theta3
+    exists; theta2 always does then): the conditions under which :func:`puma_ik` has
+    solutions. The distance to an intersection is at least the distance to each set, so
+    the larger of ``d3 - |w_xy|`` and the distance to the shell ``[r_min, r_max]`` is a
+    lower bound. A configuration reaching the pose within ``tol_p`` [m] and ``tol_r``
+    [rad] has its wrist centre within ``tol_p + |tcp| tol_r`` of the target's, so a bound
+    above that proves no such configuration exists.
+    """
+    if not is_puma_like(robot):
+        return -math.inf
+    _, a, d, _ = robot.table
+    t = np.eye(4) if base is None else np.asarray(base, dtype=float)
+    rb = t[:3, :3]
+    p = rb.T @ (np.asarray(position, dtype=float) - t[:3, 3])
+    w = p - (rb.T @ np.asarray(rotation, dtype=float)) @ robot.tcp
+    w[2] -= d[0]
+    a2, a3, d3, d4 = float(a[2]), float(a[3]), float(d[2]), float(d[3])
+    const = a2 ** 2 + a3 ** 2 + d3 ** 2 + d4 ** 2
+    spread = 2.0 * abs(a2) * math.hypot(a3, d4)
+    r_min = math.sqrt(max(const - spread, 0.0))
+    r_max = math.sqrt(const + spread)
+    norm = float(np.linalg.norm(w))
+    return max(abs(d3) - math.hypot(float(w[0]), float(w[1])), r_min - norm, norm - r_max)
+
+
 def wrap_into(q: FloatArray, lower: FloatArray, upper: FloatArray, near: FloatArray
               ) -> FloatArray | None:
     """``q`` ``(n,)`` with each joint shifted by a multiple of 2π into ``[lower, upper]``

@@ -449,6 +449,12 @@ def _position_dls_kernel(table: FloatArray, tcp: FloatArray, base: FloatArray,
     return q, False
 
 
+def wrap_clip(q: FloatArray, lower: FloatArray, upper: FloatArray) -> FloatArray:
+    """Each joint of ``q`` ``(n,)`` outside its limits moved by a multiple of 2π (-1, 1,
+    -2, 2) into them when one fits, then clamped (compiled; the numeric IK's projection)."""
+    return _wrap_clip(np.ascontiguousarray(q, dtype=float), lower, upper)
+
+
 def position_dls(robot: RobotModel, q0: FloatArray, target: FloatArray,
                  base: FloatArray | None = None, tol: float = 1e-6, iterations: int = 60,
                  damping: float = 1e-6) -> FloatArray | None:

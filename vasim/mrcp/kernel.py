@@ -92,6 +92,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.core.geometry import rotvec_from_matrix
+from vasim.mrcp.batch_ik import TrajectoryRequest, solve_first_attempts
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
 from vasim.mrcp.indices.base import prefetch_distances
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
@@ -352,9 +353,31 @@ class MRCPKernel:
             rpred = np.repeat(rots[-1:], cfg.horizon, axis=0)
         return all_t, mean, std, np.concatenate([rots[-1:], rpred])
 
+    def _first_attempts(self, pairs: Sequence[Key], mean: FloatArray,
+                        rotations: Mapping[Key, list[FloatArray | None]],
+                        q_meas: Mapping[str, FloatArray]
+                        ) -> dict[Key, tuple[FloatArray, NDArray[np.bool_]]]:
+        """The first IK attempts along every pair's predicted points, in one compiled call
+        (:mod:`vasim.mrcp.batch_ik`; exact trajectory IK only).
+
+        **Decision** (issue #17 §4, cost): the pairs' IK is batched across robots: the
+        attempts are the ones each ``arm.ik`` makes first, with the same seeds and the same
+        compiled arithmetic, so the configurations are unchanged; a point whose attempt
+        fails, and the rest of its pair, go through ``arm.ik`` as before.
+        """
+        if self.config.trajectory_ik != "exact" or not self.config.batch_ik:
+            return {}
+        reqs = [TrajectoryRequest(self.arms[r], self._seeds.get((r, q), q_meas[r]),
+                                  q_meas[r] if r == self.rsel else None, mean[:, q],
+                                  rotations[(r, q)]) for r, q in pairs]
+        return {key: res for key, res in zip(pairs, solve_first_attempts(reqs), strict=True)
+                if res is not None}
+
     def _trajectory_configs(self, arm: ArmKinematics, key: Key, first: FloatArray | None,
                             seed: FloatArray, positions: FloatArray,
-                            rotations: list[FloatArray | None]) -> tuple[FloatArray, NDArray]:
+                            rotations: list[FloatArray | None],
+                            attempts: tuple[FloatArray, NDArray[np.bool_]] | None = None
+                            ) -> tuple[FloatArray, NDArray]:
         n_pts = positions.shape[0]
         configs = np.full((n_pts, arm.n_joints), np.nan)
         reach = np.zeros(n_pts, dtype=bool)
@@ -362,7 +385,9 @@ class MRCPKernel:
         linear = self.config.trajectory_ik == "linear"
         last = 0                    # the last reachable point: a linear step starts there
         for k in range(n_pts):
-            if k == 0:
+            if attempts is not None and attempts[1][k]:     # solved in the batched call
+                sol = attempts[0][k]
+            elif k == 0:
                 sol = first if first is not None else arm.ik(positions[0], rotations[0], s)
             elif linear:
                 sol = _linear_step(arm, s, positions[k] - positions[last],
@@ -392,14 +417,18 @@ class MRCPKernel:
         pairs = [(self.rsel, self.cutp)] + [(r, q) for r in self.arms if r != self.rsel
                                             for q in range(len(self.task_points))
                                             if q != self.cutp]
+        pair_rotations = {(r, q): [trot[k] @ self.task_points[q].rotation
+                                   if self.task_points[q].rotation is not None else None
+                                   for k in range(times.shape[0])] for r, q in pairs}
+        first = self._first_attempts(pairs, mean, pair_rotations, q_meas)
         for r, q in pairs:
             arm = self.arms[r]
             selected = r == self.rsel
             tp = self.task_points[q]
-            rotations = [trot[k] @ tp.rotation if tp.rotation is not None else None
-                         for k in range(times.shape[0])]
+            rotations = pair_rotations[(r, q)]
             configs, reach = self._trajectory_configs(
-                arm, (r, q), q_meas[r] if selected else None, q_meas[r], mean[:, q], rotations)
+                arm, (r, q), q_meas[r] if selected else None, q_meas[r], mean[:, q], rotations,
+                first.get((r, q)))
             hist = self._pred_hist.setdefault((r, q), deque(maxlen=cfg.horizon * cfg.stride))
             if not reach[0]:
                 raw[(r, q)] = {ix.name: 0.0 for ix in self.indices}

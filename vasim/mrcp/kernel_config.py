@@ -44,6 +44,10 @@ class KernelConfig:
             limits makes the point unreachable).
         distance_points: ``"all"`` or ``"ends"``: where along the trajectory the world's
             distance queries are made (:class:`~vasim.mrcp.indices.EvalContext`).
+        batch_ik: make the first IK attempt of every (robot, point) trajectory in one
+            compiled call per cycle for arms that describe it (``first_attempt()``,
+            :mod:`vasim.mrcp.batch_ik`); False: one ``arm.ik`` call per point. The same
+            configurations either way (a cost option, for comparisons).
         planner: action planner parameters.
         indices: the indices evaluated each cycle.
         grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
@@ -70,6 +74,7 @@ class KernelConfig:
     ttc_samples: int = 4
     trajectory_ik: str = "exact"
     distance_points: str = "all"
+    batch_ik: bool = True
     planner: PlannerParams = field(default_factory=PlannerParams)
     indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
     grasp_tolerance: float = 0.002
