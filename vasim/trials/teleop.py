@@ -33,12 +33,16 @@ the latest physics step, ``clutch`` (master decoupled),
 ``zoom`` and ``in_view`` (needle inside the camera's view cone). The trial metrics are the
 pipeline's (``vasim.records.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
 needle trajectory, spec/study.md §4 "length of the needle/tool trajectory"), Q =
-``contact_time``, ``accumulated_force``, ``accumulated_torque`` and
+``target_deformation`` [mm s] (the seed's Q: the rings' displacement by contacts,
+integrated over time and summed over the rings, ``vasim.trials.teleop_quality``; with its
+peak ``target_deformation_peak`` [mm]) and, for experiment 3, ``contact_time``,
+``accumulated_force``, ``accumulated_torque`` and
 ``target_displacement_max``; with tissue, every Q metric is the abdomen's quality
 accumulator (``TISSUE_METRICS``, decisions below). Added per trial:
 ``master_path_l2`` (the summed path of the operator's hands on the masters, camera hand
 included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfers``,
-``tt_time`` (time the master was decoupled), ``safety_stops``.
+``tt_time`` (time the master was decoupled), ``safety_stops``, and EM split by what
+moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
 
 **Decisions**:
 
@@ -160,6 +164,7 @@ from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
+from vasim.trials.teleop_quality import TargetDeformation
 from vasim.trials.vf import TrialConfig, TrialResult
 
 if TYPE_CHECKING:
@@ -299,6 +304,8 @@ class TeleopTrial:
         self._clutch = 0
         self._via = False          # the next waypoint is the via point before ring i
         self.route_j = 0           # waypoints of the route reached so far
+        self.deformation = TargetDeformation()
+        """Q as the seed measures it (``vasim.trials.teleop_quality``)."""
         self.em_parts = dict.fromkeys(EM_PARTS, 0.0)
         """The needle's path [m] split by what moved it (``EM_PARTS``)."""
         self._em_from = self.needle.copy()
@@ -333,6 +340,7 @@ class TeleopTrial:
         tools = self.instruments()
         while ab.t + 0.5 * ab.dt <= self.t:
             self._snap = ab.step(tools)
+            self.deformation.add(ab.dt, self._snap.target_displacement)
             for kind, detail in self._snap.events:
                 self.events.append((self._snap.t, kind, detail))
         if self._snap is not None:
@@ -630,6 +638,8 @@ class TeleopTrial:
                    "safety_stops": float(self.counts["safety_stops"]),
                    "tt_time": self.tt_time,
                    **{f"em_{k}": v for k, v in self.em_parts.items()}})
+        if self.abdomen is not None:
+            tm.update(self.deformation.as_metrics())
         return TrialResult(config=self.config, schema=load_schema("none"),
                            task=self.task.operator_task(self.task.rings, self.task.start),
                            samples=self.samples, metrics=metrics, summary=summary,
