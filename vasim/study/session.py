@@ -233,6 +233,8 @@ class Session:
             else self.protocol.max_trial_time,
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
+            mode_practice=None if mode is None else sum(
+                t.condition == mode for t in self.schedule[:scheduled.index]),
         )
 
     @property

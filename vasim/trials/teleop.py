@@ -159,6 +159,7 @@ from vasim.operator.needle import (
     pregrasp_offset,
 )
 from vasim.operator.scripted import OperatorProfile
+from vasim.operator.teleop_profile import SEED_TELEOP, TeleopEffects, teleop_adjustment
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
@@ -247,13 +248,16 @@ class TeleopTrial:
             quality metrics); default: a new one (``config.scene == "none"``: no tissue,
             static rings).
         holder: the tool holder of the station (``build_station``).
+        effects: the operator's mode effects (``vasim.operator.teleop_profile``; default:
+            the calibration to the seed's Table 5.1).
 
     Raises:
         ConfigError: no mode in ``config``.
     """
 
     def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
-                 abdomen: Abdomen | None = None, holder: str = "positioner") -> None:
+                 abdomen: Abdomen | None = None, holder: str = "positioner",
+                 effects: TeleopEffects = SEED_TELEOP) -> None:
         if config.mode is None:
             raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
                               "'mrcp_cam')", field="mode")
@@ -263,6 +267,11 @@ class TeleopTrial:
         self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
                                 ring_radius=radius)
         self.profile = config.profile if config.profile is not None else _preset(config.skill)
+        self.effects = effects
+        self.adjustment = teleop_adjustment(
+            self.mode, config.practice if config.mode_practice is None
+            else config.mode_practice, self.profile, effects)
+        """The hands' profiles of this mode and mode practice (``teleop_profile``)."""
         self.rng = np.random.default_rng(_seed(config.seed, 41))
         self.station = build_station({"right": self.task.start + grasp_offset("right")},
                                      holder=holder)
@@ -316,8 +325,11 @@ class TeleopTrial:
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
-              key: int) -> Hand:
-        return Hand(self.profile, self.task, points, start,
+              key: int, *, carry: bool = False) -> Hand:
+        """A new path of a hand; ``carry``: the needle is carried to a ring (the threading
+        movement, ``vasim.operator.teleop_profile``)."""
+        prof = self.adjustment.carry if carry else self.adjustment.handover
+        return Hand(prof, self.task, points, start,
                      _seed(self.config.seed, 43, key), self.config.practice, reach)
 
     def instruments(self) -> dict[str, ToolPose]:
@@ -431,7 +443,8 @@ class TeleopTrial:
                             config=kernel_config(st, self.config.seed))
         master = self.needle.copy()
         key = 0
-        hand = self._hand(self._waypoint()[None, :], self.needle, self.task.ring_radius, key)
+        hand = self._hand(self._waypoint()[None, :], self.needle, self.task.ring_radius, key,
+                          carry=not self._via)
         dt_op = self.dt / OPERATOR_SUBSTEPS
         ack = 0.0            # time left until the operator acknowledges a safety stop
         holding = False
@@ -482,24 +495,24 @@ class TeleopTrial:
                         self.events.append((self.t, "mrcp", "safety stop acknowledged"))
                         key += 1
                         hand = self._hand(self._waypoint()[None, :], self.needle,
-                                          self.task.ring_radius, key)
+                                          self.task.ring_radius, key, carry=not self._via)
             before = self.route_j
             self._finish_cycle()
             if self.route_j != before and not self.done:   # the next waypoint: a new path
                 key += 1
                 hand = self._hand(self._waypoint()[None, :], self.needle,
-                                  self.task.ring_radius, key)
+                                  self.task.ring_radius, key, carry=not self._via)
             yield self.k
         self.master_path += self.camera.path
 
     def _stdt(self) -> Iterator[int]:
         st = self.station
         dt_op = self.dt / OPERATOR_SUBSTEPS
-        sigma = grasp_sigma(self.profile, self.config.practice)
+        sigma = grasp_sigma(self.adjustment.handover, self.config.practice)
         delay = self.profile.reaction_delay + GRIPPER_TIME
         key = 0
         offset = self.needle - st.tip(self.holder)       # needle centre - holder tip
-        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key)
+        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key, carry=True)
         phase = "carry"
         other: Side = "left"
         wait = 0.0
@@ -566,7 +579,7 @@ class TeleopTrial:
                     offset = self.needle - st.tip(self.holder)
                     key += 1
                     hand = self._hand(self._goal()[None, :], self.needle,
-                                      self.task.ring_radius, key)
+                                      self.task.ring_radius, key, carry=True)
                     phase = "carry"
             before = self.i
             self._transferring = phase in ("approach", "close", "release")
@@ -580,7 +593,7 @@ class TeleopTrial:
                     phase = "handover"
                 else:
                     hand = self._hand(self._goal()[None, :], self.needle,
-                                      self.task.ring_radius, key)
+                                      self.task.ring_radius, key, carry=True)
                     phase = "carry"
             yield self.k
 

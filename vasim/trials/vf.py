@@ -134,6 +134,8 @@ class TrialConfig:
             the needle task on the MRCP slave station (``vasim.trials.teleop``, 18 ms
             control cycle), where ``task``, ``variant``, ``schema``, ``dt`` and
             ``velocity_cutoff_hz`` are not used.
+        mode_practice: earlier trials of this teleoperation mode in the session (the
+            mode-specific learning of ``vasim.operator.teleop_profile``); None: ``practice``.
     """
 
     task: TaskName = "trajectory"
@@ -153,6 +155,7 @@ class TrialConfig:
     poi_spacing: float | None = None
     mode: str | None = None
     label: str | None = None
+    mode_practice: int | None = None
 
     def __post_init__(self) -> None:
         if self.mode is not None and self.mode not in TELEOPERATION_MODES:
@@ -199,6 +202,10 @@ class TrialConfig:
         if self.profile is not None and not isinstance(self.profile, OperatorProfile):
             raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
                               field="profile")
+        mp = self.mode_practice
+        if mp is not None and (isinstance(mp, bool) or not isinstance(mp, int) or mp < 0):
+            raise ConfigError(f"mode_practice must be an integer >= 0 or None, got {mp!r}",
+                              field="mode_practice")
 
 
 @dataclass(frozen=True, eq=False)
