@@ -79,7 +79,7 @@ def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
     from vasim.trials.vf import TrialConfig
 
     cfg = TrialConfig(**job["config"])
-    trial = TeleopTrial(cfg, effects=TeleopEffects(**job["effects"]))
+    trial = TeleopTrial(cfg, effects=TeleopEffects(**job["effects"]), n_rings=job["n_rings"])
     try:
         res = trial.run()
     finally:
@@ -95,8 +95,11 @@ def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def cohort_jobs(n_subjects: int, seed: int, effects: TeleopEffects) -> list[dict[str, Any]]:
-    """Every trial of the cohort, configured as ``Session.trial_config`` configures it."""
+def cohort_jobs(n_subjects: int, seed: int, effects: TeleopEffects, *,
+                trials_per_mode: int | None = None, n_rings: int | None = None,
+                max_time: float | None = None) -> list[dict[str, Any]]:
+    """Every trial of the cohort, configured as ``Session.trial_config`` configures it
+    (``trials_per_mode``, ``n_rings``, ``max_time``: smaller cohorts for tests)."""
     from vasim.study.cohort import cohort_subjects
     from vasim.study.protocol import generate_schedule, load_protocol
     from vasim.study.session import trial_seed
@@ -107,18 +110,22 @@ def cohort_jobs(n_subjects: int, seed: int, effects: TeleopEffects) -> list[dict
         schedule = generate_schedule(protocol, subj.session_seed)
         for t in schedule:
             m = sum(s.condition == t.condition for s in schedule[:t.index])
+            if trials_per_mode is not None and m >= trials_per_mode:
+                continue
             jobs.append({
                 "subject": subj.code, "mode": t.condition, "trial_number": m + 1,
-                "index": t.index, "effects": asdict(effects),
+                "index": t.index, "effects": asdict(effects), "n_rings": n_rings,
                 "config": {"mode": t.condition, "seed": trial_seed(subj.session_seed, t.index),
                            "practice": t.index, "mode_practice": m, "profile": subj.profile,
-                           "max_time": protocol.max_trial_time, "subject": subj.code}})
+                           "max_time": protocol.max_trial_time if max_time is None
+                           else max_time, "subject": subj.code}})
     return jobs
 
 
-def simulate(n_subjects: int, seed: int, effects: TeleopEffects, workers: int) -> pd.DataFrame:
-    """The cohort's trials, one row each."""
-    jobs = cohort_jobs(n_subjects, seed, effects)
+def simulate(n_subjects: int, seed: int, effects: TeleopEffects, workers: int,
+             **small: Any) -> pd.DataFrame:
+    """The cohort's trials, one row each (``small``: ``cohort_jobs``'s test sizes)."""
+    jobs = cohort_jobs(n_subjects, seed, effects, **small)
     t0 = time.perf_counter()
     if workers <= 1:
         rows = [_run_trial(j) for j in jobs]
@@ -172,7 +179,8 @@ def fit(n_subjects: int, seed: int, workers: int) -> TeleopEffects:
 
 
 def _pct(a: float, b: float) -> str:
-    return f"{100.0 * (a - b) / b:+.1f} %"
+    """``(a - b) / b`` in %, or ``n/a`` when b is 0 (e.g. no contact at all)."""
+    return f"{100.0 * (a - b) / b:+.1f} %" if b != 0 else "n/a (reference 0)"
 
 
 def side_by_side(df: pd.DataFrame) -> list[str]:

@@ -22,6 +22,8 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   dependence in VF-free trials (the seed's hypotheses, chapter 6). A session run by the
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
+  A teleoperation trial also gets ``mode_practice``, the number of earlier trials of its
+  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``).
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
   the operator profile resolved (not just the preset name), so a resumed session runs with
   the same person even if the presets change.

@@ -634,6 +634,10 @@ class TeleopTrial:
             "schema": "none", "active_fixtures": "", "nonfinite_inputs": 0,
             "scene": self.config.scene, "mode": self.mode, "task": "needle",
             "n_rings": n, "n_transfers_needed": self.task.n_transfers,
+            "mode_practice": self.adjustment.mode_practice,
+            "teleop_effects": (f"thread_time={self.effects.thread_time} stdt_noise="
+                               f"{self.effects.stdt_noise} camera_cost="
+                               f"{self.effects.camera_cost}"),
             **{k: int(v) for k, v in self.counts.items()},
         })
         if self.abdomen is not None:
