@@ -234,8 +234,17 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--fit", action="store_true", help="fit the calibration first")
     ap.add_argument("--fit-subjects", type=int, default=3)
     ap.add_argument("--csv", default=None, help="also write the trials to this CSV")
+    ap.add_argument("--effects", default=None, metavar="K,THETA,C",
+                    help="run with these thread_time, stdt_noise, camera_cost instead")
     args = ap.parse_args(argv)
     effects = fit(args.fit_subjects, args.seed, args.workers) if args.fit else SEED_TELEOP
+    if args.effects:
+        try:
+            k, theta, c = (float(v) for v in args.effects.split(","))
+            effects = TeleopEffects(thread_time=k, stdt_noise=theta, camera_cost=c)
+        except ValueError as exc:
+            ap.error(f"--effects: expected three numbers K,THETA,C, got {args.effects!r} "
+                     f"({exc})")
     print(f"cohort: {args.subjects} subjects, seed {args.seed}, {effects}", flush=True)
     df = simulate(args.subjects, args.seed, effects, args.workers)
     if args.csv:
