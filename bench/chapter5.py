@@ -26,8 +26,9 @@ its predictions. The same cohort through the study store: ``python -m vasim stud
 ``tables/mrcp_descriptives.csv``).
 
 Usage: ``python -m bench.chapter5 [--subjects N] [--seed S] [--workers W] [--fit]
-[--fit-subjects N]``; the default, 4 subjects (72 trials), takes about 15 min on one core;
-the seed's 20 subjects (``--subjects 20``, 360 trials) about 75 min.
+[--fit-subjects N] [--effects K,THETA,C] [--csv PATH]``; the default, 4 subjects (72
+trials, about 7900 s simulated), takes 9 min on one core at 15x real time (26 min on a
+loaded machine); the seed's 20 subjects (``--subjects 20``, 360 trials) about 45 min.
 """
 
 from __future__ import annotations
