@@ -289,3 +289,25 @@ def test_the_stored_trials_pass_the_via_points_in_every_mode(session) -> None:
             pts.append(w)
         moved = np.linalg.norm(np.array(pts) - rest_vias, axis=1)
         assert moved.max() <= 0.004 + d["metrics"]["target_displacement_max"] + 1e-5
+
+
+def test_the_report_tables_et_em_and_q_of_the_stored_trials(session, tmp_path: Path) -> None:
+    # issue #21 §4: tables/mrcp_descriptives.csv keeps metric, mode, mean for ET, EM and Q;
+    # Q is the rings' deformation [mm s] (vasim.trials.teleop_quality) as stored per trial
+    from vasim.operator.learning import OPERATOR_LABEL
+    from vasim.study.report import build_report
+
+    build_report(session["db"], tmp_path / "r", protocol="mrcp_short")
+    desc = pd.read_csv(tmp_path / "r" / "tables" / "mrcp_descriptives.csv")
+    label = {"stdt": "StdT", "mrcp": "MRCP", "mrcp_cam": "MRCP+Cam"}
+    for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
+                        ("Q", "target_deformation")):
+        rows = desc[desc["metric"] == key].set_index("mode")
+        assert set(rows.index) == set(label.values())
+        for mode, d in session["data"].items():
+            assert rows.loc[label[mode], "mean"] == pytest.approx(d["metrics"][metric])
+    with TrialStore(session["db"], readonly=True) as st:
+        assert st.sessions()["operator"].tolist() == [OPERATOR_LABEL]
+    for d in session["data"].values():       # the trial knows its mode's practice
+        assert d["trial"]["config"]["mode_practice"] == 0
+        assert d["metrics"]["target_deformation"] >= 0.0
