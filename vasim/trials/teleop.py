@@ -73,6 +73,13 @@ moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
   0.95 / 0.96, 1.02 / 0.95 m): the station and the kernel do not lengthen it, and the
   threading task is done as the seed's subjects did it, one target at a time. What
   remains of the seed's EM difference is the person (``vasim.operator.teleop_profile``).
+* The person in the modes (issue #21 §2): every hand's profile is the trial's
+  ``vasim.operator.teleop_profile.teleop_adjustment`` of the mode and its practice
+  (``config.mode_practice``, else ``config.practice``): carries to a ring use its
+  ``carry`` profile (the threading time), every other movement its ``handover`` one, and
+  StdT's jaw placement error follows the handover profile's perception. The default is
+  the seed calibration ``SEED_TELEOP``; ``effects=NEUTRAL`` is the scripted operator as
+  it is (the station's mechanics tests).
 * Every instrument in the abdomen is in the contact model (issue #7 §4): each physics
   step gets the two tools (trocar to tool tip, ``"right"`` and ``"left"``) and the
   endoscope (camera trocar to lens, the same 2.5 mm capsule as the tools: the abdomen has
