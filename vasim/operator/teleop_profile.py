@@ -134,7 +134,7 @@ SEED_TELEOP = TeleopEffects(thread_time=10.0, stdt_noise=0.64, camera_cost=0.27)
    stdt_noise 0.35 + (1.175 - 1.060) / 0.397 = 0.64, camera_cost 0.53 + (1.041 - 1.158)
    / 0.448 = 0.27; thread_time kept (MRCP's ET 3.6 % under the seed's). Its 4-subject
    cohort (``python -m bench.chapter5``): MRCP's ET 97.4 s, EM StdT/MRCP 1.140, ET
-   MRCP+Cam/MRCP 0.987.
+   MRCP+Cam/MRCP 0.987; its 10-subject cohort (``--subjects 10``): 115.9 s, 1.122, 1.059.
 
 A threading movement ten times the scripted operator's Fitts time is the model's largest
 assumption: the seed's trials are five times longer than the simulated position-only task,
