@@ -37,7 +37,8 @@ def _metrics(rng: np.random.Generator, mode: str, rep: int, skill: float) -> dic
             "contact_time": 10.0 * f * np.exp(rng.normal(0, 0.2)),
             "accumulated_force": 30.0 * f * np.exp(rng.normal(0, 0.2)),
             "accumulated_torque": 1.5 * f * np.exp(rng.normal(0, 0.2)),
-            "target_displacement_max": 0.004 * f * np.exp(rng.normal(0, 0.2))}
+            "target_displacement_max": 0.004 * f * np.exp(rng.normal(0, 0.2)),
+            "target_deformation": 5.0 * f * np.exp(rng.normal(0, 0.3))}
 
 
 def write_mrcp(store: TrialStore, code: str, seed: int, *, stop_after: int | None = None,
@@ -97,7 +98,7 @@ def test_gains_equal_hand_computed_ratios(mrcp_study) -> None:
     complete = data[data["subject"] != "M9"]
     gains = _csv(out, "mrcp_gains")
     for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
-                        ("Q_force", "accumulated_force"),
+                        ("Q_force", "accumulated_force"), ("Q", "target_deformation"),
                         ("Q_target_displacement", "target_displacement_max")):
         for mode, label in (("mrcp", "MRCP"), ("mrcp_cam", "MRCP+Cam")):
             # balanced design (6 trials per subject and mode): the ratio of the means of all
@@ -118,6 +119,11 @@ def test_descriptives_and_paired_tests(mrcp_study) -> None:
     assert et.loc["StdT", "mean"] == pytest.approx(means["stdt"].mean(), rel=1e-12)
     assert et.loc["MRCP", "sd"] == pytest.approx(means["mrcp"].std(ddof=1), rel=1e-12)
     assert et.loc["MRCP+Cam", "n_trials"] == 36
+    # ET, EM and Q keep the columns metric, mode, mean (issue #21 §4); Q is in mm s
+    q = desc[desc["metric"] == "Q"].set_index("mode")
+    qm = complete.groupby(["subject", "mode"])["target_deformation"].mean().unstack()
+    assert q.loc["MRCP", "mean"] == pytest.approx(qm["mrcp"].mean(), rel=1e-12)
+    assert set(q["unit"]) == {"mm s"} and set(q["family"]) == {"Q"}
     ids = {int(x) for x in et.loc["StdT", "trial_ids"].split()}
     assert ids == set(complete.loc[complete["mode"] == "stdt", "trial_id"])
     paired = _csv(out, "mrcp_paired")

@@ -16,6 +16,7 @@ import pytest
 
 from vasim.cli import main
 from vasim.operator.needle import needle_task
+from vasim.operator.teleop_profile import NEUTRAL
 from vasim.study.protocol import load_protocol
 from vasim.study.store import TrialStore
 from vasim.trials.registry import run_trial
@@ -232,8 +233,10 @@ def test_every_mode_follows_the_same_needle_route() -> None:
     np.testing.assert_array_equal(points[3], handover_point(task.rings[1], task.rings[2]))
     visited = {}
     for mode in ("stdt", "mrcp"):
+        # the route is the station's and the task's: the person as the scripted operator is,
+        # without the seed-calibrated mode effects (whose threading is ten times slower)
         tr = TeleopTrial(TrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
-                         n_rings=3)
+                         n_rings=3, effects=NEUTRAL)
         res = tr.run()
         assert res.summary["finished"]
         log = tr.route_log
@@ -286,3 +289,25 @@ def test_the_stored_trials_pass_the_via_points_in_every_mode(session) -> None:
             pts.append(w)
         moved = np.linalg.norm(np.array(pts) - rest_vias, axis=1)
         assert moved.max() <= 0.004 + d["metrics"]["target_displacement_max"] + 1e-5
+
+
+def test_the_report_tables_et_em_and_q_of_the_stored_trials(session, tmp_path: Path) -> None:
+    # issue #21 §4: tables/mrcp_descriptives.csv keeps metric, mode, mean for ET, EM and Q;
+    # Q is the rings' deformation [mm s] (vasim.trials.teleop_quality) as stored per trial
+    from vasim.operator.learning import OPERATOR_LABEL
+    from vasim.study.report import build_report
+
+    build_report(session["db"], tmp_path / "r", protocol="mrcp_short")
+    desc = pd.read_csv(tmp_path / "r" / "tables" / "mrcp_descriptives.csv")
+    label = {"stdt": "StdT", "mrcp": "MRCP", "mrcp_cam": "MRCP+Cam"}
+    for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
+                        ("Q", "target_deformation")):
+        rows = desc[desc["metric"] == key].set_index("mode")
+        assert set(rows.index) == set(label.values())
+        for mode, d in session["data"].items():
+            assert rows.loc[label[mode], "mean"] == pytest.approx(d["metrics"][metric])
+    with TrialStore(session["db"], readonly=True) as st:
+        assert st.sessions()["operator"].tolist() == [OPERATOR_LABEL]
+    for d in session["data"].values():       # the trial knows its mode's practice
+        assert d["trial"]["config"]["mode_practice"] == 0
+        assert d["metrics"]["target_deformation"] >= 0.0

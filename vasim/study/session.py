@@ -25,6 +25,8 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   A session run by the
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
+  A teleoperation trial also gets ``mode_practice``, the number of earlier trials of its
+  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``).
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
   the operator profile resolved (not just the preset name), so a resumed session runs with
   the same person even if the presets change.
@@ -265,6 +267,8 @@ class Session:
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
             gain=gain,
+            mode_practice=None if mode is None else sum(
+                t.condition == mode for t in self.schedule[:scheduled.index]),
         )
 
     @property

@@ -33,12 +33,16 @@ the latest physics step, ``clutch`` (master decoupled),
 ``zoom`` and ``in_view`` (needle inside the camera's view cone). The trial metrics are the
 pipeline's (``vasim.records.trial_metrics``): ET = ``completion_time``, EM = ``path_l2`` (the
 needle trajectory, spec/study.md §4 "length of the needle/tool trajectory"), Q =
-``contact_time``, ``accumulated_force``, ``accumulated_torque`` and
+``target_deformation`` [mm s] (the seed's Q: the rings' displacement by contacts,
+integrated over time and summed over the rings, ``vasim.trials.teleop_quality``; with its
+peak ``target_deformation_peak`` [mm]) and, for experiment 3, ``contact_time``,
+``accumulated_force``, ``accumulated_torque`` and
 ``target_displacement_max``; with tissue, every Q metric is the abdomen's quality
 accumulator (``TISSUE_METRICS``, decisions below). Added per trial:
 ``master_path_l2`` (the summed path of the operator's hands on the masters, camera hand
 included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfers``,
-``tt_time`` (time the master was decoupled), ``safety_stops``.
+``tt_time`` (time the master was decoupled), ``safety_stops``, and EM split by what
+moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
 
 **Decisions**:
 
@@ -53,6 +57,29 @@ included), ``camera_path_l2``, ``transfers``, ``regrasps``, ``misaligned_transfe
   hand-over height: in a 4-subject cohort MRCP's tool tips touched the loops in 6 of 8
   trials and StdT's in 1 of 8, which was the route's doing, not the mode's. Each reached
   waypoint is in ``route_log`` and, for via points, a ``"route"`` event with its position.
+* One path of the scripted hand per waypoint, in every mode (issue #21 §1): when the
+  needle reaches a waypoint, the hand starts a new path toward the next one. Before, MRCP's
+  hand was one scripted path through the whole route, and the scripted operator's
+  *anticipation* (it starts toward the next point once it believes the current one
+  reached) sent the needle 30-50 mm on toward the next via point whenever its perceived
+  position was within the ring radius but the needle was not; it came back after its miss
+  detection. That alone made MRCP's needle path 22 % longer than StdT's in the issue's
+  cohort, the opposite of the seed. Measured per part of the path (``em_to_ring``,
+  ``em_to_via``, ``em_transfer``, seed 1, no tissue): MRCP to-ring legs were 206, 204, 192
+  mm for 67, 70, 60 mm of straight distance (StdT: 87, 125, 117 mm), and the kernel's
+  transfers moved the needle 0 mm (it is held in TT; its master increments are dropped,
+  22 mm in 30 TT cycles, and the kernel followed the master's TOp increments to 3 mm in 1.37 m).
+  With one path per waypoint MRCP's path is StdT's within ±7 % (seeds 1-3: 1.06 / 1.01,
+  0.95 / 0.96, 1.02 / 0.95 m): the station and the kernel do not lengthen it, and the
+  threading task is done as the seed's subjects did it, one target at a time. What
+  remains of the seed's EM difference is the person (``vasim.operator.teleop_profile``).
+* The person in the modes (issue #21 §2): every hand's profile is the trial's
+  ``vasim.operator.teleop_profile.teleop_adjustment`` of the mode and its practice
+  (``config.mode_practice``, else ``config.practice``): carries to a ring use its
+  ``carry`` profile (the threading time), every other movement its ``handover`` one, and
+  StdT's jaw placement error follows the handover profile's perception. The default is
+  the seed calibration ``SEED_TELEOP``; ``effects=NEUTRAL`` is the scripted operator as
+  it is (the station's mechanics tests).
 * Every instrument in the abdomen is in the contact model (issue #7 §4): each physics
   step gets the two tools (trocar to tool tip, ``"right"`` and ``"left"``) and the
   endoscope (camera trocar to lens, the same 2.5 mm capsule as the tools: the abdomen has
@@ -116,7 +143,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -129,23 +155,24 @@ from vasim.mrcp.toolstation import CameraRobot, Station, build_station
 from vasim.operator.needle import (
     RING_RADIUS,
     RING_SITES,
-    NeedleTask,
     Side,
     classify_grasp,
     grasp_offset,
     grasp_sigma,
     handover_point,
     lateral_error,
-    needle_route,
     needle_task,
     needs_via,
     pregrasp_offset,
 )
-from vasim.operator.scripted import OperatorProfile, ScriptedOperator
+from vasim.operator.scripted import OperatorProfile
+from vasim.operator.teleop_profile import SEED_TELEOP, TeleopEffects, teleop_adjustment
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
-from vasim.trials.endoscope import DEFAULT_ENDOSCOPE, in_view_cone
+from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
+from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
+from vasim.trials.teleop_quality import TargetDeformation
 from vasim.trials.vf import TrialConfig, TrialResult
 
 if TYPE_CHECKING:
@@ -185,15 +212,11 @@ REPULSION_INFLUENCE = 0.03
 """Influence distance of the MRCP planner's repulsion at this station [m] (module
 docstring, decisions: 3 cm since the shared needle route)."""
 
-CAMERA_FOV_DEG = 70.0
-"""Full field of view of the camera robot of ``mrcp_cam`` [deg]."""
-
-CAMERA_ZOOM = math.tan(math.radians(DEFAULT_ENDOSCOPE.fov_deg / 2)) / math.tan(
-    math.radians(CAMERA_FOV_DEG / 2))
-"""Magnification of the following camera relative to the fixed endoscope (1.70)."""
-
-CAMERA_TIME_CONSTANT = 0.4
-"""The camera hand's pursuit time constant [s]."""
+EM_PARTS = ("to_ring", "to_via", "transfer")
+"""What moved the needle, for the split of EM (``em_<part>`` trial metrics, [m]): carrying
+it to a ring, carrying it to a via point, and changing hands (MRCP: the kernel's transfer,
+the master decoupled; StdT: approach, grasp and release, where only a misaligned grasp
+moves it)."""
 
 TISSUE_METRICS = {
     "contact_time": "contact_time", "contact_count": "contact_count",
@@ -221,72 +244,6 @@ def needle_points() -> list[TaskPoint]:
             for s in ("right", "left")]
 
 
-class _Hand:
-    """One scripted hand on one master, following a path of goals."""
-
-    def __init__(self, profile: OperatorProfile, task: NeedleTask, points: np.ndarray,
-                 start: np.ndarray, seed: int, practice: int,
-                 reach: float | tuple[float, ...]) -> None:
-        self.points = np.asarray(points, dtype=float).reshape(-1, 3)
-        self.reach = np.broadcast_to(np.asarray(reach, dtype=float), (len(self.points),))
-        self.op = ScriptedOperator(profile, task.operator_task(
-            self.points, start, float(self.reach.min())), seed=seed, practice=practice)
-        self.op.reset(start)
-        self.j = 0
-
-    @property
-    def done(self) -> bool:
-        return self.j >= len(self.points)
-
-    def move(self, dt: float, seen: np.ndarray, goal: np.ndarray, zoom: float) -> np.ndarray:
-        """One hand step: the master increment [m] toward ``goal`` (current position)."""
-        dx = self.op.step_floats(dt, tuple(seen.tolist()), tuple(goal.tolist()),
-                                 min(self.j, len(self.points) - 1), False, 0.0, zoom,
-                                 (1.0, 1.0, 1.0), (0.0, 0.0, 0.0))
-        d = np.asarray(dx, dtype=float)
-        return np.where(np.isfinite(d), d, 0.0)
-
-    def check(self, position: np.ndarray, goal: np.ndarray) -> bool:
-        """Advances the goal when ``position`` is within reach of it; True if it did."""
-        if float(np.linalg.norm(position - goal)) <= self.reach[min(self.j,
-                                                                     len(self.reach) - 1)]:
-            self.j += 1
-            return True
-        return False
-
-
-@dataclass
-class _Camera:
-    """The endoscope: fixed on the rings' centroid, or (``follows``) driven by a hand."""
-
-    robot: CameraRobot
-    aim: np.ndarray
-    follows: bool
-    path: float = 0.0
-
-    @property
-    def zoom(self) -> float:
-        return CAMERA_ZOOM if self.follows else 1.0
-
-    def view(self) -> tuple[np.ndarray, np.ndarray, float]:
-        return self.robot.lens(self.aim), self.aim, math.radians(self.robot.fov_deg)
-
-    def contains(self, p: np.ndarray) -> bool:
-        pos, look, fov = self.view()
-        return bool(in_view_cone(p[None, :], pos, look, fov)[0])
-
-    def follow(self, p: np.ndarray, dt: float) -> None:
-        """The camera hand: re-aim when ``p`` leaves the central third of the view."""
-        if not self.follows:
-            return
-        pos, look, fov = self.view()
-        if bool(in_view_cone(p[None, :], pos, look, fov / 3.0)[0]):
-            return
-        step = (p - self.aim) * (1.0 - math.exp(-dt / CAMERA_TIME_CONSTANT))
-        self.aim = self.aim + step
-        self.path += float(np.linalg.norm(step))
-
-
 class TeleopTrial:
     """One trial of a teleoperation mode (module docstring).
 
@@ -298,13 +255,16 @@ class TeleopTrial:
             quality metrics); default: a new one (``config.scene == "none"``: no tissue,
             static rings).
         holder: the tool holder of the station (``build_station``).
+        effects: the operator's mode effects (``vasim.operator.teleop_profile``; default:
+            the calibration to the seed's Table 5.1).
 
     Raises:
         ConfigError: no mode in ``config``.
     """
 
     def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
-                 abdomen: Abdomen | None = None, holder: str = "positioner") -> None:
+                 abdomen: Abdomen | None = None, holder: str = "positioner",
+                 effects: TeleopEffects = SEED_TELEOP) -> None:
         if config.mode is None:
             raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
                               "'mrcp_cam')", field="mode")
@@ -314,6 +274,11 @@ class TeleopTrial:
         self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
                                 ring_radius=radius)
         self.profile = config.profile if config.profile is not None else _preset(config.skill)
+        self.effects = effects
+        self.adjustment = teleop_adjustment(
+            self.mode, config.practice if config.mode_practice is None
+            else config.mode_practice, self.profile, effects)
+        """The hands' profiles of this mode and mode practice (``teleop_profile``)."""
         self.rng = np.random.default_rng(_seed(config.seed, 41))
         self.station = build_station({"right": self.task.start + grasp_offset("right")},
                                      holder=holder)
@@ -350,19 +315,28 @@ class TeleopTrial:
         follows = self.mode == "mrcp_cam"
         cam = CameraRobot(self.station.camera.fulcrum, fov_deg=CAMERA_FOV_DEG if follows
                           else DEFAULT_ENDOSCOPE.fov_deg)
-        self.camera = _Camera(cam, self.task.start.copy() if follows
+        self.camera = Camera(cam, self.task.start.copy() if follows
                               else self.task.rings.mean(axis=0), follows)
         self._clutch = 0
         self._via = False          # the next waypoint is the via point before ring i
         self.route_j = 0           # waypoints of the route reached so far
+        self.deformation = TargetDeformation()
+        """Q as the seed measures it (``vasim.trials.teleop_quality``)."""
+        self.em_parts = dict.fromkeys(EM_PARTS, 0.0)
+        """The needle's path [m] split by what moved it (``EM_PARTS``)."""
+        self._em_from = self.needle.copy()
+        self._transferring = False     # the needle is changing hands this cycle
         self.route_log: list[tuple[int, float, np.ndarray, np.ndarray]] = []
         """(ring index or -1 for a via point, time, waypoint, needle centre) per waypoint
         reached, in order (``needle_route``)."""
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
-              key: int) -> _Hand:
-        return _Hand(self.profile, self.task, points, start,
+              key: int, *, carry: bool = False) -> Hand:
+        """A new path of a hand; ``carry``: the needle is carried to a ring (the threading
+        movement, ``vasim.operator.teleop_profile``)."""
+        prof = self.adjustment.carry if carry else self.adjustment.handover
+        return Hand(prof, self.task, points, start,
                      _seed(self.config.seed, 43, key), self.config.practice, reach)
 
     def instruments(self) -> dict[str, ToolPose]:
@@ -385,6 +359,7 @@ class TeleopTrial:
         tools = self.instruments()
         while ab.t + 0.5 * ab.dt <= self.t:
             self._snap = ab.step(tools)
+            self.deformation.add(ab.dt, self._snap.target_displacement)
             for kind, detail in self._snap.events:
                 self.events.append((self._snap.t, kind, detail))
         if self._snap is not None:
@@ -400,10 +375,6 @@ class TeleopTrial:
         if self._via:
             return handover_point(self.rings[self.i - 1], self.rings[self.i])
         return self._goal()
-
-    def _route_points(self) -> np.ndarray:
-        """The route's waypoints at rest (the scripted operator's task)."""
-        return needle_route(self.task.rings, self.task.sides)[0]
 
     def _check_via(self) -> bool:
         """Marks the via point reached when the needle is within the ring radius of it."""
@@ -448,6 +419,9 @@ class TeleopTrial:
     def _finish_cycle(self) -> None:
         """Physics, the ring test, the camera hand, the sample (with the ring it was
         compared with: the goal advances after the row, as in ``vasim.trials.vf``)."""
+        part = ("transfer" if self._transferring else "to_via" if self._via else "to_ring")
+        self.em_parts[part] += float(np.linalg.norm(self.needle - self._em_from))
+        self._em_from = self.needle.copy()
         self._physics()
         g, i = self._goal().copy(), self.i
         self._check_via()
@@ -476,7 +450,8 @@ class TeleopTrial:
                             config=kernel_config(st, self.config.seed))
         master = self.needle.copy()
         key = 0
-        hand = self._hand(self._route_points(), self.needle, self.task.ring_radius, key)
+        hand = self._hand(self._waypoint()[None, :], self.needle, self.task.ring_radius, key,
+                          carry=not self._via)
         dt_op = self.dt / OPERATOR_SUBSTEPS
         ack = 0.0            # time left until the operator acknowledges a safety stop
         holding = False
@@ -491,6 +466,7 @@ class TeleopTrial:
             self.needle = kernel.task_pose()[0]
             self.holder = "right" if kernel.rsel == "right" else "left"
             self._clutch = 0 if rec.state is KernelState.TOP else 1
+            self._transferring = rec.state.mode == "TT"
             if self._clutch:
                 self.tt_time += self.dt
             hold_now = False
@@ -525,21 +501,25 @@ class TeleopTrial:
                         kernel.reset_fault()
                         self.events.append((self.t, "mrcp", "safety stop acknowledged"))
                         key += 1
-                        hand = self._hand(self._route_points(), self.needle,
-                                          self.task.ring_radius, key)
+                        hand = self._hand(self._waypoint()[None, :], self.needle,
+                                          self.task.ring_radius, key, carry=not self._via)
+            before = self.route_j
             self._finish_cycle()
-            hand.j = self.route_j
+            if self.route_j != before and not self.done:   # the next waypoint: a new path
+                key += 1
+                hand = self._hand(self._waypoint()[None, :], self.needle,
+                                  self.task.ring_radius, key, carry=not self._via)
             yield self.k
         self.master_path += self.camera.path
 
     def _stdt(self) -> Iterator[int]:
         st = self.station
         dt_op = self.dt / OPERATOR_SUBSTEPS
-        sigma = grasp_sigma(self.profile, self.config.practice)
+        sigma = grasp_sigma(self.adjustment.handover, self.config.practice)
         delay = self.profile.reaction_delay + GRIPPER_TIME
         key = 0
         offset = self.needle - st.tip(self.holder)       # needle centre - holder tip
-        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key)
+        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key, carry=True)
         phase = "carry"
         other: Side = "left"
         wait = 0.0
@@ -606,9 +586,10 @@ class TeleopTrial:
                     offset = self.needle - st.tip(self.holder)
                     key += 1
                     hand = self._hand(self._goal()[None, :], self.needle,
-                                      self.task.ring_radius, key)
+                                      self.task.ring_radius, key, carry=True)
                     phase = "carry"
             before = self.i
+            self._transferring = phase in ("approach", "close", "release")
             self._finish_cycle()
             if self.i != before and not self.done:     # a ring passed: what next
                 key += 1
@@ -619,11 +600,11 @@ class TeleopTrial:
                     phase = "handover"
                 else:
                     hand = self._hand(self._goal()[None, :], self.needle,
-                                      self.task.ring_radius, key)
+                                      self.task.ring_radius, key, carry=True)
                     phase = "carry"
             yield self.k
 
-    def _approach_hand(self, side: Side, key: int) -> _Hand:
+    def _approach_hand(self, side: Side, key: int) -> Hand:
         pts = np.array([self.needle + pregrasp_offset(side), self.needle + grasp_offset(side)])
         return self._hand(pts, self.station.tip(side), (PREGRASP_REACH, GRASP_REACH), key)
 
@@ -660,6 +641,10 @@ class TeleopTrial:
             "schema": "none", "active_fixtures": "", "nonfinite_inputs": 0,
             "scene": self.config.scene, "mode": self.mode, "task": "needle",
             "n_rings": n, "n_transfers_needed": self.task.n_transfers,
+            "mode_practice": self.adjustment.mode_practice,
+            "teleop_effects": (f"thread_time={self.effects.thread_time} stdt_noise="
+                               f"{self.effects.stdt_noise} camera_cost="
+                               f"{self.effects.camera_cost}"),
             **{k: int(v) for k, v in self.counts.items()},
         })
         if self.abdomen is not None:
@@ -675,7 +660,10 @@ class TeleopTrial:
                    "regrasps": float(self.counts["regrasps"]),
                    "misaligned_transfers": float(self.counts["misaligned_transfers"]),
                    "safety_stops": float(self.counts["safety_stops"]),
-                   "tt_time": self.tt_time})
+                   "tt_time": self.tt_time,
+                   **{f"em_{k}": v for k, v in self.em_parts.items()}})
+        if self.abdomen is not None:
+            tm.update(self.deformation.as_metrics())
         return TrialResult(config=self.config, schema=load_schema("none"),
                            task=self.task.operator_task(self.task.rings, self.task.start),
                            samples=self.samples, metrics=metrics, summary=summary,

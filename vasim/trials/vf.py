@@ -113,6 +113,8 @@ class TrialConfig:
             ``velocity_cutoff_hz`` are not used.
         gain: the fixture gain (``vasim.fixtures.gain``): a constant in [0, 1] (1: the
             schema as written) or an ``AdaptiveRule``; logged per sample (``gain``).
+        mode_practice: earlier trials of this teleoperation mode in the session (the
+            mode-specific learning of ``vasim.operator.teleop_profile``); None: ``practice``.
     """
 
     task: TaskName = "trajectory"
@@ -133,6 +135,7 @@ class TrialConfig:
     mode: str | None = None
     label: str | None = None
     gain: GainRule = 1.0
+    mode_practice: int | None = None
 
     def __post_init__(self) -> None:
         # the fixture gain (vasim.fixtures.gain): a constant, or the adaptive rule (a stored
@@ -182,6 +185,10 @@ class TrialConfig:
         if self.profile is not None and not isinstance(self.profile, OperatorProfile):
             raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
                               field="profile")
+        mp = self.mode_practice
+        if mp is not None and (isinstance(mp, bool) or not isinstance(mp, int) or mp < 0):
+            raise ConfigError(f"mode_practice must be an integer >= 0 or None, got {mp!r}",
+                              field="mode_practice")
 
 
 @dataclass(frozen=True, eq=False)

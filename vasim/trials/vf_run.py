@@ -26,7 +26,7 @@ def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, ob
     """The trial configuration as plain JSON-able data (stored with the trial)."""
     # mode and label only when set: the records of other trials stay as they were
     rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name in ("mode", "label", "poi_spacing")
+           and not (f.name in ("mode", "label", "poi_spacing", "mode_practice")
                     and getattr(config, f.name) is None)}
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
     if config.gain == 1.0:  # the schema as written: the record stays as it was

@@ -66,7 +66,9 @@ per-trial metrics are computed from the samples when a trial closes and stored w
   an assisted trial's "trial" level is the probe number of the VF-free trial that closes
   its block (the stage of the session it belongs to), a probe trial's its own number.
 * MRCP (spec §4) per trial: ET = ``completion_time`` [s], EM = ``path_l2`` (Euclidean
-  tool path length) [m], Q = ``target_displacement_max`` [m] (when stored),
+  needle path length) [m], Q = ``target_deformation`` [mm s] (the rings' displacement by
+  contacts integrated over time, ``vasim.trials.teleop_quality``),
+  ``target_displacement_max`` [m] (when stored),
   ``contact_time`` [s], ``accumulated_force`` [N s], ``accumulated_torque`` [N m s].
   Per subject and mode the cell is the mean over the mode's trials; means, sds, paired
   t-tests and gains use the subjects with every mode; gain = mean(StdT) / mean(mode) of

@@ -56,7 +56,8 @@ class MrcpMetric:
 
 MRCP_METRICS: tuple[MrcpMetric, ...] = (
     MrcpMetric("ET", "completion_time", "ET", "execution time", "s"),
-    MrcpMetric("EM", "path_l2", "EM", "tool path length", "m"),
+    MrcpMetric("EM", "path_l2", "EM", "needle path length", "m"),
+    MrcpMetric("Q", "target_deformation", "Q", "target deformation by contacts", "mm s"),
     MrcpMetric("Q_target_displacement", "target_displacement_max", "Q",
                "largest target displacement", "m"),
     MrcpMetric("Q_contact_time", "contact_time", "Q", "accumulated contact time", "s"),
@@ -73,11 +74,13 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
     prov: list[dict[str, str]] = []
     intro: list[Block] = [Paragraph(
         "Per trial: ET = execution time (completion_time) [s]; EM = economy of movement, "
-        "the Euclidean length of the tool path (path_l2) [m]; Q = quality: target "
-        "displacement [m] (when stored), accumulated contact time [s], force [N s] and "
-        "torque [N m s] on tissue. Per subject and mode the cell is the mean over the "
-        "mode's trials; mean and sd per mode, paired Student t-tests per pair of modes "
-        "(with observed power and the minimum n for power 0.9) and the seed's gain "
+        "the Euclidean length of the needle path (path_l2) [m]; Q = quality as the seed "
+        "measures it: the rings' displacement by contacts, integrated over time and summed "
+        "over the rings (target_deformation) [mm s]; and, as experiment 3, the largest "
+        "target displacement [m], accumulated contact time [s], force [N s] and "
+        "torque [N m s] on tissue (when stored). Per subject and mode the cell is the "
+        "mean over the mode's trials; mean and sd per mode, paired Student t-tests per "
+        "pair of modes (with observed power and the minimum n for power 0.9) and the seed's gain "
         "mean(StdT)/mean(mode) use the subjects with every mode. Learning curves: mean and "
         "interquartile range per trial number within the mode (1..6). Likert items: see "
         "the Questionnaires section.")]
