@@ -46,17 +46,27 @@ TRAJECTORY_VARIANTS = 7
 POI_SPACING = 0.0105
 """Default arc length between successive POIs [m] (> 2 x reach radius): 30 POIs.
 
-**Decision** (the seed gives neither the spacing nor r_reach): the default stays 10.5 mm with
-r_reach = 5 mm, the task every stored trial and calibration so far was run on. With it,
-eq. 6.5's e_i is dominated by the distance still to travel (a tip on the path at speed v
-sums ~(spacing - r_reach)/2 of L1 distance per sample while the path deviation adds its
-3-4 mm), so e_i tracks latency; the path-deviation measures (``vasim.records.
-path_deviation``) are the accuracy measure that does not. A protocol that wants e_i itself
-to respond to deviation sets ``poi_spacing_m`` smaller (the seed's df2 = 98131 over 46 x 38
-trials suggests ~56 aggregated rows per trial, i.e. ~5.6 mm spacing on this 31 cm path)
-with ``reach_radius_m`` < spacing / 2 (e.g. 5.6 mm and 2.5 mm): the travel term then shrinks
-to ~1.5 mm per sample, the order of the deviations. Changing the default would change the
-task of every existing protocol and store; it is a protocol choice."""
+**Decision** (the seed gives neither the spacing nor r_reach; issue #15): 10.5 mm with
+r_reach = 5 mm, chosen so that eq. 6.5's e_i rises with the deviation from the path over the
+deviations operators show. Reason, the geometry of the reach rule: a tip moving at speed v
+with a lateral offset d (< r) heads for p_i from a + s before it to a before it, a =
+sqrt(r^2 - d^2) (where the rule fires), so e_i = (s / v)(a + s/2 + d) in L1 (offset along
+an axis; tested
+analytically in ``tests/study/test_metrics_path_deviation.py``). It grows with d only while
+d < r / sqrt(2): beyond, the goal advances earlier and e_i *falls* with the deviation, and
+at d >= r the goal does not advance at all (the operator must stop and correct). The
+VF-free simulated operator deviates 3-4 mm on average (path_dev_mean_mm), so r = 5 mm keeps
+e_i increasing up to 3.5 mm; s > 2 r keeps the reach spheres apart, and the smallest such
+spacing (10.5 mm) maximises the share of the deviation term d / (a + s/2 + d). A smaller
+radius (the seed's df2 = 98131 over 46 x 38 trials suggests ~56 rows per trial, ~5.6 mm
+spacing, r < 2.8 mm) makes e_i fall above 1.8-2 mm of deviation and turns each POI into a
+targeting task: measured (2 simulated subjects per fixture, 5.6 / 2.5 mm), VF-free trials
+took 55 s instead of 17 s and e_i / duration stayed 7.8-8.2 mm for every fixture. Even so,
+the travel term a + s/2 is more than half of e_i / duration for every d < r when s > 2 r
+(75 % at d = 3 mm with the default), so e_i ranks the fastest condition first in any
+reach-rule task; ``vasim.records.path_deviation`` gives the
+accuracy measure that does not depend on speed. ``poi_spacing_m`` and ``reach_radius_m``
+set other values per protocol."""
 
 POI_SPACING_RANGE = (0.002, 0.05)
 """Accepted POI spacings [m]: 2 mm (the tool's own size) to 5 cm (6 POIs on the path)."""
