@@ -22,8 +22,8 @@ def test_accuracy_benefits_combine_as_independent_probabilities():
     e = combine_effects([ag, mag])
     b = 1.0 - (1.0 - (1.0 - ag.accuracy)) * (1.0 - (1.0 - mag.accuracy))  # 1 - prod(1 - b_i)
     assert 1.0 - e.accuracy == pytest.approx(b, rel=1e-12)
-    assert e.accuracy == pytest.approx(0.78 * 0.88)
-    assert e.speed == pytest.approx(0.88 * 0.80)
+    assert e.accuracy == pytest.approx(0.66 * 0.95)
+    assert e.speed == pytest.approx(0.84 * 0.80)
     assert e.practice_weight == 1.2
     assert 1.0 + e.dependence == pytest.approx(1.04 * 1.06)
     # carry-over: a VF-free trial keeps what each fixture would leave
@@ -49,7 +49,7 @@ def test_labels_get_the_combination_of_calibrated_fixtures_only():
     out = label_effects({"ag_mag": ("ag", "mag"), "ff_faded": ("ff",), "vg": ("vg",),
                          "ff_cone": ("ff", "cone")})
     assert out["ff_faded"] == SEED_EFFECTS["ff"]
-    assert out["ag_mag"].accuracy == pytest.approx(0.78 * 0.88)
+    assert out["ag_mag"].accuracy == pytest.approx(0.66 * 0.95)
     assert out["vg"] is SEED_EFFECTS["vg"]  # calibrated labels keep their numbers
     assert "ff_cone" not in out  # the cone is not calibrated: no guessing
 

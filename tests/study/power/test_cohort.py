@@ -76,6 +76,6 @@ def test_scaled_effects_rederive_the_session_configurations(tiny_protocol: Proto
         assert c1.seed == c0.seed and c1.variant == c0.variant and c1.schema == c0.schema
         assert c1.practice == st.index            # every earlier trial counts as one
         assert c1.profile is not None and c0.profile is not None
-        if st.condition == "ff":                   # FF's calibrated 0.6 noise factor is gone
+        if st.condition == "ff":                   # FF's calibrated noise factor is gone
             assert c1.profile.noise == subj.profile.noise
-            assert np.isclose(c0.profile.noise, 0.6 * subj.profile.noise)
+            assert np.isclose(c0.profile.noise, SEED_EFFECTS["ff"].accuracy * subj.profile.noise)

@@ -47,14 +47,12 @@ def _no_ray_left(timeout: float = 15.0) -> bool:
 def test_power_end_to_end_on_a_local_ray(tiny_protocol_path: Path, tmp_path: Path,
                                          capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "power"
-    t0 = time.perf_counter()
+    # ~40 s on an idle 2-core machine (no wall-clock assert: bench/power.py measures speed)
     code = main(["study", "power", "--protocol", str(tiny_protocol_path), "--subjects", "4",
                  "--cohorts", "2", "--coarse", "--max-time", "1.5", "--workers", "2",
                  "--out", str(out), "--no-progress"])
-    wall = time.perf_counter() - t0
     text = capsys.readouterr().out
     assert code == 0, text
-    assert wall < 120, wall           # ~40 s on this 2-core machine; 120 s under load
     assert _no_ray_left()
     assert not list(tmp_path.glob("**/*.sqlite"))       # no study database without asking
     power = pd.read_csv(out / "power.csv")
@@ -105,7 +103,7 @@ def test_bad_subject_spec_fails_before_ray_starts(tiny_protocol_path: Path,
     (["--workers", "0"], "got 0, expected at least 1 Ray worker"),
     (["--subjects", "1:5"], "got 1, expected an integer"),
     (["--subjects", "10:60:0"], "STEP 0, expected a step >= 1"),
-    (["--effect-scale", "3"], "fixture 'ff' would get an invalid effect"),
+    (["--effect-scale", "3"], "fixture 'ag' would get an invalid effect"),
 ])
 def test_bad_power_arguments_are_one_line_errors(tiny_protocol_path: Path, args: list[str],
                                                  needle: str,

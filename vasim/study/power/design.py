@@ -162,11 +162,13 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
     Example:
         >>> e = scaled_effects(0.5)["ff"]
         >>> round(e.accuracy, 3), round(e.speed, 3), round(e.dependence, 3)
-        (0.8, 1.02, 0.06)
+        (0.77, 1.02, 0.06)
         >>> scaled_effects(0.0)["ff"].accuracy
         1.0
     """
     s = check_number(scale, "--effect-scale", bound=EFFECT_SCALE)
+    if s == 1.0:   # the calibration itself, not 1 + (a - 1) rounded
+        return dict(base)
     out = {}
     for name, e in base.items():
         try:
