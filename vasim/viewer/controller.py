@@ -20,7 +20,11 @@ Modes (**decisions**):
   first pending scheduled trial with the session's ``trial_config`` and stores it linked to
   its schedule index (``TrialStore.begin_trial`` refuses a second running attempt, so a
   double start from two tabs cannot duplicate a trial). The session completes when no
-  scheduled trial is pending.
+  scheduled trial is pending. A pending trial that begins a later sitting (a block with
+  ``delay_days``) is refused before its delay has passed since the previous trial ended,
+  on Start (before any countdown) and on auto-advance alike: the status line and the
+  notification name the sitting and when it is due (``history.refuse_early_sitting``, the
+  rule of ``vasim study resume``; no simulated delay in the browser).
 
 Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
 on completion the samples, per-point metrics, summary, events and trial metrics are
@@ -66,6 +70,7 @@ from vasim.viewer.history import (
     learning_curve,
     open_session,
     record_browser_sitting,
+    refuse_early_sitting,
     session_progress,
     trial_score_card,
 )
@@ -413,6 +418,11 @@ class TrainingController(ConditionCommands):
             self._publish(status=f"session {session.id} is complete", **self._progress())
             return
         nxt = pending[0]
+        try:  # a later sitting before its delay: refused, as vasim study resume does
+            refuse_early_sitting(self.store(), session, nxt)
+        except StoreError as exc:
+            self._publish(running=False, status=str(exc), **self._progress())
+            raise
         cfg = replace(session.trial_config(nxt), scene=self.scene)
         # The session's input (stored with it when it was created) drives all its trials.
         kind = str(session.settings.extra.get("input", self.panel.input))
@@ -566,6 +576,15 @@ class TrainingController(ConditionCommands):
         p = self.panel
         if (self.active() or self._pending is not None) and p.mode != "demo":
             raise ConfigError("a trial is already running (Stop it first)", field="start")
+        if p.mode == "protocol":   # refuse an early sitting before any countdown
+            session = self._session()
+            self._publish(session_id=session.id)
+            if session.pending:
+                try:
+                    refuse_early_sitting(self.store(), session, session.pending[0])
+                except StoreError as exc:
+                    self._publish(running=False, status=str(exc), **self._progress())
+                    raise
         if p.mode != "demo" and p.input != "scripted" and self.countdown_s > 0:
             # The start cue (**decision**: a countdown, not the first move, because the
             # trial's clock must not depend on when a page's first batch arrives): the
@@ -640,6 +659,7 @@ class TrainingController(ConditionCommands):
             self._start_demo(replace(cfg, variant=variant, seed=cfg.seed + 1))
         elif (p.mode == "protocol" and p.auto_advance and self.info.schedule_index is not None
               and p.position is not None):
+            self._done_since = math.inf  # once: a refused next sitting is not retried
             self._start_protocol_trial()
         else:
             self._done_since = math.inf  # hold the final frame until the next command
