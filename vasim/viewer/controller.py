@@ -81,6 +81,7 @@ from vasim.viewer.state import (
     PanelState,
     TrialInfo,
     f5pl_fields,
+    gain_plan,
     plain,
     plain_dict,
     schema_choices,
@@ -272,6 +273,7 @@ class TrainingController(ConditionCommands):
             input=input_kind, trial_id=trial_id,
             schedule_index=None if scheduled is None else scheduled.index,
             condition=None if scheduled is None else scheduled.condition,
+            gain_plan=self._gain_plan(config, session, scheduled),
         )
         self.browser = device if isinstance(device, BrowserDevice) else None
         self.instrument = device if isinstance(device, LaparoscopicDevice) else None
@@ -282,6 +284,17 @@ class TrainingController(ConditionCommands):
         trial.start()
         self._pair = (self.info, trial)
         return self.info
+
+    @staticmethod
+    def _gain_plan(config: TrialConfig, session: Any, scheduled: Any) -> str:
+        """How the trial's fixture gain is set (``state.gain_plan``): a protocol trial's
+        from its block (``vasim.study.gain_plan.gain_text``), any other's from its config."""
+        text = ""
+        if session is not None and scheduled is not None:
+            from vasim.study.gain_plan import gain_text
+
+            text = gain_text(session.protocol, scheduled)
+        return gain_plan(config.gain, text)
 
     def _close_trial(self, reason: str, *, failed: bool = False) -> None:
         """Stops the running trial; a stored one that is not done (or whose loop ``failed``)
