@@ -3,8 +3,10 @@
 same seed (vasim/study/power/driver.py).
 
 The cluster is this test's own: `ray start --block` runs as a child process in its own
-session with its own `--temp-dir`, and teardown ends it and its descendants by pid (never
-`ray stop`, which would stop every Ray of the user on the machine). Starting it takes
+session with its own `--temp-dir` (where it records `ray_current_cluster`, so a concurrent
+`ray.init()` on the machine, which looks in /tmp/ray, never finds and joins it), and
+teardown ends it and its descendants by pid (never `ray stop`, which would stop every Ray
+of the user on the machine) and removes its temp dir. Starting it takes
 ~10 s here (2026-11-27), so the test stays in the suite. The cluster uses token
 authentication (Ray 2.60) with a token of the test's own, given to the driver as
 ``RAY_AUTH_MODE=token`` and ``RAY_AUTH_TOKEN``: what a user joining such a cluster exports.
@@ -13,6 +15,7 @@ authentication (Ray 2.60) with a token of the test's own, given to the driver as
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -134,6 +137,7 @@ def _head(tmp_path: Path) -> Iterator[int]:
         _, alive = psutil.wait_procs(family, timeout=15)
         for p in alive:
             p.kill()
+        shutil.rmtree(temp, ignore_errors=True)      # the head's session logs and sockets
         assert not alive, f"Ray processes outlived their head: {alive}"
 
 
