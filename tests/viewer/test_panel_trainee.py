@@ -16,10 +16,12 @@ POINTS = np.array([[0.01, 0.0, 0.0], [0.02, 0.0, 0.0]])
 def _text(tcp, goal_index):
     info = SimpleNamespace(number=2, mode="demo", trial_id=None, points=POINTS,
                            start=np.zeros(3), title="demo run 2 (not stored)",
-                           config=SimpleNamespace(max_time=180.0))
+                           config=SimpleNamespace(max_time=180.0), fixtures=(),
+                           gain_plan="constant")
     goal = POINTS[min(goal_index, 1)]
     frame = SimpleNamespace(t=1.25, tcp=np.asarray(tcp, float), goal=goal,
-                            goal_index=goal_index, n_points=2, done=goal_index >= 2)
+                            goal_index=goal_index, n_points=2, done=goal_index >= 2,
+                            gain=1.0)
     return metrics_text(info, frame, [0.5])
 
 

@@ -1,12 +1,19 @@
-"""A browser protocol session's later sitting (issue #18 §2): the trial that begins it
-carries a 'sitting' event with the real time elapsed since the previous trial."""
+"""A browser protocol session's later sitting (issue #18 §2): refused before its delay has
+passed (the rule of `vasim study resume`, vasim/study/sitting_rule.py), and once begun the
+trial that begins it carries a 'sitting' event with the real time elapsed since the
+previous trial."""
 
 from __future__ import annotations
 
 import json
+import sqlite3
 import time
 from pathlib import Path
 
+import pandas as pd
+import pytest
+
+from vasim.core.errors import StoreError
 from vasim.study.session import SITTING_EVENT
 from vasim.study.store import TrialStore
 from vasim.viewer.controller import Command, TrainingController
@@ -30,11 +37,30 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         for cmd in (Command("mode", "protocol"), Command("subject", "B01"),
                     Command("protocol", "vf_retention")):
             c.handle(cmd)
-        for _ in range(14):               # sitting 1 (13 trials) + the first retention probe
+        for _ in range(13):               # sitting 1 (13 trials)
             c.handle(Command("start"))
             assert drive(lambda: c.info.trial_id is not None and not c.panel.running)
         sid = c.panel.session_id
         assert sid is not None
+        last = c.info.trial_id
+        # the retention sitting 7 days later: refused now, with when it is due (a few
+        # seconds short of 7 d, rounded up to the minute)
+        with pytest.raises(StoreError) as info:
+            c.handle(Command("start"))
+        msg = str(info.value)
+        assert "sitting 2 (block 'retention') begins 7 d after the previous trial" in msg
+        assert "(in 7 d 0 h)" in msg and "come back then" in msg, msg
+        with TrialStore(db, readonly=True) as st:
+            ended = pd.Timestamp(st.trial(last)["ended_at"])
+        assert f"due {(ended + pd.Timedelta(days=7)).isoformat()}" in msg
+        assert c.panel.status == msg and not c.panel.running and not c.active()
+        assert c.panel.completed == 13                      # nothing was started
+        # a week passes (the previous trial's end moved back 7 days and 1 minute)
+        aged = (ended - pd.Timedelta(days=7, minutes=1)).isoformat()
+        with sqlite3.connect(db) as con:
+            con.execute("UPDATE trials SET ended_at = ? WHERE id = ?", (aged, last))
+        c.handle(Command("start"))
+        assert drive(lambda: c.info.trial_id not in (None, last) and not c.panel.running)
     finally:
         c.close()
     with TrialStore(db, readonly=True) as st:
@@ -47,5 +73,5 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         rec = json.loads(ev[ev["kind"] == SITTING_EVENT]["detail"].iloc[0])
         assert (rec["sitting"], rec["block"], rec["delay_days"], rec["simulated"]) == (
             2, "retention", 7.0, False)
-        # the real gap between trial 13's end and trial 14's start, in days
-        assert 0.0 <= rec["elapsed_days"] < 60.0 / 86_400
+        # the real gap between trial 13's (aged) end and trial 14's start, in days
+        assert 7.0 + 1 / 1440 <= rec["elapsed_days"] < 7.0 + 2 / 1440

@@ -29,13 +29,15 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="subject counts: START:STOP:STEP (e.g. 10:60:5), N1,N2,... or N")
     r.add_argument("--cohorts", type=bounded_int(COHORTS), default=200,
                    help="Monte Carlo cohorts per N (default 200: power to +-0.035 at 0.5)")
-    r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=1.0,
+    r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=None,
                    help="x the operator's calibrated fixture effects (1: the seed's; 0: "
-                        "none, the fixture tests' type-I error; 0.5: half)")
+                        "none, the fixture tests' type-I error; 0.5: half); default: the "
+                        "protocol's [power] effect_scale, else 1")
     r.add_argument("--effects", type=Path, default=None, metavar="FILE.toml",
                    help="fixture effects by condition label ([ff] accuracy = 0.8, speed, "
-                        "practice_weight, carryover, dependence); unset fields keep the "
-                        "calibration; --effect-scale applies on top")
+                        "practice_weight, carryover, dependence), applied over the "
+                        "protocol's [power.effects]; unset fields keep those (else the "
+                        "calibration); --effect-scale applies on top")
     r.add_argument("--alpha", type=bounded_float(ALPHA), default=0.05,
                    help="significance level (default 0.05)")
     r.add_argument("--p", choices=["gg", "uncorrected"], default="gg",
@@ -64,7 +66,6 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
-    from vasim.operator.learning import SEED_EFFECTS
     from vasim.study.power.design import (
         COARSE_DT,
         COARSE_WARNING,
@@ -76,12 +77,18 @@ def _cmd_power(args: argparse.Namespace) -> int:
     from vasim.study.power.driver import run_power
     from vasim.study.power.output import format_table, write_outputs
     from vasim.study.protocol import load_protocol
+    from vasim.study.protocol.power import resolve_effects
 
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
-    base = load_effects(args.effects) if args.effects is not None else SEED_EFFECTS
+    # Decision (vasim.study.protocol.power): calibration < protocol [power] < command line
+    scale, base = resolve_effects(protocol.power, cli_scale=args.effect_scale)
+    if args.effects is not None:
+        base = load_effects(args.effects, base=base)
+    sources = effect_sources(protocol.power is not None and bool(protocol.power.effects),
+                             args.effects)
     design = PowerDesign(subjects=parse_subjects(args.subjects), cohorts=args.cohorts,
-                         seed=args.seed, effect_scale=args.effect_scale, alpha=args.alpha,
+                         seed=args.seed, effect_scale=scale, alpha=args.alpha,
                          dt=COARSE_DT if args.coarse else FULL_DT,
                          max_trial_time=args.max_time,
                          p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
@@ -91,8 +98,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
     print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator "
-          f"calibrated to the seed{', effects of ' + str(args.effects) if args.effects else ''}"
-          f", effect scale {args.effect_scale:g}, {step} step, "
+          f"calibrated to the seed{sources}, effect scale {scale:g}, {step} step, "
           f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
           f" p; {args.cohorts} cohorts per N; ± = Monte Carlo standard error)")
     print(format_table(res.power))
@@ -104,7 +110,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
           f"{res.cohorts_per_second:.3g} cohorts/s")
     if args.out is not None:
         title = (f"{protocol.name}: power of the primary tests, {args.cohorts} cohorts per N, "
-                 f"effect scale {args.effect_scale:g}, alpha {args.alpha:g}"
+                 f"effect scale {scale:g}, alpha {args.alpha:g}"
                  + (" (coarse 2 ms step: fixture power underestimated)" if args.coarse
                     else ""))
         for path in write_outputs(args.out, res.power, res.cohorts, title=title):
@@ -112,4 +118,18 @@ def _cmd_power(args: argparse.Namespace) -> int:
     return 0
 
 
-__all__ = ["register_power"]
+def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
+    """What the header names besides the calibration: the protocol's ``[power.effects]``
+    and the ``--effects`` file, when used.
+
+    >>> effect_sources(True, Path("e.toml"))
+    ", effects of the protocol's [power] and e.toml"
+    >>> effect_sources(False, None)
+    ''
+    """
+    parts = (["the protocol's [power]"] if protocol_effects else []) + (
+        [str(effects_file)] if effects_file is not None else [])
+    return f", effects of {' and '.join(parts)}" if parts else ""
+
+
+__all__ = ["effect_sources", "register_power"]

@@ -23,6 +23,7 @@ from pathlib import Path
 from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
 from vasim.cli.power import register_power
 from vasim.core.bounds import (
+    GAIN,
     ID,
     PRACTICE_TRIALS,
     SEED,
@@ -65,6 +66,10 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                         "that it cannot be mistaken for a subject code)")
     p.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=180.0,
                    help="time limit [s]")
+    p.add_argument("--gain", type=bounded_float(GAIN), default=1.0, metavar="G",
+                   help="constant fixture gain in [0, 1] scaling every fixture's f5PL output "
+                        "(1: the schema as written, default; 0: no assistance); logged per "
+                        "sample and stored with the trial like a schedule's gain")
     p.add_argument("--scene", default="default",
                    help="abdomen scene (protocols/scenes/NAME.toml or a TOML path), or 'none' "
                         "for a static task without tissue (default: default)")
@@ -119,7 +124,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
-        max_time=args.max_time, scene=args.scene, label=_label(args),
+        max_time=args.max_time, scene=args.scene, label=_label(args), gain=_gain(args),
     )
     store = None
     if args.db is not None:
@@ -135,6 +140,29 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     if args.points:
         print(result.metrics.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     return 0
+
+
+def _gain(args: argparse.Namespace) -> float:
+    """``--gain`` (already in [0, 1], ``bounded_float(GAIN)``), refused below 1 on a schema
+    without fixtures.
+
+    **Decision**: as a protocol refuses a gain on a fixture-free schema ("a schema with
+    fixtures (a gain scales them)"), ``vasim trial`` does: a gain < 1 there would be stored
+    as a faded trial that nothing faded.
+
+    Raises:
+        ConfigError: (field ``--gain``) naming the value and the schema.
+    """
+    gain = float(getattr(args, "gain", 1.0))
+    if gain != 1.0:
+        from vasim.fixtures.schema import load_schema
+
+        schema = load_schema(args.schema)
+        if not schema.fixtures:
+            raise ConfigError(f"got {gain:g}, expected 1 for schema {schema.name!r}, which "
+                              "has no fixtures (a gain scales a schema's fixtures)",
+                              field="--gain")
+    return gain
 
 
 def _label(args: argparse.Namespace) -> str | None:
@@ -171,7 +199,7 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
         skill=args.skill, practice=args.practice, seed=args.seed, subject=args.subject,
-        max_time=args.max_time, scene=args.scene, label=_label(args),
+        max_time=args.max_time, scene=args.scene, label=_label(args), gain=_gain(args),
     )
     factory = _realtime_device_factory(args.device)
     in_process = bool(getattr(args, "in_process", False))
@@ -262,7 +290,9 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
         ("trial id", "-" if trial_id is None else str(trial_id)),
         ("database", "-" if db is None else str(db)),
         ("task", f"{result.task.name} ({result.task.kind}, {len(m)} points)"),
-        ("schema", f"{result.schema.name} [{s['active_fixtures'] or 'no fixtures'}]"),
+        ("schema", f"{result.schema.name} [{s['active_fixtures'] or 'no fixtures'}]"
+                   + (f", gain {describe_gain(result.config.gain, s)}"
+                      if result.config.gain != 1.0 else "")),
         ("operator", f"{result.config.operator}/{result.config.skill}, seed {result.config.seed}"),
         ("subject", result.config.subject or (
             f"none ({result.config.label})" if result.config.label else "none")),
@@ -289,6 +319,22 @@ def format_summary(result: object, trial_id: int | None, db: Path | None) -> str
     if not math.isfinite(float(s["sim_time"])):
         lines.append("warning: non-finite time")
     return "\n".join(lines)
+
+
+def describe_gain(gain: object, summary: object) -> str:
+    """A trial's fixture gain in words: ``"0.5 (constant)"`` or ``"adaptive 0.25-1, mean
+    0.61"`` (``summary["gain_mean"]``).
+
+    >>> describe_gain(0.5, {"gain_mean": 0.5})
+    '0.5 (constant)'
+    """
+    from vasim.fixtures.gain import AdaptiveRule
+
+    mean = summary.get("gain_mean") if isinstance(summary, dict) else None
+    if isinstance(gain, AdaptiveRule):
+        return (f"adaptive {gain.gain_min:g}-{gain.gain_max:g}"
+                + (f", mean {float(mean):.2f}" if mean is not None else ""))
+    return f"{float(gain):g} (constant)"  # type: ignore[arg-type]
 
 
 _OUTCOME_WORDS = {"timed_out": "timed out", "stopped": "stopped", "failed": "failed",

@@ -81,6 +81,7 @@ from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
+from vasim.study.gain_plan import condition_priors
 from vasim.study.gates import apply_gates, expert_groups
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial, gated_blocks
 from vasim.study.session import (
@@ -314,7 +315,8 @@ def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Gen
                    simulator_experience=d.simulator_experience,
                    robotic_experience=d.robotic_experience)
     conds = list(dict.fromkeys(c for item in q.items for c in item.conditions))
-    perceived = perceive({c: (measured or {}).get(c, 0.0) for c in conds}, rng)
+    perceived = perceive({c: (measured or {}).get(c, 0.0) for c in conds}, rng,
+                         condition_priors(protocol))
     for item in q.items:
         a = _item_answer(item, rng, perceived)
         if a is not None:

@@ -23,11 +23,11 @@ Tables (one row per ...):
     ``n_samples, started_at, ended_at, vasim_version``.
 ``trial_metrics``
     **completed** trial of a subject: the context ``trial_id, subject, group, session_id,
-    protocol, trial_index, block, block_index, trial_in_block, condition, schema, task,
-    variant, probe, probe_index`` (the VF-free trial number 1..8 of the learning curve, NULL
-    for assisted trials), ``repetition, attempt, outcome`` and one column per metric of
-    ``vasim.records.trial_metrics.TRIAL_METRICS`` (units there). Trials outside sessions have
-    NULL session columns and ``condition`` = their schema.
+    protocol, trial_index, block, block_index, trial_in_block, phase, sitting, day,
+    condition, schema, task, variant, probe, probe_index`` (the VF-free trial number 1..8 of
+    the learning curve, NULL for assisted trials), ``repetition, attempt, outcome`` and one
+    column per metric of ``vasim.records.trial_metrics.TRIAL_METRICS`` (units there).
+    Trials outside sessions have NULL session columns and ``condition`` = their schema.
 ``point_metrics``
     trajectory point of a completed trial of a subject: ``trial_id, subject, session_id,
     trial_index,
@@ -44,7 +44,14 @@ Tables (one row per ...):
     n_trials, n_completed, n_interrupted, created_at, ended_at, notes``.
 ``schedule``
     scheduled trial: ``session_id, trial_index, block, block_index, trial_in_block,
-    condition, schema, task, variant, probe, probe_index, repetition, trial_id, attempts``.
+    phase, sitting, day, condition, schema, task, variant, probe, probe_index, repetition,
+    trial_id, attempts``.
+
+``phase`` is the trial's block's phase (``acquisition``, ``retention``, ``transfer``),
+``sitting`` the 1-based sitting (a new one at each block with ``delay_days``) and ``day``
+the nominal day of that sitting after the first [d] (the protocol's delays, not the
+calendar; the real elapsed time is in the ``'sitting'`` events), from the stored protocol
+and schedule (``_phases``).
 
 Trials without a subject (free practice) are in ``samples`` and ``trials`` (the audit
 tables) but left out of the subject analyses (``trial_metrics``, ``point_metrics``);
@@ -85,6 +92,13 @@ from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES
 from vasim.records.trial_metrics import TRIAL_METRICS
+from vasim.study.protocol import (
+    ScheduledTrial,
+    block_of,
+    day_offsets,
+    parse_protocol,
+    sitting_numbers,
+)
 from vasim.study.store import TrialStore
 
 EXPORT_TABLES: tuple[str, ...] = ("samples", "trials", "trial_metrics", "point_metrics",
@@ -97,7 +111,8 @@ CSV_NA = "\\N"
 _CONTEXT: dict[str, str] = {
     "trial_id": "int64", "subject": "str", "group": "str", "session_id": "Int64",
     "protocol": "str", "trial_index": "Int64", "block": "str", "block_index": "Int64",
-    "trial_in_block": "Int64", "condition": "str", "schema": "str", "task": "str",
+    "trial_in_block": "Int64", "phase": "str", "sitting": "Int64", "day": "float64",
+    "condition": "str", "schema": "str", "task": "str",
     "variant": "Int64", "probe": "boolean", "probe_index": "Int64", "repetition": "Int64",
     "attempt": "Int64", "outcome": "str",
 }
@@ -114,8 +129,8 @@ _SPECS: dict[str, dict[str, str]] = {
                "started_at": "str", "ended_at": "str", "vasim_version": "str"},
     "trial_metrics": {**_CONTEXT, **dict.fromkeys(TRIAL_METRICS, "float64")},
     "point_metrics": {**{k: _CONTEXT[k] for k in ("trial_id", "subject", "session_id",
-                                                  "trial_index", "condition", "probe",
-                                                  "probe_index")},
+                                                  "trial_index", "phase", "sitting",
+                                                  "condition", "probe", "probe_index")},
                       "point": "int64", "reached": "bool", "t_reached": "float64",
                       "error_l1": "float64", "latency": "float64", "path_l1": "float64",
                       "path_l2": "float64", "n_samples": "int64"},
@@ -131,14 +146,15 @@ _SPECS: dict[str, dict[str, str]] = {
                  "n_interrupted": "int64", "created_at": "str", "ended_at": "str",
                  "notes": "str"},
     "schedule": {"session_id": "int64", "trial_index": "int64", "block": "str",
-                 "block_index": "int64", "trial_in_block": "int64", "condition": "str",
+                 "block_index": "int64", "trial_in_block": "int64", "phase": "str",
+                 "sitting": "Int64", "day": "float64", "condition": "str",
                  "schema": "str", "task": "str", "variant": "int64", "probe": "bool",
                  "probe_index": "Int64", "repetition": "int64", "trial_id": "Int64",
                  "attempts": "int64"},
 }
 """Column -> dtype of every table (what ``read_export`` restores)."""
 
-_UNITS: dict[str, str] = {"t": "s", "dt": "s", "t_reached": "s", "latency": "s",
+_UNITS: dict[str, str] = {"t": "s", "dt": "s", "day": "d", "t_reached": "s", "latency": "s",
                           "error_l1": "m", "path_l1": "m", "path_l2": "m",
                           **{f"{p}_{a}": u for p, u in (("x", "m"), ("g", "m"), ("f", "N"),
                                                         ("fc", "N"), ("tc", "N m"))
@@ -178,8 +194,31 @@ def _typed(df: pd.DataFrame, table: str) -> pd.DataFrame:
 
 
 # ----------------------------------------------------------------------------- tables
+def _phases(store: TrialStore, session_id: int, sched: pd.DataFrame) -> pd.DataFrame:
+    """``sched`` with the phase, sitting and nominal day of each scheduled trial, from the
+    protocol text stored with the session (``vasim.study.protocol.phases``).
+
+    **Decision**: derived on export, not stored per trial: the stored protocol and the
+    stored schedule determine them (``sitting_numbers``, ``day_offsets``, the same
+    functions the session runner uses), so old databases export them too. A stored
+    protocol this release can no longer parse leaves the three columns missing rather
+    than failing the export.
+    """
+    out = sched.copy()
+    try:
+        protocol = parse_protocol(store.session(session_id)["protocol_toml"],
+                                  source=f"{store.path} session {session_id}")
+        schedule = [ScheduledTrial.from_row(r) for r in sched.to_dict("records")]
+        out["phase"] = [block_of(protocol, t.block).phase for t in schedule]
+        out["sitting"] = sitting_numbers(protocol, schedule)
+        out["day"] = day_offsets(protocol, schedule)
+    except (ConfigError, KeyError):
+        out["phase"], out["sitting"], out["day"] = None, pd.NA, np.nan
+    return out
+
+
 def _schedule_all(store: TrialStore) -> pd.DataFrame:
-    frames = [store.schedule(int(i)) for i in store.sessions()["id"]]
+    frames = [_phases(store, int(i), store.schedule(int(i))) for i in store.sessions()["id"]]
     if not frames:
         return _typed(pd.DataFrame({c: [] for c in _SPECS["schedule"]}), "schedule")
     return _typed(pd.concat(frames, ignore_index=True), "schedule")
@@ -219,8 +258,8 @@ def _trial_metrics_table(store: TrialStore, ctx: pd.DataFrame) -> pd.DataFrame:
 
 def _point_metrics_table(store: TrialStore, ctx: pd.DataFrame) -> pd.DataFrame:
     frames = []
-    keys = ["trial_id", "subject", "session_id", "trial_index", "condition", "probe",
-            "probe_index"]
+    keys = ["trial_id", "subject", "session_id", "trial_index", "phase", "sitting",
+            "condition", "probe", "probe_index"]
     for row in ctx[keys].itertuples(index=False):
         pm = store.point_metrics(int(row.trial_id))
         if pm.empty:

@@ -11,7 +11,10 @@ Pure functions of a protocol and its schedule (issue #18 items 1 and 3), used by
 * ``condition_effects``: the calibrated effects by condition label, extended with the
   labels the seed did not calibrate -- a faded/adaptive condition (``ff_faded``) takes its
   schema's effect, a combined schema (``ag_mag``) the combination of its fixtures'
-  (``vasim.operator.combined``); labels the seed calibrated keep their numbers.
+  (``vasim.operator.combined``); labels the seed calibrated keep their numbers;
+* ``condition_priors``: the questionnaire priors of the same labels
+  (``vasim.operator.questionnaire.condition_prior``: combined from the fixtures, faded by
+  the block's mean gain ``block_mean_gain``).
 
 **Decision** (adaptive trials and the calibrated operator): the gain of an adaptive trial
 is only known once it has run (it follows the trainee's deviation), while the operator's
@@ -29,10 +32,12 @@ from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.schema import load_schema
 from vasim.operator.combined import label_effects
 from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.operator.questionnaire import SEED_MEAN_RATING, ConditionPrior, condition_prior
 from vasim.study.protocol import Block, Protocol, ScheduledTrial
 from vasim.trials.kinds import TELEOPERATION_MODES
 
 _EFFECTS: dict[tuple[Block, ...], dict[str, FixtureEffect]] = {}
+_PRIORS: dict[tuple[Block, ...], dict[str, ConditionPrior]] = {}
 
 
 def trial_gain(protocol: Protocol, scheduled: ScheduledTrial) -> GainRule:
@@ -97,4 +102,49 @@ def condition_effects(protocol: Protocol) -> dict[str, FixtureEffect]:
     return out
 
 
-__all__ = ["condition_effects", "gain_text", "learning_gain", "schedule_gains", "trial_gain"]
+def block_mean_gain(block: Block) -> float:
+    """The mean ``learning_gain`` over the block's own trials (1 for a constant block):
+    what a subject experienced of the condition as a whole.
+
+    >>> from vasim.study.protocol import load_protocol
+    >>> {b.condition: block_mean_gain(b) for b in load_protocol("vf_fading").blocks
+    ...  if b.has_gain}
+    {'ff_faded': 0.625, 'ff_adaptive': 0.5, 'mag_faded': 0.625, 'mag_adaptive': 0.5}
+    """
+    n = len(block.variants) * block.repetitions
+    if not block.has_gain or n == 0:
+        return 1.0
+    return float(sum(learning_gain(block.trial_gain(i)) for i in range(n)) / n)
+
+
+def condition_priors(protocol: Protocol) -> dict[str, ConditionPrior]:
+    """The questionnaire priors of the protocol's conditions the seed did not rate: a
+    combined schema from its fixtures, a faded/adaptive condition from its schema's
+    fixtures at the block's mean gain (``vasim.operator.questionnaire.condition_prior``;
+    conditions with an unrated fixture are left out, i.e. neutral). Cached per protocol
+    blocks, as ``condition_effects``.
+
+    >>> from vasim.study.protocol import load_protocol
+    >>> pr = condition_priors(load_protocol("vf_schemas"))
+    >>> sorted(pr), round(pr["mag_ff"].best_share, 4)
+    (['ag_mag', 'mag_ff', 'vg_ag'], 0.5136)
+    """
+    cached = _PRIORS.get(protocol.blocks)
+    if cached is not None:
+        return dict(cached)
+    out: dict[str, ConditionPrior] = {}
+    for b in protocol.blocks:
+        cond = b.condition
+        if b.probe or cond in TELEOPERATION_MODES or cond in out:
+            continue
+        if cond in SEED_MEAN_RATING and not b.has_gain:
+            continue  # the seed rated it
+        prior = condition_prior(load_schema(b.schema or cond).kinds, block_mean_gain(b))
+        if prior is not None:
+            out[cond] = prior
+    _PRIORS[protocol.blocks] = out
+    return dict(out)
+
+
+__all__ = ["block_mean_gain", "condition_effects", "condition_priors", "gain_text",
+           "learning_gain", "schedule_gains", "trial_gain"]

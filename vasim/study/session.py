@@ -89,6 +89,7 @@ from vasim.study.protocol import (
     sitting_numbers,
     validate_answers,
 )
+from vasim.study.sitting_rule import early_sitting
 from vasim.study.store import SessionMeta, TrialStore
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 from vasim.trials.registry import run_trial
@@ -504,15 +505,29 @@ def _check_delay(store: TrialStore, session: Session, st: ScheduledTrial, delay:
                  simulate: bool) -> dict[str, Any]:
     """The sitting's record; refuses a real sitting whose delay has not passed."""
     rec = sitting_record(store, session, st, delay, simulate)
-    if not simulate and rec["elapsed_days"] is not None and rec["elapsed_days"] < delay:
-        last = pd.Timestamp(rec["previous_ended_at"])
-        due = last + pd.Timedelta(days=delay)
-        raise StoreError(
-            f"session {session.id} of subject {session.subject!r}: sitting "
-            f"{rec['sitting']} (block {st.block!r}) begins {delay:g} d after the previous "
-            f"trial (ended {last.isoformat()}), due {due.isoformat()}; resume then, or pass "
-            "--simulate-delay to record a simulated delay")
+    if not simulate:
+        check_sitting_due(session, rec, "resume then, or pass --simulate-delay to record "
+                          "a simulated delay")
     return rec
+
+
+def check_sitting_due(session: Session, rec: Mapping[str, Any], remedy: str,
+                      now: str | pd.Timestamp | None = None) -> None:
+    """Refuses the later sitting ``rec`` (:func:`sitting_record`) when its delay has not
+    passed at ``now`` (None: the current time): the rule of
+    :func:`vasim.study.sitting_rule.early_sitting`, shared by ``vasim study resume`` and the
+    viewer, each with its own ``remedy``.
+
+    Raises:
+        StoreError: naming the session, subject, sitting, block, delay, when the previous
+            trial ended, when the sitting is due and how long that is.
+    """
+    early = early_sitting(sitting=int(rec["sitting"]), block=str(rec["block"]),
+                          delay_days=float(rec["delay_days"]),
+                          previous_ended_at=rec.get("previous_ended_at"),
+                          now=pd.Timestamp.now(tz="UTC") if now is None else now)
+    if early is not None:
+        raise StoreError(early.message(session.id, session.subject, remedy))
 
 
 def record_sitting(store: TrialStore, session: Session, st: ScheduledTrial,
@@ -647,6 +662,7 @@ __all__ = [
     "SessionSettings",
     "abort_session",
     "after_simulated_trial",
+    "check_sitting_due",
     "find_session",
     "load_answers_file",
     "load_session",

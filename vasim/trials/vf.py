@@ -204,6 +204,8 @@ class TrialFrame:
         abdomen: the latest physics snapshot (deforming organs, moving targets, contact), or
             None for a static task.
         tissue_force: (3,) tissue contact force on the tool tip this step [N], or None.
+        gain: the fixture gain of this step's render (``vasim.fixtures.gain``; 1: the
+            schema as written).
     """
 
     k: int
@@ -219,6 +221,7 @@ class TrialFrame:
     error_l1: float = 0.0
     abdomen: AbdomenSnapshot | None = None
     tissue_force: Vec3 | None = None
+    gain: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -636,6 +639,7 @@ class TrialRunner:
             n_points=self._n, done=self.done, outputs=self.runtime.outputs(),
             last_latency=last_latency, error_l1=self._err, abdomen=self._snap,
             tissue_force=np.array(self._fc) if self.abdomen is not None else None,
+            gain=float(getattr(self.runtime, "gain", 1.0)),
         )
 
     def result(self, wall_time: float = 0.0, *,

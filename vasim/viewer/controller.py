@@ -20,7 +20,11 @@ Modes (**decisions**):
   first pending scheduled trial with the session's ``trial_config`` and stores it linked to
   its schedule index (``TrialStore.begin_trial`` refuses a second running attempt, so a
   double start from two tabs cannot duplicate a trial). The session completes when no
-  scheduled trial is pending.
+  scheduled trial is pending. A pending trial that begins a later sitting (a block with
+  ``delay_days``) is refused before its delay has passed since the previous trial ended,
+  on Start (before any countdown) and on auto-advance alike: the status line and the
+  notification name the sitting and when it is due (``history.refuse_early_sitting``, the
+  rule of ``vasim study resume``; no simulated delay in the browser).
 
 Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
 on completion the samples, per-point metrics, summary, events and trial metrics are
@@ -66,6 +70,7 @@ from vasim.viewer.history import (
     learning_curve,
     open_session,
     record_browser_sitting,
+    refuse_early_sitting,
     session_progress,
     trial_score_card,
 )
@@ -76,6 +81,7 @@ from vasim.viewer.state import (
     PanelState,
     TrialInfo,
     f5pl_fields,
+    gain_plan,
     plain,
     plain_dict,
     schema_choices,
@@ -267,6 +273,7 @@ class TrainingController(ConditionCommands):
             input=input_kind, trial_id=trial_id,
             schedule_index=None if scheduled is None else scheduled.index,
             condition=None if scheduled is None else scheduled.condition,
+            gain_plan=self._gain_plan(config, session, scheduled),
         )
         self.browser = device if isinstance(device, BrowserDevice) else None
         self.instrument = device if isinstance(device, LaparoscopicDevice) else None
@@ -277,6 +284,17 @@ class TrainingController(ConditionCommands):
         trial.start()
         self._pair = (self.info, trial)
         return self.info
+
+    @staticmethod
+    def _gain_plan(config: TrialConfig, session: Any, scheduled: Any) -> str:
+        """How the trial's fixture gain is set (``state.gain_plan``): a protocol trial's
+        from its block (``vasim.study.gain_plan.gain_text``), any other's from its config."""
+        text = ""
+        if session is not None and scheduled is not None:
+            from vasim.study.gain_plan import gain_text
+
+            text = gain_text(session.protocol, scheduled)
+        return gain_plan(config.gain, text)
 
     def _close_trial(self, reason: str, *, failed: bool = False) -> None:
         """Stops the running trial; a stored one that is not done (or whose loop ``failed``)
@@ -413,6 +431,11 @@ class TrainingController(ConditionCommands):
             self._publish(status=f"session {session.id} is complete", **self._progress())
             return
         nxt = pending[0]
+        try:  # a later sitting before its delay: refused, as vasim study resume does
+            refuse_early_sitting(self.store(), session, nxt)
+        except StoreError as exc:
+            self._publish(running=False, status=str(exc), **self._progress())
+            raise
         cfg = replace(session.trial_config(nxt), scene=self.scene)
         # The session's input (stored with it when it was created) drives all its trials.
         kind = str(session.settings.extra.get("input", self.panel.input))
@@ -566,6 +589,15 @@ class TrainingController(ConditionCommands):
         p = self.panel
         if (self.active() or self._pending is not None) and p.mode != "demo":
             raise ConfigError("a trial is already running (Stop it first)", field="start")
+        if p.mode == "protocol":   # refuse an early sitting before any countdown
+            session = self._session()
+            self._publish(session_id=session.id)
+            if session.pending:
+                try:
+                    refuse_early_sitting(self.store(), session, session.pending[0])
+                except StoreError as exc:
+                    self._publish(running=False, status=str(exc), **self._progress())
+                    raise
         if p.mode != "demo" and p.input != "scripted" and self.countdown_s > 0:
             # The start cue (**decision**: a countdown, not the first move, because the
             # trial's clock must not depend on when a page's first batch arrives): the
@@ -640,6 +672,7 @@ class TrainingController(ConditionCommands):
             self._start_demo(replace(cfg, variant=variant, seed=cfg.seed + 1))
         elif (p.mode == "protocol" and p.auto_advance and self.info.schedule_index is not None
               and p.position is not None):
+            self._done_since = math.inf  # once: a refused next sitting is not retried
             self._start_protocol_trial()
         else:
             self._done_since = math.inf  # hold the final frame until the next command

@@ -100,6 +100,29 @@ def record_browser_sitting(st: Any, session_id: int, index: int) -> None:
         record_sitting(st, s, scheduled, rec)
 
 
+BROWSER_SITTING_REMEDY = ("come back then: a browser session waits the real delay "
+                          "(a simulated delay is vasim study resume --simulate-delay)")
+"""What the trainee page's refusal of an early sitting tells the subject to do."""
+
+
+def refuse_early_sitting(st: Any, session: Any, scheduled: Any,
+                         now: str | None = None) -> None:
+    """Refuses to begin ``scheduled`` when it begins a later sitting whose delay has not
+    passed since the previous trial ended: the rule of ``vasim study resume`` without
+    ``--simulate-delay`` (``vasim.study.session.check_sitting_due``).
+
+    Raises:
+        StoreError: naming the sitting, when it is due and how long that is.
+    """
+    from vasim.study.session import check_sitting_due, sitting_begins, sitting_record
+
+    delay = sitting_begins(session, scheduled)
+    if delay is None:
+        return
+    rec = sitting_record(st, session, scheduled, delay, False)
+    check_sitting_due(session, rec, BROWSER_SITTING_REMEDY, now=now)
+
+
 def learning_curve(st: Any, session_id: int | None, subject: str | None,
                    label: str | None = None) -> tuple[tuple[int, float, float], ...]:
     """The learning curve so far, ``(n, completion_time, mean_latency)`` per trial: the
@@ -170,5 +193,5 @@ def session_progress(st: Any, session_id: int, running_index: int | None) -> dic
 
 
 __all__ = ["BENCHMARK_LEVEL", "CURVE_METRICS", "learning_curve", "open_session",
-           "record_browser_sitting", "session_progress", "trial_gate_card",
+           "record_browser_sitting", "refuse_early_sitting", "session_progress", "trial_gate_card",
            "trial_score_card"]

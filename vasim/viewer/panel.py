@@ -1,5 +1,7 @@
 """The experimenter's panel: mode, subject, protocol, progress, trial control, the fixture
-schema with live f5PL editing, live metrics, the end-of-trial summary and learning curve.
+schema with live f5PL editing, live metrics, the end-of-trial summary and learning curve;
+the live metrics include the running trial's fixture gain (its current value and whether
+it is constant, scheduled or adaptive).
 
 The panel only reads and queues: every control's callback turns into a controller
 ``Command`` passed to ``submit`` (the app queues it for the controller thread), and
@@ -104,6 +106,19 @@ def summary_text(summary: dict[str, Any] | None) -> str:
     return "| metric | value | unit |\n|---|---|---|\n" + "\n".join(rows)
 
 
+def gain_text(info: TrialInfo, frame: TrialFrame) -> str:
+    """The experimenter's gain cell: the current gain and how it is set, e.g. ``"0.63
+    (adaptive 25-100 %)"``; ``"— (no fixtures)"`` for a fixture-free trial.
+
+    **Decision**: only the experimenter page shows it; the trainee page does not (what
+    the trainee is told about the assistance is the protocol's business, not the
+    viewer's).
+    """
+    if not info.fixtures:
+        return "— (no fixtures)"
+    return f"{float(frame.gain):.2f} ({md_escape(info.gain_plan)})"
+
+
 def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
                  outcome: str | None = None) -> str:
     """Live metrics (markdown): the trial (its store id, how it ended), time in trial and
@@ -132,6 +147,7 @@ def metrics_text(info: TrialInfo, frame: TrialFrame, latencies: Sequence[float],
     return (f"| | |\n|---|---|\n"
             f"| Trial | {md_escape(info.title)} ({md_escape(info.mode)}, {md_escape(state)}) |\n"
             f"| Time | {frame.t:.2f} s of {limit:.0f} s |\n"
+            f"| Fixture gain | {gain_text(info, frame)} |\n"
             f"| Distance to path | {path_txt} |\n"
             f"| Distance to goal | {goal_mm:.1f} mm |\n"
             f"| Points | {min(frame.goal_index, frame.n_points)} / {frame.n_points} |\n"
@@ -354,5 +370,14 @@ class ExperimenterPanel:
             self.metrics.content = text
 
 
-__all__ = ["F5PL_FIELDS", "NO_PROTOCOL", "ExperimenterPanel", "f5pl_curve", "md_escape",
-           "metrics_text", "progress_text", "summary_text"]
+__all__ = [
+    "F5PL_FIELDS",
+    "NO_PROTOCOL",
+    "ExperimenterPanel",
+    "f5pl_curve",
+    "gain_text",
+    "md_escape",
+    "metrics_text",
+    "progress_text",
+    "summary_text",
+]

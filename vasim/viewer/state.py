@@ -13,6 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
+from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, available_schemas
 from vasim.trials.vf import TrialConfig
@@ -38,6 +39,21 @@ class Command:
     value: Any = None
 
 
+def gain_plan(rule: GainRule, schedule_text: str = "") -> str:
+    """How a trial's fixture gain is set, for the experimenter: ``"adaptive 25-100 %"``
+    (assist-as-needed), ``"scheduled (gain 75 %)"`` (a faded block's stage,
+    ``vasim.study.gain_plan.gain_text``) or ``"constant"`` (a constant gain, 1 included).
+
+    >>> gain_plan(0.75, "gain 75 %"), gain_plan(0.5), gain_plan(1.0)
+    ('scheduled (gain 75 %)', 'constant', 'constant')
+    """
+    if isinstance(rule, AdaptiveRule):
+        return f"adaptive {rule.gain_min * 100:.0f}-{rule.gain_max * 100:.0f} %"
+    if schedule_text:
+        return f"scheduled ({schedule_text})"
+    return "constant"
+
+
 @dataclass(frozen=True, eq=False)
 class TrialInfo:
     """What does not change during one trial (built once per trial).
@@ -49,7 +65,9 @@ class TrialInfo:
         (N, 3) or None. reach_radius: [m]. start: (3,) tool start [m]. mode: the mode it
         runs in. input: ``INPUTS``. trial_id: store id (None when not stored).
         schedule_index: 0-based scheduled trial (protocol mode). condition: the protocol's
-        condition label (protocol mode).
+        condition label (protocol mode). gain_plan: how its fixture gain is set
+        (``panel.gain_plan``: ``"constant"``, ``"scheduled (gain 75 %)"``,
+        ``"adaptive 25-100 %"``); the current value is each frame's ``gain``.
     """
 
     number: int
@@ -66,6 +84,7 @@ class TrialInfo:
     trial_id: int | None = None
     schedule_index: int | None = None
     condition: str | None = None
+    gain_plan: str = "constant"
 
     @property
     def title(self) -> str:
@@ -165,5 +184,5 @@ def schema_choices(current: str) -> tuple[str, ...]:
     names = available_schemas()
     return names if current in names else (*names, current)
 
-__all__ = ["Command", "PanelState", "TrialInfo", "f5pl_fields", "plain", "plain_dict",
-           "schema_choices", "with_f5pl"]
+__all__ = ["Command", "PanelState", "TrialInfo", "f5pl_fields", "gain_plan", "plain",
+           "plain_dict", "schema_choices", "with_f5pl"]

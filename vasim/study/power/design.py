@@ -18,7 +18,8 @@ integration step.
   calibration, s = 0 a null fixture effect (every fixture like VF-free; the power of the
   fixture tests is then their type-I error), s = 0.5 half the effects. An effects file
   (``--effects FILE.toml``, :func:`parse_effects`) sets single fixtures' effects first;
-  the scale then applies to them.
+  the scale then applies to them. A protocol's ``[power]`` table sets both too
+  (:mod:`vasim.study.protocol.power`: calibration < protocol < command line).
 * Integration step (:data:`FULL_DT`, :data:`COARSE_DT`): the 1 kHz control step of every
   stored trial, or the validated coarse planning step (``--coarse``, see
   :data:`COARSE_DT`).
@@ -35,10 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
-from vasim.core.config import check_int, check_keys, check_number, parse_toml
+from vasim.core.config import check_int, check_number, parse_toml
 from vasim.core.errors import ConfigError
 from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
 from vasim.study.protocol import Protocol
+from vasim.study.protocol.power import EFFECT_FIELDS, effects_from_tables
 from vasim.trials.kinds import TELEOPERATION_MODES
 
 FULL_DT = 1e-3
@@ -200,11 +202,6 @@ def check_power_protocol(protocol: Protocol) -> None:
                           "fixture and practice tests need one", field="--protocol")
 
 
-EFFECT_FIELDS: tuple[str, ...] = ("accuracy", "speed", "practice_weight", "carryover",
-                                  "dependence")
-"""The fields of an effects file's table (``FixtureEffect``'s)."""
-
-
 def parse_effects(text: str, *, file: str | Path | None = None,
                   base: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> dict[str, FixtureEffect]:
     """Fixture effects from an effects file (``--effects FILE.toml``): one table per
@@ -227,22 +224,13 @@ def parse_effects(text: str, *, file: str | Path | None = None,
         >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed, e["mag"].speed
         (0.8, True, 0.8)
     """
-    data = parse_toml(text, file=file, kind="effects")
-    out = dict(base)
-    for label, table in data.items():
-        t = check_keys(table, EFFECT_FIELDS, str(label), file=file)
-        values = {k: getattr(out.get(label, FixtureEffect()), k) for k in EFFECT_FIELDS}
-        for k, v in t.items():
-            values[k] = check_number(v, f"{label}.{k}", file=file)
-        try:
-            out[str(label)] = FixtureEffect(**values)
-        except ValueError as exc:
-            raise ConfigError(str(exc), file=file, field=str(label)) from None
-    return out
+    return effects_from_tables(parse_toml(text, file=file, kind="effects"), file=file,
+                               base=base)
 
 
-def load_effects(path: str | Path) -> dict[str, FixtureEffect]:
-    """:func:`parse_effects` of a file.
+def load_effects(path: str | Path, base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+                 ) -> dict[str, FixtureEffect]:
+    """:func:`parse_effects` of a file, applied over ``base``.
 
     Raises:
         ConfigError: the file cannot be read, or :func:`parse_effects`'s errors.
@@ -253,7 +241,7 @@ def load_effects(path: str | Path) -> dict[str, FixtureEffect]:
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read the effects file: {exc}", file=p,
                           field="--effects") from None
-    return parse_effects(text, file=p)
+    return parse_effects(text, file=p, base=base)
 
 
 @dataclass(frozen=True)

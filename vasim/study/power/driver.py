@@ -2,11 +2,14 @@
 
 :func:`run_power` starts a local Ray on this machine (``ray.init(num_cpus=workers,
 include_dashboard=False)``, its processes on 127.0.0.1) or joins the cluster ``address``
-names (``ray://head:10001`` through Ray Client, or ``auto`` / ``host:6379`` from a cluster
-node), submits one task per design point and cohort (:func:`~vasim.study.power.cohort.
-cohort_tests`), collects them as they finish with a progress bar over cohorts
-(:mod:`vasim.core.progress`) and always shuts Ray down (``ray.shutdown()`` in a
-``finally``: Ctrl-C and errors included; a local Ray's processes end with it).
+names: ``host:port`` (the head's GCS port; the driver must run on a node of the
+cluster, tested in ``tests/study/power/test_cluster.py``), ``auto`` (the cluster started on
+this node) or ``ray://head:10001`` (Ray Client, from anywhere; needs the ``ray[client]``
+extra). It submits one task per design point and cohort
+(:func:`~vasim.study.power.cohort.cohort_tests`), collects them as they finish with a
+progress bar over cohorts (:mod:`vasim.core.progress`) and always shuts Ray down
+(``ray.shutdown()`` in a ``finally``: Ctrl-C and errors included; a local Ray's processes
+end with it).
 
 **Decisions**:
 
@@ -105,9 +108,32 @@ def init_ray(address: str | None, workers: int | None) -> int:
     except (ConnectionError, RuntimeError, ValueError) as exc:
         ray.shutdown()
         where = f"the Ray cluster {address!r}" if address else "a local Ray"
-        raise ConfigError(f"could not start or join {where}: {exc}",
+        raise ConfigError(f"could not start or join {where}: {exc}{_join_hint(address)}",
                           field="--address") from None
     return int(ray.cluster_resources().get("CPU", 0))
+
+
+def _join_hint(address: str | None) -> str:
+    """What to check when joining ``address`` failed (nothing for a local Ray).
+
+    **Decision**: Ray 2.60 enables token authentication on a cluster whose head finds a
+    token (``~/.ray/auth_token``), but a driver given an explicit address never enables it
+    by itself; such a join fails with "Authentication token is missing or incorrect"
+    repeated until Ray's timeout. vasim does not set the mode for the user (it would send
+    a token to any address named); the error says what to export instead.
+
+    >>> _join_hint(None)
+    ''
+    >>> "RAY_AUTH_MODE=token" in _join_hint("10.0.0.5:6379")
+    True
+    """
+    if not address:
+        return ""
+    hint = ("; a cluster with token authentication needs RAY_AUTH_MODE=token and its token "
+            "(RAY_AUTH_TOKEN, RAY_AUTH_TOKEN_PATH or ~/.ray/auth_token) in this shell")
+    if address.startswith("ray://"):
+        hint += "; a ray:// address needs the ray[client] extra installed"
+    return hint
 
 
 def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = None,

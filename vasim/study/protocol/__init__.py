@@ -49,6 +49,11 @@ TOML layout (every field is checked; defaults in brackets)::
     adaptive = { gain_min = 0.25, gain_max = 1.0, tau_s = 2.0, deviation_full_m = 0.003,
                  initial = 0.5 }        # [none] assist-as-needed (initial: [gain_max])
 
+    [power]                             # [none] planning effects of `vasim study power`
+    effect_scale = 0.5                  # [1] (vasim.study.protocol.power); the command
+    [power.effects.ff]                  # line's --effect-scale / --effects override them
+    accuracy = 0.8                      # labels: the protocol's conditions
+
     [questionnaires.pre]
     demographics = true                 # [false] group, specialisation, experience levels
     [[questionnaires.pre.items]]        # further items (same layout as post)
@@ -119,6 +124,7 @@ from vasim.study.protocol.model import (
     TaskKind,
 )
 from vasim.study.protocol.phases import PHASES, Gate, gated_blocks
+from vasim.study.protocol.power import PowerPlan
 from vasim.study.protocol.questionnaires import (
     ITEM_TYPES,
     LIKERT_POINTS,
@@ -152,6 +158,7 @@ __all__ = [
     "AnswerRow",
     "Block",
     "Gate",
+    "PowerPlan",
     "Protocol",
     "QuestionItem",
     "Questionnaire",

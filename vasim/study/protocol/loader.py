@@ -19,12 +19,13 @@ from vasim.core.errors import ConfigError
 from vasim.core.resources import available_files, data_file, read_data_file, studies_dir
 from vasim.study.protocol.model import Block, Protocol
 from vasim.study.protocol.phases import Gate
+from vasim.study.protocol.power import power_plan_from_table
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 
 _TOP = ("name", "description", "task", "reach_radius_m", "max_trial_time_s",
         "excessive_force_n", "repeat_timed_out", "path_tolerance_m", "poi_spacing_m",
         "randomisation", "probe", "blocks",
-        "questionnaires")
+        "questionnaires", "power")
 _BLOCK = ("name", "condition", "variants", "repetitions", "probe", "counterbalance",
           "probes_after", "schema", "phase", "delay_days", "gate")
 _GATE = ("metrics", "k", "consecutive", "max_trials", "expert_group")
@@ -124,6 +125,10 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
             questionnaires[qname] = Questionnaire(q.get("demographics", False), tuple(items))
         except ConfigError as exc:
             raise rewrap(exc, qpath, source) from exc
+    try:
+        power = power_plan_from_table(data["power"]) if "power" in data else None
+    except ConfigError as exc:
+        raise rewrap(exc, "", source) from exc
     kw: dict[str, Any] = {
         "name": data["name"], "description": data["description"], "task": data["task"],
         "blocks": tuple(blocks),
@@ -137,7 +142,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),
         "probe_variant": probe.get("variant", 0),
-        "pre": questionnaires["pre"], "post": questionnaires["post"],
+        "pre": questionnaires["pre"], "post": questionnaires["post"], "power": power,
         "text": text, "source": source,
     }
     try:

@@ -39,6 +39,7 @@ from vasim.fixtures.gain import (
     scheduled_gain,
 )
 from vasim.study.protocol.phases import Gate, check_block_phase, check_protocol_phases
+from vasim.study.protocol.power import PowerPlan
 from vasim.study.protocol.questionnaires import QuestionItem, Questionnaire
 from vasim.trials.kinds import TELEOPERATION_MODES
 
@@ -176,6 +177,8 @@ class Protocol:
         probe_condition: condition of probe trials (a fixture-free schema).
         probe_variant: variant of probe trials.
         blocks: the blocks in file order. pre, post: the questionnaires.
+        power: the ``[power]`` table's planning effects (``vasim.study.protocol.power``),
+            or None.
         text: the TOML text it was parsed from (stored with each session; not compared).
         source: the file it came from (not compared).
 
@@ -200,6 +203,7 @@ class Protocol:
     probe_variant: int = 0
     pre: Questionnaire = _NO_QUESTIONS
     post: Questionnaire = _NO_QUESTIONS
+    power: PowerPlan | None = None
     text: str | None = field(default=None, compare=False, repr=False)
     source: str | None = field(default=None, compare=False, repr=False)
 
@@ -256,6 +260,10 @@ class Protocol:
                 raise fail(b.probes_after, "0 (teleoperation-mode blocks have no "
                            "fixture-free probes)", field=f"blocks[{i}].probes_after")
         check_protocol_phases(self)
+        if self.power is not None:
+            if not isinstance(self.power, PowerPlan):
+                raise fail(self.power, "a PowerPlan", field="power")
+            self.power.check_labels(self.conditions)
         n_trials = sum(b.n_trials for b in self.blocks)
         if n_trials > TRIALS_PER_SESSION.high:
             raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "

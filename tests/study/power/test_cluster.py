@@ -1,0 +1,180 @@
+"""`vasim study power --address` against a real Ray cluster started on this machine
+(`ray start --head --block` on 127.0.0.1, 1 CPU), compared with the local-Ray run of the
+same seed (vasim/study/power/driver.py).
+
+The cluster is this test's own: `ray start --block` runs as a child process in its own
+session with its own `--temp-dir` (where it records `ray_current_cluster`, so a concurrent
+`ray.init()` on the machine, which looks in /tmp/ray, never finds and joins it), and
+teardown ends it and its descendants by pid (never `ray stop`, which would stop every Ray
+of the user on the machine) and removes its temp dir. Starting it takes
+~10 s here (2026-11-27), so the test stays in the suite. The cluster uses token
+authentication (Ray 2.60) with a token of the test's own, given to the driver as
+``RAY_AUTH_MODE=token`` and ``RAY_AUTH_TOKEN``: what a user joining such a cluster exports.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pandas as pd
+import psutil
+import pytest
+
+import vasim
+from vasim.cli import main
+
+RAY = Path(sys.executable).with_name("ray")
+START_TIMEOUT_S = 60.0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _ray_client_missing() -> bool:
+    from ray._private.utils import get_ray_client_dependency_error
+
+    return get_ray_client_dependency_error() is not None
+
+
+def _wait_for_gcs(port: int, proc: subprocess.Popen[bytes], log: Path) -> None:
+    """Until the cluster's GCS accepts connections and `ray start` reports it started."""
+    end = time.monotonic() + START_TIMEOUT_S
+    while time.monotonic() < end:
+        if proc.poll() is not None:
+            pytest.fail(f"ray start exited {proc.returncode}: {log.read_text()[-2000:]}")
+        if "Ray runtime started" in log.read_text(errors="replace"):
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    return
+        time.sleep(0.25)
+    pytest.fail(f"the Ray head did not start in {START_TIMEOUT_S} s: "
+                f"{log.read_text()[-2000:]}")
+
+
+AUTH_VARS = ("RAY_AUTH_MODE", "RAY_AUTH_TOKEN", "RAY_AUTH_TOKEN_PATH")
+
+
+def _reset_ray_auth() -> None:
+    """Makes this process's Ray re-read the authentication variables (Ray caches them)."""
+    from ray._raylet import AuthenticationTokenLoader, Config
+
+    Config.initialize("")
+    AuthenticationTokenLoader.instance().reset_cache()
+
+
+@contextmanager
+def _cluster_token() -> Iterator[dict[str, str]]:
+    """Token authentication with a token of this test's own, in this process (the driver)
+    and for the head: the shared ``~/.ray/auth_token`` (which any local Ray creates) is then
+    neither needed nor read, whatever ran before."""
+    from ray._private.authentication.authentication_token_generator import (
+        generate_new_authentication_token,
+    )
+
+    saved = {k: os.environ.get(k) for k in AUTH_VARS}
+    auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": generate_new_authentication_token()}
+    os.environ.pop("RAY_AUTH_TOKEN_PATH", None)
+    os.environ.update(auth)
+    _reset_ray_auth()
+    try:
+        yield auth
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        _reset_ray_auth()
+
+
+@pytest.fixture
+def ray_cluster(tmp_path: Path) -> Iterator[int]:
+    """A 1-CPU Ray head on 127.0.0.1 (its GCS port), ended by pid in teardown."""
+    if not RAY.exists():
+        pytest.skip(f"no ray executable beside {sys.executable}")
+    with _cluster_token():
+        yield from _head(tmp_path)
+
+
+def _head(tmp_path: Path) -> Iterator[int]:
+    port = _free_port()
+    log = tmp_path / "ray_head.log"
+    env = dict(os.environ)
+    root = str(Path(vasim.__file__).resolve().parents[1])   # the workers import this vasim
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    temp = Path("/tmp") / f"vasim_ray_{os.getpid()}_{port}"   # short: unix socket paths
+    with log.open("wb") as out:
+        proc = subprocess.Popen(
+            [str(RAY), "start", "--head", "--block", "--node-ip-address", "127.0.0.1",
+             "--port", str(port), "--num-cpus", "1", "--include-dashboard", "false",
+             "--disable-usage-stats", "--temp-dir", str(temp)],
+            stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    try:
+        _wait_for_gcs(port, proc, log)
+        yield port
+    finally:
+        try:
+            family = psutil.Process(proc.pid).children(recursive=True)
+        except psutil.Error:
+            family = []
+        proc.terminate()                  # ray start --block drains and ends its children
+        try:
+            proc.wait(timeout=45)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+        _, alive = psutil.wait_procs(family, timeout=15)
+        for p in alive:
+            p.kill()
+        shutil.rmtree(temp, ignore_errors=True)      # the head's session logs and sockets
+        assert not alive, f"Ray processes outlived their head: {alive}"
+
+
+def _power(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    code = main(["study", "power", *argv, "--out", str(out), "--no-progress"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    return text
+
+
+def test_address_of_a_running_cluster_gives_the_local_result(
+        ray_cluster: int, tiny_protocol_path: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    common = ["--protocol", str(tiny_protocol_path), "--subjects", "3,4", "--cohorts", "2",
+              "--coarse", "--max-time", "1.5", "--seed", "11"]
+    address = f"127.0.0.1:{ray_cluster}"
+    on_cluster = _power([*common, "--address", address], tmp_path / "cluster", capsys)
+    local = _power([*common, "--workers", "1"], tmp_path / "local", capsys)
+    assert f"(cluster {address})" in on_cluster and "on 1 CPU(s)" in on_cluster
+    assert "(local Ray)" in local
+    # same seeds -> the same cohorts -> the same F, p and power, whatever ran them
+    a = pd.read_csv(tmp_path / "cluster" / "power_cohorts.csv")
+    b = pd.read_csv(tmp_path / "local" / "power_cohorts.csv")
+    assert set(a["n_subjects"]) == {3, 4} and set(a["cohort"]) == {0, 1}
+    assert a["F"].notna().sum() >= 4, a          # real tests were computed and compared
+    pd.testing.assert_frame_equal(a, b)
+    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "cluster" / "power.csv"),
+                                  pd.read_csv(tmp_path / "local" / "power.csv"))
+    table = [ln for ln in on_cluster.splitlines() if "±" in ln]
+    assert table and table == [ln for ln in local.splitlines() if "±" in ln]
+
+
+@pytest.mark.skipif(not _ray_client_missing(), reason="ray[client] is installed here")
+def test_a_ray_client_address_without_ray_client_is_a_clear_error(
+        tiny_protocol_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["study", "power", "--protocol", str(tiny_protocol_path), "--subjects", "2",
+                 "--cohorts", "1", "--address", "ray://127.0.0.1:10001", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and "--address" in err and "ray[client]" in err, err
+    assert err.count("\n") == 1
