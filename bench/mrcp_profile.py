@@ -15,8 +15,8 @@ Parts (what is wrapped):
 * FK: ``arm.tcp_pose`` and the world's link frames (``dh.frames_many`` / ``frames_one``);
 * Jacobians: ``arm.jacobian`` / ``jacobian_batch`` (first-order steps; Θ's Jacobians are
   inside its own compiled call and count as Θ);
-* indices, each: its ``evaluate`` (Θ: its compiled call, FK and Jacobians of its samples
-  included);
+* indices, each: its ``evaluate`` / ``evaluate_many`` (Θ: its compiled call, FK and
+  Jacobians of its samples included);
 * distances: the evaluation's batched queries (``prefetch_distances``), the compiled model
   (``swept_distances``, ``swept_pair_bounds``), pybullet's ``getClosestPoints``, the
   world's ``min_distance`` / ``min_distances`` / ``in_collision`` wrappers;
@@ -125,6 +125,8 @@ def _targets() -> list[tuple[str, Any, str]]:
     for name in ("rj", "theta", "cr", "cone", "visibility", "force_torque"):
         cls = type(INDICES.create(name))
         out.append((f"index {name}", cls, "evaluate"))
+        if "evaluate_many" in cls.__dict__:
+            out.append((f"index {name}", cls, "evaluate_many"))
     if hasattr(kernel, "prefetch_distances_all"):
         out.append(("distances: evaluation prefetch (Python)", kernel,
                     "prefetch_distances_all"))
@@ -197,8 +199,8 @@ def main() -> None:
     print(f"cycle CPU p50 {plain:.2f} ms unwrapped, {wrapped:.2f} ms wrapped (the wrappers' "
           f"cost: {wrapped - plain:+.2f} ms)")
     print_profile(ms, calls, "batched (KernelConfig defaults)")
-    ms0, calls0, _ = profile_cycles(batch_distances=False, batch_ik=False)
-    print_profile(ms0, calls0, "per robot (batch_distances=False, batch_ik=False)")
+    ms0, calls0, _ = profile_cycles(batch_distances=False, batch_indices=False)
+    print_profile(ms0, calls0, "per robot (batch_distances=False, batch_indices=False)")
 
 
 if __name__ == "__main__":

@@ -466,14 +466,33 @@ class MRCPKernel:
         elif (reach_d := self._distance_range()) is not None:   # one call per robot
             for r in self.arms:
                 prefetch_distances([c for (rr, _), c in contexts.items() if rr == r], reach_d)
-        for key, ctx in contexts.items():
-            raw[key] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
-            self._pred_hist[key].append(ctx.configs.copy())
+        for key, values in zip(contexts, self._index_values(list(contexts.values())),
+                               strict=True):
+            raw[key] = values
+            self._pred_hist[key].append(contexts[key].configs.copy())
         for ix in self._groups:
             combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
             for k, v in combined.items():
                 raw[k][ix.name] = v
         return self._to_time(t, raw, q_meas)
+
+    def _index_values(self, contexts: Sequence[EvalContext]) -> list[dict[str, float]]:
+        """Every index's value at every context (in the contexts' order).
+
+        **Decision** (issue #17 §4, cost): with ``KernelConfig.batch_indices`` an index
+        that evaluates many contexts at once (``evaluate_many(contexts)``: Θ, one compiled
+        call for all robots' Jacobians) gets the whole cycle in one call; the values are
+        its ``evaluate``'s, bit for bit, and no index depends on the order of the
+        evaluations (they read the context and the world, which does not move).
+        """
+        columns: list[tuple[str, list[float]]] = []
+        for ix in self.indices:
+            many = getattr(ix, "evaluate_many", None) if self.config.batch_indices else None
+            if many is not None:
+                columns.append((ix.name, [float(v) for v in many(contexts)]))
+            else:
+                columns.append((ix.name, [float(ix.evaluate(c)) for c in contexts]))
+        return [{name: values[i] for name, values in columns} for i in range(len(contexts))]
 
     def _distance_range(self) -> float | None:
         """The largest body-distance range any index declares (``distance_range(world)``),

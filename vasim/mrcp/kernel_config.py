@@ -53,6 +53,10 @@ class KernelConfig:
             model, :func:`~vasim.mrcp.indices.base.prefetch_distances_all`); False: one
             ``min_distances`` call per robot. The same values either way (a cost option,
             for comparisons).
+        batch_indices: an index with ``evaluate_many(contexts)`` (Θ: one compiled call
+            for every robot's Jacobians) evaluates all of a cycle's (robot, point)
+            contexts in one call; False: ``evaluate`` per context. The same values either
+            way (a cost option, for comparisons).
         planner: action planner parameters.
         indices: the indices evaluated each cycle.
         grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
@@ -81,6 +85,7 @@ class KernelConfig:
     distance_points: str = "all"
     batch_ik: bool = True
     batch_distances: bool = True
+    batch_indices: bool = True
     planner: PlannerParams = field(default_factory=PlannerParams)
     indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
     grasp_tolerance: float = 0.002
