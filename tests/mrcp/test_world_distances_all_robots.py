@@ -220,3 +220,74 @@ def test_kernel_cycles_are_the_same_with_one_call_or_one_per_robot(
             compared += 1
     assert compared == cycles * (1 + 7 * 5)
     assert min(calls) > 0          # every cycle has bodies within range, not only caps
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), cutoff=st.sampled_from([2e-5, 0.05, 0.3, np.inf]),
+       window=st.sampled_from([1e-3, 0.02, np.inf]))
+def test_pair_bounds_of_all_bodies_in_one_call_equal_one_call_per_body(
+        world: PybulletWorld, seed: int, cutoff: float, window: float) -> None:
+    rng = np.random.default_rng(seed)
+    _pose_randomly(world, rng)
+    for a in ROBOTS:
+        many = world._pair_bounds_each(a, _others(a), cutoff, window)
+        assert sorted(many) == sorted(b for b in _others(a) if b != "box")   # box: no model
+        for b, got in many.items():
+            pairs = world._all_pairs(a, b)
+            assert pairs is not None
+            one = world._pair_bounds(a, b, pairs, cutoff, window)
+            assert one is not None and np.array_equal(got, one)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), cap=st.sampled_from([0.05, 0.2, 1.0]))
+def test_a_robots_distance_to_each_body_equals_min_distance_bit_for_bit(
+        world: PybulletWorld, seed: int, cap: float) -> None:
+    rng = np.random.default_rng(seed)
+    _pose_randomly(world, rng)
+    close = 0
+    for a in ROBOTS:
+        got = world.min_distance_each(a, _others(a), cap)
+        for b, prox in zip(_others(a), got, strict=True):
+            ref = world.min_distance(a, b, cap)
+            assert prox.distance == ref.distance
+            assert np.array_equal(prox.point_a, ref.point_a, equal_nan=True)
+            assert np.array_equal(prox.point_b, ref.point_b, equal_nan=True)
+            assert (prox.link_a, prox.link_b) == (ref.link_a, ref.link_b)
+            close += ref.distance < cap
+    assert close > 0 or cap < 1.0      # within 1 m some body always is (bases 0.55 m apart)
+
+
+def test_distance_to_each_body_refuses_bad_names(world: PybulletWorld) -> None:
+    with pytest.raises(KeyError, match="nobody"):
+        world.min_distance_each("a", ["b", "nobody"])
+    with pytest.raises(ValueError, match="two different bodies"):
+        world.min_distance_each("a", ["b", "a"])
+
+
+def test_collision_checks_agree_with_pybullets_whole_body_query() -> None:
+    """``in_collision`` (the model's bounds of all bodies in one call choosing which bodies
+    pybullet is asked about) against pybullet's own answer for every body, over random
+    poses of which some collide."""
+    import pybullet as pb
+
+    w = _station()
+    rng = np.random.default_rng(23)
+    hits = 0
+    for _ in range(40):
+        _pose_randomly(w, rng)
+        for a in ROBOTS:
+            body = w.body_id(a)
+            touching = any(p[8] <= 0.0 for other in _others(a)
+                           for p in pb.getClosestPoints(body, w.body_id(other), 0.0,
+                                                        physicsClientId=w.client_id))
+            if touching:
+                assert w.in_collision(a)
+                hits += 1
+            elif not w.in_collision(a):
+                continue
+            else:       # no other body touches: the robot touches itself
+                pairs = w.self_collision_pairs(a)
+                assert any(w.links_in_collision(body, i, body, j) for i, j in pairs)
+    assert hits > 0
+    w.close()

@@ -652,3 +652,36 @@ def swept_pair_bounds(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
                        limit + margin, ws) - margin
         if out[p] < best:
             best = out[p]
+
+
+@njit(cache=True, nogil=True)
+def swept_pair_bounds_bodies(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
+                             scale_a: np.ndarray, ball_a: np.ndarray, bcen_a: np.ndarray,
+                             brad_a: np.ndarray, frames_b: np.ndarray, pts_b: np.ndarray,
+                             n_b: np.ndarray, scale_b: np.ndarray, ball_b: np.ndarray,
+                             bcen_b: np.ndarray, brad_b: np.ndarray, starts: np.ndarray,
+                             margins: np.ndarray, verts: np.ndarray, nbrs: np.ndarray,
+                             cutoff: float, window: float, iterations: int, out: np.ndarray
+                             ) -> None:  # pragma: no cover - compiled
+    """:func:`swept_pair_bounds` of every link pair of body ``a`` with each of several
+    bodies (stacked as in :func:`swept_distances`: body ``k`` = links
+    ``starts[k]:starts[k + 1]``, ``margins[k]``), in one call: body ``k``'s ``La x Lk``
+    values, pairs in row-major order (``a``'s link first), go to ``out`` from
+    ``La x starts[k]`` on — the values of one :func:`swept_pair_bounds` call per body, bit
+    for bit (the same call per body)."""
+    la = frames_a.shape[0]
+    for body in range(starts.shape[0] - 1):
+        j0 = starts[body]
+        j1 = starts[body + 1]
+        lk = j1 - j0
+        ia = np.empty(la * lk, dtype=np.int64)
+        ib = np.empty(la * lk, dtype=np.int64)
+        for i in range(la):
+            for j in range(lk):
+                ia[i * lk + j] = i
+                ib[i * lk + j] = j
+        swept_pair_bounds(frames_a, pts_a, n_a, scale_a, ball_a, bcen_a, brad_a,
+                          frames_b[j0:j1], pts_b[j0:j1], n_b[j0:j1], scale_b[j0:j1],
+                          ball_b[j0:j1], bcen_b[j0:j1], brad_b[j0:j1], verts, nbrs,
+                          margins[body], cutoff, window, iterations, ia, ib,
+                          out[la * j0:la * j1])

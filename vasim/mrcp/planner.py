@@ -210,8 +210,10 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
     reps = []
     before: dict[str, float] = {}
     nearest: tuple[float, FloatArray] | None = None     # (distance, unit witness direction)
-    for body in bodies:
-        prox = world.min_distance(robot, body, p.influence)
+    each = getattr(world, "min_distance_each", None)      # one batched call when offered
+    proxs = (each(robot, list(bodies), p.influence) if each is not None
+             else [world.min_distance(robot, body, p.influence) for body in bodies])
+    for body, prox in zip(bodies, proxs, strict=True):
         before[body] = prox.distance
         u = _unit(prox.point_a, prox.point_b)
         if u is not None and (nearest is None or prox.distance < nearest[0]):
