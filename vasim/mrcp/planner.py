@@ -188,7 +188,8 @@ def step_limits(arm: ArmKinematics, q: FloatArray, q_new: FloatArray, dt: float)
 def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: FloatArray,
                    goal: FloatArray | None, goal_rotation: FloatArray | None,
                    bodies: Sequence[str], memory: ObstacleMemory, p: PlannerParams,
-                   dt: float, rng: np.random.Generator, repel: bool = True) -> FloatArray:
+                   dt: float, rng: np.random.Generator, repel: bool = True,
+                   batched: bool = True) -> FloatArray:
     """One cycle of a candidate (Algorithm 2 inner loop); poses ``world`` at the result.
 
     Args:
@@ -199,6 +200,9 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
             obstacles).
         memory: per-(robot, body) distances of the last cycle (updated).
         repel: False for the final straight approach to a grasp.
+        batched: ask a world that offers ``min_distance_each(robot, bodies, max_distance)``
+            for all the bodies in one call (the values of one ``min_distance`` per body,
+            issue #17 §4); False: one ``min_distance`` call per body.
 
     Returns:
         The new configuration (``q`` when no safe move exists).
@@ -210,7 +214,7 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
     reps = []
     before: dict[str, float] = {}
     nearest: tuple[float, FloatArray] | None = None     # (distance, unit witness direction)
-    each = getattr(world, "min_distance_each", None)      # one batched call when offered
+    each = getattr(world, "min_distance_each", None) if batched else None
     proxs = (each(robot, list(bodies), p.influence) if each is not None
              else [world.min_distance(robot, body, p.influence) for body in bodies])
     for body, prox in zip(bodies, proxs, strict=True):
