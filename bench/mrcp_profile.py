@@ -134,9 +134,7 @@ def _targets() -> list[tuple[str, Any, str]]:
                     "min_distances_many"))
     if hasattr(world, "swept_distances_many"):
         out.append(("distances: compiled, all robots", world, "swept_distances_many"))
-    if hasattr(world.PybulletWorld, "min_distance_each"):
-        out.append(("distances: min_distance_each (Python)", world.PybulletWorld,
-                    "min_distance_each"))
+    if hasattr(world, "swept_pair_bounds_bodies"):
         out.append(("distances: compiled, link-pair bounds", world,
                     "swept_pair_bounds_bodies"))
     if hasattr(world, "swept_nearest_many"):

@@ -239,32 +239,6 @@ def test_pair_bounds_of_all_bodies_in_one_call_equal_one_call_per_body(
             assert one is not None and np.array_equal(got, one)
 
 
-@settings(max_examples=20, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), cap=st.sampled_from([0.05, 0.2, 1.0]))
-def test_a_robots_distance_to_each_body_equals_min_distance_bit_for_bit(
-        world: PybulletWorld, seed: int, cap: float) -> None:
-    rng = np.random.default_rng(seed)
-    _pose_randomly(world, rng)
-    close = 0
-    for a in ROBOTS:
-        got = world.min_distance_each(a, _others(a), cap)
-        for b, prox in zip(_others(a), got, strict=True):
-            ref = world.min_distance(a, b, cap)
-            assert prox.distance == ref.distance
-            assert np.array_equal(prox.point_a, ref.point_a, equal_nan=True)
-            assert np.array_equal(prox.point_b, ref.point_b, equal_nan=True)
-            assert (prox.link_a, prox.link_b) == (ref.link_a, ref.link_b)
-            close += ref.distance < cap
-    assert close > 0 or cap < 1.0      # within 1 m some body always is (bases 0.55 m apart)
-
-
-def test_distance_to_each_body_refuses_bad_names(world: PybulletWorld) -> None:
-    with pytest.raises(KeyError, match="nobody"):
-        world.min_distance_each("a", ["b", "nobody"])
-    with pytest.raises(ValueError, match="two different bodies"):
-        world.min_distance_each("a", ["b", "a"])
-
-
 def test_collision_checks_agree_with_pybullets_whole_body_query() -> None:
     """``in_collision`` (the model's bounds of all bodies in one call choosing which bodies
     pybullet is asked about) against pybullet's own answer for every body, over random

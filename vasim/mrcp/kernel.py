@@ -628,7 +628,7 @@ class MRCPKernel:
                 goal, grot = self.pregrasp(a.point, pos, rot)
             move_candidate(self.world, self.arms[a.robot], a.robot, q_meas[a.robot], goal,
                            grot, self._bodies(a.robot), self._memory, cfg.planner, cfg.dt,
-                           self._rng, batched=cfg.batch_distances)
+                           self._rng)
 
     def _act_rcnt(self, t: float, q_meas: Mapping[str, FloatArray], pos: FloatArray,
                   rot: FloatArray, events: list[str]) -> None:
@@ -657,8 +657,7 @@ class MRCPKernel:
                 events.append(f"transfer_pregrasp {r}@{q}")
             else:
                 move_candidate(self.world, arm, r, q_meas[r], pre, grot, self._bodies(r),
-                               self._memory, cfg.planner, cfg.dt, self._rng,
-                               batched=cfg.batch_distances)
+                               self._memory, cfg.planner, cfg.dt, self._rng)
                 return
         if self.state is KernelState.TT_GRASP:
             if np.linalg.norm(grasp - tcp) <= cfg.grasp_tolerance and self._snap(
@@ -669,8 +668,7 @@ class MRCPKernel:
                 events.append(f"transfer_grasped {r}@{q}")
                 return
             move_candidate(self.world, arm, r, q_meas[r], grasp, grot, self._bodies(r),
-                           self._memory, cfg.planner, cfg.dt, self._rng, repel=False,
-                           batched=cfg.batch_distances)
+                           self._memory, cfg.planner, cfg.dt, self._rng, repel=False)
 
     def _snap(self, robot: str, arm: ArmKinematics, q: FloatArray, grasp: FloatArray,
               grot: FloatArray | None) -> bool:

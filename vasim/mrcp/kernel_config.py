@@ -51,10 +51,9 @@ class KernelConfig:
         batch_distances: the evaluation's distance queries of every robot in one call
             (the world's ``nearest_distances_many`` / ``min_distances_many``, one compiled
             call per cycle and robot model,
-            :func:`~vasim.mrcp.indices.base.prefetch_distances_all`), and each candidate's
-            distances to every body in one call of the planner (``min_distance_each``);
-            False: one ``min_distances`` call per robot, one ``min_distance`` per body.
-            The same values either way (a cost option, for comparisons).
+            :func:`~vasim.mrcp.indices.base.prefetch_distances_all`); False: one
+            ``min_distances`` call per robot. The same values either way (a cost option,
+            for comparisons).
         batch_indices: an index with ``evaluate_many(contexts)`` (Θ: one compiled call
             for every robot's Jacobians) evaluates all of a cycle's (robot, point)
             contexts in one call; False: ``evaluate`` per context. The same values either

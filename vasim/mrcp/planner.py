@@ -188,8 +188,7 @@ def step_limits(arm: ArmKinematics, q: FloatArray, q_new: FloatArray, dt: float)
 def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: FloatArray,
                    goal: FloatArray | None, goal_rotation: FloatArray | None,
                    bodies: Sequence[str], memory: ObstacleMemory, p: PlannerParams,
-                   dt: float, rng: np.random.Generator, repel: bool = True,
-                   batched: bool = True) -> FloatArray:
+                   dt: float, rng: np.random.Generator, repel: bool = True) -> FloatArray:
     """One cycle of a candidate (Algorithm 2 inner loop); poses ``world`` at the result.
 
     Args:
@@ -200,9 +199,6 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
             obstacles).
         memory: per-(robot, body) distances of the last cycle (updated).
         repel: False for the final straight approach to a grasp.
-        batched: ask a world that offers ``min_distance_each(robot, bodies, max_distance)``
-            for all the bodies in one call (the values of one ``min_distance`` per body,
-            issue #17 §4); False: one ``min_distance`` call per body.
 
     Returns:
         The new configuration (``q`` when no safe move exists).
@@ -214,10 +210,8 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
     reps = []
     before: dict[str, float] = {}
     nearest: tuple[float, FloatArray] | None = None     # (distance, unit witness direction)
-    each = getattr(world, "min_distance_each", None) if batched else None
-    proxs = (each(robot, list(bodies), p.influence) if each is not None
-             else [world.min_distance(robot, body, p.influence) for body in bodies])
-    for body, prox in zip(bodies, proxs, strict=True):
+    for body in bodies:
+        prox = world.min_distance(robot, body, p.influence)
         before[body] = prox.distance
         u = _unit(prox.point_a, prox.point_b)
         if u is not None and (nearest is None or prox.distance < nearest[0]):

@@ -706,7 +706,17 @@ class PybulletWorld:
                           window: float = math.inf) -> dict[str, FloatArray]:
         """:meth:`_pair_bounds` of all link pairs (:meth:`_all_pairs`) of body ``a`` with
         each body of ``names`` that has a compiled model, in one compiled call
-        (``swept_pair_bounds_bodies``: the values of one call per body, bit for bit)."""
+        (``swept_pair_bounds_bodies``: the values of one call per body, bit for bit).
+
+        **Decision** (issue #17 §4, cost): :meth:`in_collision` takes the bounds of every
+        other body in one call (8 RX60B: 0.50 -> 0.42 ms for one check of each robot,
+        measured). :meth:`min_distance` stays one body a call: the planner's per-body
+        queries batched this way measured no gain (1.17 vs 1.17 ms for every robot to every
+        body: the cost is the pybullet queries and the Python around them, not the
+        bounds), and the query of ``b`` to ``a`` cannot reuse the one of ``a`` to ``b`` at
+        the same poses: pybullet's answers are not symmetric bit for bit (1/3 of 1,701
+        close pairs of 8 RX60B differ, by up to 3.4 µm, the witness points almost always),
+        so reuse would change the planner's steps."""
         sa = self._sweep_of(a)
         modelled = [n for n in dict.fromkeys(names) if n != a and self._sweep_of(n) is not None]
         if sa is None or not modelled:
@@ -724,45 +734,6 @@ class PybulletWorld:
         la = fa.shape[0]
         return {n: out[la * int(starts[k]):la * int(starts[k + 1])]
                 for k, n in enumerate(modelled)}
-
-    def min_distance_each(self, a: str, bodies: Sequence[str], max_distance: float = 1.0
-                          ) -> list[Proximity]:
-        """``[min_distance(a, b, max_distance) for b in bodies]``, bit for bit, with the
-        compiled link-pair bounds of all the bodies in one call.
-
-        **Decision** (issue #17 §4, cost): a candidate's guided move asks for its distance
-        to every other body (56 queries a cycle for 8 robots); the bounds that choose the
-        link pairs pybullet is asked about are one compiled call per candidate instead of
-        one per body, the pybullet queries and their order per body unchanged. The
-        candidates move one after the other (each one's new pose is an obstacle for the
-        next), so these queries cannot be one call across robots; nor can the query of
-        ``b`` to ``a`` reuse the one of ``a`` to ``b`` at the same poses: pybullet's
-        answers are not symmetric bit for bit (1/3 of 1,701 close pairs of 8 RX60B differ,
-        by up to 3.4 µm; the witness points almost always), so reuse would change the
-        planner's steps.
-
-        Raises:
-            KeyError: an unknown body name.
-            ValueError: ``a`` among ``bodies``.
-        """
-        for b in bodies:
-            self._known(b)
-            if b == a:
-                raise ValueError(f"min_distance needs two different bodies, got {a!r} twice "
-                                 "(self-proximity: in_collision / self_collision_pairs)")
-        if not self.compiled_distances:
-            return [self.min_distance(a, b, max_distance) for b in bodies]
-        bounds = self._pair_bounds_each(a, bodies, max_distance + _ABOVE,
-                                        COMPILED_TOLERANCE + _ABOVE)
-        out = []
-        for b in bodies:
-            got = bounds.get(b)
-            pairs = self._all_pairs(a, b)
-            if got is not None and pairs is not None and not np.any(np.isneginf(got)):
-                out.append(self._min_distance_among(a, b, pairs, got, max_distance))
-            else:       # no model, or a pair without an estimate: min_distance's own path
-                out.append(self.min_distance(a, b, max_distance))
-        return out
 
     def _all_pairs(self, a: str, b: str) -> NDArray[np.int64] | None:
         sa, sb = self._sweep_of(a), self._sweep_of(b)
