@@ -9,6 +9,7 @@ BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "be
            "bench.report", "bench.abdomen", "bench.contact",
            "bench.mrcp_rpq", "bench.viewer"]
 BENCHES += ["bench.mrcp"]  # the MRCP control cycle vs the 18 ms budget
+BENCHES += ["bench.mrcp_profile"]  # where the 8-robot MRCP cycle's time goes, by part
 BENCHES += ["bench.power"]  # power planning: cohorts/s on 1 and 2 local Ray workers
 
 

@@ -31,6 +31,10 @@ figure that counts on an unloaded host (the header prints the load average: run 
 
 Then (issue #17 §4-5):
 
+* for 2, 4, 8 and 16 RX60B, the cycle with the evaluation's distances and Θ of all robots
+  in one compiled call a cycle (``KernelConfig`` defaults) against one distance call per
+  robot and one Θ call per (robot, point) (``batch_distances=False, batch_indices=False``:
+  the same cycles, alternating runs): CPU and wall p50 / p99 and their ratios;
 * the speed-up of batching the trajectory IK across robots (8 RX60B, default variant,
   ``KernelConfig(batch_ik=...)``: the same cycles, alternating runs);
 * the ``eight_robots`` scenario's whole cycle as ``vasim mrcp run`` and the browser run it
@@ -193,7 +197,8 @@ def six_indices(st: Station) -> tuple[IndexSpec, ...]:
 
 
 def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
-                distance_points: str = "all", batch_ik: bool = True
+                distance_points: str = "all", batch_ik: bool = True,
+                batch_distances: bool = True, batch_indices: bool = True
                 ) -> tuple[list[float], list[float], int]:
     """Per-cycle wall and thread-CPU times [ms] of ``cycles`` full TOp cycles, and the
     (robot, point) evaluations per cycle.
@@ -202,7 +207,8 @@ def time_cycles(st: Station, cycles: int = CYCLES, trajectory_ik: str = "exact",
         RuntimeError: if a timed cycle is not a full evaluation cycle (a fault).
     """
     cfg = KernelConfig(indices=six_indices(st), ntt_threshold=1e9, trajectory_ik=trajectory_ik,
-                       distance_points=distance_points, batch_ik=batch_ik)
+                       distance_points=distance_points, batch_ik=batch_ik,
+                       batch_distances=batch_distances, batch_indices=batch_indices)
     rsel = next(iter(st.arms))
     k = MRCPKernel(st.arms, st.world, st.task_points, rsel, 0, st.start, config=cfg)
     wall, cpu = [], []
@@ -237,6 +243,43 @@ def batch_speedup(n: int = 8, cycles: int = SPEEDUP_CYCLES) -> tuple[float, floa
             out.extend(time_cycles(rx60b_station(n), cycles, batch_ik=batched)[1])
     c_on, c_off = statistics.median(on), statistics.median(off)
     return c_on, c_off, c_off / c_on
+
+
+@dataclass
+class Comparison:
+    """CPU and wall p50 / p99 [ms] of the same cycles with the evaluation's distances and
+    Θ batched across robots and one call per robot (per (robot, point) for Θ)."""
+
+    robots: int
+    batched_cpu: list[float]
+    batched_wall: list[float]
+    per_robot_cpu: list[float]
+    per_robot_wall: list[float]
+
+    def row(self) -> str:
+        b50, b99 = statistics.median(self.batched_cpu), _pct(self.batched_cpu, 99)
+        o50, o99 = statistics.median(self.per_robot_cpu), _pct(self.per_robot_cpu, 99)
+        bw50, bw99 = statistics.median(self.batched_wall), _pct(self.batched_wall, 99)
+        ow50, ow99 = statistics.median(self.per_robot_wall), _pct(self.per_robot_wall, 99)
+        return (f"{self.robots:6d} {b50:8.2f} {b99:8.2f} {bw50:8.2f} {bw99:8.2f} "
+                f"{o50:8.2f} {o99:8.2f} {ow50:8.2f} {ow99:8.2f} {o50 / b50:7.2f}x "
+                f"{o99 / b99:7.2f}x")
+
+
+def batch_distances_comparison(n: int, cycles: int = SPEEDUP_CYCLES) -> Comparison:
+    """The ``n``-RX60B default cycle with the evaluation's distances (and Θ) of all robots
+    in one compiled call a cycle (``KernelConfig`` defaults) and with one distance call
+    per robot and one Θ call per (robot, point) (``batch_distances=False,
+    batch_indices=False``: the cycle before), alternating runs (the same cycles: the
+    batch changes no value)."""
+    out = Comparison(n, [], [], [], [])
+    for _ in range(2):
+        for batched in (False, True):
+            wall, cpu, _ = time_cycles(rx60b_station(n), cycles, batch_distances=batched,
+                                       batch_indices=batched)
+            (out.batched_cpu if batched else out.per_robot_cpu).extend(cpu)
+            (out.batched_wall if batched else out.per_robot_wall).extend(wall)
+    return out
 
 
 @contextmanager
@@ -350,6 +393,16 @@ def main() -> None:
             print(f"{name:8s} {variant:7s} {n:6d} {pairs:5d} {w50:9.2f} {w99:9.2f} {c50:8.2f} "
                   f"{c99:8.2f} {w50 / c50:8.2f} {c99 / BUDGET_MS:8.2f} {w99 / BUDGET_MS:9.2f}",
                   flush=True)
+    print(f"RX60B default: the evaluation's distances and Θ of all robots in one compiled "
+          f"call a cycle (batched) vs one distance call per robot and one Θ call per "
+          f"(robot, point) (per robot), alternating runs of {SPEEDUP_CYCLES} cycles, load "
+          f"average {os.getloadavg()[0]:.1f}; ms:")
+    print(f"{'robots':>6s} {'cpu p50':>8s} {'cpu p99':>8s} {'wall p50':>8s} {'wall p99':>8s} "
+          f"{'cpu p50':>8s} {'cpu p99':>8s} {'wall p50':>8s} {'wall p99':>8s} "
+          f"{'p50 gain':>8s} {'p99 gain':>8s}")
+    print(f"{'':6s} {'batched':>35s} {'per robot':>35s}")
+    for n in (2, 4, 8, 16):
+        print(batch_distances_comparison(n).row(), flush=True)
     c_on, c_off, ratio = batch_speedup()
     print(f"8 RX60B default, trajectory IK batched across robots (one compiled call a cycle) "
           f"vs one arm.ik call per point: cpu p50 {c_on:.2f} vs {c_off:.2f} ms = {ratio:.2f}x "

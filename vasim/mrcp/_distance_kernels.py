@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from vasim.mrcp.dh import _chain_kernel
+
 
 @njit(cache=True, nogil=True)
 def _clamp01(x: float) -> float:  # pragma: no cover - compiled
@@ -387,40 +389,216 @@ def swept_distances(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
         for i in range(la):
             rot_a[i] = fa[i, :3, :3]
         for body in range(starts.shape[0] - 1):
-            j0 = starts[body]
-            nbl = starts[body + 1] - j0
-            margin = margins[body]
-            for i in range(la):
-                for jj in range(nbl):
-                    j = j0 + jj
-                    dx, dy, dz = sa[i, 0] - sb[j, 0], sa[i, 1] - sb[j, 1], sa[i, 2] - sb[j, 2]
-                    bound[i * nbl + jj] = (np.sqrt(dx * dx + dy * dy + dz * dz) - brad_a[i]
-                                           - brad_b[j] - margin)
-            order = np.argsort(bound[:la * nbl])
-            best = cutoff
-            for idx in order:
-                if bound[idx] >= best:
-                    break
-                i = idx // nbl
-                j = j0 + idx % nbl
-                # a cheaper lower bound first: the key points' separation along the line
-                # of the bounding centres, less both sweeping radii (the pair's value is
-                # at least its capsule bound, which is at least this; 1e-9 m of slack for
-                # round-off keeps the minimum exactly the one of the full values)
-                if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
-                        - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
-                        - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
-                        - margin - 1e-9 >= best:
-                    continue
-                # _pair skips the support search when the capsule bound is already >= best
-                # and stops refining once the pair is surely no nearer than best: the
-                # minimum is the one of the full values, at about half the cost per pair
-                dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
-                             rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
-                             best + margin, ws, best + margin) - margin
-                if dist < best:
-                    best = dist
-            out[c, body] = best
+            out[c, body] = _min_to_body(wa, sa, rot_a, n_a, scale_a, ball_a, brad_a, wb, sb,
+                                        rot_b, n_b, scale_b, ball_b, brad_b, starts[body],
+                                        starts[body + 1], margins[body], verts, nbrs, cutoff,
+                                        iterations, bound, ws)
+
+
+@njit(cache=True, nogil=True)
+def _min_to_body(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: np.ndarray,
+                 scale_a: np.ndarray, ball_a: np.ndarray, brad_a: np.ndarray, wb: np.ndarray,
+                 sb: np.ndarray, rot_b: np.ndarray, n_b: np.ndarray, scale_b: np.ndarray,
+                 ball_b: np.ndarray, brad_b: np.ndarray, j0: int, j1: int, margin: float,
+                 verts: np.ndarray, nbrs: np.ndarray, cutoff: float, iterations: int,
+                 bound: np.ndarray, ws: np.ndarray) -> float:  # pragma: no cover - compiled
+    """Branch and bound over the link pairs of body ``a`` (world key points ``wa``,
+    bounding centres ``sa``, rotations ``rot_a``) and the links ``j0:j1`` of the stacked
+    bodies ``b``: the smallest swept-model distance less ``margin``, ``cutoff`` when none
+    is nearer (``bound``, ``ws``: scratch space). The one per-(configuration, body) step of
+    :func:`swept_distances` and :func:`swept_distances_many`."""
+    la = wa.shape[0]
+    nbl = j1 - j0
+    for i in range(la):
+        for jj in range(nbl):
+            j = j0 + jj
+            dx, dy, dz = sa[i, 0] - sb[j, 0], sa[i, 1] - sb[j, 1], sa[i, 2] - sb[j, 2]
+            bound[i * nbl + jj] = (np.sqrt(dx * dx + dy * dy + dz * dz) - brad_a[i]
+                                   - brad_b[j] - margin)
+    order = np.argsort(bound[:la * nbl])
+    best = cutoff
+    for idx in order:
+        if bound[idx] >= best:
+            break
+        i = idx // nbl
+        j = j0 + idx % nbl
+        # a cheaper lower bound first: the key points' separation along the line of the
+        # bounding centres, less both sweeping radii (the pair's value is at least its
+        # capsule bound, which is at least this; 1e-9 m of slack for round-off keeps the
+        # minimum exactly the one of the full values)
+        if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
+                - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
+                - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
+                - margin - 1e-9 >= best:
+            continue
+        # _pair skips the support search when the capsule bound is already >= best and
+        # stops refining once the pair is surely no nearer than best: the minimum is the
+        # one of the full values, at about half the cost per pair
+        dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
+                     rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
+                     best + margin, ws, best + margin) - margin
+        if dist < best:
+            best = dist
+    return best
+
+
+@njit(cache=True, nogil=True)
+def swept_distances_many(table: np.ndarray, tcp: np.ndarray, bases: np.ndarray,
+                         qs: np.ndarray, row_query: np.ndarray, wanted: np.ndarray,
+                         pts_a: np.ndarray, n_a: np.ndarray, scale_a: np.ndarray,
+                         ball_a: np.ndarray, bcen_a: np.ndarray, brad_a: np.ndarray,
+                         frames_b: np.ndarray, pts_b: np.ndarray, n_b: np.ndarray,
+                         scale_b: np.ndarray, ball_b: np.ndarray, bcen_b: np.ndarray,
+                         brad_b: np.ndarray, starts: np.ndarray, margins: np.ndarray,
+                         verts: np.ndarray, nbrs: np.ndarray, cutoff: float,
+                         iterations: int, out: np.ndarray) -> None:  # pragma: no cover
+    """:func:`swept_distances` for the configurations of several robots of one model at
+    once, their link frames included (issue #17 §4: one compiled call per cycle for the
+    distances and the forward kinematics of every robot).
+
+    Args: the model's DH ``table`` ``(4, n)`` and ``tcp`` ``(3,)``; per query robot its base
+    ``bases[r]`` ``(4, 4)``; configurations ``qs`` ``(N, n)``, row ``c`` of query robot
+    ``row_query[c]``; ``wanted`` ``(R, B)``: the bodies each query robot is measured
+    against (False for itself). The ``B`` bodies are stacked once for all query robots
+    (their world key points computed once: shared by every query); the other arguments
+    as in :func:`swept_distances`. ``out[c, k]`` ``(N, B)`` is written where
+    ``wanted[row_query[c], k]``: the value :func:`swept_distances` gives the robot at
+    ``qs[c]`` (frames of :func:`vasim.mrcp.dh.frames_many`) against body ``k``, bit for bit
+    (the same compiled steps in the same order).
+    """
+    la = pts_a.shape[0]
+    lb = frames_b.shape[0]
+    n = qs.shape[1]
+    frames = np.empty((n + 2, 4, 4))
+    wa = np.empty((la, 3, 3))
+    wb = np.empty((lb, 3, 3))
+    sa = np.empty((la, 3))
+    sb = np.empty((lb, 3))
+    rot_a = np.empty((la, 3, 3))
+    rot_b = np.empty((lb, 3, 3))
+    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
+    for j in range(lb):
+        rot_b[j] = frames_b[j, :3, :3]
+    bound = np.empty(la * lb)
+    ws = np.empty((16, 3))
+    for c in range(qs.shape[0]):
+        r = row_query[c]
+        _chain_kernel(table, tcp, bases[r], qs[c], frames)
+        fa = frames[:la]
+        _to_world(fa, pts_a, n_a, bcen_a, wa, sa)
+        for i in range(la):
+            rot_a[i] = fa[i, :3, :3]
+        for body in range(starts.shape[0] - 1):
+            if not wanted[r, body]:
+                continue
+            out[c, body] = _min_to_body(wa, sa, rot_a, n_a, scale_a, ball_a, brad_a, wb, sb,
+                                        rot_b, n_b, scale_b, ball_b, brad_b, starts[body],
+                                        starts[body + 1], margins[body], verts, nbrs, cutoff,
+                                        iterations, bound, ws)
+
+
+@njit(cache=True, nogil=True)
+def _nearest_of_bodies(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: np.ndarray,
+                       scale_a: np.ndarray, ball_a: np.ndarray, brad_a: np.ndarray,
+                       wb: np.ndarray, sb: np.ndarray, rot_b: np.ndarray, n_b: np.ndarray,
+                       scale_b: np.ndarray, ball_b: np.ndarray, brad_b: np.ndarray,
+                       starts: np.ndarray, margins: np.ndarray, member: np.ndarray,
+                       verts: np.ndarray, nbrs: np.ndarray, cutoff: float, iterations: int,
+                       bound: np.ndarray, link_i: np.ndarray, link_j: np.ndarray,
+                       link_m: np.ndarray, ws: np.ndarray) -> float:  # pragma: no cover
+    """:func:`_min_to_body` over the link pairs of every body ``k`` with ``member[k]`` at
+    once: one branch and bound whose best value so far prunes the pairs of all of them
+    (each body's pairs less that body's margin). The result is the minimum over those
+    bodies of :func:`_min_to_body`'s values, bit for bit: both are the minimum of the same
+    full pair values (a pair is pruned or stopped early only when its value cannot be
+    below the best so far), the pair that attains it computed in full either way.
+    ``bound``, ``link_*``: scratch space (at least ``La x Lb``)."""
+    la = wa.shape[0]
+    count = 0
+    for body in range(starts.shape[0] - 1):
+        if not member[body]:
+            continue
+        margin = margins[body]
+        for i in range(la):
+            for j in range(starts[body], starts[body + 1]):
+                dx, dy, dz = sa[i, 0] - sb[j, 0], sa[i, 1] - sb[j, 1], sa[i, 2] - sb[j, 2]
+                bound[count] = (np.sqrt(dx * dx + dy * dy + dz * dz) - brad_a[i] - brad_b[j]
+                                - margin)
+                link_i[count] = i
+                link_j[count] = j
+                link_m[count] = margin
+                count += 1
+    order = np.argsort(bound[:count])
+    best = cutoff
+    for idx in order:
+        if bound[idx] >= best:
+            break
+        i = link_i[idx]
+        j = link_j[idx]
+        margin = link_m[idx]
+        if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
+                - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
+                - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
+                - margin - 1e-9 >= best:
+            continue
+        dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
+                     rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
+                     best + margin, ws, best + margin) - margin
+        if dist < best:
+            best = dist
+    return best
+
+
+@njit(cache=True, nogil=True)
+def swept_nearest_many(table: np.ndarray, tcp: np.ndarray, bases: np.ndarray,
+                       qs: np.ndarray, row_query: np.ndarray, groups: np.ndarray,
+                       cutoffs: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
+                       scale_a: np.ndarray, ball_a: np.ndarray, bcen_a: np.ndarray,
+                       brad_a: np.ndarray, frames_b: np.ndarray, pts_b: np.ndarray,
+                       n_b: np.ndarray, scale_b: np.ndarray, ball_b: np.ndarray,
+                       bcen_b: np.ndarray, brad_b: np.ndarray, starts: np.ndarray,
+                       margins: np.ndarray, verts: np.ndarray, nbrs: np.ndarray,
+                       iterations: int, out: np.ndarray) -> None:  # pragma: no cover
+    """The nearest body of each group, for the configurations of several robots of one
+    model (issue #17 §4: the distances an index reads are often only the nearest of a set
+    of bodies — CR's — so one branch and bound serves the whole set).
+
+    Args as in :func:`swept_distances_many`, with ``groups`` ``(R, G, B)``: the bodies of
+    group ``g`` for query robot ``r``, and ``cutoffs`` ``(G,)``. ``out[c, g]`` ``(N, G)``:
+    the minimum over the group's bodies of what :func:`swept_distances_many` gives with
+    cutoff ``cutoffs[g]`` (bit for bit, :func:`_nearest_of_bodies`); ``cutoffs[g]`` for
+    an empty group.
+    """
+    la = pts_a.shape[0]
+    lb = frames_b.shape[0]
+    n = qs.shape[1]
+    frames = np.empty((n + 2, 4, 4))
+    wa = np.empty((la, 3, 3))
+    wb = np.empty((lb, 3, 3))
+    sa = np.empty((la, 3))
+    sb = np.empty((lb, 3))
+    rot_a = np.empty((la, 3, 3))
+    rot_b = np.empty((lb, 3, 3))
+    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
+    for j in range(lb):
+        rot_b[j] = frames_b[j, :3, :3]
+    bound = np.empty(la * lb)
+    link_i = np.empty(la * lb, dtype=np.int64)
+    link_j = np.empty(la * lb, dtype=np.int64)
+    link_m = np.empty(la * lb)
+    ws = np.empty((16, 3))
+    for c in range(qs.shape[0]):
+        r = row_query[c]
+        _chain_kernel(table, tcp, bases[r], qs[c], frames)
+        fa = frames[:la]
+        _to_world(fa, pts_a, n_a, bcen_a, wa, sa)
+        for i in range(la):
+            rot_a[i] = fa[i, :3, :3]
+        for g in range(groups.shape[1]):
+            out[c, g] = _nearest_of_bodies(wa, sa, rot_a, n_a, scale_a, ball_a, brad_a, wb,
+                                           sb, rot_b, n_b, scale_b, ball_b, brad_b, starts,
+                                           margins, groups[r, g], verts, nbrs, cutoffs[g],
+                                           iterations, bound, link_i, link_j, link_m, ws)
 
 
 @njit(cache=True, nogil=True)
@@ -474,3 +652,36 @@ def swept_pair_bounds(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
                        limit + margin, ws) - margin
         if out[p] < best:
             best = out[p]
+
+
+@njit(cache=True, nogil=True)
+def swept_pair_bounds_bodies(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
+                             scale_a: np.ndarray, ball_a: np.ndarray, bcen_a: np.ndarray,
+                             brad_a: np.ndarray, frames_b: np.ndarray, pts_b: np.ndarray,
+                             n_b: np.ndarray, scale_b: np.ndarray, ball_b: np.ndarray,
+                             bcen_b: np.ndarray, brad_b: np.ndarray, starts: np.ndarray,
+                             margins: np.ndarray, verts: np.ndarray, nbrs: np.ndarray,
+                             cutoff: float, window: float, iterations: int, out: np.ndarray
+                             ) -> None:  # pragma: no cover - compiled
+    """:func:`swept_pair_bounds` of every link pair of body ``a`` with each of several
+    bodies (stacked as in :func:`swept_distances`: body ``k`` = links
+    ``starts[k]:starts[k + 1]``, ``margins[k]``), in one call: body ``k``'s ``La x Lk``
+    values, pairs in row-major order (``a``'s link first), go to ``out`` from
+    ``La x starts[k]`` on — the values of one :func:`swept_pair_bounds` call per body, bit
+    for bit (the same call per body)."""
+    la = frames_a.shape[0]
+    for body in range(starts.shape[0] - 1):
+        j0 = starts[body]
+        j1 = starts[body + 1]
+        lk = j1 - j0
+        ia = np.empty(la * lk, dtype=np.int64)
+        ib = np.empty(la * lk, dtype=np.int64)
+        for i in range(la):
+            for j in range(lk):
+                ia[i * lk + j] = i
+                ib[i * lk + j] = j
+        swept_pair_bounds(frames_a, pts_a, n_a, scale_a, ball_a, bcen_a, brad_a,
+                          frames_b[j0:j1], pts_b[j0:j1], n_b[j0:j1], scale_b[j0:j1],
+                          ball_b[j0:j1], bcen_b[j0:j1], brad_b[j0:j1], verts, nbrs,
+                          margins[body], cutoff, window, iterations, ia, ib,
+                          out[la * j0:la * j1])

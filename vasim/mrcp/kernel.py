@@ -94,7 +94,11 @@ from numpy.typing import NDArray
 from vasim.core.geometry import rotvec_from_matrix
 from vasim.mrcp.batch_ik import TrajectoryRequest, solve_first_attempts
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
-from vasim.mrcp.indices.base import prefetch_distances
+from vasim.mrcp.indices.base import (
+    NearestQuery,
+    prefetch_distances,
+    prefetch_distances_all,
+)
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.kernel_config import IndexSpec as IndexSpec
 from vasim.mrcp.kernel_config import KernelConfig as KernelConfig
@@ -455,33 +459,82 @@ class MRCPKernel:
                 configs=configs, reachable=reach, joint_velocity=vel, past_configs=past,
                 world=self.world, wrench=wrench, extras=extras,
                 distance_points=cfg.distance_points)
-        reach_d = self._distance_range()
-        if reach_d is not None:     # one batched distance query per robot (see below)
+        if cfg.batch_distances:     # one batched call for all robots (see below)
+            per_body, nearest = self._distance_queries()
+            if contexts and (per_body is not None or nearest):
+                prefetch_distances_all(list(contexts.values()), per_body, nearest)
+        elif (reach_d := self._distance_range()) is not None:   # one call per robot
             for r in self.arms:
                 prefetch_distances([c for (rr, _), c in contexts.items() if rr == r], reach_d)
-        for key, ctx in contexts.items():
-            raw[key] = {ix.name: float(ix.evaluate(ctx)) for ix in self.indices}
-            self._pred_hist[key].append(ctx.configs.copy())
+        for key, values in zip(contexts, self._index_values(list(contexts.values())),
+                               strict=True):
+            raw[key] = values
+            self._pred_hist[key].append(contexts[key].configs.copy())
         for ix in self._groups:
             combined = ix.combine({k: v[ix.name] for k, v in raw.items()})
             for k, v in combined.items():
                 raw[k][ix.name] = v
         return self._to_time(t, raw, q_meas)
 
+    def _index_values(self, contexts: Sequence[EvalContext]) -> list[dict[str, float]]:
+        """Every index's value at every context (in the contexts' order).
+
+        **Decision** (issue #17 §4, cost): with ``KernelConfig.batch_indices`` an index
+        that evaluates many contexts at once (``evaluate_many(contexts)``: Θ, one compiled
+        call for all robots' Jacobians) gets the whole cycle in one call; the values are
+        its ``evaluate``'s, bit for bit, and no index depends on the order of the
+        evaluations (they read the context and the world, which does not move).
+        """
+        columns: list[tuple[str, list[float]]] = []
+        for ix in self.indices:
+            many = getattr(ix, "evaluate_many", None) if self.config.batch_indices else None
+            if many is not None:
+                columns.append((ix.name, [float(v) for v in many(contexts)]))
+            else:
+                columns.append((ix.name, [float(ix.evaluate(c)) for c in contexts]))
+        return [{name: values[i] for name, values in columns} for i in range(len(contexts))]
+
     def _distance_range(self) -> float | None:
         """The largest body-distance range any index declares (``distance_range(world)``),
         None when none reads distances.
 
-        **Decision** (issue #17 §4, cost): every (robot, point) context of a robot gets its
-        distances from one batched ``min_distances`` call per cycle
-        (:func:`~vasim.mrcp.indices.base.prefetch_distances`) before any index runs; the
-        values are the ones each context would have queried (the world does not move
-        during the evaluation), so every outcome is unchanged.
+        **Decision** (issue #17 §4, cost): every (robot, point) context gets its
+        distances before any index runs, from one batched call for all robots
+        (:func:`~vasim.mrcp.indices.base.prefetch_distances_all`: the world's
+        ``min_distances_many``, one compiled call per robot model) or, with
+        ``KernelConfig(batch_distances=False)``, one ``min_distances`` call per robot
+        (:func:`~vasim.mrcp.indices.base.prefetch_distances`); the values are the ones each
+        context would have queried (the world does not move during the evaluation), so
+        every outcome is unchanged.
         """
         ranges = [f(self.world) for ix in self.indices
                   if (f := getattr(ix, "distance_range", None)) is not None]
         found = [float(v) for v in ranges if v is not None]
         return max(found) if found else None
+
+    def _distance_queries(self) -> tuple[float | None, list[NearestQuery]]:
+        """What the indices read of the world's distances: the per-body range of those that
+        read :meth:`~vasim.mrcp.indices.EvalContext.body_distances` (None: none does) and
+        the nearest-body queries of those that declare them (``nearest_queries(world)``:
+        CR, visibility).
+
+        **Decision** (issue #17 §4, cost): with ``batch_distances`` the evaluation's
+        distances are one compiled call per cycle for all robots: an index that needs only
+        the nearest of a set of bodies gets that minimum from one branch and bound over the
+        whole set (``PybulletWorld.nearest_distances_many``), the others the per-body
+        values (``min_distances_many``); the values are those of the per-robot queries.
+        """
+        ranges: list[float] = []
+        nearest: list[NearestQuery] = []
+        for ix in self.indices:
+            declare = getattr(ix, "nearest_queries", None)
+            if declare is not None:
+                nearest.extend(declare(self.world))
+                continue
+            f = getattr(ix, "distance_range", None)
+            if f is not None and (v := f(self.world)) is not None:
+                ranges.append(float(v))
+        return (max(ranges) if ranges else None), nearest
 
     def _to_time(self, t: float, raw: Mapping[Key, dict[str, float]],
                  q_meas: Mapping[str, FloatArray]) -> dict[Key, Evaluation]:

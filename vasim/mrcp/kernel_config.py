@@ -48,6 +48,16 @@ class KernelConfig:
             compiled call per cycle for arms that describe it (``first_attempt()``,
             :mod:`vasim.mrcp.batch_ik`); False: one ``arm.ik`` call per point. The same
             configurations either way (a cost option, for comparisons).
+        batch_distances: the evaluation's distance queries of every robot in one call
+            (the world's ``nearest_distances_many`` / ``min_distances_many``, one compiled
+            call per cycle and robot model,
+            :func:`~vasim.mrcp.indices.base.prefetch_distances_all`); False: one
+            ``min_distances`` call per robot. The same values either way (a cost option,
+            for comparisons).
+        batch_indices: an index with ``evaluate_many(contexts)`` (Θ: one compiled call
+            for every robot's Jacobians) evaluates all of a cycle's (robot, point)
+            contexts in one call; False: ``evaluate`` per context. The same values either
+            way (a cost option, for comparisons).
         planner: action planner parameters.
         indices: the indices evaluated each cycle.
         grasp_tolerance: RCnt is at a (pre-)grasp pose within this distance [m].
@@ -75,6 +85,8 @@ class KernelConfig:
     trajectory_ik: str = "exact"
     distance_points: str = "all"
     batch_ik: bool = True
+    batch_distances: bool = True
+    batch_indices: bool = True
     planner: PlannerParams = field(default_factory=PlannerParams)
     indices: Sequence[IndexSpec] = (IndexSpec("rj"), IndexSpec("theta"), IndexSpec("cr"))
     grasp_tolerance: float = 0.002

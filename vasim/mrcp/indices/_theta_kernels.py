@@ -355,3 +355,20 @@ def theta_dh_segments(table: np.ndarray, tcp: np.ndarray, base: np.ndarray,
                 for i in range(n):
                     jac_s[k, s, a, i] = full_s[k * s_count + s, rows[a], i]
     return theta_segments(pos, std, z, dens, reach, jac, jac_s, bool(passes[0]), ok)
+
+
+@njit(cache=True, nogil=True)
+def theta_dh_many(tables: np.ndarray, tcps: np.ndarray, bases: np.ndarray, arm: np.ndarray,
+                  configs: np.ndarray, pos: np.ndarray, std: np.ndarray, z: np.ndarray,
+                  dens: np.ndarray, reach: np.ndarray, rows: np.ndarray, tr: np.ndarray,
+                  threshold: float, at_least: bool, out: np.ndarray
+                  ) -> None:  # pragma: no cover - compiled
+    """:func:`theta_dh_segments` for many (robot, point) contexts in one call (issue #17
+    §4: the cycle's Jacobians and Θ of every robot at once): context ``c`` uses the chain
+    ``arm[c]`` of ``tables`` ``(A, 4, n)`` / ``tcps`` ``(A, 3)`` / ``bases`` ``(A, 4, 4)``
+    and ``configs[c]`` ``(K+1, n)``, ``pos[c]`` / ``std[c]`` ``(K+1, m)``, ``reach[c]``;
+    its ``(K,)`` segment values go to ``out[c]`` (the same compiled steps, bit for bit)."""
+    for c in range(configs.shape[0]):
+        a = arm[c]
+        out[c] = theta_dh_segments(tables[a], tcps[a], bases[a], configs[c], pos[c], std[c],
+                                   z, dens, reach[c], rows, tr, threshold, at_least)

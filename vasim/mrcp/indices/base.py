@@ -48,6 +48,29 @@ class Wrench:
 
 
 @dataclass(frozen=True)
+class NearestQuery:
+    """The nearest of a set of bodies, at each trajectory point of a context: the bodies
+    of the world other than the context's robot, less ``exclude``, restricted to ``only``
+    when given; values capped at ``max_distance`` [m].
+
+    An index that reads only such a minimum declares its queries (``nearest_queries(world)``)
+    so the kernel answers them for every context of a cycle in one batched call
+    (:func:`prefetch_distances_all`); it reads them with
+    :meth:`EvalContext.nearest_distances`.
+    """
+
+    max_distance: float
+    exclude: frozenset[str] = frozenset()
+    only: frozenset[str] | None = None
+
+    def bodies(self, world: ProximityWorld, robot: str) -> list[str]:
+        """The bodies of the set for ``robot``, in the world's order."""
+        return [b for b in (*world.robot_names(), *world.obstacle_names())
+                if b != robot and b not in self.exclude
+                and (self.only is None or b in self.only)]
+
+
+@dataclass(frozen=True)
 class EvalContext:
     """Everything an index may read to evaluate one robot at one task point.
 
@@ -97,7 +120,7 @@ class EvalContext:
     wrench: Wrench | None = None
     extras: Mapping[str, Any] = field(default_factory=dict)
     distance_points: str = "all"
-    _memo: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    _memo: dict[Any, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def horizon(self) -> int:
@@ -151,6 +174,29 @@ class EvalContext:
         self._memo["distances"] = (max_distance, names, out)
         return names, out
 
+
+    def nearest_distances(self, query: NearestQuery) -> FloatArray:
+        """``(K+1,)`` distance from this robot, posed at each trajectory point, to the
+        nearest body of ``query`` [m] (capped at its ``max_distance``); NaN at the points
+        whose distances are not queried (:meth:`distance_rows`) and where the set is empty.
+
+        Read from the kernel's batched answer when it made one
+        (:func:`prefetch_distances_all`), else the row minimum of :meth:`body_distances`
+        over the set's bodies (the same values, bit for bit).
+        """
+        cached = self._memo.get(("nearest", query))
+        if cached is not None:
+            return np.asarray(cached, dtype=np.float64)
+        names, dist = self.body_distances(query.max_distance)
+        wanted = set(query.bodies(self.world, self.robot))
+        keep = [j for j, b in enumerate(names) if b in wanted]
+        out = np.full(self.configs.shape[0], np.nan)
+        if keep:
+            sub = dist[:, keep]
+            rows = ~np.all(np.isnan(sub), axis=1)
+            out[rows] = np.nanmin(sub[rows], axis=1)
+        self._memo[("nearest", query)] = out
+        return out
 
 def prediction_weights(count: int) -> FloatArray:
     """``w_k = 1/(k+1)`` for ``k = 0..count-1`` (seed eq. 3.19)."""
@@ -264,4 +310,108 @@ def prefetch_distances(contexts: Sequence[EvalContext], max_distance: float) -> 
             start += int(r.size)
         out = np.where(np.isnan(out), np.nan, np.minimum(out, max_distance))
         c._memo["distances"] = (max_distance, names, out)
+    return count
+
+
+def prefetch_distances_all(contexts: Sequence[EvalContext], max_distance: float | None,
+                           nearest: Sequence[NearestQuery] = ()) -> int:
+    """:func:`prefetch_distances` for the contexts of every robot of a cycle in one call of
+    the world's ``min_distances_many(queries, max_distance)`` (one query per robot: all
+    its contexts' rows), when the world has it; else one :func:`prefetch_distances` per
+    robot. The stored values are the same either way (``min_distances_many`` answers each
+    query as ``min_distances`` does, bit for bit).
+
+    **Decision** (cost, issue #17 §4): the kernel's evaluation makes its distance queries
+    for all robots at once — one compiled call per cycle (per robot model) for the link
+    frames and distances of every robot at every trajectory point, the other bodies'
+    geometry computed once for all of them — instead of one call per robot.
+
+    The ``nearest`` queries (:class:`NearestQuery`: an index that reads only the nearest
+    of a set of bodies) are answered for every context in one call of the world's
+    ``nearest_distances_many`` when it has one (one branch and bound over the whole set:
+    see :meth:`vasim.mrcp.world.PybulletWorld.nearest_distances_many`), stored for
+    :meth:`EvalContext.nearest_distances` with the values it would compute itself.
+
+    Args:
+        contexts: contexts of any robots of one world.
+        max_distance: the per-body range to store [m] (the largest any index reading
+            :meth:`EvalContext.body_distances` will ask for), None: no per-body values.
+        nearest: the nearest-body queries to answer.
+
+    Returns:
+        The number of configurations queried (0 when nothing was prefetched).
+
+    Raises:
+        ValueError: if the contexts are not all of one world.
+    """
+    if any(c.world is not contexts[0].world for c in contexts):
+        raise ValueError("prefetch_distances_all: contexts must share one world")
+    count = _prefetch_nearest(contexts, nearest) if nearest else 0
+    if max_distance is None:
+        return count
+    todo = [c for c in contexts if "distances" not in c._memo]
+    if not todo:
+        return count
+    world = todo[0].world
+    by_robot: dict[str, list[EvalContext]] = {}
+    for c in todo:
+        by_robot.setdefault(c.robot, []).append(c)
+    many = getattr(world, "min_distances_many", None)
+    if many is None:
+        return count + sum(prefetch_distances(cs, max_distance) for cs in by_robot.values())
+    all_names = (*world.robot_names(), *world.obstacle_names())
+    names = {r: [b for b in all_names if b != r] for r in by_robot}
+    rows = {r: [c.distance_rows() for c in cs] for r, cs in by_robot.items()}
+    queries = [(r, np.concatenate([c.configs[k] for c, k in zip(cs, rows[r], strict=True)]),
+                names[r]) for r, cs in by_robot.items()
+               if names[r] and sum(int(k.size) for k in rows[r])]
+    values = dict(zip([q[0] for q in queries],
+                      many(queries, max_distance) if queries else [], strict=True))
+    for r, cs in by_robot.items():
+        got = values.get(r)
+        start = 0
+        for c, k in zip(cs, rows[r], strict=True):
+            out = np.full((c.configs.shape[0], len(names[r])), np.nan)
+            if got is not None and k.size:
+                out[k] = np.asarray(got, dtype=np.float64)[start:start + k.size]
+                start += int(k.size)
+            out = np.where(np.isnan(out), np.nan, np.minimum(out, max_distance))
+            c._memo["distances"] = (max_distance, names[r], out)
+        count += sum(int(k.size) for k in rows[r])
+    return count
+
+
+def _prefetch_nearest(contexts: Sequence[EvalContext], queries: Sequence[NearestQuery]) -> int:
+    """Store every context's :meth:`EvalContext.nearest_distances` for ``queries`` from one
+    ``nearest_distances_many`` call (worlds without it: nothing is stored, the contexts
+    compute them from :meth:`EvalContext.body_distances`)."""
+    world = contexts[0].world if contexts else None
+    many = getattr(world, "nearest_distances_many", None)
+    if world is None or many is None:
+        return 0
+    queries = list(dict.fromkeys(queries))
+    todo = [c for c in contexts if any(("nearest", q) not in c._memo for q in queries)]
+    by_robot: dict[str, list[EvalContext]] = {}
+    for c in todo:
+        by_robot.setdefault(c.robot, []).append(c)
+    groups = {r: [q.bodies(world, r) for q in queries] for r in by_robot}
+    rows = {r: [c.distance_rows() for c in cs] for r, cs in by_robot.items()}
+    asked = [(r, np.concatenate([c.configs[k] for c, k in zip(cs, rows[r], strict=True)]),
+              groups[r]) for r, cs in by_robot.items()
+             if sum(int(k.size) for k in rows[r])]
+    values = dict(zip([a[0] for a in asked],
+                      many(asked, [q.max_distance for q in queries]) if asked else [],
+                      strict=True))
+    count = 0
+    for r, cs in by_robot.items():
+        got = values.get(r)
+        start = 0
+        for c, k in zip(cs, rows[r], strict=True):
+            for g, q in enumerate(queries):
+                out = np.full(c.configs.shape[0], np.nan)
+                if got is not None and k.size and groups[r][g]:
+                    out[k] = np.asarray(got, dtype=np.float64)[start:start + k.size, g]
+                c._memo[("nearest", q)] = out
+            start += int(k.size)
+        count += start
     return count

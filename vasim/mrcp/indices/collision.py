@@ -15,7 +15,10 @@ robot-level distance query (it is the minimum over the robot's links); distances
 ``min_distances(robot, configs (N, n), bodies, max_distance) -> (N, B)`` (same values as
 posing the robot and calling ``min_distance`` per body); the queries are made once per
 context (:meth:`~vasim.mrcp.indices.EvalContext.body_distances`) and shared with the
-visibility index.
+visibility index. CR reads only the nearest body (:class:`~vasim.mrcp.indices.base.NearestQuery`,
+every body but the ignored ones): the kernel answers that minimum for every context of a
+cycle in one batched call (one branch and bound over all the bodies at once), the values of
+the per-body queries' row minimum.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.mrcp.indices.base import INDICES, EvalContext, Key
+from vasim.mrcp.indices.base import INDICES, EvalContext, Key, NearestQuery
 from vasim.mrcp.interfaces import ProximityWorld
 
 FloatArray = NDArray[np.float64]
@@ -89,24 +92,25 @@ class CollisionRiskIndex:
         self.t_max = float(t_max)
         self.max_distance = float(max_distance)
         self.ignore = frozenset(ignore)
+        self._query = NearestQuery(self.max_distance, exclude=self.ignore)
 
     def distance_range(self, world: ProximityWorld) -> float | None:
         """The range of the body distances this index reads [m], for the kernel's one
         batched query per robot."""
         return self.max_distance
 
+    def nearest_queries(self, world: ProximityWorld) -> tuple[NearestQuery, ...]:
+        """CR reads only the nearest body (every body but the ignored ones), for the
+        kernel's one batched nearest-body query per cycle."""
+        return (self._query,)
+
     def distances(self, ctx: EvalContext) -> FloatArray:
         """``(K+1,)`` minimum distance to any other body at each reachable point (NaN else)."""
-        names, dist = ctx.body_distances(self.max_distance)
-        keep = [j for j, b in enumerate(names) if b not in self.ignore]
-        out = np.full(ctx.configs.shape[0], np.nan)
-        if not keep:
+        if not self._query.bodies(ctx.world, ctx.robot):
+            out = np.full(ctx.configs.shape[0], np.nan)
             out[ctx.reachable] = self.max_distance
             return out
-        sub = dist[:, keep]
-        rows = ~np.all(np.isnan(sub), axis=1)
-        out[rows] = np.nanmin(sub[rows], axis=1)
-        return out
+        return ctx.nearest_distances(self._query).copy()
 
     def evaluate(self, ctx: EvalContext) -> float:
         if not ctx.reachable[0]:

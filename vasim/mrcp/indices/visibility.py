@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
+from vasim.mrcp.indices.base import INDICES, EvalContext, NearestQuery, prediction_weights
 from vasim.mrcp.interfaces import ProximityWorld
 
 
@@ -50,11 +50,17 @@ class VisibilityIndex:
             raise ValueError(f"visibility: d_ref must be > 0, got {d_ref!r}")
         self.cone_body = cone_body
         self.d_ref = float(d_ref)
+        self._query = NearestQuery(self.d_ref, only=frozenset({cone_body}))
 
     def distance_range(self, world: ProximityWorld) -> float | None:
         """The range of the body distances this index reads [m] (None: it reads none in
         ``world``), for the kernel's one batched query per robot."""
         return self.d_ref if self.cone_body in world.obstacle_names() else None
+
+    def nearest_queries(self, world: ProximityWorld) -> tuple[NearestQuery, ...]:
+        """The view cone's distance (a set of one body), for the kernel's one batched
+        nearest-body query per cycle."""
+        return (self._query,) if self.cone_body in world.obstacle_names() else ()
 
     def evaluate(self, ctx: EvalContext) -> float:
         world = ctx.world
@@ -62,8 +68,7 @@ class VisibilityIndex:
             return 0.0
         if self.cone_body not in world.obstacle_names():
             return 1.0
-        names, dist = ctx.body_distances(self.d_ref)
-        col = dist[:, names.index(self.cone_body)]
+        col = ctx.nearest_distances(self._query)
         # An unreachable point scores 0; a reachable point whose distance was not queried
         # (``distance_points="ends"``) is left out of the average, as in CR.
         measured = np.isfinite(col)
