@@ -41,12 +41,6 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _ray_client_missing() -> bool:
-    from ray._private.utils import get_ray_client_dependency_error
-
-    return get_ray_client_dependency_error() is not None
-
-
 def _wait_for_gcs(port: int, proc: subprocess.Popen[bytes], log: Path) -> None:
     """Until the cluster's GCS accepts connections and `ray start` reports it started."""
     end = time.monotonic() + START_TIMEOUT_S
@@ -99,16 +93,16 @@ def _cluster_token() -> Iterator[dict[str, str]]:
 
 
 @pytest.fixture
-def ray_cluster(tmp_path: Path) -> Iterator[int]:
-    """A 1-CPU Ray head on 127.0.0.1 (its GCS port), ended by pid in teardown."""
-    if not RAY.exists():
-        pytest.skip(f"no ray executable beside {sys.executable}")
+def ray_cluster(tmp_path: Path) -> Iterator[tuple[int, int]]:
+    """A 1-CPU Ray head on 127.0.0.1: (its GCS port, its Ray Client server port), ended by
+    pid in teardown."""
+    assert RAY.exists(), f"no ray executable beside {sys.executable}"
     with _cluster_token():
         yield from _head(tmp_path)
 
 
-def _head(tmp_path: Path) -> Iterator[int]:
-    port = _free_port()
+def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
+    port, client_port = _free_port(), _free_port()
     log = tmp_path / "ray_head.log"
     env = dict(os.environ)
     root = str(Path(vasim.__file__).resolve().parents[1])   # the workers import this vasim
@@ -117,12 +111,13 @@ def _head(tmp_path: Path) -> Iterator[int]:
     with log.open("wb") as out:
         proc = subprocess.Popen(
             [str(RAY), "start", "--head", "--block", "--node-ip-address", "127.0.0.1",
-             "--port", str(port), "--num-cpus", "1", "--include-dashboard", "false",
+             "--port", str(port), "--ray-client-server-port", str(client_port),
+             "--num-cpus", "1", "--include-dashboard", "false",
              "--disable-usage-stats", "--temp-dir", str(temp)],
             stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True)
     try:
         _wait_for_gcs(port, proc, log)
-        yield port
+        yield port, client_port
     finally:
         try:
             family = psutil.Process(proc.pid).children(recursive=True)
@@ -148,31 +143,38 @@ def _power(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> st
     return text
 
 
-def test_address_of_a_running_cluster_gives_the_local_result(
-        ray_cluster: int, tiny_protocol_path: Path, tmp_path: Path,
+def test_addresses_of_a_running_cluster_give_the_local_result(
+        ray_cluster: tuple[int, int], tiny_protocol_path: Path, tmp_path: Path,
         capsys: pytest.CaptureFixture[str]) -> None:
     common = ["--protocol", str(tiny_protocol_path), "--subjects", "3,4", "--cohorts", "2",
               "--coarse", "--max-time", "1.5", "--seed", "11"]
-    address = f"127.0.0.1:{ray_cluster}"
-    on_cluster = _power([*common, "--address", address], tmp_path / "cluster", capsys)
+    port, client_port = ray_cluster
+    runs = {"gcs": f"127.0.0.1:{port}", "client": f"ray://127.0.0.1:{client_port}"}
+    text = {k: _power([*common, "--address", a], tmp_path / k, capsys) for k, a in runs.items()}
     local = _power([*common, "--workers", "1"], tmp_path / "local", capsys)
-    assert f"(cluster {address})" in on_cluster and "on 1 CPU(s)" in on_cluster
     assert "(local Ray)" in local
-    # same seeds -> the same cohorts -> the same F, p and power, whatever ran them
-    a = pd.read_csv(tmp_path / "cluster" / "power_cohorts.csv")
     b = pd.read_csv(tmp_path / "local" / "power_cohorts.csv")
-    assert set(a["n_subjects"]) == {3, 4} and set(a["cohort"]) == {0, 1}
-    assert a["F"].notna().sum() >= 4, a          # real tests were computed and compared
-    pd.testing.assert_frame_equal(a, b)
-    pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "cluster" / "power.csv"),
-                                  pd.read_csv(tmp_path / "local" / "power.csv"))
-    table = [ln for ln in on_cluster.splitlines() if "±" in ln]
-    assert table and table == [ln for ln in local.splitlines() if "±" in ln]
+    assert set(b["n_subjects"]) == {3, 4} and set(b["cohort"]) == {0, 1}
+    assert b["F"].notna().sum() >= 4, b          # real tests were computed and compared
+    for k, address in runs.items():
+        assert f"(cluster {address})" in text[k] and "on 1 CPU(s)" in text[k], text[k]
+        # same seeds -> the same cohorts -> the same F, p and power, whatever ran them
+        pd.testing.assert_frame_equal(pd.read_csv(tmp_path / k / "power_cohorts.csv"), b)
+        pd.testing.assert_frame_equal(pd.read_csv(tmp_path / k / "power.csv"),
+                                      pd.read_csv(tmp_path / "local" / "power.csv"))
+        table = [ln for ln in text[k].splitlines() if "±" in ln]
+        assert table and table == [ln for ln in local.splitlines() if "±" in ln]
 
 
-@pytest.mark.skipif(not _ray_client_missing(), reason="ray[client] is installed here")
 def test_a_ray_client_address_without_ray_client_is_a_clear_error(
-        tiny_protocol_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        tiny_protocol_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # an installation without the ray[client] extra (vasim requires it; a user's own Ray
+    # may lack it): Ray's own check reports the missing grpcio
+    import ray.client_builder
+
+    monkeypatch.setattr(ray.client_builder, "get_ray_client_dependency_error",
+                        lambda: ImportError("No module named 'grpc'"))
     code = main(["study", "power", "--protocol", str(tiny_protocol_path), "--subjects", "2",
                  "--cohorts", "1", "--address", "ray://127.0.0.1:10001", "--no-progress"])
     err = capsys.readouterr().err
