@@ -28,7 +28,7 @@ Parameters (``FixtureEffect``) and where each comes from (seed line numbers refe
 
 * a_c (``accuracy``): seed l. 5378-5380, "Tukey HSD test shows that FF is the most effective
   VF in reducing cumulative error, but its effect is not significantly different from AG
-  and MS": FF 0.54, MS 0.45, AG 0.58, Mag 0.95, VG 0.95 (VG "generating confusion more than
+  and MS": FF 0.52, MS 0.45, AG 0.66, Mag 0.95, VG 0.95 (VG "generating confusion more than
   helping", l. 5420). The target is the *measured* accuracy, the path deviation (eq. 6.5's
   e follows the time, ``vasim.tasks.trajectory.POI_SPACING``): FF lowest, AG and MS close.
   These factors sit on top of the motion model's own channels, which is why they are not
@@ -38,8 +38,11 @@ Parameters (``FixtureEffect``) and where each comes from (seed line numbers refe
   0.88 made VG the most accurate and MS the least; the 46-subject cohort of 2026-11-25
   with FF 0.60, MS 0.68, AG 0.78, Mag 0.88 gave Mag 3.71 = FF 3.73 mm and FF vs MS
   p_adj = .003; 12-subject pilots then gave (FF .52, MS .58, AG .78, Mag .95) FF 3.58, MS
-  3.84, VG 3.94, Mag 3.99, AG 4.04 mm, and (AG .60, MS .53) FF 3.58, AG 3.75, MS 3.80: the
-  path deviation moves ~1.9 mm per unit of FF's or AG's factor, ~0.8 mm per unit of MS's.
+  3.84, VG 3.94, Mag 3.99, AG 4.04 mm, and (AG .60, MS .53) FF 3.58, AG 3.75, MS 3.80 (the
+  path deviation moves ~1.9 mm per unit of FF's or AG's factor, ~0.8 mm per unit of MS's);
+  46 subjects with FF .54, AG .58, MS .45 gave AG 3.55, FF 3.67, MS 3.72 mm (AG best), and
+  with the values above (2026-11-27) FF 3.638, AG 3.641, MS 3.722, Mag 3.762, VG 3.958 mm
+  (FF vs AG p_adj = 1.0, vs MS .82: FF and AG tie at the top).
 * v_c (``speed``): l. 5380-5381, "completion time is improved by Mag and ... not
   significantly different from that of AG": Mag 0.80, AG 0.84 (0.88 left Mag vs AG at
   p_adj = .005 in the 46-subject cohort); l. 5371-5372 "they do not
@@ -69,12 +72,12 @@ are not measurements.
 Example:
     >>> adj = trial_adjustment(["none", "none", "none", "ff", "ff"], "ff")
     >>> round(adj.practice, 2), adj.noise_factor, adj.time_factor
-    (6.0, 0.54, 1.04)
+    (6.0, 0.52, 1.04)
     >>> ff_block = ["none"] * 3 + ["ff"] * 6
-    >>> round(trial_adjustment(ff_block, "none").noise_factor, 4)   # (1 - .4 x .46) x 1.12
-    0.9139
+    >>> round(trial_adjustment(ff_block, "none").noise_factor, 4)   # (1 - .4 x .48) x 1.12
+    0.905
     >>> round(trial_adjustment(ff_block + ["none"], "none").noise_factor, 4)  # carry-over
-    0.816
+    0.808
 """
 
 from __future__ import annotations
