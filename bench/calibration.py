@@ -22,14 +22,14 @@ by construction; it is for planning (power, dry runs), not evidence.
 
 Usage: ``python -m bench.calibration [--subjects N] [--db PATH] [--workers W]``.
 
-Last run (2026-11-25, 46 subjects / 31 surgeons, seed 7, 7.4 min with 2 workers, the
-calibration in ``vasim.operator.learning`` as committed): all six fixture and trial effects
-significant (e: F(5,225) = 32.3, F(7,315) = 136.6; path deviation: 59.5, 25.2; latency: 33.8,
-144.3; every p < 1e-24); eq. 6.5's e: Mag best (it follows latency, r(e, latency) = 0.996
-at the default 10.5 mm POI spacing); path deviation Mag 3.71 / FF 3.73 mm (FF vs AG p_adj
-0.85, vs MS 0.003); latency Mag best (0.49 s), vs AG p_adj 0.005; best Mag 39 / FF 26 /
-AG 22 / VG 9 / MS 4 %, worst MS 41 / VG 41 / AG 11 / Mag 7 / FF 0 %, ratings FF 7.24,
-Mag 6.80, AG 6.52, VG 5.57, MS 4.54.
+Last run (2026-11-27, 46 subjects / 31 surgeons, seed 7, 11.6 min with 2 workers on a loaded
+machine, the calibration in ``vasim.operator.learning`` as committed): all six fixture and
+trial effects significant (e: F(5,225) = 39.2, F(7,315) = 137.7; path deviation: 62.5,
+28.6; latency: 41.2, 146.6; every p < 1e-28); path deviation FF 3.638 / AG 3.641 / MS
+3.722 / Mag 3.762 / VG 3.958 mm (FF vs AG p_adj 1.00, vs MS 0.82); eq. 6.5's e: Mag best
+(it follows latency, r(e, latency) = 0.996); latency Mag 0.487 s best, vs AG p_adj 0.62;
+best Mag 35 / FF 24 / AG 24 / VG 9 / MS 9 %, worst VG 43 / MS 39 / AG 11 / Mag 7 / FF 0 %,
+ratings FF 7.26, AG 6.63, Mag 6.57, VG 5.48, MS 4.83.
 """
 
 from __future__ import annotations
