@@ -43,6 +43,7 @@ from typing import Any
 
 import pandas as pd
 
+from vasim.core.progress import progress_bar
 from vasim.operator.teleop_profile import NEUTRAL, SEED_TELEOP, TeleopEffects, secant_fit
 
 MODES = ("stdt", "mrcp", "mrcp_cam")
@@ -128,11 +129,19 @@ def simulate(n_subjects: int, seed: int, effects: TeleopEffects, workers: int,
     """The cohort's trials, one row each (``small``: ``cohort_jobs``'s test sizes)."""
     jobs = cohort_jobs(n_subjects, seed, effects, **small)
     t0 = time.perf_counter()
-    if workers <= 1:
-        rows = [_run_trial(j) for j in jobs]
-    else:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as ex:
-            rows = list(ex.map(_run_trial, jobs))
+    with progress_bar(len(jobs), f"chapter 5 ({n_subjects} subjects)", "trial") as bar:
+        if workers <= 1:
+            rows = []
+            for j in jobs:
+                rows.append(_run_trial(j))
+                bar.update(1)
+        else:
+            with ProcessPoolExecutor(workers,
+                                     mp_context=multiprocessing.get_context("spawn")) as ex:
+                rows = []
+                for r in ex.map(_run_trial, jobs):   # in order: the bar moves as they end
+                    rows.append(r)
+                    bar.update(1)
     df = pd.DataFrame(rows)
     wall = time.perf_counter() - t0
     print(f"  {len(df)} trials of {n_subjects} subjects, {df['sim_time'].sum():.0f} s simulated "
