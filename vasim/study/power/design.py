@@ -164,7 +164,7 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
     Example:
         >>> e = scaled_effects(0.5)["ff"]
         >>> round(e.accuracy, 3), round(e.speed, 3), round(e.dependence, 3)
-        (0.77, 1.02, 0.06)
+        (0.76, 1.02, 0.06)
         >>> scaled_effects(0.0)["ff"].accuracy
         1.0
     """
