@@ -118,9 +118,9 @@ class TeleopEffects:
 NEUTRAL = TeleopEffects()
 """No mode effect: the scripted operator as it is (the first pilot of the fit)."""
 
-SEED_TELEOP = TeleopEffects(thread_time=10.0, stdt_noise=0.64, camera_cost=0.27)
-"""The calibration to the seed's Table 5.1 (module docstring), two iterations (seed 7,
-2026-11-25):
+SEED_TELEOP = TeleopEffects(thread_time=10.0, stdt_noise=0.64, camera_cost=0.12)
+"""The calibration to the seed's Table 5.1 (module docstring), three iterations (seed 7,
+2026-11-25 and 2026-11-27):
 
 1. ``python -m bench.chapter5 --fit --fit-subjects 3``: pilots NEUTRAL and
    ``bench.chapter5.PILOT`` (thread_time 2, stdt_noise 1, camera_cost 0.5) gave MRCP's ET
@@ -135,6 +135,18 @@ SEED_TELEOP = TeleopEffects(thread_time=10.0, stdt_noise=0.64, camera_cost=0.27)
    / 0.448 = 0.27; thread_time kept (MRCP's ET 3.6 % under the seed's). Its 4-subject
    cohort (``python -m bench.chapter5``): MRCP's ET 97.4 s, EM StdT/MRCP 1.140, ET
    MRCP+Cam/MRCP 0.987; its 10-subject cohort (``--subjects 10``): 115.9 s, 1.122, 1.059.
+3. The seed's 20 subjects (``--subjects 20``, 2026-11-27): MRCP's ET 114.5 s, EM StdT/MRCP
+   1.269, ET MRCP+Cam/MRCP 1.184 with camera_cost 0.27 (paired p = .020: MRCP+Cam
+   significantly slower than MRCP, where the seed found no difference, p = .41). Only
+   MRCP+Cam's trials depend on camera_cost, so they were re-run with the same seeds:
+   0.05 gave ET 1.013 (p = .84) but MRCP+Cam's Q half of MRCP's (p = .033; seed +7.4 %,
+   p = .62); 0.12 gives ET 1.064 (p = .36), EM 1.022 (p = .78), Q 0.53 (p = .062). The
+   secant through the first two (0.086 for ET alone) would trade Q's non-significance for
+   the last 2 % of ET; **Decision**: 0.12, the value that keeps both of the seed's reported
+   results (ET ratio 1.041 within 2.3 points, no significant difference on ET, EM or Q).
+   thread_time and stdt_noise were kept (MRCP's ET 13 % over the seed's, EM StdT/MRCP
+   1.269 against 1.175: the 20-subject cohort's moments differ from the 4-subject one's
+   they were fitted on).
 
 A threading movement ten times the scripted operator's Fitts time is the model's largest
 assumption: the seed's trials are five times longer than the simulated position-only task,
