@@ -5,11 +5,11 @@ include_dashboard=False)``, its processes on 127.0.0.1) or joins the cluster ``a
 names: ``host:port`` (the head's GCS port; the driver must run on a node of the
 cluster, tested in ``tests/study/power/test_cluster.py``), ``auto`` (the cluster started on
 this node) or ``ray://head:10001`` (Ray Client, from anywhere; the ``ray[client]`` extra,
-a dependency of vasim; tested against a client server in the same file). It submits one task per design point and cohort
-(:func:`~vasim.study.power.cohort.cohort_tests`), collects them as they finish with a
-progress bar over cohorts (:mod:`vasim.core.progress`) and always shuts Ray down
-(``ray.shutdown()`` in a ``finally``: Ctrl-C and errors included; a local Ray's processes
-end with it).
+a dependency of vasim; tested against a client server in the same file). It submits one
+task per design point and cohort (:func:`~vasim.study.power.cohort.cohort_tests`),
+collects them as they finish with a progress bar over cohorts (:mod:`vasim.core.progress`)
+and always shuts Ray down (``ray.shutdown()`` in a ``finally``: Ctrl-C and errors
+included; a local Ray's processes end with it).
 
 **Decisions**:
 
