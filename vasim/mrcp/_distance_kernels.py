@@ -259,6 +259,15 @@ def _to_world(frames: np.ndarray, pts: np.ndarray, count: np.ndarray, centre: np
 
 
 @njit(cache=True, nogil=True)
+def _posed(frames: np.ndarray, pts: np.ndarray, count: np.ndarray, centre: np.ndarray,
+           world: np.ndarray, wcentre: np.ndarray, rot: np.ndarray) -> None:  # pragma: no cover
+    """:func:`_to_world` and each link's rotation ``rot`` ``(L, 3, 3)``."""
+    _to_world(frames, pts, count, centre, world, wcentre)
+    for i in range(frames.shape[0]):
+        rot[i] = frames[i, :3, :3]
+
+
+@njit(cache=True, nogil=True)
 def _pair(wa: np.ndarray, na: int, rot_a: np.ndarray, scale_a: float, ball_a: float,
           wb: np.ndarray, nb: int, rot_b: np.ndarray, scale_b: float, ball_b: float,
           verts: np.ndarray, nbrs: np.ndarray, iterations: int, skip_above: float,
@@ -378,21 +387,44 @@ def swept_distances(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
     sb = np.empty((lb, 3))
     rot_a = np.empty((la, 3, 3))
     rot_b = np.empty((lb, 3, 3))
-    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
-    for j in range(lb):
-        rot_b[j] = frames_b[j, :3, :3]
+    _posed(frames_b, pts_b, n_b, bcen_b, wb, sb, rot_b)
     bound = np.empty(la * lb)
     ws = np.empty((16, 3))
     for c in range(frames_a.shape[0]):
         fa = frames_a[c]
-        _to_world(fa, pts_a, n_a, bcen_a, wa, sa)
-        for i in range(la):
-            rot_a[i] = fa[i, :3, :3]
+        _posed(fa, pts_a, n_a, bcen_a, wa, sa, rot_a)
         for body in range(starts.shape[0] - 1):
             out[c, body] = _min_to_body(wa, sa, rot_a, n_a, scale_a, ball_a, brad_a, wb, sb,
                                         rot_b, n_b, scale_b, ball_b, brad_b, starts[body],
                                         starts[body + 1], margins[body], verts, nbrs, cutoff,
                                         iterations, bound, ws)
+
+
+@njit(cache=True, nogil=True)
+def _pruned_pair(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: np.ndarray,
+                 scale_a: np.ndarray, ball_a: np.ndarray, wb: np.ndarray, sb: np.ndarray,
+                 rot_b: np.ndarray, n_b: np.ndarray, scale_b: np.ndarray,
+                 ball_b: np.ndarray, i: int, j: int, margin: float, best: float,
+                 verts: np.ndarray, nbrs: np.ndarray, iterations: int,
+                 ws: np.ndarray) -> float:  # pragma: no cover - compiled
+    """The swept-model distance of link pair ``(i, j)`` less ``margin`` if it can be below
+    ``best``, else a value ``>= best`` (the step of every branch and bound here).
+
+    A cheaper lower bound first: the key points' separation along the line of the bounding
+    centres, less both sweeping radii (the pair's value is at least its capsule bound,
+    which is at least this; 1e-9 m of slack for round-off keeps the minimum exactly the one
+    of the full values). Then :func:`_pair`, which skips the support search when the
+    capsule bound is already ``>= best`` and stops refining once the pair is surely no
+    nearer than ``best``: the minimum is the one of the full values, at about half the cost
+    per pair."""
+    if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
+            - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
+            - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
+            - margin - 1e-9 >= best:
+        return np.inf
+    return _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
+                 rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
+                 best + margin, ws, best + margin) - margin
 
 
 @njit(cache=True, nogil=True)
@@ -422,21 +454,8 @@ def _min_to_body(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: np.ndar
             break
         i = idx // nbl
         j = j0 + idx % nbl
-        # a cheaper lower bound first: the key points' separation along the line of the
-        # bounding centres, less both sweeping radii (the pair's value is at least its
-        # capsule bound, which is at least this; 1e-9 m of slack for round-off keeps the
-        # minimum exactly the one of the full values)
-        if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
-                - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
-                - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
-                - margin - 1e-9 >= best:
-            continue
-        # _pair skips the support search when the capsule bound is already >= best and
-        # stops refining once the pair is surely no nearer than best: the minimum is the
-        # one of the full values, at about half the cost per pair
-        dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
-                     rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
-                     best + margin, ws, best + margin) - margin
+        dist = _pruned_pair(wa, sa, rot_a, n_a, scale_a, ball_a, wb, sb, rot_b, n_b, scale_b,
+                            ball_b, i, j, margin, best, verts, nbrs, iterations, ws)
         if dist < best:
             best = dist
     return best
@@ -476,18 +495,14 @@ def swept_distances_many(table: np.ndarray, tcp: np.ndarray, bases: np.ndarray,
     sb = np.empty((lb, 3))
     rot_a = np.empty((la, 3, 3))
     rot_b = np.empty((lb, 3, 3))
-    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
-    for j in range(lb):
-        rot_b[j] = frames_b[j, :3, :3]
+    _posed(frames_b, pts_b, n_b, bcen_b, wb, sb, rot_b)
     bound = np.empty(la * lb)
     ws = np.empty((16, 3))
     for c in range(qs.shape[0]):
         r = row_query[c]
         _chain_kernel(table, tcp, bases[r], qs[c], frames)
         fa = frames[:la]
-        _to_world(fa, pts_a, n_a, bcen_a, wa, sa)
-        for i in range(la):
-            rot_a[i] = fa[i, :3, :3]
+        _posed(fa, pts_a, n_a, bcen_a, wa, sa, rot_a)
         for body in range(starts.shape[0] - 1):
             if not wanted[r, body]:
                 continue
@@ -536,14 +551,8 @@ def _nearest_of_bodies(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: n
         i = link_i[idx]
         j = link_j[idx]
         margin = link_m[idx]
-        if _axis_bound(wa[i], n_a[i], wb[j], n_b[j], sa[i], sb[j]) \
-                - (scale_a[i] if ball_a[i] <= 0.0 else ball_a[i]) \
-                - (scale_b[j] if ball_b[j] <= 0.0 else ball_b[j]) \
-                - margin - 1e-9 >= best:
-            continue
-        dist = _pair(wa[i], n_a[i], rot_a[i], scale_a[i], ball_a[i], wb[j], n_b[j],
-                     rot_b[j], scale_b[j], ball_b[j], verts, nbrs, iterations,
-                     best + margin, ws, best + margin) - margin
+        dist = _pruned_pair(wa, sa, rot_a, n_a, scale_a, ball_a, wb, sb, rot_b, n_b, scale_b,
+                            ball_b, i, j, margin, best, verts, nbrs, iterations, ws)
         if dist < best:
             best = dist
     return best
@@ -579,9 +588,7 @@ def swept_nearest_many(table: np.ndarray, tcp: np.ndarray, bases: np.ndarray,
     sb = np.empty((lb, 3))
     rot_a = np.empty((la, 3, 3))
     rot_b = np.empty((lb, 3, 3))
-    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
-    for j in range(lb):
-        rot_b[j] = frames_b[j, :3, :3]
+    _posed(frames_b, pts_b, n_b, bcen_b, wb, sb, rot_b)
     bound = np.empty(la * lb)
     link_i = np.empty(la * lb, dtype=np.int64)
     link_j = np.empty(la * lb, dtype=np.int64)
@@ -591,9 +598,7 @@ def swept_nearest_many(table: np.ndarray, tcp: np.ndarray, bases: np.ndarray,
         r = row_query[c]
         _chain_kernel(table, tcp, bases[r], qs[c], frames)
         fa = frames[:la]
-        _to_world(fa, pts_a, n_a, bcen_a, wa, sa)
-        for i in range(la):
-            rot_a[i] = fa[i, :3, :3]
+        _posed(fa, pts_a, n_a, bcen_a, wa, sa, rot_a)
         for g in range(groups.shape[1]):
             out[c, g] = _nearest_of_bodies(wa, sa, rot_a, n_a, scale_a, ball_a, brad_a, wb,
                                            sb, rot_b, n_b, scale_b, ball_b, brad_b, starts,
@@ -623,12 +628,8 @@ def swept_pair_bounds(frames_a: np.ndarray, pts_a: np.ndarray, n_a: np.ndarray,
     sb = np.empty((lb, 3))
     rot_a = np.empty((la, 3, 3))
     rot_b = np.empty((lb, 3, 3))
-    _to_world(frames_a, pts_a, n_a, bcen_a, wa, sa)
-    _to_world(frames_b, pts_b, n_b, bcen_b, wb, sb)
-    for i in range(la):
-        rot_a[i] = frames_a[i, :3, :3]
-    for j in range(lb):
-        rot_b[j] = frames_b[j, :3, :3]
+    _posed(frames_a, pts_a, n_a, bcen_a, wa, sa, rot_a)
+    _posed(frames_b, pts_b, n_b, bcen_b, wb, sb, rot_b)
     count = ia.shape[0]
     bound = np.empty(count)
     for p in range(count):
