@@ -27,6 +27,7 @@ examples:
   vasim mrcp run cube_rotation
   vasim mrcp run cube_translation --plot translation.png
   vasim mrcp run faucet --seed 3 --json
+  vasim mrcp run suture_combined --coarse --json
 """
 
 
@@ -143,6 +144,12 @@ def cmd_run(args: argparse.Namespace) -> int:
               f"cause={tr['cause']} ntt={tr['ntt']:.2f} ({done})", file=out)
     if not res.transfers():
         print("  none", file=out)
+    if summary.get("subtasks"):        # a scenario with a state graph (suture_combined)
+        print("subtasks:", file=out)
+        for st in summary["subtasks"]:
+            where = f" (stitch {st['stitch']})" if st.get("stitch") else ""
+            print(f"  {st['t_start']:7.3f} - {st['t_end']:7.3f}  {st['mode']:<5} "
+                  f"{st['name']}{where}", file=out)
     if res.violations:
         print(f"INVARIANTS VIOLATED ({len(res.violations)}):", file=out)
         for v in res.violations[:20]:

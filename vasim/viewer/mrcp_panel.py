@@ -61,7 +61,9 @@ from vasim.viewer.mrcp_view import (
     StationFrame,
     StationGeometry,
     StationView,
+    SubtaskView,
     station_frame,
+    subtask_text,
     task_pose,
 )
 from vasim.viewer.notify import ErrorReporter
@@ -357,9 +359,13 @@ def status_text(scenario: str, frame: MrcpFrame | None, speed: float) -> str:
     rcnt = f" → **{html.escape(str(s.rcnt))}**" if s.rcnt and s.rcnt != s.rsel else ""
     lag = "" if frame.realtime >= 0.9 * speed else \
         f" (behind: {frame.realtime:.2f}× real time)"
-    return (f"**{html.escape(scenario)}** · run {frame.run} · t = {s.t:5.2f} s{lag}  \n"
+    text = (f"**{html.escape(scenario)}** · run {frame.run} · t = {s.t:5.2f} s{lag}  \n"
             f"holds the task: **{html.escape(s.rsel)}** @ point {s.cutp}{rcnt} · "
             f"mode {html.escape(str(s.state))} · NTT {ntt}")
+    sub = subtask_text(s)
+    if sub is not None:       # a scenario with a state graph of subtasks (the suture)
+        text += f"  \nsubtask: **{html.escape(sub)}**"
+    return text
 
 
 def event_log_text(h: History, limit: int = 8) -> str:
@@ -520,6 +526,9 @@ class MrcpViewerApp(ErrorReporter):
                                  retry_s=retry_s)
         self.server: viser.ViserServer | None = None
         self.station: StationView | None = None
+        self.subtasks: SubtaskView | None = None
+        """The suture's thread and subtask label (created at the first sample with a
+        subtask)."""
         self.panel: MrcpPanel | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -610,8 +619,12 @@ class MrcpViewerApp(ErrorReporter):
         return viewer_url(self.host, self.port, self.access.token)
 
     def scene_nodes(self) -> list[str]:
-        """Names of the station's scene nodes (sorted)."""
-        return self.station.node_names() if self.station is not None else []
+        """Names of the station's scene nodes (sorted; the suture's thread and subtask
+        label once drawn)."""
+        names = self.station.node_names() if self.station is not None else []
+        if self.subtasks is not None:
+            names = sorted([*names, *self.subtasks.node_names()])
+        return names
 
     def stats(self) -> dict[str, float]:
         """Cycles run, runs, failures, view and panel updates, the run's real-time factor."""
@@ -701,6 +714,10 @@ class MrcpViewerApp(ErrorReporter):
                 assert frame is not None
                 self._shown_seq = frame.seq
                 station.update(frame.station)
+                if getattr(frame.sample, "subtask", None) is not None:
+                    if self.subtasks is None:
+                        self.subtasks = SubtaskView(server)
+                    self.subtasks.update(frame.sample)
                 panel.show_status(frame, self.speed)
             if force_plots or now - self._t_plot >= self.plot_period:
                 self._t_plot = now

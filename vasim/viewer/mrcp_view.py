@@ -19,6 +19,7 @@ constants), and for any other scenario the convex hull of the grasp points.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -217,6 +218,8 @@ def task_shape(scenario: str, points: FloatArray) -> trimesh.Trimesh:
         rod = trimesh.creation.cylinder(radius=0.004, height=2 * laparoscopic_rings.HALF_ROD)
         rod.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
         return rod
+    if scenario == "suture_combined":
+        return needle_mesh()
     if scenario == "faucet":
         parts = [trimesh.creation.cylinder(radius=0.02, height=0.03)]
         for k in range(3):
@@ -237,6 +240,78 @@ def task_shape(scenario: str, points: FloatArray) -> trimesh.Trimesh:
         ball = trimesh.creation.icosphere(subdivisions=1, radius=0.015)
         ball.apply_translation(pts.mean(axis=0) if len(pts) else np.zeros(3))
         return ball
+
+
+def needle_mesh(radius: float = 0.0006) -> trimesh.Trimesh:
+    """The suture's curved needle (needle frame): short cylinders along its arc."""
+    from vasim.mrcp.scenarios.suture_geometry import needle_points
+
+    pts = needle_points(19)
+    parts = [trimesh.creation.cylinder(radius=radius, segment=np.array([a, b]))
+             for a, b in itertools.pairwise(pts)]
+    out = trimesh.util.concatenate(parts)
+    assert isinstance(out, trimesh.Trimesh)  # Trimesh parts concatenate to one Trimesh
+    return out
+
+
+def subtask_text(sample: Any) -> str | None:
+    """The suture's subtask line (``"stitch 2 · pass_through · MRCP"``), None for a
+    scenario without subtasks.
+
+    Example:
+        >>> class S: subtask, mode, scene = "insertion", "MRCP", {"stitch": 2}
+        >>> subtask_text(S())
+        'stitch 2 · insertion · MRCP'
+    """
+    sub = getattr(sample, "subtask", None)
+    if sub is None:
+        return None
+    scene = getattr(sample, "scene", None) or {}
+    stitch = scene.get("stitch")
+    head = f"stitch {stitch} · " if stitch and sub not in ("pre_suture", "knot_tying") else ""
+    return f"{head}{sub} · {getattr(sample, 'mode', None) or '?'}"
+
+
+class SubtaskView:
+    """The suture's extra scene nodes (``/mrcp/suture``): the thread as line segments
+    (its free chain and the pinned path through the stitches) and a label with the current
+    subtask and pairing mode. Created by the app for a run whose samples carry a subtask."""
+
+    def __init__(self, server: viser.ViserServer):
+        scene = server.scene
+        empty = np.zeros((1, 2, 3), dtype=np.float32)
+        self.thread = scene.add_line_segments("/mrcp/suture/thread", empty,
+                                              (30, 30, 160), thickness=0.0008)
+        self.pinned = scene.add_line_segments("/mrcp/suture/pinned", empty,
+                                              (90, 60, 160), thickness=0.0008)
+        self.label = scene.add_label("/mrcp/suture/subtask", "subtask", anchor="bottom-left",
+                                     font_screen_scale=1.2)
+        self.updates = 0
+
+    def node_names(self) -> list[str]:
+        return sorted([self.thread.name, self.pinned.name, self.label.name])
+
+    @staticmethod
+    def segments(points: Any) -> NDArray[np.float32]:
+        """``(n, 3)`` polyline -> ``(n - 1, 2, 3)`` segments (one degenerate for n < 2)."""
+        p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        if len(p) < 2:
+            return np.zeros((1, 2, 3), dtype=np.float32)
+        return np.stack([p[:-1], p[1:]], axis=1)
+
+    def update(self, sample: Any) -> None:
+        """Draws the thread and the subtask label of one sample (inside ``atomic()``)."""
+        scene = getattr(sample, "scene", None) or {}
+        if "thread" in scene:
+            self.thread.points = self.segments(scene["thread"])
+        if "pinned" in scene:
+            self.pinned.points = self.segments(scene["pinned"])
+        text = subtask_text(sample)
+        if text is not None and self.label.text != text:
+            self.label.text = text
+        pos = np.asarray(sample.task_position, dtype=np.float64)
+        self.label.position = pos + np.array([0.0, 0.0, 0.05])
+        self.updates += 1
 
 
 def station_geometry(scenario: str, setup: Any) -> StationGeometry:
@@ -415,13 +490,16 @@ __all__ = [
     "StationFrame",
     "StationGeometry",
     "StationView",
+    "SubtaskView",
     "holder_text",
     "link_poses",
+    "needle_mesh",
     "obstacle_mesh",
     "obstacle_poses",
     "pose7",
     "robot_role",
     "station_frame",
     "station_geometry",
+    "subtask_text",
     "task_pose",
 ]

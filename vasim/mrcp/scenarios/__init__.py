@@ -15,10 +15,11 @@ from vasim.mrcp.scenarios.eight_robots import EightRobots
 from vasim.mrcp.scenarios.faucet import Faucet
 from vasim.mrcp.scenarios.laparoscopic_rings import LaparoscopicRings
 from vasim.mrcp.scenarios.obstacle_hole import ObstacleHole
+from vasim.mrcp.scenarios.suture_combined import SutureCombined
 
 SCENARIOS: dict[str, Scenario] = {s.name: s for s in (
     CubeRotation(), CubeTranslation(), ObstacleHole(), LaparoscopicRings(), Faucet(),
-    EightRobots())}
+    EightRobots(), SutureCombined())}
 
 
 def get_scenario(name: str) -> Scenario:

@@ -66,6 +66,10 @@ class Setup:
         extras: time -> scenario data for task-oriented indices (passed to the kernel).
         close: releases the world's resources.
         notes: scenario facts copied into the run's summary (e.g. the turning rate).
+        custom_run: a scenario that is more than the kernel following a script (the
+            suture's state graph switches the pairing mode) runs its own loop:
+            ``custom_run(name, duration, progress) -> RunResult``; the runner calls it
+            instead of its own (None: the runner's loop).
     """
 
     arms: dict[str, ArmKinematics]
@@ -80,6 +84,7 @@ class Setup:
     extras: Callable[[float], Mapping[str, Any]] | None = None
     close: Callable[[], None] = lambda: None
     notes: dict[str, Any] = field(default_factory=dict)
+    custom_run: Callable[..., Any] | None = None
 
 
 class Scenario(Protocol):

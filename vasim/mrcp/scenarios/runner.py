@@ -51,7 +51,10 @@ class Sample:
     """One cycle: mode, roles, NTT and the per-robot evaluations (TOp cycles only), the
     commanded configurations, the achieved task pose (behind the operator's script after a
     transfer until :class:`TrackingOperator` has caught up) and the robots in collision
-    (candidates included: the planner's moves must avoid obstacles too)."""
+    (candidates included: the planner's moves must avoid obstacles too). A scenario with a
+    state graph of subtasks (``suture_combined``) adds the current ``subtask``, the pairing
+    ``mode`` (``"StdT"`` / ``"MRCP"``) and ``scene``: what the viewer draws besides the
+    station (the thread's nodes, world frame)."""
 
     t: float
     state: str
@@ -66,6 +69,9 @@ class Sample:
     task_position: FloatArray
     task_rotation: FloatArray | None
     colliding: tuple[str, ...] = ()
+    subtask: str | None = None
+    mode: str | None = None
+    scene: dict[str, Any] | None = None
 
 
 @dataclass
@@ -77,6 +83,8 @@ class RunResult:
     samples: list[Sample]
     violations: list[str]
     notes: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)
+    """Scenario-specific sections of the summary (the suture's ``subtasks``)."""
 
     def events(self, prefix: str = "") -> list[tuple[float, str]]:
         """``(t, event)`` of every event starting with ``prefix``."""
@@ -101,7 +109,7 @@ class RunResult:
                 "cycles": len(self.samples), "transfers": self.transfers(),
                 "events": [{"t": round(t, 4), "event": e} for t, e in self.events()],
                 "violations": self.violations, "final_rsel": self.samples[-1].rsel
-                if self.samples else None, "notes": self.notes}
+                if self.samples else None, "notes": self.notes, **self.extra}
 
 
 def _parse_start(event: str) -> dict[str, Any]:
@@ -278,6 +286,13 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
     ``operator`` replaces the script as the source of the operator's target after t = 0
     (e.g. an :class:`OperatorSwitch`); None (default) follows ``setup.operator``.
     """
+    if setup.custom_run is not None:       # a scenario with its own loop (the suture)
+        try:
+            out = setup.custom_run(name, duration, progress)
+        finally:
+            setup.close()
+        assert isinstance(out, RunResult)
+        return out
     cfg = setup.config
     source = setup.operator if operator is None else operator
     pos0, rot0 = setup.operator(0.0)

@@ -74,14 +74,16 @@ NEEDLE_RADIUS = 0.018
 NEEDLE_HEIGHT = 0.009               # centre above the surface during a stitch
 TAIL_GRASP = 0.15
 TIP_GRASP = 0.15
-APPROACH = 0.008
+APPROACH = 0.012
 ENTRY_ANGLE = math.pi + math.asin(NEEDLE_HEIGHT / NEEDLE_RADIUS)
 EXIT_ANGLE = 2 * math.pi - math.asin(NEEDLE_HEIGHT / NEEDLE_RADIUS)
 #: Nominal hand-over rotations (needle angle β) for the pre-grasp directions.
 BETA_TRANSFER = 2 * math.pi + 0.05          # the needle transfer (R1 takes the tip point)
 BETA_START = ENTRY_ANGLE - 0.12             # the tip just above the entry point
-#: The jaw length: needle points this close to a grasping tool's tip are in its jaws.
-JAW = 0.005
+#: The jaw length: needle points this close to a grasping tool's tip are in its jaws
+#: (**decision**: a needle holder's jaws are 10-15 mm long; the shafts reach the needle
+#: steeply, close to its plane, so the needle runs along the jaws near the grasp).
+JAW = 0.010
 
 
 def breathing(t: float) -> float:
