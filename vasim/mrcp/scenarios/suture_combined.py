@@ -83,7 +83,16 @@ RETURN_X = -0.05
 #: The thread's length [m] and its free chain at start.
 THREAD_LENGTH = 0.32
 THREAD_FREE = 0.06
-#: An MRCP subtask that has not ended after this long is a violation [s].
+#: Knot tying: R1 withdraws this far along its shaft, then takes the thread this far
+#: from the last exit; R0 winds round it on a ring (radius, height over R1's tip) by
+#: KNOT_TURN in KNOT_TURN_S, then both pull (R0's and R1's displacements).
+KNOT_WITHDRAW = 0.025
+KNOT_SITE = np.array([0.012, 0.0, 0.02])
+KNOT_RING = (0.015, 0.0)
+KNOT_TURN = 0.6 * math.pi
+KNOT_TURN_S = 2.5
+KNOT_PULL = (np.array([-0.015, -0.01, 0.004]), np.array([0.012, 0.0, 0.004]))
+#: A subtask that has not ended after this long is a violation [s].
 TIMEOUT = 8.0
 #: The largest gap between the thread's end and the needle's tail [m].
 ATTACH_TOL = 5e-4
@@ -482,7 +491,7 @@ class SutureRun:
     # ------------------------------------------------------------------ StdT scripts
     @staticmethod
     def _stdt_stages(sub: str) -> int:
-        return 1 if sub == "pre_suture" else 3
+        return 1 if sub == "pre_suture" else 5
 
     def _stdt_targets(self, sub: str, stage: int, since: float, rsel: str,
                       rest: dict[str, FloatArray], stitches: list[_Stitch],
@@ -498,23 +507,32 @@ class SutureRun:
             goal0 = centre + rot @ self.task_points[0].position
             wait1 = g.entry_exit(0)[1] + off + np.array([0.006, 0.0, 0.012])
             return {"R0": goal0, "R1": wait1}, True
-        # knot tying: the free end's robot (R1) takes the thread above the last exit, the
-        # needle's robot wraps the thread round R1's jaws on the trocars' side, both pull
+        # knot tying: the free end's robot (``other``, R1) withdraws along its shaft, then
+        # takes the thread above the last exit; the needle's robot wraps the thread round
+        # R1's jaws on the trocars' side; both pull
         last = stitches[-1].exit if stitches[-1].exit is not None else g.entry_exit(
             self.stitches - 1)[1]
-        site = last + off + np.array([0.012, 0.0, 0.02])
-        held = self.tcp(rsel)
+        site = last + off + KNOT_SITE
+        if stage not in self._knot:
+            self._knot[stage] = {r: self.tcp(r) - off for r in (rsel, other)}
+        held = {r: p + off for r, p in self._knot[stage].items()}
         if stage == 0:
-            return {other: site, rsel: held}, True
+            shaft = self.arms[other].tcp_pose(self.world.configuration(other))[1][:, 2]
+            return {other: held[other] - KNOT_WITHDRAW * shaft, rsel: held[rsel]}, True
         if stage == 1:
-            turn = min(1.0, since / 2.5)
-            psi = math.pi + 0.75 * math.pi * turn
-            loop = site + 0.012 * np.array([math.cos(psi), math.sin(psi), 0.0])
+            return {other: site, rsel: held[rsel]}, True
+        ring = site + np.array([0.0, 0.0, KNOT_RING[1]])
+        if stage == 2:
+            return {rsel: ring + KNOT_RING[0] * np.array([-1.0, 0.0, 0.0]), other: site}, True
+        if stage == 3:
+            turn = min(1.0, since / KNOT_TURN_S)
+            psi = math.pi + KNOT_TURN * turn
+            loop = ring + KNOT_RING[0] * np.array([math.cos(psi), math.sin(psi), 0.0])
             return {rsel: loop, other: site}, turn >= 1.0
-        return {rsel: site + np.array([-0.02, -0.012, 0.006]),
-                other: site + np.array([0.012, 0.0, 0.004])}, True
+        return {rsel: held[rsel] + KNOT_PULL[0], other: site + KNOT_PULL[1]}, True
 
     _extra_arms: dict[str, ArmKinematics] = field(default_factory=dict)
+    _knot: dict[int, dict[str, FloatArray]] = field(default_factory=dict)
     _off0: FloatArray = field(default_factory=lambda: np.zeros(3))
 
 
@@ -549,11 +567,8 @@ class _SetupView:
 def task_points() -> list[TaskPoint]:
     """The needle's grasp points: 0 near the tail (R0's), 1 near the tip (R1's), with
     their pre-grasp offsets (see :mod:`.suture_geometry`)."""
-    c = g.stitch_centre(1)
-    a0 = g.approach_vector("R0", g.GRASP_PHI[0], g.BETA_START, c)
-    a1 = g.approach_vector("R1", g.GRASP_PHI[1], g.BETA_TRANSFER, c)
-    return [TaskPoint(g.arc_point(g.GRASP_PHI[0]), None, approach=a0),
-            TaskPoint(g.arc_point(g.GRASP_PHI[1]), None, approach=a1)]
+    return [TaskPoint(g.arc_point(phi), None, approach=g.approach_vector())
+            for phi in g.GRASP_PHI]
 
 
 class SutureCombined:

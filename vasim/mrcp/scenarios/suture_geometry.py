@@ -25,8 +25,10 @@ and leaves it at ``α_x = 2π - asin(h / r)`` (right lip).
   a shaft would lie along the arc.
 * Grasp points: point 0 near the tail (R0's, ``TAIL_GRASP`` rad of arc from the tail),
   point 1 near the tip (R1's, ``TIP_GRASP`` from the tip); position-only (the fulcrum fixes
-  the tool's axis). Each point's pre-grasp is ``APPROACH`` back along the receiving
-  tool's shaft at the nominal hand-over pose, expressed in the needle's frame.
+  the tool's axis). Each point's pre-grasp is ``APPROACH`` off the needle's plane on the
+  trocars' side (:func:`approach_vector`): the kernel's planner does not see the needle
+  (it is not a body), so a waiting tool must not wait in its plane, where the turning
+  needle would sweep through it.
 * The tool-orientation cones (spec §4, eq. 3.28-3.29) have semi-axes ``CONE_A`` along the
   incision's normal (x) and ``CONE_B`` along it (y): wide along y, where the trocars'
   offset lies, and such that neither tool can follow the needle far onto the other side
@@ -74,11 +76,9 @@ NEEDLE_RADIUS = 0.018
 NEEDLE_HEIGHT = 0.009               # centre above the surface during a stitch
 TAIL_GRASP = 0.15
 TIP_GRASP = 0.15
-APPROACH = 0.012
+APPROACH = 0.02
 ENTRY_ANGLE = math.pi + math.asin(NEEDLE_HEIGHT / NEEDLE_RADIUS)
 EXIT_ANGLE = 2 * math.pi - math.asin(NEEDLE_HEIGHT / NEEDLE_RADIUS)
-#: Nominal hand-over rotations (needle angle β) for the pre-grasp directions.
-BETA_TRANSFER = 2 * math.pi + 0.05          # the needle transfer (R1 takes the tip point)
 BETA_START = ENTRY_ANGLE - 0.12             # the tip just above the entry point
 #: The jaw length: needle points this close to a grasping tool's tip are in its jaws
 #: (**decision**: a needle holder's jaws are 10-15 mm long; the shafts reach the needle
@@ -162,13 +162,11 @@ def below_surface(point: FloatArray, t: float) -> bool:
                 and abs(p[1] - PATH_Y) < TISSUE_HALF_Y)
 
 
-def approach_vector(robot: str, phi: float, beta: float, centre: FloatArray) -> FloatArray:
-    """The pre-grasp offset of the point at ``φ`` for ``robot`` (needle frame): ``APPROACH``
-    back along the robot's shaft when the needle is at ``β`` about ``centre`` (world)."""
-    rot = needle_rotation(beta)
-    p = centre + rot @ arc_point(phi)
-    up = TROCARS[robot] - p
-    return np.asarray(rot.T @ (APPROACH * up / np.linalg.norm(up)), dtype=float)
+def approach_vector() -> FloatArray:
+    """The pre-grasp offset of a grasp point (needle frame): ``APPROACH`` off the needle's
+    plane on the trocars' side (-y), so a waiting tool never stands in the needle's plane
+    and its last approach crosses the plane at the grasp point only."""
+    return np.array([0.0, -APPROACH, 0.0])
 
 
 __all__ = [name for name in dir() if name.isupper()] + [
