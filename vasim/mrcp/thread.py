@@ -139,7 +139,7 @@ class SutureThread:
         self.free_length = float(free)
         self.nodes = self._initial_chain(anchor, tail, self.free_length)
         self.attach_gap = 0.0
-        self._offset = np.zeros(3)
+        self.update(tail)
 
     # ------------------------------------------------------------------ geometry
     def _initial_chain(self, start: FloatArray, end: FloatArray, length: float) -> FloatArray:
@@ -231,6 +231,7 @@ class SutureThread:
         self.free_length = free
         self.pinned += [entry.copy(), exit_.copy()]
         self.nodes = self._initial_chain(exit_, tail, free)
+        self.update(tail)
 
     def state(self) -> ThreadState:
         return ThreadState(np.array(self.pinned), self.nodes.copy(), self.slack,

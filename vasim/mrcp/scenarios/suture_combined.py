@@ -68,6 +68,7 @@ from vasim.mrcp.scenarios.runner import (
     check_invariants,
 )
 from vasim.mrcp.thread import SutureThread
+from vasim.mrcp.world_sweeps import HULL_MARGIN
 
 STITCHES = 3
 STITCH_SUBTASKS = ("approximation", "insertion", "pass_through", "needle_transfer",
@@ -88,8 +89,8 @@ THREAD_FREE = 0.06
 #: KNOT_TURN in KNOT_TURN_S, then both pull (R0's and R1's displacements).
 KNOT_WITHDRAW = 0.025
 KNOT_SITE = np.array([0.012, 0.0, 0.02])
-KNOT_RING = (0.015, 0.0)
-KNOT_TURN = 0.6 * math.pi
+KNOT_RING = (0.016, -0.008)
+KNOT_TURN = 0.5 * math.pi
 KNOT_TURN_S = 2.5
 KNOT_PULL = (np.array([-0.015, -0.01, 0.004]), np.array([0.012, 0.0, 0.004]))
 #: A subtask that has not ended after this long is a violation [s].
@@ -201,7 +202,8 @@ class SutureRun:
     # ------------------------------------------------------------------ checks
     def needle_in_robot(self, holders: tuple[str, ...]) -> list[str]:
         """Robots whose tool shaft contains a needle point outside the jaws (the in-body
-        part of each shaft: a capsule of ``TOOL_RADIUS`` from the tip up).
+        part of each shaft: a capsule from the tip up, of the radius the collision world
+        gives it: ``TOOL_RADIUS`` grown by pybullet's hull margin).
 
         **Decision** (the jaws): points within ``JAW`` of the tip are exempt for a robot
         whose jaws are on the needle: a holder, the receiving robot of a transfer (its
@@ -219,7 +221,7 @@ class SutureRun:
             keep = np.ones(len(pts), dtype=bool)
             if r in holders:
                 keep = np.linalg.norm(rel, axis=1) > g.JAW
-            if np.any(d[keep] < g.TOOL_RADIUS):
+            if np.any(d[keep] < g.TOOL_RADIUS + HULL_MARGIN):
                 bad.append(r)
         return bad
 
