@@ -263,6 +263,8 @@ class SutureRun:
         self._shafts = dict(self.arms)
         self._shafts.update(self._extra_arms)
         self._jaws: dict[str, float] = {}
+        self._knot = {}
+        self._sub_off = g.tissue_offset(0.0)
         graph = SutureGraph(self.stitches)
         rsel, cutp = "R0", 0
         kernel: MRCPKernel | None = None
@@ -277,7 +279,6 @@ class SutureRun:
         sub_events: list[str] = []
         samples: list[Sample] = []
         total = self.duration if duration is None else duration
-        base_y = {r: self.tcp(r) for r in self.arms}
         stdt_stage = 0
         stage_t0 = 0.0
         for i in range(math.floor(total / dt + 1e-9)):
@@ -294,7 +295,7 @@ class SutureRun:
             if graph.mode is TeleopMode.STDT:
                 kernel = None
                 targets, stage_done = self._stdt_targets(sub, stdt_stage, t - stage_t0, rsel,
-                                                         base_y, stitches, thread)
+                                                         stitches)
                 reached = True
                 for r, goal in targets.items():
                     self._drive(r, goal, dt)
@@ -374,7 +375,7 @@ class SutureRun:
                 events.append(f"subtask_done {sub}")
                 sub_t0, sub_start, sub_events = t, (self.needle[0].copy(),
                                                     self.needle[1].copy()), []
-                stdt_stage, stage_t0 = 0, t
+                stdt_stage, stage_t0, self._sub_off = 0, t, off
             elif (t - sub_t0 > TIMEOUT
                   and (kernel is None or kernel.state is KernelState.TOP)):
                 self._violation(f"{sub} (stitch {k + 1}) timed out")
@@ -384,6 +385,7 @@ class SutureRun:
                 graph.advance(kernel.state if kernel is not None else KernelState.TOP)
                 sub_t0, sub_start, sub_events = t, (self.needle[0].copy(),
                                                     self.needle[1].copy()), []
+                stdt_stage, stage_t0, self._sub_off = 0, t, off
             ts = thread.state()
             scene = {"thread": (ts.nodes + off).tolist(), "pinned": (ts.pinned + off).tolist(),
                      "slack": ts.slack, "reserve": ts.reserve, "free_length": ts.free_length,
@@ -455,7 +457,8 @@ class SutureRun:
         if sub == "tighten_thread":
             pull = np.array([0.5, -0.3, 0.8])
             pull /= np.linalg.norm(pull)
-            return start[0] + off - self._off0 + pull * PULL_SPEED * since, start[1]
+            # the pull starts where the needle was, riding on the breathing tissue
+            return start[0] + off - self._sub_off + pull * PULL_SPEED * since, start[1]
         if sub == "needle_return":
             nxt = g.stitch_centre(min(k + 1, self.stitches - 1)) + off
             goal = (nxt + np.array([RETURN_X, 0.0, 0.012]), g.needle_rotation(g.BETA_START))
@@ -466,8 +469,6 @@ class SutureRun:
                    target: tuple[FloatArray, FloatArray], events: list[str], rsel: str,
                    kernel: MRCPKernel, stitches: list[_Stitch], thread: SutureThread,
                    off: FloatArray) -> bool:
-        if sub == "tighten_thread" and since <= self.config.dt + 1e-9:
-            self._off0 = off
         quiet = kernel.state is KernelState.TOP
         near = bool(np.linalg.norm(self.needle[0] - target[0]) < 1e-3
                     and np.linalg.norm(self.needle[1] - target[1]) < 0.03)
@@ -496,8 +497,7 @@ class SutureRun:
         return 1 if sub == "pre_suture" else 5
 
     def _stdt_targets(self, sub: str, stage: int, since: float, rsel: str,
-                      rest: dict[str, FloatArray], stitches: list[_Stitch],
-                      thread: SutureThread) -> tuple[dict[str, FloatArray], bool]:
+                      stitches: list[_Stitch]) -> tuple[dict[str, FloatArray], bool]:
         """Each master's tool-tip target in a StdT subtask, and whether its stage's script
         is over (the stage ends when the tips are also there)."""
         off = g.tissue_offset(self._t)
@@ -535,7 +535,7 @@ class SutureRun:
 
     _extra_arms: dict[str, ArmKinematics] = field(default_factory=dict)
     _knot: dict[int, dict[str, FloatArray]] = field(default_factory=dict)
-    _off0: FloatArray = field(default_factory=lambda: np.zeros(3))
+    _sub_off: FloatArray = field(default_factory=lambda: np.zeros(3))
 
 
 def _angle_gap(a: float, b: float) -> float:
