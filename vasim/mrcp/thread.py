@@ -49,6 +49,7 @@ everything else is left out and said here):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,9 +67,34 @@ TAUT = 0.995
 LOOP_SLACK = 0.015
 
 
-def _unit(v: FloatArray) -> FloatArray:
-    n = float(np.linalg.norm(v))
-    return v / n if n > 1e-15 else np.array([0.0, 0.0, -1.0])
+def _fabrik(x: list[list[float]], start: list[float], tail: list[float], seg: float
+            ) -> list[list[float]]:
+    """FABRIK on plain floats (a few hundred tiny vector operations per call: numpy's
+    per-call cost would dominate): backward passes from ``tail``, forward passes from
+    ``start``, until the chain's end is within 1e-7 m of the tail; every segment is then
+    exactly ``seg`` long (the forward pass comes last)."""
+    n = len(x) - 1
+
+    def toward(a: list[float], b: list[float]) -> list[float]:
+        """The point ``seg`` from ``a`` toward ``b`` (straight down when they coincide)."""
+        dx, dy, dz = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+        d = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if d < 1e-15:
+            return [a[0], a[1], a[2] - seg]
+        f = seg / d
+        return [a[0] + f * dx, a[1] + f * dy, a[2] + f * dz]
+
+    for _ in range(ITERATIONS):
+        x[n] = list(tail)
+        for i in range(n - 1, -1, -1):
+            x[i] = toward(x[i + 1], x[i])
+        x[0] = list(start)
+        for i in range(n):
+            x[i + 1] = toward(x[i], x[i + 1])
+        e = x[n]
+        if math.dist(e, tail) < 1e-7:
+            break
+    return x
 
 
 def _polyline_length(points: FloatArray) -> float:
@@ -192,15 +218,7 @@ class SutureThread:
             x = start[None, :] + (seg * np.arange(self.n + 1))[:, None] * u[None, :]
         else:
             x[1:-1, 2] -= SAG_STEP
-            for _ in range(ITERATIONS):     # FABRIK: backward from the tail, forward from
-                x[-1] = tail                # the pinned end; segments stay exactly seg long
-                for i in range(self.n - 1, -1, -1):
-                    x[i] = x[i + 1] + seg * _unit(x[i] - x[i + 1])
-                x[0] = start
-                for i in range(self.n):
-                    x[i + 1] = x[i] + seg * _unit(x[i + 1] - x[i])
-                if float(np.linalg.norm(x[-1] - tail)) < 1e-7:
-                    break
+            x = np.array(_fabrik(x.tolist(), start.tolist(), tail.tolist(), seg))
         self.nodes = x
         self.attach_gap = float(np.linalg.norm(x[-1] - tail))
         return self.state()
