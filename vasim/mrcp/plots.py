@@ -6,7 +6,8 @@ index; RSel at CuTP, a candidate at its best point); (b) ``texec`` (the minimum 
 indices); (c) ``ttransf*`` of the candidates (0 for RSel); (d) NTT with the transfer
 threshold (an infinite NTT — RSel has no useful time left — is drawn at the top of the
 axis); (e) RSel. Dashed lines mark transfer starts, solid ones their completion. TT cycles
-are not evaluated (gaps in (a)-(d)).
+are not evaluated (gaps in (a)-(d)). A run with a state graph of subtasks
+(``suture_combined``) shades its StdT subtasks in every panel (no MRCP kernel runs there).
 """
 
 from __future__ import annotations
@@ -73,6 +74,12 @@ def plot_run(res: RunResult, path: str | Path, ntt_threshold: float = 0.9,
             ax.axvline(tr["t_start"], color="grey", linestyle="--", linewidth=0.8)
             if tr["t_done"] is not None:
                 ax.axvline(tr["t_done"], color="grey", linewidth=0.8)
+    for sub in res.extra.get("subtasks", []):
+        if sub.get("mode") == "stdt":
+            for ax in axes:
+                ax.axvspan(sub["t_start"], sub["t_end"], color="0.85", alpha=0.6, linewidth=0)
+            ax_sel.text(0.5 * (sub["t_start"] + sub["t_end"]), len(res.robots) - 0.7,
+                        f"StdT: {sub['name']}", ha="center", fontsize="small")
     for ax, label in zip(axes, ("index value", "texec [s]", "ttransf* [s]", "NTT", "RSel"),
                          strict=True):
         ax.set_ylabel(label)
