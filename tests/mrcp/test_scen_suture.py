@@ -142,3 +142,14 @@ def test_json_summary_has_subtasks_transfers_and_violations(result: RunResult) -
     for key in ("subtasks", "transfers", "violations", "stitches", "thread"):
         assert key in d
     assert set(d["subtasks"][0]) >= {"name", "mode", "t_start", "t_end"}
+
+
+def test_cli_text_lists_the_subtasks_and_a_cut_run_is_not_a_violation(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from vasim.cli import main
+
+    code = main(["mrcp", "run", "suture_combined", "--coarse", "--duration", "1.2"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "subtasks:" in out and "stdt  pre_suture" in out
+    assert "invariants: task always grasped" in out

@@ -404,7 +404,7 @@ class SutureRun:
                 progress(s)
             if graph.done:
                 break
-        if not graph.done:
+        if not graph.done and duration is None:    # its own time limit: the graph stuck
             self.violations.append(f"t={self._t:.3f}: the suture did not finish "
                                    f"(stopped in {graph.subtask})")
         ts = thread.state()
@@ -419,7 +419,8 @@ class SutureRun:
                             "slack": round(ts.slack, 6), "reserve": round(ts.reserve, 6)}}
         return RunResult(name, list(self.arms), samples, self.violations,
                          {"stitches": self.stitches, "breathing_amplitude_m": g.BREATH_AMPLITUDE,
-                          "breathing_period_s": g.BREATH_PERIOD}, extra=extra)
+                          "breathing_period_s": g.BREATH_PERIOD, "finished": graph.done,
+                          "stopped_in": None if graph.done else graph.subtask}, extra=extra)
 
     # ------------------------------------------------------------------ the stitch
     def _track_stitch(self, sub: str, k: int, t: float, stitches: list[_Stitch],
