@@ -717,6 +717,8 @@ class MrcpViewerApp(ErrorReporter):
                 if getattr(frame.sample, "subtask", None) is not None:
                     if self.subtasks is None:
                         self.subtasks = SubtaskView(server)
+                        # the needle is 36 mm across: grasp-point markers of 3 mm, not 12
+                        station.points.point_size = 0.003
                     self.subtasks.update(frame.sample)
                 panel.show_status(frame, self.speed)
             if force_plots or now - self._t_plot >= self.plot_period:
