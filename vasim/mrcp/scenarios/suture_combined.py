@@ -38,6 +38,9 @@ always held, RSel never in collision, joint limits, the holder at its grasp poin
 StdT the same for both robots; the needle never inside a robot (outside the holders'
 jaws, :data:`~.suture_geometry.JAW`); the thread attached to the needle (gap <= 0.5 mm).
 
+The viewer's "Operator" control does not steer this scenario (its operator is the
+graph's script; ``run_setup`` hands the loop to :meth:`SutureRun.run`).
+
 **Decisions**: the indices are RJ, CR and the tool cone (Θ is left out: it costs most and
 neither hand-over of the suture depends on dexterity); the camera robot is an obstacle,
 not a kernel robot; the needle is not a collision body (the tissue does not stop it).
