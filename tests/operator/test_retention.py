@@ -51,7 +51,7 @@ def test_retention_probe_after_an_ff_block_by_hand() -> None:
     adj = weighted_adjustment(history, "none", w)
     r = DEFAULT_RETENTION.retained(7.0)
     ff = SEED_EFFECTS["ff"]
-    assert adj.practice == pytest.approx((3 + 6 * 1.5) * r)
+    assert adj.practice == pytest.approx((3 + 6 * ff.practice_weight) * r)
     expected = (1 - ff.carryover * r * (1 - ff.accuracy)) * (1 + ff.dependence * r)
     assert adj.noise_factor == pytest.approx(expected)
     same_day = trial_adjustment(history, "none")

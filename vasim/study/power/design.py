@@ -38,7 +38,9 @@ import numpy as np
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
 from vasim.core.config import check_int, check_number, parse_toml
 from vasim.core.errors import ConfigError
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.operator.effects import FixtureEffect, scale_effect
+from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.scenario import Scenario
 from vasim.study.protocol import Protocol
 from vasim.study.protocol.power import EFFECT_FIELDS, effects_from_tables
 from vasim.trials.kinds import TELEOPERATION_MODES
@@ -169,15 +171,10 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
         1.0
     """
     s = check_number(scale, "--effect-scale", bound=EFFECT_SCALE)
-    if s == 1.0:   # the calibration itself, not 1 + (a - 1) rounded
-        return dict(base)
     out = {}
     for name, e in base.items():
         try:
-            out[name] = FixtureEffect(
-                accuracy=1.0 + s * (e.accuracy - 1.0), speed=1.0 + s * (e.speed - 1.0),
-                practice_weight=1.0 + s * (e.practice_weight - 1.0),
-                carryover=e.carryover, dependence=s * e.dependence)
+            out[name] = scale_effect(e, s)
         except ValueError as exc:
             raise ConfigError(f"got {s!r}: fixture {name!r} would get an invalid effect "
                               f"({exc})", field="--effect-scale") from None
@@ -255,7 +252,9 @@ class PowerDesign:
             (:data:`FULL_DT` or :data:`COARSE_DT`). max_trial_time: trial time limit [s]
             (None: the protocol's). p_column: the p-value a test rejects on, ``"p_gg"``
             (Greenhouse-Geisser) or ``"p_unc"``. base_effects: the fixture effects before
-            scaling (the calibration, or an effects file's, :func:`load_effects`).
+            scaling (the scenario's, or an effects file's over them, :func:`load_effects`).
+        scenario: the declared scenario the cohorts' subjects, groups and fixture
+            mechanisms come from (None: the shipped default, ``seed_plausible``).
         effects: ``scaled_effects(effect_scale, base_effects)``: what the operator gets.
 
     **Decision**: a test rejects when its Greenhouse-Geisser p < alpha (``p_column``
@@ -274,6 +273,7 @@ class PowerDesign:
     max_trial_time: float | None = None
     p_column: str = "p_gg"
     base_effects: Mapping[str, FixtureEffect] = field(default_factory=lambda: SEED_EFFECTS)
+    scenario: Scenario | None = None
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
