@@ -14,11 +14,12 @@ scripted 1 kHz engine adds each fixture's mechanism on top (unless the scenario'
 **Estimation** (:func:`estimate_effects`; statsmodels ``MixedLM``, REML, a random intercept
 per subject)::
 
-    ln E_ij = b0 + sum_c beta_c [trial j assisted by c] + s(practice_j)
+    ln E_ij = b0 + sum_c beta_c [trial j assisted by c] + s(ln(1 + practice_j))
               + gamma_1 carry_ij + gamma_2 after_ij [+ variant_j] + u_i + e_ij
 
 E the trial's mean path deviation (``path_dev_mean_mm``), practice the trial's 0-based
-position in its session, s a natural cubic regression spline (patsy ``cr``, 4 df),
+position in its session, s a natural cubic regression spline (patsy ``cr``, 4 df, centred;
+in ln(1 + practice), where a power law of practice is a line),
 ``carry`` the number of distinct fixtures practised before an unassisted trial (0 for an
 assisted one: carry-over is estimated, not assumed away), ``after`` 1 for an unassisted
 trial right after an assisted one (guidance dependence), ``variant`` the trajectory
@@ -101,7 +102,8 @@ def estimate_effects(frame: pd.DataFrame, *, level: float = 0.95) -> dict[str, A
     out: dict[str, Any] = {
         "quantity": "assisted path-deviation ratio: mean path deviation while assisted / "
                     "unassisted at equal practice before any fixture was practised",
-        "model": "MixedLM ln(path_dev_mean_mm) ~ fixture + cr(practice, 4) + carry + after "
+        "model": "MixedLM ln(path_dev_mean_mm) ~ fixture + cr(ln(1 + practice), 4) + carry + "
+                 "after "
                  "[+ C(variant)] + (1 | subject), REML, Wald CIs",
         "level": level, "n_subjects": int(df["subject"].nunique()), "n_trials": len(df),
         "fixtures": {}}
@@ -114,7 +116,8 @@ def estimate_effects(frame: pd.DataFrame, *, level: float = 0.95) -> dict[str, A
     df["y"] = np.log(df[PATH_DEV].astype(float))
     use_variant = df["variant"].nunique() > 1 and not variant_confounded(df)
     out["variant_in_model"] = use_variant
-    terms = ["C(condition, Treatment('none'))", "cr(practice, df=4, constraints='center')"]
+    terms = ["C(condition, Treatment('none'))",
+             "cr(np.log1p(practice), df=4, constraints='center')"]
     if df["carry"].nunique() > 1:
         terms.append("carry")
     if df["after"].nunique() > 1:

@@ -44,6 +44,7 @@ class OutcomeCohort:
 
     Attributes:
         trials: one row per trial: ``subject, group, trial_index, condition, probe,
+            probe_index,
             variant, trial_id, path_dev_mean_mm``.
         answers: subject code -> its post-questionnaire answers.
     """
@@ -82,7 +83,8 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
             tid += 1
             rows.append({"subject": subj.code, "group": subj.group,
                          "trial_index": st.index, "condition": st.condition,
-                         "probe": st.probe, "variant": st.variant, "trial_id": tid,
+                         "probe": st.probe, "probe_index": st.probe_index,
+                         "variant": st.variant, "trial_id": tid,
                          PATH_DEV: draw_path_deviation(scenario.outcome, subj.profile,
                                                        cfg.profile, cfg.practice, u, rng)})
         if answers and not protocol.post.empty:
