@@ -29,6 +29,7 @@ import sqlite3
 import subprocess
 import sys
 import tempfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -60,7 +61,7 @@ SEED_ORDER = ("FF most effective on cumulative error, not significantly differen
 
 
 def scripted_cohort(db: Path, scenario: str, scale: float, subjects: int, seed: int,
-                    workers: int) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
+                    workers: int) -> tuple[pd.DataFrame, list[Mapping[str, Any]]]:
     """Runs (or continues) the cohort through the CLI and reads trials and answers."""
     subprocess.run([sys.executable, "-m", "vasim", "study", "simulate", "--protocol",
                     PROTOCOL, "--subjects", str(subjects), "--seed", str(seed), "--workers",
@@ -81,7 +82,7 @@ def scripted_cohort(db: Path, scenario: str, scale: float, subjects: int, seed: 
         f"ON s.id = a.session_id WHERE a.questionnaire = 'post' AND s.protocol = '{PROTOCOL}'",
         con)
     con.close()
-    answers = []
+    answers: list[Mapping[str, Any]] = []
     for _, g in ans.groupby("subject"):
         a: dict[str, Any] = {"rating": {}}
         for r in g.itertuples():
@@ -115,7 +116,7 @@ def rm_anova(trials: pd.DataFrame, dv: str, effect: str) -> str:
 
 
 def rows(sc: Scenario, scale: float, engine: str, trials: pd.DataFrame,
-         answers: list[dict[str, Any]]) -> list[tuple[str, str, str, str]]:
+         answers: Sequence[Mapping[str, Any]]) -> list[tuple[str, str, str, str]]:
     """(quantity, seed, assumed, out) rows (module docstring)."""
     eff = sc.effects(scale)
     est = estimate_effects(trials)
@@ -177,7 +178,8 @@ def main(argv: list[str] | None = None) -> None:
     if args.engine == "outcome":
         coh = outcome_cohort(load_protocol(PROTOCOL), sc, n_subjects=n, seed=args.seed,
                              effect_scale=args.effect_scale)
-        trials, answers = coh.trials, list(coh.answers.values())
+        trials = coh.trials
+        answers: Sequence[Mapping[str, Any]] = list(coh.answers.values())
     else:
         db = args.db or Path(tempfile.mkdtemp(prefix="vasim_calibration_")) / "c.sqlite"
         trials, answers = scripted_cohort(db, args.scenario, args.effect_scale, n, args.seed,

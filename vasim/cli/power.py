@@ -128,7 +128,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
 
 
 def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
-    """What the header names besides the calibration: the protocol's ``[power.effects]``
+    """What the header names besides the scenario: the protocol's ``[power.effects]``
     and the ``--effects`` file, when used.
 
     >>> effect_sources(True, Path("e.toml"))

@@ -29,7 +29,7 @@ an assisted trial scales with that trial's gain, ``delta_G = G delta`` (the guid
 hypothesis: what was not leaned on is not missed; Winstein, Pohl & Lewthwaite 1994 found
 faded feedback retained better). Practice and carry-over are left as they are: a faded
 trial is practice all the same. ``vasim.operator.learning.trial_adjustment`` applies it
-(its ``gain`` and ``history_gains`` arguments; G = 1 keeps the calibrated numbers).
+(its ``gain`` and ``history_gains`` arguments; G = 1 keeps the declared numbers).
 
 Example:
     >>> e = combine_effects([FixtureEffect(accuracy=0.8, speed=0.9),

@@ -116,7 +116,7 @@ def trial_adjustment(history: Sequence[str], condition: str,
                    for h in history)
     if condition != VF_FREE:
         e = _effect(condition, effects)
-        if gain != 1.0:  # the gain hook (issue #18); G = 1 keeps the calibrated numbers
+        if gain != 1.0:  # the gain hook (issue #18); G = 1 keeps the declared numbers
             return TrialAdjustment(practice, 1.0 - gain * (1.0 - e.accuracy),
                                    1.0 + gain * (e.speed - 1.0))
         return TrialAdjustment(practice, e.accuracy, e.speed)

@@ -6,7 +6,7 @@ Pure functions of a protocol and its schedule (issue #18 items 1 and 3), used by
 * ``trial_gain``: the fixture gain rule of a scheduled trial (``vasim.fixtures.gain``):
   the block's schedule stage or adaptive rule for its own trials, 1.0 otherwise (probes,
   constant blocks, teleoperation modes);
-* ``learning_gain``: the gain the calibrated operator's per-trial adjustment uses
+* ``learning_gain``: the gain the simulated operator's per-trial adjustment uses
   (``vasim.operator.learning.trial_adjustment``'s ``gain``);
 * ``condition_effects``: a scenario's declared effects by condition label
   (``vasim.operator.scenario``), at an effect scale. **Decision** (issue #25): a label the
@@ -15,7 +15,7 @@ Pure functions of a protocol and its schedule (issue #18 items 1 and 3), used by
   of its fixtures' declared effects (``vasim.operator.combined``); nothing of the seed is
   applied to conditions the seed did not run.
 
-**Decision** (adaptive trials and the calibrated operator): the gain of an adaptive trial
+**Decision** (adaptive trials and the simulated operator): the gain of an adaptive trial
 is only known once it has run (it follows the trainee's deviation), while the operator's
 per-trial adjustment is set before the trial (a cohort plans every trial up front). The
 adjustment uses the rule's start gain (``AdaptiveRule.start``); within the trial the motion

@@ -9,17 +9,18 @@ integration step.
   plain binomial one; the price is a noisier curve *shape*).
 * Surgeons among N: ``round(N x 31 / 46)`` (the VF study's 31 surgeons of 46, as
   ``vasim study simulate``).
-* Effect sizes (:func:`scaled_effects`): the operator's calibrated fixture effects
-  (``vasim.operator.learning.SEED_EFFECTS``, one per condition label of the protocol)
+* Effect sizes (:func:`scaled_effects`): the scenario's declared fixture effects
+  (``--scenario``, :mod:`vasim.operator.scenario`; one per condition label)
   scaled by ``effect_scale`` s: every departure from "no effect" is multiplied by s,
   ``accuracy = 1 + s (a - 1)``, ``speed = 1 + s (v - 1)``,
   ``practice_weight = 1 + s (w - 1)``, ``dependence = s delta``; the carry-over fraction
   rho is kept (it is a fraction of the accuracy gain, which already scales). s = 1 is the
-  calibration, s = 0 a null fixture effect (every fixture like VF-free; the power of the
+  scenario as declared, s = 0 a null fixture effect (every fixture like VF-free; the power of the
   fixture tests is then their type-I error), s = 0.5 half the effects. An effects file
   (``--effects FILE.toml``, :func:`parse_effects`) sets single fixtures' effects first;
   the scale then applies to them. A protocol's ``[power]`` table sets both too
-  (:mod:`vasim.study.protocol.power`: calibration < protocol < command line).
+  (:mod:`vasim.study.protocol.power`: scenario < protocol < command line). The
+  scenario's mechanism gain scales with s as well (``Scenario.mechanism``).
 * Integration step (:data:`FULL_DT`, :data:`COARSE_DT`): the 1 kHz control step of every
   stored trial, or the validated coarse planning step (``--coarse``, see
   :data:`COARSE_DT`).
@@ -157,7 +158,7 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
     """The fixture effects with every departure from "no effect" times ``scale``.
 
     Args:
-        scale: s >= 0 (module docstring). base: the effects to scale (the calibration).
+        scale: s >= 0 (module docstring). base: the effects to scale (the scenario's).
 
     Raises:
         ConfigError: s outside ``EFFECT_SCALE`` or an effect it would make invalid
