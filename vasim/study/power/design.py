@@ -165,9 +165,9 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
             (e.g. an accuracy factor <= 0).
 
     Example:
-        >>> e = scaled_effects(0.5)["ff"]
+        >>> e = scaled_effects(0.5)["ff"]   # seed_plausible: FF accuracy 0.75
         >>> round(e.accuracy, 3), round(e.speed, 3), round(e.dependence, 3)
-        (0.76, 1.02, 0.06)
+        (0.875, 1.0, 0.0)
         >>> scaled_effects(0.0)["ff"].accuracy
         1.0
     """
@@ -204,7 +204,7 @@ def parse_effects(text: str, *, file: str | Path | None = None,
                   base: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> dict[str, FixtureEffect]:
     """Fixture effects from an effects file (``--effects FILE.toml``): one table per
     condition label, any of :data:`EFFECT_FIELDS`; a field left out keeps ``base``'s (the
-    calibration), a label ``base`` lacks starts from "no effect".
+    scenario's), a label ``base`` lacks starts from "no effect".
 
     Example file::
 
@@ -220,7 +220,7 @@ def parse_effects(text: str, *, file: str | Path | None = None,
     Example:
         >>> e = parse_effects("[ff]\\naccuracy = 0.8\\n")
         >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed, e["mag"].speed
-        (0.8, True, 0.8)
+        (0.8, True, 1.0)
     """
     return effects_from_tables(parse_toml(text, file=file, kind="effects"), file=file,
                                base=base)
