@@ -7,8 +7,9 @@ Bounds: with K intervals the Monte Carlo standard error of a rate near 0.95 (or 
 sqrt(0.95 x 0.05 / K) (0.015 at K = 200); the five intervals of one cohort share its
 subjects, so the effective K is smaller; the bounds allow about 4 such errors below the
 nominal coverage and above the nominal false-positive rate. Recorded on 2026-11-27 with
-100 + 100 cohorts of 10 subjects (docs/simulation.md): coverage 0.932, false-positive
-rate printed by this test.
+100 + 100 cohorts of 10 subjects (docs/simulation.md): coverage 0.932 (both scenarios),
+false-positive rate 0.068; this test's 40 + 40 cohorts: coverage 0.980 and 0.950,
+false-positive rate 0.050 (about 4 min on a loaded 2-core machine).
 """
 
 from __future__ import annotations
