@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.operator.learning import SEED_EFFECTS, trial_adjustment
+from vasim.operator.learning import DEFAULT_EFFECTS, trial_adjustment
 from vasim.operator.retention import (
     DEFAULT_RETENTION,
     RetentionModel,
@@ -50,8 +50,8 @@ def test_retention_probe_after_an_ff_block_by_hand() -> None:
     w = practice_weights([7.0] * 9, [True] * 9, untrained=False)
     adj = weighted_adjustment(history, "none", w)
     r = DEFAULT_RETENTION.retained(7.0)
-    ff = SEED_EFFECTS["ff"]
-    assert adj.practice == pytest.approx((3 + 6 * 1.5) * r)
+    ff = DEFAULT_EFFECTS["ff"]
+    assert adj.practice == pytest.approx((3 + 6 * ff.practice_weight) * r)
     expected = (1 - ff.carryover * r * (1 - ff.accuracy)) * (1 + ff.dependence * r)
     assert adj.noise_factor == pytest.approx(expected)
     same_day = trial_adjustment(history, "none")

@@ -13,12 +13,7 @@ import pytest
 
 from vasim.cli import main
 from vasim.core.errors import ConfigError
-from vasim.operator.questionnaire import (
-    RATING_WEIGHT,
-    SEED_BEST_SHARE,
-    SEED_MEAN_RATING,
-    SEED_WORST_SHARE,
-)
+from vasim.operator.scenario import load_scenario
 from vasim.study.cohort import (
     DEMOGRAPHIC_MODEL,
     cohort_subjects,
@@ -92,13 +87,15 @@ def test_cohort_subjects_are_reproducible_and_grouped() -> None:
     b = cohort_subjects(46, 31, seed=8)
     assert [s.group for s in a] != [s.group for s in b]
     assert len({s.session_seed for s in a}) == 46
-    # OperatorProfile.sample's group model: surgeons' skill ~ Beta(7, 3) (mean 0.7),
-    # residents' ~ Beta(3, 5) (mean 0.375)
+    # the default scenario's group model: skill drawn with the laparoscopy experience,
+    # mean skill sum_k p_k m_k (0.725 surgeons, 0.405 residents), the group's asymptote
+    sc = load_scenario("seed_plausible")
     big = cohort_subjects(600, 300, seed=1)
-    sk = {g: np.mean([s.profile.skill for s in big if s.group == g])
-          for g in ("surgeon", "resident")}
-    assert sk["surgeon"] == pytest.approx(0.7, abs=0.03)
-    assert sk["resident"] == pytest.approx(0.375, abs=0.03)
+    for g in ("surgeon", "resident"):
+        skills = [s.profile.skill for s in big if s.group == g]
+        assert np.mean(skills) == pytest.approx(sc.groups[g].mean_skill,
+                                                abs=4 * np.std(skills) / np.sqrt(300))
+        assert {s.profile.asymptote for s in big if s.group == g} == {sc.groups[g].asymptote}
     for bad in ({"n_subjects": 0, "n_surgeons": 0}, {"n_subjects": 3, "n_surgeons": 4}):
         with pytest.raises(ConfigError):
             cohort_subjects(seed=1, **bad)
@@ -124,29 +121,29 @@ def test_measured_benefit_and_rating_model() -> None:
     errors = {1: 3.0, 4: 1.0, 2: 1.0, 3: 3.0, 5: 4.0}  # probe mean 2, vg mean 2, ff 4
     b = measured_benefits(sched, errors)
     assert b["vg"] == pytest.approx(0.0) and b["ff"] == pytest.approx(math.log(0.5))
-    # The answers follow a perceived benefit (vasim.operator.questionnaire), not the
-    # measured error alone: with equal measured benefits the cohort reproduces the seed's
-    # shares among the protocol's conditions (multinomial logit, exact) and mean ratings.
+    # The answers follow the subject's own measured benefit only (the scenario's
+    # questionnaire model): with equal benefits there is no preference (shares 1/2, equal
+    # mean ratings r0 + s b), whatever the seed's subjects said.
+    model = load_scenario("seed_plausible").questionnaire
     p = parse_protocol(TINY)
     rng = np.random.default_rng(0)
     n = 3000
     same = [simulated_answers(p, "post", rng, measured={"vg": 0.1, "ff": 0.1})
             for _ in range(n)]
-    best_vg = SEED_BEST_SHARE["vg"] / (SEED_BEST_SHARE["vg"] + SEED_BEST_SHARE["ff"])
-    worst_vg = SEED_WORST_SHARE["vg"] / (SEED_WORST_SHARE["vg"] + SEED_WORST_SHARE["ff"])
     se = 0.5 / math.sqrt(n)   # binomial standard error bound
-    assert np.mean([r["best"] == "vg" for r in same]) == pytest.approx(best_vg, abs=4 * se)
-    assert np.mean([r["worst"] == "vg" for r in same]) == pytest.approx(worst_vg, abs=4 * se)
-    for c in ("vg", "ff"):
-        assert np.mean([r["rating"][c] for r in same]) == pytest.approx(
-            SEED_MEAN_RATING[c], abs=0.1)
+    assert np.mean([r["best"] == "vg" for r in same]) == pytest.approx(0.5, abs=4 * se)
+    assert np.mean([r["worst"] == "vg" for r in same]) == pytest.approx(0.5, abs=4 * se)
+    centre = model.rating_centre + model.rating_per_benefit * 0.1
+    for c in ("vg", "ff"):   # rounding to integers keeps the mean within ~0.1
+        assert np.mean([r["rating"][c] for r in same]) == pytest.approx(centre, abs=0.15)
     # a subject's own benefit moves the answers: VG cut its error 20 % more than FF did
     moved = [simulated_answers(p, "post", rng, measured={"vg": 0.2, "ff": 0.0})
              for _ in range(n)]
     gap = (np.mean([r["rating"]["vg"] - r["rating"]["ff"] for r in moved])
            - np.mean([r["rating"]["vg"] - r["rating"]["ff"] for r in same]))
-    assert gap == pytest.approx(RATING_WEIGHT * 0.2, abs=0.15)
-    assert np.mean([r["best"] == "vg" for r in moved]) > best_vg + 0.05
+    assert gap == pytest.approx(model.rating_per_benefit * 0.2, abs=0.15)
+    p_vg = 1.0 / (1.0 + math.exp(-0.2 / model.choice_noise))   # logit in b / tau
+    assert np.mean([r["best"] == "vg" for r in moved]) == pytest.approx(p_vg, abs=4 * se)
     sets = Counter(len(r.get("sets", [])) for r in same)
     assert sets[0] > 0 and sets[1] > 0 and sets[2] == 0  # only 2 conditions: one set of 2
 

@@ -8,10 +8,25 @@ import pytest
 
 from vasim.core.errors import ConfigError
 from vasim.fixtures.gain import AdaptiveRule
-from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.learning import DEFAULT_EFFECTS
+from vasim.operator.scenario import load_scenario, parse_scenario
+from vasim.study.cohort import scenario_record
 from vasim.study.gain_plan import condition_effects, learning_gain, trial_gain
 from vasim.study.protocol import generate_schedule, load_protocol, parse_protocol
 from vasim.study.session import Session, SessionSettings
+
+
+def deriving_scenario():
+    """seed_plausible with FF slowing the operator (speed 1.2) and unlisted labels derived
+    from their fixtures (``derive_unlisted = true``)."""
+    text = load_scenario("seed_plausible").text
+    old_d = "derive_unlisted = { value = false"
+    old_s = 'speed = { value = 1.0, source = "assumed: no effect on movement time" }'
+    assert old_d in text and old_s in text
+    text = text.replace(old_d, "derive_unlisted = { value = true").replace(
+        old_s, 'speed = { value = 1.2, source = "test" }', 1)   # the first: [fixtures.ff]
+    return parse_scenario(text)
+
 
 HEAD = """
 name = "g"
@@ -55,28 +70,33 @@ def test_every_scheduled_trial_gets_its_gain():
     assert all(g == p.blocks[3].adaptive for g in gains["ff_adaptive"])
     assert set(gains["ff"]) == set(gains["mag"]) == set(gains["none"]) == {1.0}
     # the trial configurations carry them, and the operator's adjustment follows
+    sc = deriving_scenario()
     session = Session(id=1, subject="S01", protocol=p, seed=11, status="running",
-                      settings=SessionSettings(), schedule=tuple(sched),
-                      completed=(None,) * len(sched))
+                      settings=SessionSettings(extra={"scenario": scenario_record(sc, 1.0)}),
+                      schedule=tuple(sched), completed=(None,) * len(sched))
     cfgs = {t.index: session.trial_config(t) for t in sched}
     faded = [t for t in sched if t.condition == "ff_faded"]
     assert [cfgs[t.index].gain for t in faded] == gains["ff_faded"]
     assert all(cfgs[t.index].schema == "ff" for t in faded)
     full, quarter = cfgs[faded[0].index], cfgs[faded[-1].index]
     base = SessionSettings().resolved_profile()
-    ff = SEED_EFFECTS["ff"]
+    ff = sc.fixtures["ff"]
+    assert ff.speed == 1.2
     assert full.profile.fitts_a == pytest.approx(base.fitts_a * ff.speed)
     assert quarter.profile.fitts_a == pytest.approx(base.fitts_a * (1 + 0.25 * (ff.speed - 1)))
     assert learning_gain(p.blocks[3].adaptive) == 0.5
 
 
-def test_combined_conditions_get_the_combined_calibrated_effect():
+def test_unlisted_conditions_get_an_effect_only_when_the_scenario_says_so():
+    # the shipped scenario: no operator effect for labels it does not list (issue #25)
     eff = condition_effects(load_protocol("vf_schemas"))
-    assert eff["ag_mag"].accuracy == pytest.approx(SEED_EFFECTS["ag"].accuracy
-                                                   * SEED_EFFECTS["mag"].accuracy)
-    assert eff["vg"] is SEED_EFFECTS["vg"]
-    eff2 = condition_effects(load_protocol("vf_learning_curve"))
-    assert eff2 == SEED_EFFECTS  # the seed's study keeps its calibration
+    assert "ag_mag" not in eff and eff == DEFAULT_EFFECTS
+    sc = deriving_scenario()
+    eff = condition_effects(load_protocol("vf_schemas"), sc)
+    assert eff["ag_mag"].accuracy == pytest.approx(sc.fixtures["ag"].accuracy
+                                                   * sc.fixtures["mag"].accuracy)
+    assert eff["vg"] == sc.fixtures["vg"]
+    assert condition_effects(load_protocol("vf_learning_curve"), sc, 0.0)["ff"].is_null
 
 
 @pytest.mark.parametrize(("extra", "condition", "schema", "field", "shown"), [

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from vasim.core.errors import StoreError
-from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.operator.retention import DEFAULT_RETENTION
 from vasim.study.cohort import simulate_cohort
 from vasim.study.protocol import load_protocol
@@ -28,7 +28,7 @@ from vasim.study.store import TrialStore
 
 
 def _weight(cond: str) -> float:
-    return 1.0 if cond == "none" else SEED_EFFECTS[cond].practice_weight
+    return 1.0 if cond == "none" else DEFAULT_EFFECTS[cond].practice_weight
 
 
 def test_a_later_sitting_waits_for_its_delay_or_records_a_simulated_one(tmp_path: Path) -> None:

@@ -1,5 +1,5 @@
 """``vasim study power``: power of the VF study's primary tests against the subject count,
-from Monte Carlo cohorts of the calibrated operator on Ray (issue #18 item 5;
+from Monte Carlo cohorts of a declared scenario's operator on Ray (issue #18 item 5;
 :mod:`vasim.study.power`). Registered by :mod:`vasim.cli.study` under ``vasim study``."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r = ss.add_parser(
         "power", help="power of the primary tests against N, from simulated cohorts (Ray)",
         description=(
-            "Simulate --cohorts cohorts of the calibrated scripted operator at each subject "
+            "Simulate --cohorts cohorts of the scripted operator of --scenario at each subject "
             "count of --subjects, analyse each with the report's primary RM-ANOVAs (fixture "
             "effect and practice effect on cumulative error, latency and path deviation) "
             "and print the power of each test (share of cohorts with p < alpha) with its "
@@ -30,14 +30,18 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--cohorts", type=bounded_int(COHORTS), default=200,
                    help="Monte Carlo cohorts per N (default 200: power to +-0.035 at 0.5)")
     r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=None,
-                   help="x the operator's calibrated fixture effects (1: the seed's; 0: "
-                        "none, the fixture tests' type-I error; 0.5: half); default: the "
-                        "protocol's [power] effect_scale, else 1")
+                   help="x the scenario's fixture effects and mechanism gain (1: as "
+                        "declared; 0: none, the fixture tests' type-I error; 0.5: half); "
+                        "default: the protocol's [power] effect_scale, else 1")
     r.add_argument("--effects", type=Path, default=None, metavar="FILE.toml",
                    help="fixture effects by condition label ([ff] accuracy = 0.8, speed, "
                         "practice_weight, carryover, dependence), applied over the "
                         "protocol's [power.effects]; unset fields keep those (else the "
-                        "calibration); --effect-scale applies on top")
+                        "scenario's); --effect-scale applies on top")
+    r.add_argument("--scenario", default="seed_plausible", metavar="NAME|FILE.toml",
+                   help="the declared scenario of the simulated operator (subjects, groups, "
+                        "fixture effects and mechanisms): a name in protocols/scenarios "
+                        "(seed_plausible, null) or a TOML file, as `vasim study simulate`")
     r.add_argument("--alpha", type=bounded_float(ALPHA), default=0.05,
                    help="significance level (default 0.05)")
     r.add_argument("--p", choices=["gg", "uncorrected"], default="gg",
@@ -66,6 +70,7 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
+    from vasim.operator.scenario import load_scenario
     from vasim.study.power.design import (
         COARSE_DT,
         COARSE_WARNING,
@@ -79,10 +84,12 @@ def _cmd_power(args: argparse.Namespace) -> int:
     from vasim.study.protocol import load_protocol
     from vasim.study.protocol.power import resolve_effects
 
+    scenario = load_scenario(args.scenario)
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
-    # Decision (vasim.study.protocol.power): calibration < protocol [power] < command line
-    scale, base = resolve_effects(protocol.power, cli_scale=args.effect_scale)
+    # Decision (vasim.study.protocol.power): scenario < protocol [power] < command line
+    scale, base = resolve_effects(protocol.power, cli_scale=args.effect_scale,
+                                  base=scenario.fixtures)
     if args.effects is not None:
         base = load_effects(args.effects, base=base)
     sources = effect_sources(protocol.power is not None and bool(protocol.power.effects),
@@ -91,14 +98,16 @@ def _cmd_power(args: argparse.Namespace) -> int:
                          seed=args.seed, effect_scale=scale, alpha=args.alpha,
                          dt=COARSE_DT if args.coarse else FULL_DT,
                          max_trial_time=args.max_time,
-                         p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
+                         p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base,
+                         scenario=scenario)
     if args.out is not None:   # before the run: a bad --out must not waste the cohorts
         args.out.mkdir(parents=True, exist_ok=True)
     res = run_power(protocol, design, address=args.address, workers=args.workers,
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
-    print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator "
-          f"calibrated to the seed{sources}, effect scale {scale:g}, {step} step, "
+    print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator of "
+          f"scenario {scenario.name} ({scenario.sha256[:12]}){sources}, effect scale "
+          f"{scale:g}, {step} step, "
           f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
           f" p; {args.cohorts} cohorts per N; ± = Monte Carlo standard error)")
     print(format_table(res.power))
@@ -119,7 +128,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
 
 
 def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
-    """What the header names besides the calibration: the protocol's ``[power.effects]``
+    """What the header names besides the scenario: the protocol's ``[power.effects]``
     and the ``--effects`` file, when used.
 
     >>> effect_sources(True, Path("e.toml"))

@@ -23,6 +23,7 @@ from pathlib import Path
 from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
 from vasim.cli.power import register_power
 from vasim.core.bounds import (
+    EFFECT_SCALE,
     GAIN,
     ID,
     PRACTICE_TRIALS,
@@ -431,6 +432,14 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         "most 4 x the cores)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
+    r.add_argument("--scenario", default="seed_plausible", metavar="NAME|FILE.toml",
+                   help="the declared scenario of the simulated operator: a name in "
+                        "protocols/scenarios (seed_plausible, null) or a TOML file "
+                        "(docs/simulation.md); stored with each session with its sha256")
+    r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=1.0,
+                   metavar="X",
+                   help="x the scenario's fixture effects and mechanism gain (default 1; "
+                        "0: no fixture effect at all)")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
 
@@ -625,9 +634,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    from vasim.operator.scenario import load_scenario
     from vasim.study.cohort import simulate_cohort
     from vasim.study.protocol import load_protocol
 
+    scenario = load_scenario(args.scenario)
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
     surgeons = args.surgeons
@@ -635,9 +646,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         surgeons = round(args.subjects * 31 / 46)  # the VF study: 31 surgeons of 46
     rep = simulate_cohort(_new_db(args.db), protocol, n_subjects=args.subjects,
                           n_surgeons=surgeons, seed=args.seed, workers=args.workers,
-                          progress=_progress(args), max_trial_time=args.max_time)
+                          progress=_progress(args), max_trial_time=args.max_time,
+                          scenario=scenario, effect_scale=args.effect_scale)
     print(f"cohort of {_count(rep.subjects, 'subject')} ({_count(surgeons, 'surgeon')}), "
-          f"seed {args.seed}: "
+          f"seed {args.seed}, scenario {scenario.name} ({scenario.sha256[:12]}) x "
+          f"{args.effect_scale:g}: "
           f"{rep.sessions_completed} sessions completed, {rep.trials_run} trials run now")
     print(f"simulated {rep.sim_seconds:.1f} s in {rep.wall_seconds:.1f} s wall with "
           f"{rep.workers} worker(s): {rep.realtime_ratio:.1f}x real time")

@@ -162,8 +162,9 @@ TEXT_LENGTH = Bound(1, 100_000, "characters", "a free-text answer")
 # -- power planning (vasim.study.power) ---------------------------------------------------
 COHORTS = Bound(1, 100_000, "", "Monte Carlo cohorts per design point; 10,000 give a power "
                 "to +-0.005, 100,000 x 46 subjects is years of CPU")
-EFFECT_SCALE = Bound(0.0, 5.0, "", "x the calibrated fixture effects; from 2.5 FF's 40 % "
-                     "error reduction exceeds 100 % (refused by the effect itself)")
+EFFECT_SCALE = Bound(0.0, 5.0, "", "x a scenario's fixture effects; a scale that makes an "
+                     "effect invalid (an error reduction above 100 %) is refused by the "
+                     "effect itself")
 ALPHA = Bound(1e-6, 0.5, "", "a significance level; above 0.5 a test rejects more often "
               "than not under H0")
 MAX_MESSAGE_CHARS = 80

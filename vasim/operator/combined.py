@@ -1,9 +1,10 @@
-"""The calibrated operator's effect of a combined schema and of a fixture at reduced gain.
+"""The simulated operator's effect of a combined schema and of a fixture at reduced gain.
 
-The seed calibrated five single fixtures (``vasim.operator.learning.SEED_EFFECTS``); the
-seed's next study (sec. 7.2.3, issue #18 item 3) combines them (AG+Mag, Mag+FF, VG+AG), and
-the fading study (item 1) runs them at a gain G in [0, 1]. Neither has a measurement, so
-both are *rules*, stated here and applied to the calibrated single effects.
+A scenario declares single fixtures' effects (``vasim.operator.scenario``); the seed's next
+study (sec. 7.2.3, issue #18 item 3) combines them (AG+Mag, Mag+FF, VG+AG), and the fading
+study (item 1) runs them at a gain G in [0, 1]. Neither has a measurement, so both are
+*rules*, stated here and applied to the declared single effects (a combination only when
+the scenario's ``derive_unlisted`` says so).
 
 **Decision** (combination rule): the fixtures of a schema act on the trainee through
 independent channels, so their benefits combine as independent probabilities of removing
@@ -28,7 +29,7 @@ an assisted trial scales with that trial's gain, ``delta_G = G delta`` (the guid
 hypothesis: what was not leaned on is not missed; Winstein, Pohl & Lewthwaite 1994 found
 faded feedback retained better). Practice and carry-over are left as they are: a faded
 trial is practice all the same. ``vasim.operator.learning.trial_adjustment`` applies it
-(its ``gain`` and ``history_gains`` arguments; G = 1 keeps the calibrated numbers).
+(its ``gain`` and ``history_gains`` arguments; G = 1 keeps the declared numbers).
 
 Example:
     >>> e = combine_effects([FixtureEffect(accuracy=0.8, speed=0.9),
@@ -42,7 +43,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.operator.effects import FixtureEffect
 
 
 def combine_effects(effects: Sequence[FixtureEffect]) -> FixtureEffect:
@@ -69,19 +70,19 @@ def combine_effects(effects: Sequence[FixtureEffect]) -> FixtureEffect:
 
 
 def label_effects(components: Mapping[str, Sequence[str]],
-                  base: Mapping[str, FixtureEffect] = SEED_EFFECTS,
+                  base: Mapping[str, FixtureEffect],
                   ) -> dict[str, FixtureEffect]:
     """``base`` extended with the effect of every condition label it lacks.
 
     Args:
         components: condition label -> the fixture kinds its schema runs (e.g.
             ``{"ag_mag": ("ag", "mag"), "ff_faded": ("ff",)}``).
-        base: the calibrated single effects (labels already there keep their effect).
+        base: the declared single effects (labels already there keep their effect).
 
     Returns:
         A new mapping: ``base`` plus the combination of each new label whose fixtures all
-        have a calibrated effect (a label with an uncalibrated fixture, e.g. the cone,
-        gets none: no guessing beyond the calibrated fixtures).
+        have a declared effect (a label with an undeclared fixture, e.g. the cone,
+        gets none: no guessing beyond the declared fixtures).
     """
     out = dict(base)
     for label, kinds in components.items():

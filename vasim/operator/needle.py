@@ -258,7 +258,8 @@ def grasp_sigma(profile: OperatorProfile, practice: int) -> float:
         2.25
     """
     kn = 1.0 + SKILL_NOISE * (1.0 - profile.skill)
-    return float(profile.perception_noise * kn * power_law(practice, profile.learning_rate))
+    return float(profile.perception_noise * kn * power_law(practice, profile.learning_rate,
+                                                               profile.asymptote))
 
 
 def classify_grasp(error: float, grasp_tolerance: float = GRASP_TOLERANCE,

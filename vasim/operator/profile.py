@@ -20,6 +20,9 @@ class OperatorProfile:
     Attributes:
         skill: s in [0, 1]: 0 novice, 1 expert (scales movement time, noise, feedback gain).
         learning_rate: alpha >= 0, power-law exponent of practice (0.1-0.5).
+        asymptote: f in [0, 1), the share of the learnable noise and movement time that
+            practice never removes: lambda_P = f + (1 - f) (1 + P)^-alpha (0: the plain
+            power law; a scenario's group sets it, ``vasim.operator.scenario``).
         reaction_delay: tau_d [s], visual feedback delay, in [0, 1] (typically 0.15-0.25).
         tremor_amplitude: RMS tremor displacement per axis [m] (about 1e-4), >= 0.
         tremor_hz: tremor frequency [Hz], in [4, 20] (physiological: 8-12).
@@ -50,6 +53,7 @@ class OperatorProfile:
 
     skill: float = 0.5
     learning_rate: float = 0.25
+    asymptote: float = 0.0
     reaction_delay: float = 0.2
     tremor_amplitude: float = 1e-4
     tremor_hz: float = 10.0
@@ -73,6 +77,7 @@ class OperatorProfile:
         # field: (low, high, low_inclusive, high_inclusive)
         "skill": (0.0, 1.0, True, True),
         "learning_rate": (0.0, 2.0, True, True),
+        "asymptote": (0.0, 1.0, True, False),
         "reaction_delay": (0.0, 1.0, True, True),
         "tremor_amplitude": (0.0, 0.01, True, True),
         "tremor_hz": (4.0, 20.0, True, True),

@@ -39,7 +39,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from vasim.operator.learning import (
-    SEED_EFFECTS,
+    DEFAULT_EFFECTS,
     VF_FREE,
     FixtureEffect,
     TrialAdjustment,
@@ -113,7 +113,7 @@ def practice_weights(ages_days: Sequence[float], same_path: Sequence[bool], *,
 
 
 def weighted_adjustment(history: Sequence[str], condition: str, weights: Sequence[float],
-                        effects: Mapping[str, FixtureEffect] = SEED_EFFECTS,
+                        effects: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS,
                         ) -> TrialAdjustment:
     """``learning.trial_adjustment`` with each earlier trial counted by its weight.
 

@@ -13,7 +13,8 @@ which the master's axes are aligned with).
 
 1. Learning and skill factors (dimensionless)::
 
-       lambda_P = (1 + P) ** -alpha                      power law of practice
+       lambda_P = f + (1 - f) (1 + P) ** -alpha          power law of practice, with
+                                                         asymptote f (profile.asymptote)
        kappa_T  = 1 + 1.5 (1 - s)                        movement-time factor of skill
        kappa_N  = 1 + 1.0 (1 - s)                        noise factor of skill
        kappa_K  = 0.5 + 0.5 s                            feedback-gain factor of skill
@@ -185,15 +186,17 @@ _BLOCK = 1024
 _NRAND = 12
 
 
-def power_law(practice: float, alpha: float) -> float:
-    """Power law of practice factor lambda_P = (1 + P) ** -alpha (Newell & Rosenbloom 1981).
+def power_law(practice: float, alpha: float, asymptote: float = 0.0) -> float:
+    """Power law of practice factor lambda_P = f + (1 - f) (1 + P) ** -alpha (Newell &
+    Rosenbloom 1981; f = ``asymptote``, the share practice never removes: experienced
+    operators plateau, issue #25).
 
-    >>> round(power_law(20, 0.3), 4)
-    0.4012
+    >>> round(power_law(20, 0.3), 4), round(power_law(20, 0.3, 0.5), 4)
+    (0.4012, 0.7006)
     """
     if practice < 0:
         raise ValueError(f"practice must be >= 0, got {practice!r}")
-    return (1.0 + practice) ** -alpha
+    return asymptote + (1.0 - asymptote) * (1.0 + practice) ** -alpha
 
 
 def fitts_time(distance: float, width: float, a: float, b: float) -> float:
@@ -290,7 +293,7 @@ class ScriptedOperator:
         self.seed = seed
         self.practice = int(practice)
         p = profile
-        lam = power_law(self.practice, p.learning_rate)
+        lam = power_law(self.practice, p.learning_rate, p.asymptote)
         self.learning_factor = lam
         """lambda_P of this trial."""
         kn = 1.0 + SKILL_NOISE * (1.0 - p.skill)

@@ -11,36 +11,38 @@ SQLite never sees concurrent writers. Re-running the same command continues wher
 stopped: trials left 'running' by a killed run are marked 'interrupted' when the store opens
 and run again as new attempts (same trial seed: the same trial).
 
-Models (**decisions**; demographics are plausible choices, not fitted to data; the
-operator's fixture effects, learning, carry-over and questionnaire answers are calibrated to
-the seed's chapter 6, ``vasim.operator.learning`` / ``vasim.operator.questionnaire``, and
-the sessions say so: operator "scripted (calibrated to the seed, synthetic)"):
+Models (**decisions**): a cohort is a declared scenario (``vasim.operator.scenario``,
+``protocols/scenarios/*.toml``; default ``seed_plausible``): its groups (learning rate and
+asymptote, experience and skill), fixture effects, effect scale and questionnaire model are
+assumptions with sources, not fits to the seed. Each session stores the scenario's text,
+sha256 and the effect scale (``settings.extra["scenario"]``) and the operator label
+"scripted (declared scenario, synthetic)".
 
 * Subjects: ``n_surgeons`` surgeons and ``n_subjects - n_surgeons`` residents, assigned to
   the codes by a seeded permutation (codes do not reveal the group). Subject j draws from
-  its own stream ``SeedSequence([seed, 5, j])``: the operator profile
-  (``OperatorProfile.sample(rng, group)``) and the demographics; its session seed is
+  its own stream ``SeedSequence([seed, 5, j])``: the laparoscopy experience and, from it,
+  the operator profile (``Scenario.sample_subject``: demographics and skill drawn
+  together), then the other demographics; its session seed is
   ``SeedSequence([seed, 6, j])``, and its pre / post answers draw from
   ``SeedSequence([session seed, 7])`` / ``[session seed, 8]``. Same command, same cohort.
-* Demographics (``DEMOGRAPHIC_MODEL``), categorical, per group (surgeon | resident):
+* Demographics: laparoscopy_experience from the scenario's group (with the skill); the
+  others (``DEMOGRAPHIC_MODEL``, assumed, categorical, per group surgeon | resident):
 
   - specialisation: general surgery .6, gynaecology .15, urology .15, other .1 (both);
-  - laparoscopy_experience: 11-50 .1, 51-200 .3, >200 .6 | none .2, 1-10 .4, 11-50 .3,
-    51-200 .1;
   - simulator_experience: none .4, occasional .5, regular .1 | none .3, occasional .5,
     regular .2;
   - robotic_experience: none .6, observed .2, assisted .1, performed .1 | none .7,
     observed .25, assisted .05.
 
-* Post-questionnaire answers from a *perceived* benefit (``vasim.operator.questionnaire``,
-  calibrated to the seed's subjective results): for each assisted condition c the measured
-  benefit ``b_c = ln(E_probe / E_c)``, E the mean path deviation (``path_dev_mean_mm``,
-  accuracy independent of speed; ``total_error_l1`` for trials stored without it) of the
-  subject's completed trials of c and of its fixture-free probe trials (b > 0: the fixture
-  reduced the error), moves the answers around each fixture's noticeability, comfort and
-  rating centre: "best" and "worst" are multinomial-logit choices whose cohort shares are
-  the seed's, the 0-10 rating is centred on the seed's mean rating (an unlabelled
-  condition choice: uniform). Proposed schemas: 0, 1 or 2 proposals with probabilities
+* Post-questionnaire answers from what the subject experienced
+  (``vasim.operator.questionnaire``, the scenario's ``[questionnaire]`` noise model): for
+  each assisted condition c the measured benefit ``b_c = ln(E_probe / E_c)``, E the mean
+  path deviation (``path_dev_mean_mm``, accuracy independent of speed;
+  ``total_error_l1`` for trials stored without it) of the subject's completed trials of c
+  and of its fixture-free probe trials (b > 0: the fixture reduced the error); "best" and
+  "worst" are logit choices in b, the 0-10 rating linear in b plus noise (an unlabelled
+  condition choice: uniform). No seed share or rating enters: with no fixture effect
+  there is no preference. Proposed schemas: 0, 1 or 2 proposals with probabilities
   0.2, 0.5, 0.3 (``PROPOSALS_P``, capped by ``max_entries``), proposal m (1-based) = the
   ``min_size + m - 1`` conditions of largest best-utility. Likert items:
   ``clip(round(N(3.5, 1)), 1, 5)`` (no performance model); choice and integer items:
@@ -76,12 +78,12 @@ from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.operator.questionnaire import Perception, perceive
+from vasim.operator.scenario import QuestionnaireModel, Scenario, default_scenario
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
-from vasim.study.gain_plan import condition_priors
 from vasim.study.gates import apply_gates, expert_groups
 from vasim.study.protocol import Protocol, QuestionItem, ScheduledTrial, gated_blocks
 from vasim.study.session import (
@@ -106,7 +108,6 @@ DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]
     "surgeon": {
         "specialisation": (("general_surgery", "gynaecology", "urology", "other"),
                            (0.6, 0.15, 0.15, 0.1)),
-        "laparoscopy_experience": (("11-50", "51-200", ">200"), (0.1, 0.3, 0.6)),
         "simulator_experience": (("none", "occasional", "regular"), (0.4, 0.5, 0.1)),
         "robotic_experience": (("none", "observed", "assisted", "performed"),
                                (0.6, 0.2, 0.1, 0.1)),
@@ -114,7 +115,6 @@ DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]
     "resident": {
         "specialisation": (("general_surgery", "gynaecology", "urology", "other"),
                            (0.6, 0.15, 0.15, 0.1)),
-        "laparoscopy_experience": (("none", "1-10", "11-50", "51-200"), (0.2, 0.4, 0.3, 0.1)),
         "simulator_experience": (("none", "occasional", "regular"), (0.3, 0.5, 0.2)),
         "robotic_experience": (("none", "observed", "assisted"), (0.7, 0.25, 0.05)),
     },
@@ -180,8 +180,11 @@ def _seed63(seed: int, *key: int) -> int:
     return ((int(a) << 32) | int(b)) & (2**63 - 1)
 
 
-def draw_demographics(rng: np.random.Generator, group: str) -> Demographics:
-    """Demographics of one simulated subject of ``group`` (``DEMOGRAPHIC_MODEL``).
+def draw_demographics(rng: np.random.Generator, group: str,
+                      laparoscopy_experience: str | None = None) -> Demographics:
+    """Demographics of one simulated subject of ``group`` (``DEMOGRAPHIC_MODEL``), with
+    its ``laparoscopy_experience`` (drawn with the skill, ``Scenario.sample_subject``;
+    None: drawn here from the default scenario's group).
 
     Raises:
         ConfigError: unknown group.
@@ -189,7 +192,9 @@ def draw_demographics(rng: np.random.Generator, group: str) -> Demographics:
     if group not in DEMOGRAPHIC_MODEL:
         raise ConfigError(f"group must be one of {', '.join(DEMOGRAPHIC_MODEL)}, got "
                           f"{group!r}", field="group")
-    values = {"group": group}
+    if laparoscopy_experience is None:
+        laparoscopy_experience = default_scenario().sample_subject(rng, group)[1]
+    values = {"group": group, "laparoscopy_experience": laparoscopy_experience}
     for name, (opts, probs) in DEMOGRAPHIC_MODEL[group].items():
         values[name] = opts[int(rng.choice(len(opts), p=probs))]
     return Demographics.from_mapping(values)
@@ -220,10 +225,18 @@ def counterbalanced_seed(seed: int, j: int) -> int:
 
 def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
                     prefix: str = SUBJECT_PREFIX,
-                    latin_square: bool = False) -> list[SimulatedSubject]:
+                    latin_square: bool = False,
+                    scenario: Scenario | None = None) -> list[SimulatedSubject]:
     """The cohort's subjects (a pure function of its arguments; module docstring).
     ``latin_square``: session seeds that give subject j latin-square row j - 1
-    (:func:`counterbalanced_seed`).
+    (:func:`counterbalanced_seed`). ``scenario``: the group models (None: the default)."""
+    sc = scenario or default_scenario()
+    return _cohort_subjects(n_subjects, n_surgeons, seed, prefix, latin_square, sc)
+
+
+def _cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, prefix: str,
+                     latin_square: bool, sc: Scenario) -> list[SimulatedSubject]:
+    """:func:`cohort_subjects`'s body.
 
     Raises:
         ConfigError: counts out of range.
@@ -249,13 +262,13 @@ def cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, *,
     for j in range(1, n_subjects + 1):
         group = groups[order[j - 1]]
         rng = _stream(seed, 5, j)
-        profile = OperatorProfile.sample(rng, group)
+        profile, lap = sc.sample_subject(rng, group)
         session_seed = _seed63(seed, 6, j)
         if latin_square:
             session_seed = counterbalanced_seed(session_seed, j)
         out.append(SimulatedSubject(
             number=j, code=f"{prefix}{j:0{width}d}", group=group, profile=profile,
-            demographics=draw_demographics(rng, group), session_seed=session_seed))
+            demographics=draw_demographics(rng, group, lap), session_seed=session_seed))
     return out
 
 
@@ -296,7 +309,8 @@ def _item_answer(item: QuestionItem, rng: np.random.Generator,
 
 def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Generator, *,
                       demographics: Demographics | None = None,
-                      measured: Mapping[str, float] | None = None) -> dict[str, Any]:
+                      measured: Mapping[str, float] | None = None,
+                      model: QuestionnaireModel | None = None) -> dict[str, Any]:
     """A simulated subject's answers to one questionnaire (module docstring's models).
 
     Args:
@@ -305,6 +319,7 @@ def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Gen
         measured: measured benefit b_c per condition (``measured_benefits``; missing
             conditions count 0), from which each condition's ``Perception`` is drawn once
             per questionnaire (``vasim.operator.questionnaire.perceive``).
+        model: the scenario's questionnaire model (None: the default scenario's).
     """
     q = getattr(protocol, questionnaire)
     out: dict[str, Any] = {}
@@ -316,7 +331,7 @@ def simulated_answers(protocol: Protocol, questionnaire: str, rng: np.random.Gen
                    robotic_experience=d.robotic_experience)
     conds = list(dict.fromkeys(c for item in q.items for c in item.conditions))
     perceived = perceive({c: (measured or {}).get(c, 0.0) for c in conds}, rng,
-                         condition_priors(protocol))
+                         model or default_scenario().questionnaire)
     for item in q.items:
         a = _item_answer(item, rng, perceived)
         if a is not None:
@@ -370,7 +385,9 @@ def _record_post(store: TrialStore, session: Session, subject: SimulatedSubject)
     errors = dict(zip(tm["trial_id"].astype(int), tm["value"].astype(float), strict=True))
     b = measured_benefits(sched, errors)
     rng = _stream(subject.session_seed, 8)
-    answers = simulated_answers(session.protocol, "post", rng, measured=b)
+    scenario = session.scenario[0] or default_scenario()
+    answers = simulated_answers(session.protocol, "post", rng, measured=b,
+                                model=scenario.questionnaire)
     record_answers(store, session.id, "post", answers, source=f"simulated {subject.code}")
 
 
@@ -415,17 +432,29 @@ class _Job:
 
 
 # ------------------------------------------------------------------------------ cohort
+def scenario_record(scenario: Scenario, effect_scale: float) -> dict[str, Any]:
+    """What a simulated session stores of its scenario (``settings.extra["scenario"]``):
+    name, text, sha256 and the effect scale."""
+    return {"name": scenario.name, "sha256": scenario.sha256, "effect_scale": effect_scale,
+            "text": scenario.text}
+
+
 def prepare_sessions(store: TrialStore, protocol: Protocol,
                      subjects: Sequence[SimulatedSubject], *, cohort_seed: int,
-                     max_trial_time: float | None = None) -> list[tuple[SimulatedSubject, int]]:
+                     max_trial_time: float | None = None,
+                     scenario: Scenario | None = None,
+                     effect_scale: float = 1.0) -> list[tuple[SimulatedSubject, int]]:
     """Finds or creates each subject's session of ``protocol`` (with its pre answers).
 
     An existing session must come from the same cohort (seed and subject number, stored
-    with it); an aborted one is left alone.
+    with it) and the same scenario and effect scale; an aborted one is left alone.
 
     Raises:
-        ConfigError: a subject code already used by another cohort or a real subject.
+        ConfigError: a subject code already used by another cohort or a real subject, or
+            by this cohort under another scenario or effect scale.
     """
+    sc = scenario or default_scenario()
+    rec = scenario_record(sc, effect_scale)
     out = []
     for subj in subjects:
         df = store.sessions(subject=subj.code, protocol=protocol.name)
@@ -448,12 +477,20 @@ def prepare_sessions(store: TrialStore, protocol: Protocol,
                     f"{cohort['group']} in a cohort of another size or surgeon count (now a "
                     f"{subj.group}); use the same --subjects and --surgeons as before, or "
                     f"another database", field="subjects")
+            had = extra.get("scenario") or {}
+            if (had.get("sha256"), had.get("effect_scale", 1.0)) != (sc.sha256, effect_scale):
+                raise ConfigError(
+                    f"subject {subj.code} of {store.path} was simulated under scenario "
+                    f"{had.get('name', 'seed calibration (before issue #25)')!r} at effect "
+                    f"scale {had.get('effect_scale', 1.0)!r} (now {sc.name!r} at "
+                    f"{effect_scale!r}); use the same --scenario and --effect-scale, or "
+                    "another database", field="scenario")
             out.append((subj, sid))
             continue
         settings = SessionSettings(
             operator="scripted", profile=subj.profile, max_trial_time=max_trial_time,
             extra={"cohort": {"seed": cohort_seed, "subject": subj.number,
-                              "group": subj.group}})
+                              "group": subj.group}, "scenario": rec})
         sid = start_session(store, protocol, subj.code, seed=subj.session_seed,
                             settings=settings)
         if not protocol.pre.empty:
@@ -509,6 +546,8 @@ def simulate_cohort(
     progress: bool = True,
     max_trial_time: float | None = None,
     max_trials_per_subject: int | None = None,
+    scenario: Scenario | None = None,
+    effect_scale: float = 1.0,
 ) -> CohortReport:
     """Simulates (or continues simulating) a cohort into the study database ``db``.
 
@@ -522,6 +561,9 @@ def simulate_cohort(
         max_trial_time: trial time limit [s] (None: the protocol's).
         max_trials_per_subject: run at most this many (the first pending) trials of each
             subject (None: all); for tests and benchmarks.
+        scenario: the declared scenario (None: ``seed_plausible``).
+        effect_scale: x the scenario's fixture effects and mechanism gain (0: no fixture
+            effect at all; ``Scenario.effects``, ``Scenario.mechanism``).
 
     Returns:
         A ``CohortReport``.
@@ -531,15 +573,21 @@ def simulate_cohort(
         KeyboardInterrupt: after marking the trials in flight 'interrupted'.
     """
     protocol.check_runnable()
+    sc = scenario or default_scenario()
+    if not math.isfinite(effect_scale) or effect_scale < 0:
+        raise ConfigError(f"got {effect_scale!r}, expected a number >= 0",
+                          field="effect_scale")
     subjects = cohort_subjects(n_subjects, n_surgeons, seed,
-                               latin_square=protocol.block_order == "latin_square")
+                               latin_square=protocol.block_order == "latin_square",
+                               scenario=sc)
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if n_workers < 0:
         raise ConfigError(f"workers must be >= 0, got {workers!r}", field="workers")
     t0 = time.perf_counter()
     with TrialStore(db) as store:
         sessions = prepare_sessions(store, protocol, subjects, cohort_seed=seed,
-                                    max_trial_time=max_trial_time)
+                                    max_trial_time=max_trial_time, scenario=sc,
+                                    effect_scale=effect_scale)
         _finish_sessions(store, sessions)
         total = sum(len(load_session(store, sid).schedule) for _, sid in sessions)
         initial = total - sum(len(load_session(store, sid).pending) for _, sid in sessions)
@@ -672,6 +720,7 @@ __all__ = [
     "draw_demographics",
     "measured_benefits",
     "prepare_sessions",
+    "scenario_record",
     "simulate_cohort",
     "simulate_trial",
     "simulated_answers",

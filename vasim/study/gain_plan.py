@@ -6,17 +6,16 @@ Pure functions of a protocol and its schedule (issue #18 items 1 and 3), used by
 * ``trial_gain``: the fixture gain rule of a scheduled trial (``vasim.fixtures.gain``):
   the block's schedule stage or adaptive rule for its own trials, 1.0 otherwise (probes,
   constant blocks, teleoperation modes);
-* ``learning_gain``: the gain the calibrated operator's per-trial adjustment uses
+* ``learning_gain``: the gain the simulated operator's per-trial adjustment uses
   (``vasim.operator.learning.trial_adjustment``'s ``gain``);
-* ``condition_effects``: the calibrated effects by condition label, extended with the
-  labels the seed did not calibrate -- a faded/adaptive condition (``ff_faded``) takes its
-  schema's effect, a combined schema (``ag_mag``) the combination of its fixtures'
-  (``vasim.operator.combined``); labels the seed calibrated keep their numbers;
-* ``condition_priors``: the questionnaire priors of the same labels
-  (``vasim.operator.questionnaire.condition_prior``: combined from the fixtures, faded by
-  the block's mean gain ``block_mean_gain``).
+* ``condition_effects``: a scenario's declared effects by condition label
+  (``vasim.operator.scenario``), at an effect scale. **Decision** (issue #25): a label the
+  scenario does not list (``ff_faded``, ``ag_mag``) gets no operator effect, only its
+  simulated mechanism, unless the scenario's ``derive_unlisted`` asks for the combination
+  of its fixtures' declared effects (``vasim.operator.combined``); nothing of the seed is
+  applied to conditions the seed did not run.
 
-**Decision** (adaptive trials and the calibrated operator): the gain of an adaptive trial
+**Decision** (adaptive trials and the simulated operator): the gain of an adaptive trial
 is only known once it has run (it follows the trainee's deviation), while the operator's
 per-trial adjustment is set before the trial (a cohort plans every trial up front). The
 adjustment uses the rule's start gain (``AdaptiveRule.start``); within the trial the motion
@@ -27,17 +26,16 @@ sees, the volume it hears), and the per-sample gain is logged.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.schema import load_schema
-from vasim.operator.combined import label_effects
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
-from vasim.operator.questionnaire import SEED_MEAN_RATING, ConditionPrior, condition_prior
+from vasim.operator.effects import FixtureEffect
+from vasim.operator.scenario import Scenario, default_scenario
 from vasim.study.protocol import Block, Protocol, ScheduledTrial
 from vasim.trials.kinds import TELEOPERATION_MODES
 
-_EFFECTS: dict[tuple[Block, ...], dict[str, FixtureEffect]] = {}
-_PRIORS: dict[tuple[Block, ...], dict[str, ConditionPrior]] = {}
+_EFFECTS: dict[tuple[tuple[Block, ...], str, float], dict[str, FixtureEffect]] = {}
 
 
 def trial_gain(protocol: Protocol, scheduled: ScheduledTrial) -> GainRule:
@@ -52,6 +50,21 @@ def trial_gain(protocol: Protocol, scheduled: ScheduledTrial) -> GainRule:
     if scheduled.condition != block.condition:
         return 1.0
     return block.trial_gain(scheduled.trial_in_block)
+
+
+def scale_gain(rule: GainRule, factor: float) -> GainRule:
+    """A gain rule with every gain times ``factor`` in [0, 1] (a scenario's mechanism
+    gain, ``Scenario.mechanism``): a constant ``G factor``; an adaptive rule with its
+    bounds and start scaled.
+
+    >>> scale_gain(1.0, 0.0), scale_gain(AdaptiveRule(gain_min=0.2), 0.5).gain_max
+    (0.0, 0.5)
+    """
+    f = float(factor)
+    if isinstance(rule, AdaptiveRule):
+        return replace(rule, gain_min=rule.gain_min * f, gain_max=rule.gain_max * f,
+                       initial=None if rule.initial is None else rule.initial * f)
+    return float(rule) * f
 
 
 def learning_gain(rule: GainRule) -> float:
@@ -83,22 +96,31 @@ def gain_text(protocol: Protocol, scheduled: ScheduledTrial) -> str:
     return f"gain {rule * 100:.0f} %"
 
 
-def condition_effects(protocol: Protocol) -> dict[str, FixtureEffect]:
-    """The calibrated effects by condition label for ``protocol`` (module docstring).
+def condition_effects(protocol: Protocol, scenario: Scenario | None = None,
+                      scale: float = 1.0) -> dict[str, FixtureEffect]:
+    """The operator effects by condition label for ``protocol`` under ``scenario`` (None:
+    the shipped default) at effect scale ``scale`` (module docstring).
 
-    Cached per protocol blocks (what it depends on); the returned mapping must not be
+    Cached per protocol blocks, scenario hash and scale; the returned mapping must not be
     modified.
+
+    >>> from vasim.study.protocol import load_protocol
+    >>> eff = condition_effects(load_protocol("vf_schemas"))
+    >>> "ag_mag" in eff, eff["ff"].accuracy
+    (False, 0.75)
     """
-    key = protocol.blocks
+    sc = scenario or default_scenario()
+    key = (protocol.blocks, sc.sha256, float(scale))
     out = _EFFECTS.get(key)
     if out is None:
         components: dict[str, tuple[str, ...]] = {}
-        for b in protocol.blocks:
-            cond = b.condition
-            if b.probe or cond in SEED_EFFECTS or cond in TELEOPERATION_MODES:
-                continue
-            components[cond] = load_schema(b.schema or cond).kinds
-        out = _EFFECTS[key] = label_effects(components)
+        if sc.derive_unlisted:
+            for b in protocol.blocks:
+                cond = b.condition
+                if b.probe or cond in sc.fixtures or cond in TELEOPERATION_MODES:
+                    continue
+                components[cond] = load_schema(b.schema or cond).kinds
+        out = _EFFECTS[key] = sc.condition_effects(components, scale)
     return out
 
 
@@ -117,34 +139,5 @@ def block_mean_gain(block: Block) -> float:
     return float(sum(learning_gain(block.trial_gain(i)) for i in range(n)) / n)
 
 
-def condition_priors(protocol: Protocol) -> dict[str, ConditionPrior]:
-    """The questionnaire priors of the protocol's conditions the seed did not rate: a
-    combined schema from its fixtures, a faded/adaptive condition from its schema's
-    fixtures at the block's mean gain (``vasim.operator.questionnaire.condition_prior``;
-    conditions with an unrated fixture are left out, i.e. neutral). Cached per protocol
-    blocks, as ``condition_effects``.
-
-    >>> from vasim.study.protocol import load_protocol
-    >>> pr = condition_priors(load_protocol("vf_schemas"))
-    >>> sorted(pr), round(pr["mag_ff"].best_share, 4)
-    (['ag_mag', 'mag_ff', 'vg_ag'], 0.5136)
-    """
-    cached = _PRIORS.get(protocol.blocks)
-    if cached is not None:
-        return dict(cached)
-    out: dict[str, ConditionPrior] = {}
-    for b in protocol.blocks:
-        cond = b.condition
-        if b.probe or cond in TELEOPERATION_MODES or cond in out:
-            continue
-        if cond in SEED_MEAN_RATING and not b.has_gain:
-            continue  # the seed rated it
-        prior = condition_prior(load_schema(b.schema or cond).kinds, block_mean_gain(b))
-        if prior is not None:
-            out[cond] = prior
-    _PRIORS[protocol.blocks] = out
-    return dict(out)
-
-
-__all__ = ["block_mean_gain", "condition_effects", "condition_priors", "gain_text",
-           "learning_gain", "schedule_gains", "trial_gain"]
+__all__ = ["block_mean_gain", "condition_effects", "gain_text",
+           "learning_gain", "scale_gain", "schedule_gains", "trial_gain"]

@@ -17,14 +17,17 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
 * Practice and fixture effects: the scripted operator of scheduled trial i runs with the
   adjustment ``vasim.operator.learning.trial_adjustment`` of the conditions of trials
   0..i-1 and its own condition: the practice P is the rounded effective practice (a trial
-  under FF or Mag counts more), and the profile's learnable noise and Fitts constants carry
-  the fixture's calibrated effect while assisted, and its carry-over and guidance
-  dependence in VF-free trials (the seed's hypotheses, chapter 6); a faded or adaptive
-  trial carries its gain (``vasim.study.gain_plan``: the benefit scales with it) and a
-  combined schema the combination of its fixtures' effects (``vasim.operator.combined``).
+  under a fixture may count more), and the profile's learnable noise and Fitts constants
+  carry the fixture's effect while assisted, and its carry-over and guidance dependence in
+  VF-free trials; a faded or adaptive trial carries its gain (``vasim.study.gain_plan``:
+  the benefit scales with it). The effects are a declared scenario's
+  (``vasim.operator.scenario``): the one stored in ``settings.extra["scenario"]`` (its
+  text, sha256 and ``effect_scale``, written by ``vasim study simulate``), else the shipped
+  default; the scenario's ``mechanism(scale)`` multiplies every trial's fixture gain
+  (0: the fixtures do nothing, ``--effect-scale 0`` or the null scenario).
   A session run by the
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
-  (calibrated to the seed, synthetic)"); its trials keep ``operator = "scripted"``.
+  (declared scenario, synthetic)"); its trials keep ``operator = "scripted"``.
   A teleoperation trial also gets ``mode_practice``, the number of earlier trials of its
   mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``).
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
@@ -70,12 +73,14 @@ from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.operator.learning import OPERATOR_LABEL, VF_FREE, trial_adjustment
 from vasim.operator.retention import practice_weights, weighted_adjustment
+from vasim.operator.scenario import Scenario, scenario_from_text
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.trial_meta import validate_subject_code
 from vasim.records.trial_metrics import MetricParams
 from vasim.study.gain_plan import (
     condition_effects,
     learning_gain,
+    scale_gain,
     schedule_gains,
     trial_gain,
 )
@@ -233,6 +238,7 @@ class Session:
         profile = s.resolved_profile()
         practice = scheduled.index
         gain = trial_gain(self.protocol, scheduled)  # faded/adaptive fixtures (issue #18)
+        scenario, scale = self.scenario
         if s.operator == "scripted":
             history = self.schedule[:scheduled.index]
             labels = [t.condition for t in history]
@@ -245,15 +251,20 @@ class Session:
                 # model counts each earlier trial by its forgetting weight only).
                 adj = weighted_adjustment(labels, scheduled.condition,
                                           self.practice_weights(scheduled),
-                                          condition_effects(self.protocol))
+                                          condition_effects(self.protocol, scenario, scale))
                 if g != 1.0 and scheduled.condition != VF_FREE:
                     adj = replace(adj, noise_factor=1.0 - g * (1.0 - adj.noise_factor),
                                   time_factor=1.0 + g * (adj.time_factor - 1.0))
             else:
                 adj = trial_adjustment(labels, scheduled.condition,
-                                       condition_effects(self.protocol), gain=g,
+                                       condition_effects(self.protocol, scenario, scale),
+                                       gain=g,
                                        history_gains=schedule_gains(self.protocol, history))
             profile, practice = adj.apply(profile), round(adj.practice)
+        if scenario is not None and scenario.mechanism(scale) != 1.0 \
+                and scheduled.condition != VF_FREE \
+                and scheduled.condition not in TELEOPERATION_MODES:
+            gain = scale_gain(gain, scenario.mechanism(scale))
         # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
         mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
         return TrialConfig(
@@ -271,6 +282,15 @@ class Session:
             mode_practice=None if mode is None else sum(
                 t.condition == mode for t in self.schedule[:scheduled.index]),
         )
+
+    @property
+    def scenario(self) -> tuple[Scenario | None, float]:
+        """The session's stored scenario and effect scale (None, 1: the shipped default;
+        module decisions)."""
+        rec = self.settings.extra.get("scenario")
+        if not isinstance(rec, Mapping) or "text" not in rec:
+            return None, 1.0
+        return scenario_from_text(str(rec["text"])), float(rec.get("effect_scale", 1.0))
 
     @property
     def spans_days_or_paths(self) -> bool:

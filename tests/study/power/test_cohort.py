@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.study.power.cohort import (
     cohort_subjects_of,
     cohort_tests,
@@ -68,7 +68,7 @@ def test_scaled_effects_rederive_the_session_configurations(tiny_protocol: Proto
     subj = cohort_subjects_of(tiny_protocol, 2, 11)[0]
     session = subject_session(tiny_protocol, subj, dt=COARSE_DT, max_trial_time=1.0)
     default = trial_configs(session, subj.profile)
-    same = trial_configs(session, subj.profile, dict(SEED_EFFECTS))  # a copy: re-derived
+    same = trial_configs(session, subj.profile, dict(DEFAULT_EFFECTS))  # a copy: re-derived
     assert [c for _, c in default] == [c for _, c in same]
     assert [c.profile for _, c in default] == [c.profile for _, c in same]
     none = trial_configs(session, subj.profile, scaled_effects(0.0))
@@ -78,4 +78,4 @@ def test_scaled_effects_rederive_the_session_configurations(tiny_protocol: Proto
         assert c1.profile is not None and c0.profile is not None
         if st.condition == "ff":                   # FF's calibrated noise factor is gone
             assert c1.profile.noise == subj.profile.noise
-            assert np.isclose(c0.profile.noise, SEED_EFFECTS["ff"].accuracy * subj.profile.noise)
+            assert np.isclose(c0.profile.noise, DEFAULT_EFFECTS["ff"].accuracy * subj.profile.noise)

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from vasim.core.errors import ConfigError
-from vasim.operator.learning import SEED_EFFECTS, trial_adjustment
+from vasim.operator.learning import DEFAULT_EFFECTS, trial_adjustment
 from vasim.study.power.design import (
     COARSE_DT,
     FULL_DT,
@@ -75,7 +75,7 @@ def test_surgeons_follow_the_vf_study_share() -> None:
 
 
 def test_scale_one_is_the_calibration_and_zero_no_fixture_effect() -> None:
-    assert scaled_effects(1.0) == SEED_EFFECTS
+    assert scaled_effects(1.0) == DEFAULT_EFFECTS
     none = scaled_effects(0.0)
     for e in none.values():
         assert (e.accuracy, e.speed, e.practice_weight, e.dependence) == (1.0, 1.0, 1.0, 0.0)
@@ -89,16 +89,17 @@ def test_scale_one_is_the_calibration_and_zero_no_fixture_effect() -> None:
 @given(st.floats(0.0, 1.5))
 def test_effects_scale_linearly_about_no_effect(s: float) -> None:
     for name, e in scaled_effects(s).items():
-        base = SEED_EFFECTS[name]
+        base = DEFAULT_EFFECTS[name]
         assert math.isclose(e.accuracy - 1.0, s * (base.accuracy - 1.0), abs_tol=1e-12)
         assert math.isclose(e.speed - 1.0, s * (base.speed - 1.0), abs_tol=1e-12)
         assert math.isclose(e.dependence, s * base.dependence, abs_tol=1e-12)
-        assert e.carryover == base.carryover
+        # the carry-over fraction is kept; at s = 0 the effect is the null one
+        assert e.carryover == (base.carryover if s > 0 else 0.0)
 
 
-@pytest.mark.parametrize("s", [-0.1, 2.5, 6.0, math.nan])
+@pytest.mark.parametrize("s", [-0.1, 4.0, 6.0, math.nan])
 def test_effect_scales_that_break_an_effect_are_refused(s: float) -> None:
-    # 2.5 x FF's accuracy 0.6 gives 0: no noise at all, not an operator
+    # 4 x FF's departure (accuracy 0.75 in seed_plausible) gives 0: no noise, not an operator
     with pytest.raises(ConfigError) as info:
         scaled_effects(s)
     assert info.value.field == "--effect-scale"
@@ -106,7 +107,7 @@ def test_effect_scales_that_break_an_effect_are_refused(s: float) -> None:
 
 def test_design_validates_its_fields() -> None:
     d = PowerDesign(subjects=(4, 8), cohorts=3, dt=COARSE_DT)
-    assert d.n_cohorts == 6 and d.effects == SEED_EFFECTS
+    assert d.n_cohorts == 6 and d.effects == DEFAULT_EFFECTS
     for kwargs, field in [({"cohorts": 0}, "--cohorts"), ({"alpha": 0.9}, "--alpha"),
                           ({"dt": 5e-3}, "dt"), ({"p_column": "p"}, "--p"),
                           ({"subjects": ()}, "--subjects"), ({"subjects": (1,)}, "--subjects"),
@@ -138,8 +139,8 @@ def test_effects_file_sets_single_fixtures_then_the_scale_applies(tmp_path) -> N
     path = tmp_path / "effects.toml"
     path.write_text("[ff]\naccuracy = 0.8\n[combo]\nspeed = 0.5\n", encoding="utf-8")
     base = load_effects(path)
-    assert base["ff"].accuracy == 0.8 and base["ff"].speed == SEED_EFFECTS["ff"].speed
-    assert base["mag"] == SEED_EFFECTS["mag"]
+    assert base["ff"].accuracy == 0.8 and base["ff"].speed == DEFAULT_EFFECTS["ff"].speed
+    assert base["mag"] == DEFAULT_EFFECTS["mag"]
     assert base["combo"].speed == 0.5 and base["combo"].accuracy == 1.0   # from no effect
     d = PowerDesign(subjects=(4,), cohorts=1, effect_scale=0.5, base_effects=base)
     assert math.isclose(d.effects["ff"].accuracy, 0.9)       # 1 + 0.5 (0.8 - 1)

@@ -12,7 +12,7 @@ import pytest
 from tests.study.power.conftest import TINY_POWER
 from vasim.cli import main
 from vasim.core.errors import ConfigError
-from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.study.power.design import PowerDesign
 from vasim.study.protocol import load_protocol, parse_protocol
 from vasim.study.protocol.power import PowerPlan
@@ -35,9 +35,9 @@ def test_power_table_is_loaded_with_the_protocol() -> None:
                                                            "mag": {"speed": 0.9}})
     base = p.power.base_effects()
     # the named fields replace the calibration's, the rest keep it
-    assert base["ff"].accuracy == 0.8 and base["ff"].speed == SEED_EFFECTS["ff"].speed
-    assert base["mag"].speed == 0.9 and base["mag"].accuracy == SEED_EFFECTS["mag"].accuracy
-    assert base["vg"] == SEED_EFFECTS["vg"]
+    assert base["ff"].accuracy == 0.8 and base["ff"].speed == DEFAULT_EFFECTS["ff"].speed
+    assert base["mag"].speed == 0.9 and base["mag"].accuracy == DEFAULT_EFFECTS["mag"].accuracy
+    assert base["vg"] == DEFAULT_EFFECTS["vg"]
     assert parse_protocol(TINY_POWER).power is None
 
 
@@ -92,7 +92,7 @@ def test_protocol_effects_are_used_and_the_command_line_overrides_them(
     assert d.effect_scale == 0.5
     assert math.isclose(d.effects["ff"].accuracy, 0.9)
     assert math.isclose(d.effects["mag"].speed, 0.95)            # 1 + 0.5 (0.9 - 1)
-    ag = SEED_EFFECTS["ag"].accuracy                              # the calibration's
+    ag = DEFAULT_EFFECTS["ag"].accuracy                              # the scenario's
     assert math.isclose(d.effects["ag"].accuracy, 1 + 0.5 * (ag - 1))
     # --effect-scale wins over the protocol's scale; the protocol's effects stay
     d = _design_of([*proto, "--effect-scale", "1"], monkeypatch)
@@ -106,4 +106,4 @@ def test_protocol_effects_are_used_and_the_command_line_overrides_them(
     plain = tmp_path / "plain.toml"
     plain.write_text(TINY_POWER, encoding="utf-8")
     d = _design_of(["--protocol", str(plain)], monkeypatch)
-    assert d.effect_scale == 1.0 and d.effects == dict(SEED_EFFECTS)
+    assert d.effect_scale == 1.0 and d.effects == dict(DEFAULT_EFFECTS)

@@ -1,6 +1,6 @@
 """Power planning: how many subjects a protocol needs (``vasim study power``).
 
-Many Monte Carlo cohorts of the calibrated scripted operator are simulated on Ray, each
+Many Monte Carlo cohorts of a declared scenario's scripted operator are simulated on Ray, each
 analysed with the report's own primary tests, and the share of cohorts in which a test
 rejects estimates its power at each subject count N, with its Monte Carlo error.
 

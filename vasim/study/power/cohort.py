@@ -21,9 +21,11 @@ and the report's own functions analyse it (``analyse_vf`` then
   (``DIR/power_N{N}_c{k}.sqlite``, samples included), one writer per file, and analyses it
   through ``load_study``: the store path and the in-memory path give the same tests
   (``tests/study/power/test_cohort.py``).
-* Effect sizes other than the calibration (``effect_scale`` != 1) re-derive each trial's
-  operator adjustment with the scaled effects (``trial_adjustment(..., effects)``) on top of
-  the session's configuration; every other field of the configuration is the session's.
+* The sessions carry the design's scenario at its effect scale (subjects, groups, the
+  fixture mechanisms' gain, ``Session.trial_config``); each trial's operator adjustment is
+  then re-derived with the design's effects (the scenario's, with the protocol's
+  ``[power.effects]`` and ``--effects`` over them, scaled: ``trial_adjustment(...,
+  effects)``); every other field of the configuration is the session's.
 * Power cohorts have no questionnaires (no test of the power run reads them).
 """
 
@@ -38,9 +40,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect, trial_adjustment
+from vasim.operator.learning import FixtureEffect, trial_adjustment
+from vasim.operator.scenario import Scenario, default_scenario
 from vasim.records.samples import SampleBuffer
-from vasim.study.cohort import SimulatedSubject, cohort_subjects, simulate_trial
+from vasim.study.cohort import (
+    SimulatedSubject,
+    cohort_subjects,
+    scenario_record,
+    simulate_trial,
+)
 from vasim.study.power.design import PowerDesign, cohort_seed, surgeons_for
 from vasim.study.power.estimate import COHORT_COLUMNS
 from vasim.study.protocol import Protocol, ScheduledTrial
@@ -59,13 +67,15 @@ POINT_READ = ("point", "reached", "t_reached", "error_l1", "latency")
 
 
 def subject_session(protocol: Protocol, subject: SimulatedSubject, *, dt: float,
-                    max_trial_time: float | None) -> Session:
-    """The session a stored simulated subject would get, in memory (id = subject number).
+                    max_trial_time: float | None,
+                    extra: Mapping[str, Any] | None = None) -> Session:
+    """The session a stored simulated subject would get, in memory (id = subject number);
+    ``extra``: its ``settings.extra`` (e.g. the scenario record).
 
     Its ``trial_config`` gives the very configurations ``vasim study simulate`` runs.
     """
     settings = SessionSettings(operator="scripted", profile=subject.profile,
-                               max_trial_time=max_trial_time, dt=dt)
+                               max_trial_time=max_trial_time, dt=dt, extra=dict(extra or {}))
     schedule = tuple(generate_schedule(protocol, subject.session_seed))
     return Session(id=subject.number, subject=subject.code, protocol=protocol,
                    seed=subject.session_seed, status="running", settings=settings,
@@ -73,19 +83,20 @@ def subject_session(protocol: Protocol, subject: SimulatedSubject, *, dt: float,
 
 
 def trial_configs(session: Session, profile: Any,
-                  effects: Mapping[str, FixtureEffect] = SEED_EFFECTS
+                  effects: Mapping[str, FixtureEffect] | None = None
                   ) -> list[tuple[ScheduledTrial, TrialConfig]]:
     """Each scheduled trial with its configuration under ``effects`` (module decisions).
 
     Args:
         session: the subject's session (:func:`subject_session`).
         profile: the subject's own operator profile (before any trial adjustment).
-        effects: fixture effects; the calibration leaves the session's configuration as is.
+        effects: fixture effects re-derived over the session's configuration (None: the
+            session's own, i.e. its stored scenario at its effect scale).
     """
     out = []
     for st in session.schedule:
         cfg = session.trial_config(st)
-        if effects is not SEED_EFFECTS and cfg.mode is None:
+        if effects is not None and cfg.mode is None:
             history = [t.condition for t in session.schedule[:st.index]]
             adj = trial_adjustment(history, st.condition, effects)
             cfg = replace(cfg, profile=adj.apply(profile), practice=round(adj.practice))
@@ -129,7 +140,8 @@ def schedule_frame(rows: list[dict[str, Any]]) -> pd.DataFrame:
 
 def simulate_in_memory(protocol: Protocol, subjects: Sequence[SimulatedSubject], *,
                        dt: float, max_trial_time: float | None,
-                       effects: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> CohortTrials:
+                       effects: Mapping[str, FixtureEffect] | None = None,
+                       extra: Mapping[str, Any] | None = None) -> CohortTrials:
     """Runs every scheduled trial of ``subjects`` in this process, keeping metrics only.
 
     Trial ids are 1, 2, ... in subject then schedule order (the order a fresh store
@@ -140,7 +152,8 @@ def simulate_in_memory(protocol: Protocol, subjects: Sequence[SimulatedSubject],
     metric_rows: dict[int, Mapping[str, float]] = {}
     sim, tid = 0.0, 0
     for subj in subjects:
-        session = subject_session(protocol, subj, dt=dt, max_trial_time=max_trial_time)
+        session = subject_session(protocol, subj, dt=dt, max_trial_time=max_trial_time,
+                                  extra=extra)
         for st, cfg in trial_configs(session, subj.profile, effects):
             out = simulate_trial(cfg, session.metric_params)
             tid += 1
@@ -186,7 +199,7 @@ class _Outcome:
 
 def simulate_to_store(db: Path, protocol: Protocol, subjects: Sequence[SimulatedSubject], *,
                       dt: float, max_trial_time: float | None,
-                      effects: Mapping[str, FixtureEffect] = SEED_EFFECTS,
+                      effects: Mapping[str, FixtureEffect] | None = None,
                       extra: Mapping[str, Any] | None = None) -> float:
     """Runs the cohort into a new study database ``db`` (``--keep-cohorts``): one session
     per subject (``start_session``, with ``extra`` kept in its settings), every trial
@@ -198,7 +211,8 @@ def simulate_to_store(db: Path, protocol: Protocol, subjects: Sequence[Simulated
     sim = 0.0
     with TrialStore(db) as store:
         for subj in subjects:
-            session = subject_session(protocol, subj, dt=dt, max_trial_time=max_trial_time)
+            session = subject_session(protocol, subj, dt=dt, max_trial_time=max_trial_time,
+                                      extra=extra)
             settings = replace(session.settings, extra={
                 "cohort": {"subject": subj.number, "group": subj.group},
                 **dict(extra or {})})
@@ -218,11 +232,18 @@ def simulate_to_store(db: Path, protocol: Protocol, subjects: Sequence[Simulated
     return sim
 
 
-def cohort_subjects_of(protocol: Protocol, n_subjects: int, seed: int
-                       ) -> list[SimulatedSubject]:
+def cohort_subjects_of(protocol: Protocol, n_subjects: int, seed: int,
+                       scenario: Scenario | None = None) -> list[SimulatedSubject]:
     """The cohort's subjects as ``vasim study simulate`` draws them."""
     return cohort_subjects(n_subjects, surgeons_for(n_subjects), seed,
-                           latin_square=protocol.block_order == "latin_square")
+                           latin_square=protocol.block_order == "latin_square",
+                           scenario=scenario)
+
+
+def _scenario_extra(design: PowerDesign) -> dict[str, Any]:
+    """The sessions' ``extra``: the design's scenario (or the default) at its scale."""
+    return {"scenario": scenario_record(design.scenario or default_scenario(),
+                                        design.effect_scale)}
 
 
 @dataclass(frozen=True)
@@ -257,11 +278,12 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
     """
     t0, c0 = time.perf_counter(), time.process_time()
     seed = cohort_seed(design.seed, n_subjects, k)
-    subjects = cohort_subjects_of(protocol, n_subjects, seed)
+    subjects = cohort_subjects_of(protocol, n_subjects, seed, design.scenario)
+    scen = _scenario_extra(design)
     if keep_dir is None:
         trials = simulate_in_memory(protocol, subjects, dt=design.dt,
                                     max_trial_time=design.max_trial_time,
-                                    effects=design.effects)
+                                    effects=design.effects, extra=scen)
         data = study_data(protocol, trials)
         sim, n_trials = trials.sim_seconds, trials.n_trials
     else:
@@ -270,7 +292,8 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
             db.unlink()   # a cohort is a pure function of its seed: rewrite, never mix
         sim = simulate_to_store(db, protocol, subjects, dt=design.dt,
                                 max_trial_time=design.max_trial_time, effects=design.effects,
-                                extra={"power": {"seed": seed, "n_subjects": n_subjects,
+                                extra={**scen,
+                                       "power": {"seed": seed, "n_subjects": n_subjects,
                                                  "cohort": k,
                                                  "effect_scale": design.effect_scale}})
         data = load_study(db, protocol.name)

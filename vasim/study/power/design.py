@@ -9,17 +9,18 @@ integration step.
   plain binomial one; the price is a noisier curve *shape*).
 * Surgeons among N: ``round(N x 31 / 46)`` (the VF study's 31 surgeons of 46, as
   ``vasim study simulate``).
-* Effect sizes (:func:`scaled_effects`): the operator's calibrated fixture effects
-  (``vasim.operator.learning.SEED_EFFECTS``, one per condition label of the protocol)
+* Effect sizes (:func:`scaled_effects`): the scenario's declared fixture effects
+  (``--scenario``, :mod:`vasim.operator.scenario`; one per condition label)
   scaled by ``effect_scale`` s: every departure from "no effect" is multiplied by s,
   ``accuracy = 1 + s (a - 1)``, ``speed = 1 + s (v - 1)``,
   ``practice_weight = 1 + s (w - 1)``, ``dependence = s delta``; the carry-over fraction
   rho is kept (it is a fraction of the accuracy gain, which already scales). s = 1 is the
-  calibration, s = 0 a null fixture effect (every fixture like VF-free; the power of the
+  scenario as declared, s = 0 a null fixture effect (every fixture like VF-free; the power of the
   fixture tests is then their type-I error), s = 0.5 half the effects. An effects file
   (``--effects FILE.toml``, :func:`parse_effects`) sets single fixtures' effects first;
   the scale then applies to them. A protocol's ``[power]`` table sets both too
-  (:mod:`vasim.study.protocol.power`: calibration < protocol < command line).
+  (:mod:`vasim.study.protocol.power`: scenario < protocol < command line). The
+  scenario's mechanism gain scales with s as well (``Scenario.mechanism``).
 * Integration step (:data:`FULL_DT`, :data:`COARSE_DT`): the 1 kHz control step of every
   stored trial, or the validated coarse planning step (``--coarse``, see
   :data:`COARSE_DT`).
@@ -38,7 +39,9 @@ import numpy as np
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
 from vasim.core.config import check_int, check_number, parse_toml
 from vasim.core.errors import ConfigError
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.operator.effects import FixtureEffect, scale_effect
+from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.scenario import Scenario
 from vasim.study.protocol import Protocol
 from vasim.study.protocol.power import EFFECT_FIELDS, effects_from_tables
 from vasim.trials.kinds import TELEOPERATION_MODES
@@ -155,29 +158,24 @@ def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECT
     """The fixture effects with every departure from "no effect" times ``scale``.
 
     Args:
-        scale: s >= 0 (module docstring). base: the effects to scale (the calibration).
+        scale: s >= 0 (module docstring). base: the effects to scale (the scenario's).
 
     Raises:
         ConfigError: s outside ``EFFECT_SCALE`` or an effect it would make invalid
             (e.g. an accuracy factor <= 0).
 
     Example:
-        >>> e = scaled_effects(0.5)["ff"]
+        >>> e = scaled_effects(0.5)["ff"]   # seed_plausible: FF accuracy 0.75
         >>> round(e.accuracy, 3), round(e.speed, 3), round(e.dependence, 3)
-        (0.76, 1.02, 0.06)
+        (0.875, 1.0, 0.0)
         >>> scaled_effects(0.0)["ff"].accuracy
         1.0
     """
     s = check_number(scale, "--effect-scale", bound=EFFECT_SCALE)
-    if s == 1.0:   # the calibration itself, not 1 + (a - 1) rounded
-        return dict(base)
     out = {}
     for name, e in base.items():
         try:
-            out[name] = FixtureEffect(
-                accuracy=1.0 + s * (e.accuracy - 1.0), speed=1.0 + s * (e.speed - 1.0),
-                practice_weight=1.0 + s * (e.practice_weight - 1.0),
-                carryover=e.carryover, dependence=s * e.dependence)
+            out[name] = scale_effect(e, s)
         except ValueError as exc:
             raise ConfigError(f"got {s!r}: fixture {name!r} would get an invalid effect "
                               f"({exc})", field="--effect-scale") from None
@@ -206,7 +204,7 @@ def parse_effects(text: str, *, file: str | Path | None = None,
                   base: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> dict[str, FixtureEffect]:
     """Fixture effects from an effects file (``--effects FILE.toml``): one table per
     condition label, any of :data:`EFFECT_FIELDS`; a field left out keeps ``base``'s (the
-    calibration), a label ``base`` lacks starts from "no effect".
+    scenario's), a label ``base`` lacks starts from "no effect".
 
     Example file::
 
@@ -222,7 +220,7 @@ def parse_effects(text: str, *, file: str | Path | None = None,
     Example:
         >>> e = parse_effects("[ff]\\naccuracy = 0.8\\n")
         >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed, e["mag"].speed
-        (0.8, True, 0.8)
+        (0.8, True, 1.0)
     """
     return effects_from_tables(parse_toml(text, file=file, kind="effects"), file=file,
                                base=base)
@@ -255,7 +253,9 @@ class PowerDesign:
             (:data:`FULL_DT` or :data:`COARSE_DT`). max_trial_time: trial time limit [s]
             (None: the protocol's). p_column: the p-value a test rejects on, ``"p_gg"``
             (Greenhouse-Geisser) or ``"p_unc"``. base_effects: the fixture effects before
-            scaling (the calibration, or an effects file's, :func:`load_effects`).
+            scaling (the scenario's, or an effects file's over them, :func:`load_effects`).
+        scenario: the declared scenario the cohorts' subjects, groups and fixture
+            mechanisms come from (None: the shipped default, ``seed_plausible``).
         effects: ``scaled_effects(effect_scale, base_effects)``: what the operator gets.
 
     **Decision**: a test rejects when its Greenhouse-Geisser p < alpha (``p_column``
@@ -274,6 +274,7 @@ class PowerDesign:
     max_trial_time: float | None = None
     p_column: str = "p_gg"
     base_effects: Mapping[str, FixtureEffect] = field(default_factory=lambda: SEED_EFFECTS)
+    scenario: Scenario | None = None
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:

@@ -12,6 +12,7 @@ from pathlib import Path
 from vasim.core.atomic import atomic_folder
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
+from vasim.study.recovery import recovery_summary
 from vasim.study.report.analysis import analyse_vf
 from vasim.study.report.data import load_study
 from vasim.study.report.figures import label_png
@@ -175,6 +176,7 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
                         meta=page_meta(data), sections=tuple(sections))
         summary = build_summary({t.name: t.data for t in tables}, synthetic=data.synthetic,
                                 n_subjects=int(data.sessions["subject"].nunique()))
+        summary.update(recovery_summary(data))  # assumed vs recovered (vasim.study.recovery)
         with atomic_folder(out_dir, owned=report_files(out_dir), what="report") as tmp:
             names = write_files(tmp, data, tables, prov, render_html(doc), summary)
         bar.update()

@@ -20,7 +20,7 @@ from vasim.study.store import (
 # ------------------------------------------------------------------------------ data
 SCRIPTED_OPERATOR = "scripted"
 """``sessions.operator`` of a simulated session (:mod:`vasim.study.cohort`)."""
-SYNTHETIC_LABEL = ("synthetic data: scripted operator calibrated to the seed; not "
+SYNTHETIC_LABEL = ("synthetic data: scripted operator of a declared scenario; not "
                    "evidence")
 """The label of every figure and table of a simulated cohort."""
 
