@@ -129,8 +129,9 @@ def block_context(schedule: pd.DataFrame) -> pd.DataFrame:
         ...     "block": ["b", "vg", "vg", "ff", "ff", "x"], "block_index": [0, 1, 1, 2, 2, 3],
         ...     "condition": ["none", "vg", "none", "ff", "none", "none"],
         ...     "probe": [True, False, True, False, True, True]})
-        >>> block_context(s).to_dict("list")
-        {'session_id': [1, 1], 'trial_index': [2, 4], 'practised': ['vg', 'ff'], 'previous': ['none', 'vg']}
+        >>> c = block_context(s)
+        >>> c["trial_index"].tolist(), c["practised"].tolist(), c["previous"].tolist()
+        ([2, 4], ['vg', 'ff'], ['none', 'vg'])
     """
     cols = ["session_id", "trial_index", "practised", "previous"]
     if schedule.empty:

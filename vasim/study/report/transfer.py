@@ -162,9 +162,10 @@ def transfer_model(trials: pd.DataFrame, dv: str, unit: str
     ci = result.conf_int()
     for name in fe.index:
         m = _LEVEL.match(str(name))
-        if name == "block_position" or (m and m.group(1) == "variant"):
-            rows.append({"term": "block_position" if name == "block_position" else "variant",
-                         "condition": "" if name == "block_position" else m.group(2),
+        is_variant = m is not None and m.group(1) == "variant"
+        if name == "block_position" or is_variant:
+            rows.append({"term": "variant" if is_variant else "block_position",
+                         "condition": m.group(2) if m is not None and is_variant else "",
                          "coef": float(fe[name]), "se": float(result.bse_fe[name]),
                          "z": float(result.tvalues[name]), "p": float(result.pvalues[name]),
                          "ci_low": float(ci.loc[name].iloc[0]),

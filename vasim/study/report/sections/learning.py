@@ -32,7 +32,6 @@ from vasim.study.report.html_page import (
 )
 from vasim.study.store import GROUPS
 
-
 SEED_FIGURE: dict[str, str] = {"eq65": " (the seed's Fig. 6.17 measure)",
                                "latency": " (as the seed's Fig. 6.18)"}
 """The seed figure an outcome's learning curve corresponds to."""
