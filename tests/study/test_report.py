@@ -178,7 +178,8 @@ def test_writes_html_and_tables(vf_study: tuple[Path, Path]) -> None:
     assert {"vf_rm_anova", "vf_posthoc_tukey", "vf_posthoc_paired", "vf_seed_replication",
             "vf_learning_curve", "vf_learning_fit", "vf_cells_fixture", "vf_cells_trial",
             "vf_trials", "vf_transfer_model", "vf_transfer_tests", "vf_measures",
-            "vf_measure_correlations", "cohort_summary", "questionnaire_choices", "questionnaire_ratings",
+            "vf_measure_correlations", "cohort_summary", "questionnaire_choices",
+            "questionnaire_ratings",
             "questionnaire_schemas", "questionnaire_comments", "provenance"} <= names
     assert "not an MRCP study" in html  # the MRCP section says why it is empty
 

@@ -70,7 +70,8 @@ POINT_COLUMNS: tuple[str, ...] = (
 * ``reached`` (bool): the point was reached.
 * ``t_reached`` (float64) [s]: reach time t_i since trial start, NaN if unreached.
 * ``error_l1`` (float64) [m summed over samples, "m·sample"]: eq. 6.5's e_i exactly, the
-  Manhattan distance to the next point of interest summed over samples (a sum over samples, so it grows with the logging rate and with
+  Manhattan distance to the next point of interest summed over samples (a sum over
+  samples, so it grows with the logging rate and with
   the time spent on the way to p_i: it is not a length; divide by ``n_samples`` for a mean
   error in m).
 * ``latency`` (float64) [s]: l_i = t_i - t_(i-1), NaN if unreached.

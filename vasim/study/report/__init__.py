@@ -50,7 +50,8 @@ per-trial metrics are computed from the samples when a trial closes and stored w
 * PRIMARY analysis (:mod:`~vasim.study.report.transfer`): the VF-free probe after each
   fixture block ~ fixture just practised + block position + variant, random intercept per
   subject; carry-over by a likelihood-ratio test of the previous block's fixture.
-* Fixture factor (the seed's design, secondary) (6 levels none, VG, AG, MS, Mag, FF): the cell of a subject and fixture is
+* Fixture factor (the seed's design, secondary; 6 levels none, VG, AG, MS, Mag, FF): the
+  cell of a subject and fixture is
   the mean of E (or L) over the subject's analysed trials of that condition (6 assisted
   trials; "none" = the 5 VF-free probe trials that follow the blocks: the 3 baseline
   probes always come first and would mix practice into the factor, issue #15). A linear

@@ -15,7 +15,7 @@ with ``F`` each of ``vg, ag, ms, mag, ff``;
   "mixed_model": P}``, ``T = {"F", "df1", "df2", "p", "p_gg"}``;
 * ``P`` (the PRIMARY analysis, :mod:`vasim.study.report.transfer`) = ``{"formula",
   "n_obs", "n_subjects", "fixture_test": X, "carry_over": X, "variant_test": X,
-  "block_position": E, "fixture": {F: E}}`` with ``X = {"chi2", "df", "p"}`` and
+  "block_position": E, "fixture": {F: E}}`` with ``X = {"F", "df1", "df2", "p"}`` and
   ``E = {"coef", "ci_low", "ci_high", "p"}``;
 * ``C = {"pearson": R, "repeated_measures": R}``, ``R = {"r", "ci_low", "ci_high", "p",
   "n_obs"}``.
@@ -29,9 +29,10 @@ with ``F`` each of ``vg, ag, ms, mag, ff``;
 * ``mixed_model`` (primary): the probe after each fixture block, ``dv ~ C(practised) +
   block_position + C(variant)``, random intercept per subject. ``fixture[F]``: the probe's
   mean after practising F minus the mean over the fixtures (unit of the measure), 95 %
-  Wald interval; ``fixture_test``: Wald chi-square of the fixture term; ``carry_over``:
-  likelihood-ratio test of adding the previous block's fixture; ``block_position``: the
-  change per block of practice.
+  Wald interval; ``fixture_test``: F test of the fixture term; ``carry_over``: F test of
+  adding the previous block's fixture; ``variant_test``: F test of the variant term (nested
+  within-subject OLS models, exact at small N); ``block_position``: the change per block
+  of practice.
 * ``fixture`` (secondary, the seed's design): the subject-level RM-ANOVA of the fixture
   factor (``vf_rm_anova``; VF-free level = the probes after the blocks).
 * ``practice``: the RM-ANOVA of the probe-trial factor (``vf_rm_anova``, factor
@@ -124,9 +125,10 @@ def _first(table: pd.DataFrame | None, **match: Any) -> dict[str, Any] | None:
 
 
 def _x(row: Mapping[str, Any] | None) -> dict[str, Any]:
-    if row is None:
-        return {"chi2": None, "df": None, "p": None}
-    return {"chi2": _num(row.get("chi2")), "df": _df(row.get("df")), "p": _num(row.get("p"))}
+    if row is None or _num(row.get("F")) is None:
+        return {"F": None, "df1": None, "df2": None, "p": None}
+    return {"F": _num(row.get("F")), "df1": _df(row.get("df1")), "df2": _df(row.get("df2")),
+            "p": _num(row.get("p"))}
 
 
 def _e(row: Mapping[str, Any] | None) -> dict[str, Any] | None:
