@@ -204,11 +204,14 @@ def measures_section(vf: VfAnalysis) -> tuple[Section, list[dict[str, str]]]:
                                  "unit '1': a fraction (0..1).",
                                  columns=("measure", "unit", "role", "definition",
                                           "analysed")))
+    # the measures table's 'analysed' column comes from every analysed VF trial
+    prov = [prov_row("vf_measures", "all analysed VF trials", s, trial_ids=g["trial_id"])
+            for s, g in vf.trials.groupby("subject")]
     cor = measure_correlations(vf.trials, [("eq65", "latency"), ("path_deviation", "latency"),
                                            ("eq65", "path_deviation")])
     if cor.empty:
         out.notes.append("too few analysed trials for the correlations between measures")
-        return out.section("measures", MEASURES_TITLE, intro), []
+        return out.section("measures", MEASURES_TITLE, intro), prov
     out.blocks.append(TableBlock(
         "vf_measure_correlations", "How strongly the measures track each other", cor,
         "pearson: over every analysed VF trial (95 % interval by Fisher's z; trials of a "
@@ -222,8 +225,8 @@ def measures_section(vf: VfAnalysis) -> tuple[Section, list[dict[str, str]]]:
                      f"({r['method'].replace('_', ' ')}): r = {r['r']:.3f} (95 % CI "
                      f"{r['ci_low']:.3f} to {r['ci_high']:.3f}), n = {r['n_obs']} trials")
     out.blocks.append(TextList("In words", tuple(words)))
-    prov = [prov_row("vf_measure_correlations", "all analysed VF trials", s,
-                     trial_ids=g["trial_id"]) for s, g in vf.trials.groupby("subject")]
+    prov += [prov_row("vf_measure_correlations", "all analysed VF trials", s,
+                      trial_ids=g["trial_id"]) for s, g in vf.trials.groupby("subject")]
     return out.section("measures", MEASURES_TITLE, intro), prov
 
 
