@@ -196,6 +196,10 @@ def measures_section(vf: VfAnalysis) -> tuple[Section, list[dict[str, str]]]:
         "over the logged samples) and is reported per trial times the sample period, i.e. "
         "in mm·s: a time integral of a distance, not a length. The correlations below say "
         "from these data how strongly e tracks latency.")]
+    if vf.trials.empty:
+        out.notes.append("no analysed trial of a fixture condition or a VF-free probe: no "
+                         "measures")
+        return out.section("measures", MEASURES_TITLE, intro), []
     if PATH_DEV_DV[0] not in have:
         out.notes.append(PATH_DEV_ABSENT)
     if EQ65_DV[0] not in have:
