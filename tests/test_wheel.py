@@ -167,8 +167,9 @@ def test_study_schedule_runs(installed: tuple[Path, dict[str, str]], tmp_path: P
                 "--seed", "1"], cwd=tmp_path, env=env)
     lines = out.splitlines()
     assert lines[0] == "vf_learning_curve: 38 trials, seed 1"
-    rows = [line.split() for line in lines[2:]]
+    rows = [line.split() for line in lines[2:40]]
     assert [int(r[0]) for r in rows] == list(range(38))
+    assert lines[41].startswith("block order: Williams sequence 2 of 10")
     assert rows[0][1:3] == ["baseline", "none"]
 
 

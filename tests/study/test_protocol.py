@@ -81,9 +81,11 @@ def test_vf_learning_curve_schedule(seed: int) -> None:
     assert len(s) == 38 == 3 + 5 * 7
     assert [t.index for t in s] == list(range(38))
     probes = [t for t in s if t.probe]
-    # 8 VF-free trials, all on the original trajectory, numbered 1..8 in session order
+    # 8 VF-free trials on the assisted trials' variants, rotating (issue #25), numbered
+    # 1..8 in session order
     assert len(probes) == 8
-    assert all(t.variant == 0 and t.condition == "none" and t.schema == "none" for t in probes)
+    assert all(t.condition == "none" and t.schema == "none" for t in probes)
+    assert [t.variant for t in probes] == [1 + (seed + k) % 6 for k in range(8)]
     assert [t.probe_index for t in probes] == list(range(1, 9))
     assert all(t.probe_index is None for t in s if not t.probe)
     # baseline: the first three trials
@@ -106,7 +108,9 @@ def test_vf_learning_curve_schedule(seed: int) -> None:
 
 
 def test_block_and_variant_orders_are_randomised_across_seeds() -> None:
-    p = load_protocol("vf_learning_curve")
+    d = vf_dict()
+    d["randomisation"]["block_order"] = "random"
+    p = protocol_from_dict(d)
     orders = {tuple(t.condition for t in generate_schedule(p, seed)[3::7]) for seed in range(40)}
     variants = {tuple(t.variant for t in generate_schedule(p, seed)[3:9]) for seed in range(40)}
     # 40 seeds over 120 block orders / 720 variant orders: collisions are rare
@@ -118,6 +122,11 @@ def test_block_and_variant_orders_are_randomised_across_seeds() -> None:
     s = generate_schedule(fixed, 12345)
     assert [t.condition for t in s[3::7]] == list(FIXTURES)
     assert [t.variant for t in s[3:9]] == [1, 2, 3, 4, 5, 6]
+    # the shipped protocol counterbalances: 10 Williams sequences over consecutive seeds
+    shipped = load_protocol("vf_learning_curve")
+    assert shipped.block_order == "latin_square"
+    assert len({tuple(t.condition for t in generate_schedule(shipped, seed)[3::7])
+                for seed in range(40)}) == 10
 
 
 @settings(max_examples=12, deadline=None)
@@ -179,7 +188,11 @@ def _mutate(path: list, value) -> dict:
     (["name"], KeyError, "name", "missing"),
     (["randomisation", "block_order"], "shuffle", "randomisation.block_order", "'shuffle'"),
     (["probe", "condition"], "vg", "probe.condition", "'vg'"),
-    (["probe", "variant"], 7, "probe.variant", "7"),
+    (["probe", "variants"], [1, 7], "probe.variants[1]", "7"),
+    (["probe", "variants"], [1, 1], "probe.variants", "[1, 1]"),
+    (["probe", "variants"], [], "probe.variants", "[]"),
+    (["probe", "variant"], 0, "probe.variants", "not both"),
+    (["blocks", 0, "variants"], [0], "blocks[0].variants", "rotation"),
     (["questionnaires", "post", "items", 0, "type"], "stars",
      "questionnaires.post.items[0].type", "'stars'"),
     (["questionnaires", "post", "items", 2, "max"], "ten",

@@ -60,7 +60,8 @@ def _points(rng: np.random.Generator, level: float, *, unreached_last: bool = Fa
     t = np.cumsum(np.nan_to_num(lat))
     t[~reached] = np.nan
     return pd.DataFrame({"point": np.arange(N_POINTS), "reached": reached, "t_reached": t,
-                         "error_l1": err, "latency": lat, "path_l1": 0.03, "path_l2": 0.02,
+                         "error_l1": err, "error_l1_mm_s": 10.0 * err, "latency": lat,
+                         "path_l1": 0.03, "path_l2": 0.02,
                          "n_samples": 100})
 
 
@@ -145,12 +146,13 @@ def _csv(out: Path, name: str) -> pd.DataFrame:
 
 
 def _sql_cells(db: Path) -> pd.DataFrame:
-    """Independent recomputation: per analysed trial E = Σ e_i and L = Σ l_i (reached), from
-    the store with SQL only."""
+    """Independent recomputation: per analysed trial E = Σ e_i Δt [mm s] (eq. 6.5 times the
+    sample period) and L = Σ l_i (reached), from the store with SQL only."""
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
     q = """
     SELECT s.subject, q.condition, q.probe, q.probe_index, q.trial_id,
-           (SELECT sum(error_l1) FROM point_metrics p WHERE p.trial_id = q.trial_id) AS E,
+           (SELECT sum(error_l1_mm_s) FROM point_metrics p WHERE p.trial_id = q.trial_id)
+             AS E,
            (SELECT sum(latency) FROM point_metrics p WHERE p.trial_id = q.trial_id
                                                       AND p.reached = 1) AS L,
            q.probe = 1 AND q.trial_index < (SELECT min(r.trial_index) FROM scheduled_trials r
@@ -167,15 +169,17 @@ def _sql_cells(db: Path) -> pd.DataFrame:
 def test_writes_html_and_tables(vf_study: tuple[Path, Path]) -> None:
     _, out = vf_study
     html = (out / "index.html").read_text()
-    for key in ("cohort", "learning", "fixture", "boxplots", "questionnaires", "mrcp",
-                "traceability"):
+    for key in ("cohort", "measures", "transfer", "learning", "fixture", "boxplots",
+                "questionnaires", "mrcp", "traceability"):
         assert f'<section id="{key}">' in html
     assert html.count("data:image/png;base64,") >= 6  # figures embedded, no external file
     assert "<script" not in html and 'src="http' not in html
     names = {p.stem for p in (out / "tables").glob("*.csv")}
     assert {"vf_rm_anova", "vf_posthoc_tukey", "vf_posthoc_paired", "vf_seed_replication",
             "vf_learning_curve", "vf_learning_fit", "vf_cells_fixture", "vf_cells_trial",
-            "vf_trials", "cohort_summary", "questionnaire_choices", "questionnaire_ratings",
+            "vf_trials", "vf_transfer_model", "vf_transfer_tests", "vf_measures",
+            "vf_measure_correlations", "cohort_summary", "questionnaire_choices",
+            "questionnaire_ratings",
             "questionnaire_schemas", "questionnaire_comments", "provenance"} <= names
     assert "not an MRCP study" in html  # the MRCP section says why it is empty
 
@@ -193,7 +197,7 @@ def test_rm_anova_equals_independent_recomputation(vf_study: tuple[Path, Path]) 
     keep = full[full == 6].index
     assert sorted(keep) == sorted(f"S{i}" for i in range(1, 12) if i != 4)
     cells = cells[cells["subject"].isin(keep)]
-    for dv, col in (("cum_error", "E"), ("latency", "L")):
+    for dv, col in (("eq65", "E"), ("latency", "L")):
         ref = stats.rm_anova(cells, dv=col, subject="subject", within="condition")
         row = aov[(aov["dv"] == dv) & (aov["factor"] == "fixture")].iloc[0]
         assert row["n_subjects"] == 10 and row["excluded_subjects"] == "S4"
@@ -203,7 +207,7 @@ def test_rm_anova_equals_independent_recomputation(vf_study: tuple[Path, Path]) 
     probes = t[t["probe"] == 1]
     full = probes.groupby("subject")["probe_index"].nunique()
     probes = probes[probes["subject"].isin(full[full == 8].index)]
-    for dv, col in (("cum_error", "E"), ("latency", "L")):
+    for dv, col in (("eq65", "E"), ("latency", "L")):
         ref = stats.rm_anova(probes, dv=col, subject="subject", within="probe_index")
         row = aov[(aov["dv"] == dv) & (aov["factor"] == "trial")].iloc[0]
         assert np.isfinite(row["mauchly_W"])  # 10 subjects: the 7 contrasts are estimable
@@ -219,14 +223,14 @@ def test_post_hoc_equals_direct_calls(vf_study: tuple[Path, Path]) -> None:
                                   categories=["none", "VG", "AG", "MS", "Mag", "FF"])
     pp = stats.pairwise_paired(t, dv="E", subject="subject", within="fixture")
     got = _csv(out, "vf_posthoc_paired")
-    got = got[(got["dv"] == "cum_error") & (got["factor"] == "fixture")]
+    got = got[(got["dv"] == "eq65") & (got["factor"] == "fixture")]
     assert list(got["group1"] + got["group2"]) == list(pp["group1"] + pp["group2"])
     np.testing.assert_allclose(got["p_holm"], pp["p_holm"], rtol=1e-9)
     assert set(got["label"]) == {"paired t-tests, Holm-corrected: the within-subject-correct "
                                  "alternative"}
     tk = stats.tukey_hsd_rm(t, dv="E", subject="subject", within="fixture")
     got = _csv(out, "vf_posthoc_tukey")
-    got = got[(got["dv"] == "cum_error") & (got["factor"] == "fixture")]
+    got = got[(got["dv"] == "eq65") & (got["factor"] == "fixture")]
     np.testing.assert_allclose(got["p_adj"], tk.comparisons["p_adj"], rtol=1e-9)
     assert got["label"].str.contains("as in the seed").all()
 
@@ -241,7 +245,7 @@ def test_seed_replication_is_labelled_and_per_point(vf_study: tuple[Path, Path])
     n_lat = con.execute("SELECT count(*) FROM point_metrics p JOIN scheduled_trials q "
                         "ON q.trial_id = p.trial_id WHERE p.latency IS NOT NULL").fetchone()[0]
     con.close()
-    err = rep[rep["dv"] == "cum_error"]
+    err = rep[rep["dv"] == "eq65"]
     lat = rep[rep["dv"] == "latency"]
     # additive model: df2 = rows - 1 - 5 (fixture) - 7 (trial): one row per point
     assert (err["n_rows"] == n_points).all() and (err["df2"] == n_points - 13).all()
@@ -262,7 +266,7 @@ def test_learning_curve_is_mean_and_iqr_of_probe_trials(vf_study: tuple[Path, Pa
     assert row["q75"] == pytest.approx(np.percentile(p3["L"], 75), rel=1e-12)
     assert set(map(int, row["trial_ids"].split())) == set(p3["trial_id"])
     fit = _csv(out, "vf_learning_fit")
-    assert list(fit["dv"]) == ["cum_error", "latency"] and (fit["n_obs"] == len(
+    assert list(fit["dv"]) == ["latency", "eq65"] and (fit["n_obs"] == len(
         t[t["probe"] == 1])).all()
 
 

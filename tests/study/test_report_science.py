@@ -1,6 +1,9 @@
-"""The report's study science (issue #15 item 2): the fixture factor without the baseline
-trials, the practice-adjusted mixed model, learning curves against the practice count,
-surgeons vs residents, ``summary.json`` and the synthetic label.
+"""The report's study science (issue #15 item 2, issue #25 items 2-4): the primary probe
+model (fixture just practised, block position, variant, subject; carry-over), the fixture
+factor without the baseline trials (the seed's design, secondary), the practice- and
+variant-adjusted mixed model, learning curves against the practice count, surgeons vs
+residents (group x practice), the measures and their units, ``summary.json`` and the
+synthetic label.
 
 Stores are written through the store and session API with per-point metrics drawn from a
 seeded model (no samples); expected values are recomputed here from the store with SQL,
@@ -43,8 +46,10 @@ RESIDENT = {**DEMO, "group": "resident", "laparoscopy_experience": "1-10"}
 def _points(rng: np.random.Generator, level: float) -> pd.DataFrame:
     lat = level * np.exp(rng.normal(0.0, 0.25, N_POINTS))
     err = 10.0 * level * np.exp(rng.normal(0.0, 0.25, N_POINTS))
+    # eq. 6.5 times a 10 ms sample period, in mm s: error_l1 [m·sample] x 0.01 s x 1000
     return pd.DataFrame({"point": np.arange(N_POINTS), "reached": True,
-                         "t_reached": np.cumsum(lat), "error_l1": err, "latency": lat,
+                         "t_reached": np.cumsum(lat), "error_l1": err,
+                         "error_l1_mm_s": 10.0 * err, "latency": lat,
                          "path_l1": 0.03, "path_l2": 0.02, "n_samples": 50})
 
 
@@ -102,13 +107,14 @@ def _csv(out: Path, name: str) -> pd.DataFrame:
 
 def _trials_sql(db: Path) -> pd.DataFrame:
     """Per analysed trial, from SQL only: subject, condition, probe, probe index, position,
-    E = Σ e_i, L = Σ l_i, and whether it is a baseline probe (a probe before the session's
-    first assisted trial)."""
+    variant, block index, E = Σ e_i Δt [mm s], L = Σ l_i, and whether it is a baseline probe
+    (a probe before the session's first assisted trial)."""
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
     df = pd.read_sql_query("""
     SELECT s.subject, q.session_id, q.trial_index, q.condition, q.probe, q.probe_index,
-           q.trial_id,
-           (SELECT sum(error_l1) FROM point_metrics p WHERE p.trial_id = q.trial_id) AS E,
+           q.trial_id, q.variant, q.block_index,
+           (SELECT sum(error_l1_mm_s) FROM point_metrics p WHERE p.trial_id = q.trial_id)
+             AS E,
            (SELECT sum(latency) FROM point_metrics p WHERE p.trial_id = q.trial_id
                                                       AND p.reached = 1) AS L,
            q.probe = 1 AND q.trial_index < (SELECT min(r.trial_index) FROM scheduled_trials r
@@ -126,7 +132,7 @@ def test_fixture_anova_excludes_the_baseline_trials(study: tuple[Path, Path]) ->
     t = _trials_sql(db)
     assert sorted(t.loc[t["baseline"] == 1, "probe_index"].unique()) == [1, 2, 3]
     aov = _csv(out, "vf_rm_anova")
-    for dv, col in (("cum_error", "E"), ("latency", "L")):
+    for dv, col in (("eq65", "E"), ("latency", "L")):
         row = aov[(aov["dv"] == dv) & (aov["factor"] == "fixture")].iloc[0]
         without = t[t["baseline"] == 0].groupby(["subject", "condition"])[col].mean()
         ref = stats.rm_anova(without.reset_index(), dv=col, subject="subject",
@@ -152,9 +158,10 @@ def test_mixed_model_equals_statsmodels(study: tuple[Path, Path]) -> None:
     t = _trials_sql(db)
     t["log_practice"] = np.log(t["trial_index"] + 1.0)
     t["fixture"] = pd.Categorical(t["condition"], categories=["none", *FIXTURES])
+    t["variant"] = "v" + t["variant"].astype(str)
     mm = _csv(out, "vf_mixed_model")
-    for dv, col in (("cum_error", "E"), ("latency", "L")):
-        fit = smf.mixedlm(f"{col} ~ C(fixture) + log_practice", t,
+    for dv, col in (("eq65", "E"), ("latency", "L")):
+        fit = smf.mixedlm(f"{col} ~ C(fixture) + log_practice + C(variant)", t,
                           groups=t["subject"]).fit(reml=True)
         got = mm[mm["dv"] == dv].set_index("term")
         for f in FIXTURES:
@@ -163,9 +170,73 @@ def test_mixed_model_equals_statsmodels(study: tuple[Path, Path]) -> None:
             assert got.loc[term, "p"] == pytest.approx(fit.pvalues[term], rel=1e-5, abs=1e-12)
         assert got.loc["log_practice", "coef"] == pytest.approx(fit.params["log_practice"],
                                                                  rel=1e-6)
+        for v in range(2, 7):  # the variant enters the analysis (issue #25)
+            term = f"C(variant)[T.v{v}]"
+            assert got.loc[term, "coef"] == pytest.approx(fit.params[term], rel=1e-6)
         assert (got["n_obs"] == len(t)).all() and (got["n_subjects"] == 8).all()
     text = (out / "index.html").read_text()
     assert "MixedLM" in text and "primary" in text
+    assert "per-fixture RM-ANOVA (secondary)" in text
+
+
+# ------------------------------------------------------- primary: the post-block probes
+def _post_block_probes(t: pd.DataFrame) -> pd.DataFrame:
+    """The probes closing a fixture block, with the fixture practised (the trial before)
+    and the one practised in the block before (8 trials earlier; 'none' for block 1),
+    from the SQL rows alone."""
+    key = t.set_index(["session_id", "trial_index"])["condition"]
+    p = t[(t["probe"] == 1) & (t["baseline"] == 0)].copy()
+    p["practised"] = [key[(s, i - 1)] for s, i in zip(p["session_id"], p["trial_index"],
+                                                      strict=True)]
+    p["previous"] = [key[(s, i - 8)] if b > 1 else "none" for s, i, b in
+                     zip(p["session_id"], p["trial_index"], p["block_index"], strict=True)]
+    p["practised"] = pd.Categorical(p["practised"], categories=list(FIXTURES))
+    p["variant"] = "v" + p["variant"].astype(str)
+    return p
+
+
+def test_primary_probe_model_equals_statsmodels(study: tuple[Path, Path]) -> None:
+    """Fixture effects = sum-to-zero contrasts of an independent statsmodels fit; the
+    fixture and carry-over tests = F of nested least-squares fits computed with numpy."""
+    db, out = study
+    p = _post_block_probes(_trials_sql(db))
+    assert len(p) == 8 * 5 and p["variant"].nunique() == 6
+    est, tests = _csv(out, "vf_transfer_model"), _csv(out, "vf_transfer_tests")
+    for dv, col in (("eq65", "E"), ("latency", "L")):
+        formula = f"{col} ~ C(practised, Sum) + block_index + C(variant)"
+        fit = smf.mixedlm(formula, p, groups=p["subject"]).fit(reml=True)
+        sums = [f"C(practised, Sum)[S.{f}]" for f in FIXTURES[:-1]]
+        got = est[(est["dv"] == dv) & (est["term"] == "fixture")].set_index("condition")
+        for f, term in zip(FIXTURES[:-1], sums, strict=True):
+            assert got.loc[f, "coef"] == pytest.approx(fit.params[term], rel=1e-5, abs=1e-9)
+            assert got.loc[f, "p"] == pytest.approx(fit.pvalues[term], rel=1e-4, abs=1e-10)
+        assert got.loc["ff", "coef"] == pytest.approx(-fit.params[sums].sum(), rel=1e-5,
+                                                      abs=1e-9)
+        row = tests[(tests["dv"] == dv)].set_index("test")
+        # the tests: F of nested within-subject least-squares fits, by hand (numpy)
+        def rss(cols: list[str], data: pd.DataFrame = p, y: str = col) -> tuple[float, int]:
+            x = pd.get_dummies(data[cols].astype(str), drop_first=True).astype(float)
+            x = np.column_stack([np.ones(len(data)), x.to_numpy(),
+                                 data["block_index"].to_numpy(float)])
+            beta, *_ = np.linalg.lstsq(x, data[y].to_numpy(float), rcond=None)
+            res = data[y].to_numpy(float) - x @ beta
+            return float(res @ res), len(data) - np.linalg.matrix_rank(x)
+        for test, red, full in (("fixture", ["subject", "variant"],
+                                 ["subject", "variant", "practised"]),
+                                ("carry_over", ["subject", "variant", "practised"],
+                                 ["subject", "variant", "practised", "previous"])):
+            (r0, d0), (r1, d1) = rss(red), rss(full)
+            f = ((r0 - r1) / (d0 - d1)) / (r1 / d1)
+            assert (row.loc[test, "df1"], row.loc[test, "df2"]) == (d0 - d1, d1)
+            assert row.loc[test, "F"] == pytest.approx(f, rel=1e-8)
+            assert row.loc[test, "p"] == pytest.approx(sps.f.sf(f, d0 - d1, d1), rel=1e-6)
+        assert row.loc["fixture", "df1"] == 4 and row.loc["carry_over", "df1"] == 5
+        slope = est[(est["dv"] == dv) & (est["term"] == "block_position")].iloc[0]
+        assert slope["coef"] == pytest.approx(fit.params["block_index"], rel=1e-5)
+        assert (row["n_obs"] == 40).all() and (row["n_subjects"] == 8).all()
+    text = (out / "index.html").read_text()
+    assert "Transfer: the VF-free probe after each fixture block (primary analysis)" in text
+    assert text.index("primary analysis)") < text.index("per-fixture RM-ANOVA (secondary)")
 
 
 # ---------------------------------------------------------------------- learning curves
@@ -174,7 +245,7 @@ def test_learning_curve_x_axis_is_the_practice_count(study: tuple[Path, Path]) -
     t = _trials_sql(db)
     probes = t[t["probe"] == 1]
     lc = _csv(out, "vf_learning_curve")
-    err = lc[lc["dv"] == "cum_error"]
+    err = lc[lc["dv"] == "eq65"]
     # probe k sits at the same session position for every subject: 1, 2, 3, 10, 17, ...
     expect = probes.groupby("probe_index")["trial_index"].agg(["min", "max"])
     assert (expect["min"] == expect["max"]).all()
@@ -184,7 +255,7 @@ def test_learning_curve_x_axis_is_the_practice_count(study: tuple[Path, Path]) -
     m = probes.assign(practice=probes["trial_index"] + 1).groupby("practice")["E"].mean()
     assert np.allclose(err["mean"].to_numpy(), m.to_numpy(), rtol=1e-12)
     fit = _csv(out, "vf_learning_fit")
-    row = fit[fit["dv"] == "cum_error"].iloc[0]
+    row = fit[fit["dv"] == "eq65"].iloc[0]
     ref = stats.fit_power_law((probes["trial_index"] + 1).to_numpy(float),
                               probes["E"].to_numpy(float))
     assert row["a"] == pytest.approx(ref.a, rel=1e-6)  # least-squares optimiser tolerance
@@ -200,7 +271,7 @@ def test_group_mixed_anova_and_curves(study: tuple[Path, Path]) -> None:
     probes["group"] = np.where(probes["subject"].str[1:].astype(int) <= 4, "surgeon",
                                "resident")
     g = _csv(out, "vf_group_anova")
-    for dv, col in (("cum_error", "E"), ("latency", "L")):
+    for dv, col in (("eq65", "E"), ("latency", "L")):
         rows = g[g["dv"] == dv].set_index("Source")
         assert list(rows.index) == ["group", "trial", "Interaction"]
         # balanced within: the between-groups F is the one-way ANOVA of subject means
@@ -231,32 +302,62 @@ def _check_test(t: dict, *, null: bool) -> None:
             assert isinstance(t[k], float) and math.isfinite(t[k])
 
 
+def _check_primary(m: dict, *, null: bool) -> None:
+    assert set(m) == {"formula", "n_obs", "n_subjects", "fixture_test", "carry_over",
+                      "variant_test", "block_position", "fixture"}
+    assert set(m["fixture"]) == set(FIXTURES)
+    for k in ("fixture_test", "carry_over", "variant_test"):
+        assert set(m[k]) == {"F", "df1", "df2", "p"}
+        assert (m[k]["F"] is None) == null
+    for e in (m["block_position"], *m["fixture"].values()):
+        if null:
+            assert e is None
+        else:
+            assert set(e) == {"coef", "ci_low", "ci_high", "p"}
+            assert e["ci_low"] <= e["coef"] <= e["ci_high"] and 0.0 <= e["p"] <= 1.0
+
+
 def test_summary_json_schema_and_values(study: tuple[Path, Path]) -> None:
     _, out = study
     s = json.loads((out / "summary.json").read_text())
-    assert set(s) == {"synthetic", "n_subjects", "measures", "ratings", "best_share",
-                      "worst_share"}
-    assert s["synthetic"] is True and s["n_subjects"] == 8
-    assert set(s["measures"]) == {"error", "latency", "path_deviation"}
+    assert set(s) == {"synthetic", "n_subjects", "primary", "measures",
+                      "measure_correlations", "ratings", "best_share", "worst_share",
+                      "assumed_effects", "recovered_effects"}
+    assert s["synthetic"] is True and s["n_subjects"] == 8 and s["primary"] == "mixed_model"
+    assert s["assumed_effects"] is None and s["recovered_effects"] is None
+    assert set(s["measures"]) == {"path_deviation", "latency", "eq65"}
+    assert '"error"' not in (out / "summary.json").read_text()
     aov = _csv(out, "vf_rm_anova")
-    for key, dv in (("error", "cum_error"), ("latency", "latency")):
+    grp = _csv(out, "vf_group_anova")
+    est = _csv(out, "vf_transfer_model")
+    for key in ("eq65", "latency"):
         m = s["measures"][key]
-        assert set(m) == {"fixture", "practice", "group", "mixed_model"}
-        for k in ("fixture", "practice", "group"):
+        assert set(m) == {"unit", "fixture", "practice", "group", "group_x_practice",
+                          "mixed_model"}
+        assert m["unit"] == {"eq65": "mm·s", "latency": "s"}[key]
+        for k in ("fixture", "practice", "group", "group_x_practice"):
             _check_test(m[k], null=False)
         assert m["group"]["p_gg"] is None  # a between-subjects effect has no GG correction
-        row = aov[(aov["dv"] == dv) & (aov["factor"] == "fixture")].iloc[0]
+        row = aov[(aov["dv"] == key) & (aov["factor"] == "fixture")].iloc[0]
         assert m["fixture"]["F"] == pytest.approx(row["F"], rel=1e-12)
         assert m["fixture"]["p_gg"] == pytest.approx(row["p_gg"], rel=1e-12)
-        assert set(m["mixed_model"]) == set(FIXTURES)
-        for v in m["mixed_model"].values():
-            assert set(v) == {"coef", "p"} and 0.0 <= v["p"] <= 1.0
+        inter = grp[(grp["dv"] == key) & (grp["Source"] == "Interaction")].iloc[0]
+        assert m["group_x_practice"]["F"] == pytest.approx(inter["F"], rel=1e-12)
+        assert (m["group_x_practice"]["df1"], m["group_x_practice"]["df2"]) == (7, 42)
+        _check_primary(m["mixed_model"], null=False)
+        ff = est[(est["dv"] == key) & (est["condition"] == "ff")].iloc[0]
+        assert m["mixed_model"]["fixture"]["ff"]["coef"] == pytest.approx(ff["coef"])
+        assert m["mixed_model"]["n_obs"] == 40
     # no path deviation stored in these trials: every value null
     pdv = s["measures"]["path_deviation"]
-    for k in ("fixture", "practice", "group"):
+    assert pdv["unit"] == "mm"
+    for k in ("fixture", "practice", "group", "group_x_practice"):
         _check_test(pdv[k], null=True)
-    assert pdv["mixed_model"] == dict.fromkeys(FIXTURES)
+    _check_primary(pdv["mixed_model"], null=True)
     assert "not stored in this database" in (out / "index.html").read_text()
+    # e vs latency: the correlation is reported with its interval
+    c = s["measure_correlations"]["eq65~latency"]["pearson"]
+    assert c["ci_low"] <= c["r"] <= c["ci_high"] and c["n_obs"] == 8 * 38
     # ratings: mean of S1-S3; shares: fractions of the 3 respondents
     assert s["ratings"] == pytest.approx({"vg": 13 / 3, "ag": 6.0, "ms": 8 / 3, "mag": 7.0,
                                           "ff": 9.0})
@@ -266,15 +367,51 @@ def test_summary_json_schema_and_values(study: tuple[Path, Path]) -> None:
                                               "ff": 0})
 
 
+def test_measure_correlations_equal_scipy_and_statsmodels(study: tuple[Path, Path]) -> None:
+    db, out = study
+    t = _trials_sql(db)
+    cor = _csv(out, "vf_measure_correlations")
+    row = cor[(cor["x"] == "eq65") & (cor["y"] == "latency")].set_index("method")
+    r = sps.pearsonr(t["E"], t["L"])
+    ci = r.confidence_interval(0.95)
+    assert row.loc["pearson", "r"] == pytest.approx(r.statistic, rel=1e-9)
+    assert row.loc["pearson", "ci_low"] == pytest.approx(ci.low, rel=1e-9)
+    # within subjects: the correlation of the subject-centred values (same r as the
+    # partial correlation given the subject)
+    c = t.assign(E=t["E"] - t.groupby("subject")["E"].transform("mean"),
+                 L=t["L"] - t.groupby("subject")["L"].transform("mean"))
+    assert row.loc["repeated_measures", "r"] == pytest.approx(
+        sps.pearsonr(c["E"], c["L"]).statistic, rel=1e-9)
+    text = (out / "index.html").read_text()
+    assert "mm·s" in text and "not a length" in text
+
+
+def test_no_length_unit_on_what_is_not_a_length(study: tuple[Path, Path]) -> None:
+    """eq. 6.5's e is a distance times time: every '[m]' label in the page, the tables
+    and the summary is on a length (the MRCP section's path length and displacement)."""
+    _, out = study
+    files = [out / "index.html", out / "summary.json",
+             *sorted((out / "tables").glob("*.csv"))]
+    lengths = ("needle path (path_l2) [m]", "target displacement [m]")
+    for f in files:
+        text = f.read_text()
+        for phrase in lengths:
+            text = text.replace(phrase, "")
+        assert "[m]" not in text, f.name
+        assert "cumulative error" not in text.lower(), f.name
+    units = _csv(out, "vf_measures").set_index("measure")["unit"].to_dict()
+    assert units["eq65"] == "mm·s" and units["path_deviation"] == "mm"
+
+
 def test_summary_of_an_empty_store_is_all_null(tmp_path: Path) -> None:
     TrialStore(tmp_path / "e.sqlite").close()
     build_report(tmp_path / "e.sqlite", tmp_path / "rep")
     s = json.loads((tmp_path / "rep" / "summary.json").read_text())
     assert s["synthetic"] is False and s["n_subjects"] == 0
     for m in s["measures"].values():
-        for k in ("fixture", "practice", "group"):
+        for k in ("fixture", "practice", "group", "group_x_practice"):
             _check_test(m[k], null=True)
-        assert m["mixed_model"] == dict.fromkeys(FIXTURES)
+        _check_primary(m["mixed_model"], null=True)
     for k in ("ratings", "best_share", "worst_share"):
         assert s[k] == dict.fromkeys(FIXTURES)
 
@@ -300,7 +437,8 @@ def test_synthetic_label_on_every_figure_and_table(study: tuple[Path, Path],
     page2 = (tmp_path / "rep" / "index.html").read_text()
     assert SYNTHETIC_LABEL not in page2 and "not evidence" not in page2
     assert json.loads((tmp_path / "rep" / "summary.json").read_text())["synthetic"] is False
-    for name in ("vf_rm_anova", "vf_mixed_model", "vf_group_anova", "vf_learning_curve"):
+    for name in ("vf_rm_anova", "vf_mixed_model", "vf_group_anova", "vf_learning_curve",
+                 "vf_transfer_model", "vf_transfer_tests"):
         a = (out / "tables" / f"{name}.csv").read_bytes()
         assert a == (tmp_path / "rep" / "tables" / f"{name}.csv").read_bytes(), name
 
@@ -331,5 +469,6 @@ def test_path_deviation_is_analysed_when_stored(tmp_path: Path) -> None:
     assert s["fixture"]["F"] == pytest.approx(float(ref.loc[0, "F"]), rel=1e-9)
     _check_test(s["practice"], null=False)
     _check_test(s["group"], null=False)
-    assert all(set(v) == {"coef", "p"} for v in s["mixed_model"].values())
+    _check_test(s["group_x_practice"], null=False)
+    _check_primary(s["mixed_model"], null=False)
     assert "not stored in this database" not in (out / "index.html").read_text()

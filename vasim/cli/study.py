@@ -19,6 +19,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
 from vasim.cli.power import register_power
@@ -448,6 +449,9 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
     r.add_argument("--protocol", required=True)
     r.add_argument("--seed", type=bounded_int(SEED), required=True)
+    r.add_argument("--sequence", type=bounded_int(SEED), default=None,
+                   help="the subject's sequence number i (Williams row i mod R, probe-variant "
+                        "rotation offset; default: the seed)")
     r.set_defaults(func=_cmd_schedule)
 
     r = ss.add_parser("answer", help="record questionnaire answers from a TOML file")
@@ -666,7 +670,7 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     from vasim.study.protocol import block_of, day_offsets, generate_schedule, load_protocol
 
     protocol = load_protocol(args.protocol)
-    rows = generate_schedule(protocol, args.seed)
+    rows = generate_schedule(protocol, args.seed, sequence=args.sequence)
     print(f"{protocol.name}: {len(rows)} trials, seed {args.seed}")
     print(f"{'index':>5}  {'block':<16} {'condition':<16} {'variant':>7}  probe")
     from vasim.study.gain_plan import gain_text
@@ -681,7 +685,37 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
             extra.append(f"gated: repeats up to {b.gate.max_trials}")
         note = f"  ({', '.join(extra)})" if extra else ""
         print(f"{t.index:>5}  {t.block:<16} {t.condition:<16} {t.variant:>7}  {probe}{note}")
+    print()
+    for line in _design_lines(protocol, rows, args.seed if args.sequence is None
+                              else args.sequence):
+        print(line)
     return 0
+
+
+def _design_lines(protocol: Any, rows: list[Any], sequence: int) -> list[str]:
+    """The design of the printed schedule: block-order sequence and probe-variant rotation
+    (issue #25; ``vasim.study.protocol`` schedule rules)."""
+    from vasim.study.protocol import williams_square
+
+    blocks = [t.block for i, t in enumerate(rows) if i == 0 or rows[i - 1].block != t.block]
+    n_cb = sum(b.counterbalance for b in protocol.blocks)
+    order = ", ".join(dict.fromkeys(blocks))
+    if protocol.block_order == "latin_square" and n_cb >= 2:
+        r = len(williams_square(n_cb))
+        head = (f"block order: Williams sequence {sequence % r + 1} of {r} (sequence number "
+                f"{sequence} mod {r}): {order}")
+    else:
+        head = f"block order ({protocol.block_order}): {order}"
+    out = [head]
+    vs = protocol.probe_variants
+    if vs is not None:
+        probes = " ".join(str(t.variant) for t in rows if t.probe)
+        out.append(f"VF-free trials: variants {probes} (rotation over "
+                   f"{', '.join(map(str, vs))} from offset {sequence % len(vs)}; "
+                   "balanced across subjects)")
+    else:
+        out.append(f"VF-free trials: variant {protocol.probe_variant} (no rotation)")
+    return out
 
 
 def _cmd_answer(args: argparse.Namespace) -> int:

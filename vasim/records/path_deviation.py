@@ -1,10 +1,10 @@
 """Accuracy measures that do not move with speed: distance of the tool tip to the planned path.
 
-The seed's cumulative error e_i (eq. 6.5) sums ``||x(j) - p_i||_1`` over every sample logged
-while p_i was the goal, so it grows with the time spent on the way to p_i and with the
-logging rate (at 1 kHz it is a sum of ~1,000 distances per second). With POIs ~1 cm apart
-it is dominated by the distance still to travel, i.e. it measures speed. The measures here
-answer "how far from the planned path was the tool", whatever its speed.
+The seed's e_i (eq. 6.5, called "cumulative error" there) sums ``||x(j) - p_i||_1`` over
+every sample logged while p_i was the goal, so it grows with the time spent on the way to
+p_i and with the logging rate (at 1 kHz it is a sum of ~1,000 distances per second). With
+POIs ~1 cm apart it is dominated by the distance still to travel, i.e. it measures speed.
+The measures here answer "how far from the planned path was the tool", whatever its speed.
 
 Conventions (**decisions**, the seed has no path-deviation measure):
 

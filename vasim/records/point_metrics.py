@@ -18,7 +18,8 @@ Conventions (**decisions**, the seed leaves them open; they match ``vasim.trials
 * **Latency.** ``l_i = t_i - t_(i-1)`` with ``t_(-1) = t_start`` (the trial start, ``t = 0``
   by default, since ``t`` is time since trial start). An unreached point has
   ``latency = NaN``.
-* **Cumulative error.** ``e_i = sum over rows j with goal_index[j] == i of ||x(j) - g(j)||_1``
+* **Eq. 6.5's e_i** (the seed's "cumulative error"; a distance summed over samples, not an
+  error of accuracy). ``e_i = sum over rows j with goal_index[j] == i of ||x(j) - g(j)||_1``
   (the reaching sample included). For a static point ``g(j) == p_i`` and this is eq. 6.5
   verbatim; for POIs riding on moving tissue it is the error to where the point was at step
   j.
@@ -68,8 +69,9 @@ POINT_COLUMNS: tuple[str, ...] = (
 * ``point`` (int64): trajectory point index i, 0..N-1.
 * ``reached`` (bool): the point was reached.
 * ``t_reached`` (float64) [s]: reach time t_i since trial start, NaN if unreached.
-* ``error_l1`` (float64) [m summed over samples, "m·sample"]: cumulative Manhattan error
-  e_i exactly as eq. 6.5 (a sum over samples, so it grows with the logging rate and with
+* ``error_l1`` (float64) [m summed over samples, "m·sample"]: eq. 6.5's e_i exactly, the
+  Manhattan distance to the next point of interest summed over samples (a sum over
+  samples, so it grows with the logging rate and with
   the time spent on the way to p_i: it is not a length; divide by ``n_samples`` for a mean
   error in m).
 * ``latency`` (float64) [s]: l_i = t_i - t_(i-1), NaN if unreached.

@@ -133,9 +133,11 @@ TRIAL_METRICS: dict[str, tuple[str, str]] = {
     "completed": ("0/1", "1 when every POI was reached"),
     "completion_time": ("s", "reach time of the last POI (NaN unless completed)"),
     "duration": ("s", "logged duration: last sample time minus trial start"),
-    "total_error_l1": ("m·sample", "sum of the cumulative Manhattan errors e_i (eq. 6.5): a "
-                                   "sum over logged samples, grows with time and rate"),
-    "error_l1_sum_mm_s": ("mm s", "rate-independent e: sum of e_i times the sample period"),
+    "total_error_l1": ("m·sample", "sum of eq. 6.5's e_i (Manhattan distance to the next "
+                                   "POI summed over logged samples): grows with time and "
+                                   "rate, not a length"),
+    "error_l1_sum_mm_s": ("mm s", "eq. 6.5's e integrated over time (e_i times the sample "
+                                  "period, summed): distance to the next POI x time"),
     "path_dev_mean_mm": ("mm", "time-mean distance of the tool tip to the planned path "
                                "(polyline start -> POIs; independent of speed)"),
     "path_dev_rms_mm": ("mm", "RMS distance of the tool tip to the planned path"),

@@ -54,7 +54,7 @@ def test_in_memory_cohort_equals_the_stored_one(tiny_protocol: Protocol,
     # and `vasim report` on the kept database prints the very tests power counted
     build_report(db, tmp_path / "report", progress=False)
     summary = json.loads((tmp_path / "report" / "summary.json").read_text())
-    key = {"cum_error": "error", "latency": "latency", "path_deviation": "path_deviation"}
+    key = {"eq65": "eq65", "latency": "latency", "path_deviation": "path_deviation"}
     for r in mem.tests.itertuples():
         t = summary["measures"][key[r.dv]]["fixture" if r.factor == "fixture" else "practice"]
         if np.isnan(r.F):

@@ -45,6 +45,7 @@ def _synthetic_cohort(n_subjects: int, seed: int = 1, drop: int | None = None
                 "trial_id": tid, "point": np.arange(n_pts), "reached": reached,
                 "t_reached": np.cumsum(rng.gamma(4, 0.2, n_pts)),
                 "error_l1": m * rng.gamma(5, 0.2, n_pts),
+                "error_l1_mm_s": m * rng.gamma(5, 2.0, n_pts),
                 "latency": np.where(reached, m * rng.gamma(5, 0.15, n_pts), np.nan)}))
             met[tid] = {"path_dev_mean_mm": m * rng.gamma(8, 0.5)}
     points = pd.concat(pts, ignore_index=True)

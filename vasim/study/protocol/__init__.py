@@ -29,7 +29,10 @@ TOML layout (every field is checked; defaults in brackets)::
 
     [probe]                             # the fixture-free probe trials (learning curve)
     condition = "none"                  # ["none"] a schema without fixtures
-    variant = 0                         # [0] all probe trials use this trajectory
+    variant = 0                         # [0] all probe trials use this trajectory, or
+    variants = [1, 2, 3, 4, 5, 6]       # [none] the probe trials rotate over these
+                                        # (issue #25; then a probe block has no `variants`:
+                                        # its `repetitions` trials take the rotation too)
 
     [[blocks]]                          # at least one; run in file order unless randomised
     name = "baseline"                   # required, unique
@@ -84,14 +87,19 @@ Schedule rules (**decisions**):
 * Blocks with ``counterbalance = false`` keep their position in the file; the others are
   permuted among the positions they occupy: ``"fixed"`` keeps the file order, ``"random"``
   draws a uniform permutation per subject from the seed, ``"latin_square"`` takes row
-  ``seed mod R`` of a Williams balanced Latin square (R = n rows for an even number n of
-  counterbalanced blocks, 2n for odd n; each block appears once in every position and
-  follows every other block equally often over R consecutive rows: give a cohort
-  consecutive seeds).
+  ``i mod R`` of a Williams balanced Latin square, i the subject's sequence number (the
+  seed unless ``generate_schedule(..., sequence=i)``; R = n rows for an even number n of
+  counterbalanced blocks, 2n for odd n; each block appears equally often in every position
+  and follows every other block equally often over R consecutive rows: give a cohort
+  consecutive sequence numbers, as ``vasim study simulate`` does).
 * Within a block the trials are ``repetitions`` rounds over ``variants``; ``"random"``
   shuffles each round independently (every variant once before any twice), ``"fixed"``
   keeps the listed order. ``probes_after`` probe trials (``probe.condition`` on
   ``probe.variant``) follow the block's trials.
+* ``probe.variants`` (issue #25): every probe trial, the probe blocks' own included, runs a
+  variant of the rotation: probe k of sequence number i runs ``variants[(i + k - 1) mod
+  m]`` (``probe_variant_of``): the VF-free trials run on the same variants as the assisted
+  ones, balanced across subjects (docs/study-design.md).
 * Randomness: ``numpy.random.default_rng(SeedSequence([seed, stream, block]))``, one stream
   for the block order and one per block for its variants. numpy does not promise the same
   stream across versions: the realised schedule is what is stored and replayed.
@@ -101,8 +109,8 @@ Schedule rules (**decisions**):
 Example:
     >>> p = load_protocol("vf_learning_curve")
     >>> s = generate_schedule(p, seed=7)
-    >>> len(s), sum(t.probe for t in s), {t.variant for t in s if t.probe}
-    (38, 8, {0})
+    >>> len(s), sum(t.probe for t in s), [t.variant for t in s if t.probe]
+    (38, 8, [2, 3, 4, 5, 6, 1, 2, 3])
 """
 
 from __future__ import annotations
@@ -141,6 +149,7 @@ from vasim.study.protocol.schedule import (
     extend_gated_block,
     gated_trials,
     generate_schedule,
+    probe_variant_of,
     sitting_numbers,
     williams_square,
 )
@@ -174,6 +183,7 @@ __all__ = [
     "generate_schedule",
     "load_protocol",
     "parse_protocol",
+    "probe_variant_of",
     "protocol_from_dict",
     "protocol_path",
     "sitting_numbers",

@@ -87,13 +87,21 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
     data = check_keys(data, _TOP, "", file=source,
                       required=("name", "description", "task", "blocks"))
     rnd = _table(data, "randomisation", "", source, ("block_order", "variant_order"))
-    probe = _table(data, "probe", "", source, ("condition", "variant"))
+    probe = _table(data, "probe", "", source, ("condition", "variant", "variants"))
+    if "variant" in probe and "variants" in probe:
+        raise ConfigError("give either probe.variant (one trajectory for every probe) or "
+                          "probe.variants (a rotation), not both", file=source,
+                          field="probe.variants")
     raw_blocks = check_array_of_tables(data["blocks"], "blocks", file=source)
     blocks = []
     for i, raw in enumerate(raw_blocks):
         path = f"blocks[{i}]"
         check_keys(raw, _BLOCK + _BLOCK_GAIN, path, file=source,
                    required=("name", "condition"))
+        if "variants" in probe and raw.get("probe") is True and "variants" in raw:
+            raise ConfigError("a probe block takes its variants from probe.variants in "
+                              "rotation: leave out its variants (repetitions = its number "
+                              "of trials)", file=source, field=f"{path}.variants")
         bkw = {k: _tuple(v) for k, v in raw.items()}
         if "gate" in raw:
             gate = _table(raw, "gate", path, source, _GATE)
@@ -142,6 +150,7 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         "variant_order": rnd.get("variant_order", "fixed"),
         "probe_condition": probe.get("condition", "none"),
         "probe_variant": probe.get("variant", 0),
+        "probe_variants": _tuple(probe["variants"]) if "variants" in probe else None,
         "pre": questionnaires["pre"], "post": questionnaires["post"], "power": power,
         "text": text, "source": source,
     }

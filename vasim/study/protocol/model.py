@@ -175,7 +175,13 @@ class Protocol:
             ``'timed_out'``) is run again: ``vasim.study.session`` begins a new attempt.
         block_order: ``BLOCK_ORDERS``. variant_order: ``VARIANT_ORDERS``.
         probe_condition: condition of probe trials (a fixture-free schema).
-        probe_variant: variant of probe trials.
+        probe_variant: variant of probe trials (when ``probe_variants`` is None).
+        probe_variants: the variants the probe trials rotate over (``[probe] variants``),
+            or None: every probe trial runs ``probe_variant``. With a rotation the k-th
+            probe trial (``probe_index`` k, baseline probes included) of the session with
+            sequence number i runs ``probe_variants[(i + k - 1) mod m]`` (issue #25: the
+            VF-free trials run on the same variants as the assisted ones, balanced across
+            subjects; :func:`vasim.study.protocol.schedule.probe_variant_of`).
         blocks: the blocks in file order. pre, post: the questionnaires.
         power: the ``[power]`` table's planning effects (``vasim.study.protocol.power``),
             or None.
@@ -201,6 +207,7 @@ class Protocol:
     variant_order: str = "fixed"
     probe_condition: str = "none"
     probe_variant: int = 0
+    probe_variants: tuple[int, ...] | None = None
     pre: Questionnaire = _NO_QUESTIONS
     post: Questionnaire = _NO_QUESTIONS
     power: PowerPlan | None = None
@@ -228,6 +235,7 @@ class Protocol:
             raise fail(self.blocks, "at least one block", field="blocks")
         n_var = N_VARIANTS[self.task]
         check_int(self.probe_variant, "probe.variant", lo=0, hi=n_var - 1)
+        _check_probe_variants(self.probe_variants, self.probe_variant, n_var)
         _check_condition(self.probe_condition, self.task, "probe.condition")
         if _schema_has_fixtures(self.probe_condition):
             raise fail(self.probe_condition, "a schema without fixtures (probe trials are "
@@ -253,6 +261,10 @@ class Protocol:
                 if v >= n_var:
                     raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",
                                field=f"blocks[{i}].variants[{j}]")
+            if b.probe and self.probe_variants is not None and b.variants != (0,):
+                raise fail(list(b.variants), "no variants (a probe block's trials take "
+                           "probe.variants in rotation; set its trial count with "
+                           "repetitions)", field=f"blocks[{i}].variants")
             if b.probe and b.condition != self.probe_condition:
                 raise fail(b.condition, f"the probe condition {self.probe_condition!r} (a "
                            "probe block runs it)", field=f"blocks[{i}].condition")
@@ -342,6 +354,22 @@ class Protocol:
         (``vasim.trials.teleop``), whatever the protocol's ``task`` names. The callers
         (session, cohort, CLI) keep calling it before anything is started.
         """
+
+
+def _check_probe_variants(variants: object, single: int, n_var: int) -> None:
+    """``probe.variants``: None, or distinct variants of the task, not with ``probe.variant``."""
+    if variants is None:
+        return
+    if not isinstance(variants, tuple) or not variants:
+        raise fail(list(variants) if isinstance(variants, tuple) else variants,
+                   "a non-empty array of trajectory variants", field="probe.variants")
+    for j, v in enumerate(variants):
+        check_int(v, f"probe.variants[{j}]", lo=0, hi=n_var - 1)
+    if len(set(variants)) != len(variants):
+        raise fail(list(variants), "distinct variants (no repeats)", field="probe.variants")
+    if single != 0:
+        raise fail(single, "no probe.variant beside probe.variants (one or the other)",
+                   field="probe.variant")
 
 
 def _replace_item(item: QuestionItem, **changes: Any) -> QuestionItem:

@@ -155,8 +155,11 @@ def check_protocol_phases(protocol: Protocol) -> None:
         ConfigError: naming the block field and the value.
     """
     blocks = protocol.blocks
-    probes_variant = {protocol.probe_variant} if any(b.probes_after for b in blocks) else set()
-    trained = {v for b in blocks if b.phase == "acquisition" for v in b.variants}
+    rotation = protocol.probe_variants
+    probe_vs = set(rotation) if rotation is not None else {protocol.probe_variant}
+    probes_variant = probe_vs if any(b.probes_after for b in blocks) else set()
+    trained = {v for b in blocks if b.phase == "acquisition"
+               for v in (probe_vs if b.probe and rotation is not None else b.variants)}
     trained |= probes_variant
     others: dict[str, set[int]] = {}
     for b in blocks:

@@ -102,8 +102,13 @@ def williams_square(n: int) -> list[list[int]]:
     return rows
 
 
-def block_order(protocol: Protocol, seed: int) -> list[int]:
-    """Indices into ``protocol.blocks`` in this seed's order (module docstring rules)."""
+def block_order(protocol: Protocol, seed: int, sequence: int | None = None) -> list[int]:
+    """Indices into ``protocol.blocks`` in this session's order (module docstring rules).
+
+    ``sequence``: the subject's sequence number i (``latin_square``: row i mod R of the
+    Williams square); None: the seed (a cohort gives subject j a seed congruent to j - 1,
+    ``vasim.study.cohort.counterbalanced_seed``).
+    """
     slots = [i for i, b in enumerate(protocol.blocks) if b.counterbalance]
     order = list(range(len(protocol.blocks)))
     if len(slots) < 2 or protocol.block_order == "fixed":
@@ -112,18 +117,54 @@ def block_order(protocol: Protocol, seed: int) -> list[int]:
         perm = _rng(seed, 1).permutation(len(slots)).tolist()
     else:
         rows = williams_square(len(slots))
-        perm = rows[seed % len(rows)]
+        perm = rows[(seed if sequence is None else sequence) % len(rows)]
     for slot, k in zip(slots, perm, strict=True):
         order[slot] = slots[k]
     return order
 
 
-def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
-    """The realised schedule of one session: a pure function of protocol and seed.
+def probe_variant_of(protocol: Protocol, sequence: int, probe_index: int) -> int:
+    """The trajectory variant of the probe trial ``probe_index`` (1-based) of the session
+    with sequence number ``sequence``.
+
+    With ``probe.variants`` (v_0..v_{m-1}) the probes rotate: probe k runs
+    ``v[(sequence + k - 1) mod m]``. Over any m consecutive sequence numbers every probe
+    number runs every variant once (probe number and variant are balanced across subjects),
+    and within a session m consecutive probes run m different variants. **Decision**
+    (issue #25): the balance is across subjects, because a session has 8 VF-free trials
+    and 6 variants (8 is not a multiple of 6), while each assisted block uses every
+    variant once within the session. With ``block_order = "latin_square"`` and the same
+    sequence number for the Williams row, the probe after each fixture is balanced against
+    the variant over lcm(R, m) consecutive subjects when R is even (the vf_learning_curve
+    protocol: 10 rows, 6 variants, 30 subjects; ``tests/study/test_design.py`` counts it).
+    Without ``probe.variants`` every probe runs ``probe.variant``.
+
+    Example:
+        >>> from vasim.study.protocol import load_protocol
+        >>> p = load_protocol("vf_learning_curve")
+        >>> [probe_variant_of(p, 0, k) for k in range(1, 9)]
+        [1, 2, 3, 4, 5, 6, 1, 2]
+        >>> [probe_variant_of(p, 4, k) for k in range(1, 9)]
+        [5, 6, 1, 2, 3, 4, 5, 6]
+    """
+    vs = protocol.probe_variants
+    if vs is None:
+        return protocol.probe_variant
+    return vs[(int(sequence) + int(probe_index) - 1) % len(vs)]
+
+
+def generate_schedule(protocol: Protocol, seed: int, *, sequence: int | None = None,
+                      ) -> list[ScheduledTrial]:
+    """The realised schedule of one session: a pure function of protocol, seed (and
+    sequence number).
 
     Args:
         protocol: the validated protocol.
         seed: the session's randomisation seed, an integer in [0, 2**63).
+        sequence: the subject's sequence number i: Williams row i mod R
+            (``latin_square``) and probe-variant rotation offset i mod m
+            (``probe.variants``); None: the seed itself (a simulated cohort's seeds are
+            congruent to the subject number - 1, so subject j gets sequence j - 1).
 
     Returns:
         ``protocol.n_trials`` scheduled trials in session order.
@@ -139,6 +180,7 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
         (True, 'baseline', 1)
     """
     seed = check_int(seed, "seed", bound=SEED)
+    seq = seed if sequence is None else check_int(sequence, "sequence", lo=0)
     out: list[ScheduledTrial] = []
     n_probe = 0
 
@@ -148,7 +190,7 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
         cond = b.condition
         return None if cond in TELEOPERATION_MODES else cond
 
-    for pos, bi in enumerate(block_order(protocol, seed)):
+    for pos, bi in enumerate(block_order(protocol, seed, seq)):
         b = protocol.blocks[bi]
         rng = _rng(seed, 2, bi)
         k = 0
@@ -159,6 +201,8 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
             for v in variants:
                 if b.probe:
                     n_probe += 1
+                    if protocol.probe_variants is not None:  # the rotation (issue #25)
+                        v = probe_variant_of(protocol, seq, n_probe)
                 out.append(ScheduledTrial(
                     index=len(out), block=b.name, block_index=pos, trial_in_block=k,
                     condition=b.condition, schema=schema_of(b), task=protocol.task,
@@ -170,7 +214,8 @@ def generate_schedule(protocol: Protocol, seed: int) -> list[ScheduledTrial]:
             out.append(ScheduledTrial(
                 index=len(out), block=b.name, block_index=pos, trial_in_block=k,
                 condition=protocol.probe_condition, schema=protocol.probe_condition,
-                task=protocol.task, variant=protocol.probe_variant, probe=True,
+                task=protocol.task, variant=probe_variant_of(protocol, seq, n_probe),
+                probe=True,
                 probe_index=n_probe, repetition=rep))
             k += 1
     return out

@@ -39,12 +39,19 @@ per-trial metrics are computed from the samples when a trial closes and stored w
 * Analysed trials: the completed attempt of each scheduled trial
   (``scheduled_trials.trial_id``). Interrupted attempts and trials outside sessions are
   counted in the cohort section but not analysed.
-* Per-trial outcomes of the VF study, from the per-point metrics (eq. 6.5):
-  cumulative error ``E = Σ_i e_i`` [m] over the trial's points, and latency
-  ``L = Σ_i l_i`` [s] over its *reached* points, i.e. the reach time of the last reached
-  point (the trial's completion time when every point is reached). A trial with no
-  reached point has no latency and is excluded (listed).
-* Fixture factor (6 levels none, VG, AG, MS, Mag, FF): the cell of a subject and fixture is
+* Per-trial outcomes of the VF study (issue #25; docs/study-design.md): the mean path
+  deviation [mm] (``path_dev_mean_mm``: THE accuracy measure; RMS, maximum and the
+  fraction outside the tolerance tube beside it), latency ``L = Σ_i l_i`` [s] over the
+  *reached* points, i.e. the reach time of the last reached point (the trial's completion
+  time when every point is reached), and the seed's eq. 6.5 measure ``eq65 = Σ_i e_i Δt``
+  [mm·s] (the Manhattan distance to the next point of interest integrated over time: not
+  a length, and it grows with time; the report states how strongly it tracks latency). A
+  trial with no reached point has no latency and is excluded (listed).
+* PRIMARY analysis (:mod:`~vasim.study.report.transfer`): the VF-free probe after each
+  fixture block ~ fixture just practised + block position + variant, random intercept per
+  subject; carry-over by a likelihood-ratio test of the previous block's fixture.
+* Fixture factor (the seed's design, secondary; 6 levels none, VG, AG, MS, Mag, FF): the
+  cell of a subject and fixture is
   the mean of E (or L) over the subject's analysed trials of that condition (6 assisted
   trials; "none" = the 5 VF-free probe trials that follow the blocks: the 3 baseline
   probes always come first and would mix practice into the factor, issue #15). A linear

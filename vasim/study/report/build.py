@@ -34,6 +34,7 @@ from vasim.study.report.sections.proficiency import proficiency_section
 from vasim.study.report.sections.questionnaires import questionnaire_section
 from vasim.study.report.sections.retention import retention_section
 from vasim.study.report.sections.traceability import traceability_section
+from vasim.study.report.sections.transfer import measures_section, transfer_section
 from vasim.study.report.summary import build_summary
 from vasim.study.report.writing import page_meta, write_files
 
@@ -59,7 +60,8 @@ class ReportResult:
 
 
 # ------------------------------------------------------------------------------- assembly
-STEPS: tuple[str, ...] = ("read store", "cohort", "learning curves", "fixture effect",
+STEPS: tuple[str, ...] = ("read store", "cohort", "measures", "transfer (primary)",
+                          "learning curves", "fixture effect",
                           "box plots", "groups", "questionnaires", "MRCP",
                           "retention and transfer", "proficiency gates", "write")
 """The progress-bar steps of :func:`build_report`."""
@@ -150,19 +152,21 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
 
         run(STEPS[1], lambda: cohort_section(data))
         vf = analyse_vf(data)
-        run(STEPS[2], lambda: learning_curve_section(data, vf))
-        run(STEPS[3], lambda: fixture_effect_section(data, vf))
-        run(STEPS[4], lambda: box_plot_section(vf))
-        run(STEPS[5], lambda: group_section(data, vf))
-        run(STEPS[6], lambda: questionnaire_section(data))
-        run(STEPS[7], lambda: mrcp_section(data))
+        run(STEPS[2], lambda: measures_section(vf))
+        run(STEPS[3], lambda: transfer_section(vf))
+        run(STEPS[4], lambda: learning_curve_section(data, vf))
+        run(STEPS[5], lambda: fixture_effect_section(data, vf))
+        run(STEPS[6], lambda: box_plot_section(vf))
+        run(STEPS[7], lambda: group_section(data, vf))
+        run(STEPS[8], lambda: questionnaire_section(data))
+        run(STEPS[9], lambda: mrcp_section(data))
         if data.protocol is not None and any(b.phase != "acquisition"
                                              for b in data.protocol.blocks):
-            run(STEPS[8], lambda: retention_section(data))
+            run(STEPS[10], lambda: retention_section(data))
         else:
             bar.update()
         if data.protocol is not None and any(b.gate is not None for b in data.protocol.blocks):
-            run(STEPS[9], lambda: proficiency_section(data))
+            run(STEPS[11], lambda: proficiency_section(data))
         else:
             bar.update()
         step(STEPS[-1])

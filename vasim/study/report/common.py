@@ -31,22 +31,46 @@ MODE_ORDER: tuple[str, ...] = ("stdt", "mrcp", "mrcp_cam")
 MODE_LABELS: dict[str, str] = {"stdt": "StdT", "mrcp": "MRCP", "mrcp_cam": "MRCP+Cam"}
 """Display names of the teleoperation modes."""
 
-VF_DVS: tuple[tuple[str, str, str], ...] = (
-    ("cum_error", "cumulative error Σe_i", "m"),
-    ("latency", "latency Σl_i", "s"),
-)
-"""Per-trial outcomes of the VF study: (column, name, unit)."""
 PATH_DEV_METRIC = "path_dev_mean_mm"
 """The per-trial metric (``trial_metrics``) read as the VF study's path deviation."""
+PATH_DEV_EXTRA: dict[str, tuple[str, str, str]] = {
+    "path_dev_rms_mm": ("path_dev_rms", "RMS path deviation", "mm"),
+    "path_dev_max_mm": ("path_dev_max", "maximum path deviation", "mm"),
+    "path_dev_out_frac": ("path_dev_out_frac", "fraction of time outside the tolerance tube",
+                          "1"),
+}
+"""The other path-deviation summaries: trial metric -> (column, name, unit); reported
+descriptively beside the mean (``vf_trials.csv``, the measures table)."""
 PATH_DEV_DV: tuple[str, str, str] = ("path_deviation", "mean path deviation", "mm")
-"""The path deviation as a VF outcome: mean distance of the tool tip to the planned
-polyline over the trial's samples [mm] (analysed when the store holds it)."""
+"""THE accuracy measure (issue #25): mean distance of the tool tip to the planned polyline
+over the trial's samples [mm] (analysed when the store holds it)."""
+LATENCY_DV: tuple[str, str, str] = ("latency", "latency Σl_i", "s")
+"""Speed: Σ l_i over the reached points = the reach time of the last reached point [s]."""
+EQ65_DV: tuple[str, str, str] = (
+    "eq65", "eq. 6.5 e (time-integrated distance to the next point of interest)", "mm·s")
+"""The seed's measure e (eq. 6.5), kept for comparison and named for what it is: per trial
+``Σ_i Σ_j ||x(j) - p_i||_1 Δt_j``, the Manhattan distance to the *next* point of
+interest integrated over time [mm·s] (``point_metrics.error_l1_mm_s``: eq. 6.5 times the
+sample period, so it does not depend on the logging rate). It grows with the time spent,
+so it is not an accuracy measure; the report states from the data how strongly it tracks
+latency."""
+VF_DVS: tuple[tuple[str, str, str], ...] = (PATH_DEV_DV, LATENCY_DV, EQ65_DV)
+"""Per-trial outcomes of the VF study, (column, name, unit), in report order; a store
+without one of them (e.g. no path deviation stored) analyses the others."""
 PATH_DEV_ABSENT = (f"path deviation ({PATH_DEV_METRIC}): not stored in this database (older "
                    "store or trials recorded before the metric existed): not analysed")
 """The note of a report whose store holds no path deviation."""
+EQ65_ABSENT = ("eq. 6.5 e in mm·s (point_metrics.error_l1_mm_s): not stored for these "
+               "trials: not analysed")
+"""The note of a report whose store holds no rate-independent e."""
+DV_NAMES: dict[str, str] = {dv: name for dv, name, _ in VF_DVS}
+"""Outcome column -> its name in text."""
+DV_UNITS: dict[str, str] = {dv: unit for dv, _, unit in VF_DVS}
+"""Outcome column -> its unit."""
 PLOT_NAMES: dict[str, str] = {"path_deviation": "mean path deviation",
-                              "cum_error": r"cumulative error $\Sigma_i\, e_i$",
-                               "latency": r"latency $\Sigma_i\, l_i$"}
+                              "eq65": r"eq. 6.5 $\Sigma_i\, e_i\,\Delta t$ (distance to next "
+                                      "POI x time)",
+                              "latency": r"latency $\Sigma_i\, l_i$"}
 """The outcomes' names in figures (matplotlib mathtext)."""
 FIXTURE_COLORS: dict[str, str] = {FIXTURE_LABELS[c]: PALETTE[i]
                                   for i, c in enumerate(FIXTURE_ORDER)}

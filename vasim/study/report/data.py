@@ -20,9 +20,10 @@ from vasim.study.store import (
 # ------------------------------------------------------------------------------ data
 SCRIPTED_OPERATOR = "scripted"
 """``sessions.operator`` of a simulated session (:mod:`vasim.study.cohort`)."""
-SYNTHETIC_LABEL = ("synthetic data: scripted operator of a declared scenario; not "
-                   "evidence")
-"""The label of every figure and table of a simulated cohort."""
+SYNTHETIC_LABEL = ("synthetic data: simulated operator (a declared scenario, not people); "
+                   "not evidence")
+"""The label of every figure and table of a simulated cohort. Its numbers follow from the
+simulation's assumptions (issue #25): they are never a reproduction of the seed."""
 
 
 @dataclass(frozen=True)
@@ -38,8 +39,8 @@ class StudyData:
             ``subject`` and ``stage`` (probe number of the VF-free trial closing the block).
         trials: the trial rows of those sessions, every status (``TRIAL_COLUMNS``).
         n_outside: trial rows of the store outside any session (not analysed).
-        points: per-point metrics (``trial_id, point, reached, t_reached, error_l1,
-            latency``) of the analysed trials.
+        points: per-point metrics (``trial_id, point, reached, t_reached, error_l1``
+            [m·sample], ``error_l1_mm_s`` [mm·s], ``latency`` [s]) of the analysed trials.
         metrics: per-trial metrics of the analysed trials, wide (index ``trial_id``); read
             only when the schedule has teleoperation-mode trials (the MRCP section).
         demographics: demographics of the protocol's subjects (``DEMOGRAPHIC_COLUMNS``).
@@ -96,7 +97,8 @@ class StudyData:
         return done.reset_index(drop=True)
 
 
-_POINT_COLS = ("trial_id", "point", "reached", "t_reached", "error_l1", "latency")
+_POINT_COLS = ("trial_id", "point", "reached", "t_reached", "error_l1", "error_l1_mm_s",
+               "latency")
 _SESSION_COLS = ("id", "subject", "protocol", "protocol_sha256", "seed", "status",
                  "created_at", "ended_at", "operator", "n_trials", "notes", "vasim_version",
                  "n_completed", "n_interrupted", "next_index")
@@ -203,13 +205,15 @@ def _read_store(store: TrialStore, protocol: str | None) -> StudyData:
     # No bulk reader of point metrics in TrialStore: one read-only query (the IN form lets
     # SQLite use the point_metrics primary key; a plain JOIN can scan it per session).
     rows = store.con.execute(
-        "SELECT p.trial_id, p.point, p.reached, p.t_reached, p.error_l1, p.latency "
+        "SELECT p.trial_id, p.point, p.reached, p.t_reached, p.error_l1, p.error_l1_mm_s, "
+        "p.latency "
         "FROM point_metrics p WHERE p.trial_id IN (SELECT q.trial_id FROM scheduled_trials q "
         "JOIN sessions s ON s.id = q.session_id WHERE s.protocol = ? AND q.trial_id IS NOT "
         "NULL) ORDER BY p.trial_id, p.point", (name,)).fetchall()
     points = pd.DataFrame(rows, columns=list(_POINT_COLS))
     points = points.astype({"trial_id": np.int64, "point": np.int64, "t_reached": np.float64,
-                            "error_l1": np.float64, "latency": np.float64})
+                            "error_l1": np.float64, "error_l1_mm_s": np.float64,
+                            "latency": np.float64})
     points["reached"] = points["reached"].astype(bool)
     done_ids = set(int(t) for t in sched["trial_id"].dropna())
     # the MRCP section and the VF study's path deviation (``PATH_DEV_METRIC``) read them

@@ -1,5 +1,7 @@
-"""The VF study's model-based analyses: fixture effects adjusted for practice (linear mixed
-model) and surgeons vs residents over the probe trials (mixed-design ANOVA).
+"""The VF study's secondary model-based analyses: fixture effects over every trial adjusted
+for practice and variant (linear mixed model) and surgeons vs residents over the probe
+trials (mixed-design ANOVA: group, practice and their interaction). The primary analysis
+is :mod:`vasim.study.report.transfer`.
 
 Both are pure functions of :class:`~vasim.study.report.analysis.VfAnalysis` tables; the
 statistics themselves are :func:`vasim.study.stats.mixed_model` (statsmodels ``MixedLM``)
@@ -22,6 +24,7 @@ REFERENCE = "none"
 """The reference level of the mixed model's fixture contrasts (VF-free trials)."""
 
 _TERM = re.compile(r"^C\(fixture\)\[T\.(.+)\]$")
+_VARIANT = re.compile(r"^C\(variant\)\[T\.(v\d+)\]$")
 
 
 def mixed_model_data(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -32,7 +35,8 @@ def mixed_model_data(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
         dv: the outcome column.
 
     Returns:
-        ``trial_id, subject, fixture, practice, log_practice, <dv>``; ``fixture`` is the
+        ``trial_id, subject, fixture, variant, practice, log_practice, <dv>``
+        (``variant`` text ``v<k>``, issue #25); ``fixture`` is the
         condition code as a categorical whose first level is ``none`` when present (the
         model's reference), ``log_practice = ln(practice)`` (practice: 1-based position of
         the trial in its session).
@@ -52,6 +56,8 @@ def mixed_model_data(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
     d = trials[trials[dv].notna()]
     d = pd.DataFrame({"trial_id": d["trial_id"].to_numpy(), "subject": d["subject"].astype(str)
                       .to_numpy(), "fixture": d["condition"].astype(str).to_numpy(),
+                      "variant": ["v" + str(int(v)) for v in d["variant"]]
+                      if "variant" in d.columns else "v0",
                       "practice": d["practice"].astype(np.int64).to_numpy(),
                       dv: d[dv].astype(float).to_numpy()})
     levels = ordered_conditions(d["fixture"], FIXTURE_ORDER)
@@ -61,9 +67,11 @@ def mixed_model_data(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
 
 
 def fixture_mixed_model(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
-    """Fixture effects adjusted for practice: ``dv ~ fixture + log(practice)``, random
-    intercept per subject (REML, statsmodels ``MixedLM`` via
-    :func:`vasim.study.stats.mixed_model`).
+    """Fixture effects adjusted for practice and variant: ``dv ~ fixture + log(practice) +
+    variant``, random intercept per subject (REML, statsmodels ``MixedLM`` via
+    :func:`vasim.study.stats.mixed_model`); the variant term is left out when every trial
+    ran one variant. A secondary analysis of every trial (assisted and VF-free); the
+    primary one is the probe model of :mod:`vasim.study.report.transfer`.
 
     Args:
         trials: ``VfAnalysis.trials``. dv: the outcome column.
@@ -80,11 +88,14 @@ def fixture_mixed_model(trials: pd.DataFrame, dv: str) -> pd.DataFrame:
             subjects, a single fixture level).
     """
     d = mixed_model_data(trials, dv)
-    fit = stats.mixed_model(d, f"{dv} ~ C(fixture) + log_practice", groups="subject")
+    variant = " + C(variant)" if d["variant"].nunique() > 1 else ""
+    fit = stats.mixed_model(d, f"{dv} ~ C(fixture) + log_practice{variant}", groups="subject")
     cond = []
     for term in fit["term"]:
         m = _TERM.match(str(term))
-        cond.append(m.group(1) if m else ("log_practice" if term == "log_practice" else ""))
+        v = _VARIANT.match(str(term))
+        cond.append(m.group(1) if m else v.group(1) if v else
+                    ("log_practice" if term == "log_practice" else ""))
     fit.insert(1, "condition", cond)
     fit.attrs["reference"] = str(d["fixture"].cat.categories[0])
     return fit

@@ -1,8 +1,10 @@
-"""The VF study's primary tests as one pure function, shared by the report and power
-planning.
+"""The VF study's RM-ANOVAs of the seed's design as one pure function, shared by the report
+and power planning.
 
-The report's primary result (spec §3 decision, ``summary.json`` keys ``fixture`` and
-``practice``) is a one-way subject-level RM-ANOVA per outcome for the factor fixture (6
+These tests (spec §3 decision, ``summary.json`` keys ``fixture`` and ``practice``; since
+issue #25 a secondary analysis beside the probe model of
+:mod:`vasim.study.report.transfer`) are a one-way subject-level RM-ANOVA per outcome for
+the factor fixture (6
 levels; VF-free level = the probes after the blocks) and one for the factor trial (the
 VF-free probe trials 1..8: the practice effect), each over the subjects with every cell of
 the factor. :func:`factor_anova_data` selects those subjects and orders the levels;

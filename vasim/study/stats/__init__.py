@@ -39,7 +39,9 @@ from vasim.study.stats.learning import learning_curve_summary as learning_curve_
 from vasim.study.stats.mixed import MIXED_ANOVA_COLUMNS as MIXED_ANOVA_COLUMNS
 from vasim.study.stats.mixed import mixed_anova as mixed_anova
 from vasim.study.stats.mixed_model import MIXED_MODEL_COLUMNS as MIXED_MODEL_COLUMNS
+from vasim.study.stats.mixed_model import fit_mixed_model as fit_mixed_model
 from vasim.study.stats.mixed_model import mixed_model as mixed_model
+from vasim.study.stats.mixed_model import mixed_model_lr_test as mixed_model_lr_test
 from vasim.study.stats.paired import PAIRED_COLUMNS as PAIRED_COLUMNS
 from vasim.study.stats.paired import gain as gain
 from vasim.study.stats.paired import min_n_for_power as min_n_for_power
@@ -65,12 +67,14 @@ __all__ = [
     "StatsWarning",
     "TukeyResult",
     "fit_learning_curves",
+    "fit_mixed_model",
     "fit_power_law",
     "gain",
     "learning_curve_summary",
     "min_n_for_power",
     "mixed_anova",
     "mixed_model",
+    "mixed_model_lr_test",
     "n_for_power",
     "paired_power",
     "pairwise_paired",

@@ -108,7 +108,7 @@ def fit_power_law(trial_index: Any, y: Any, *, asymptote: bool = False,
     Args:
         trial_index: (N,) trial numbers n >= 1 (any positive real); repeated indices (one
             point per subject) are allowed.
-        y: (N,) performance values (e.g. cumulative error [m] or latency [s]).
+        y: (N,) performance values (e.g. path deviation [mm] or latency [s]).
         asymptote: also fit the asymptote ``c`` (needs >= 3 distinct trial indices).
         level: confidence level of the standard band (0.95).
 

@@ -82,39 +82,10 @@ def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
         >>> fit["term"].tolist(), round(float(fit.loc[1, "coef"]), 1)
         (['Intercept', 'x'], 0.5)
     """
-    data = require_frame(data)
-    src = source_of(data)
-    if not isinstance(formula, str) or "~" not in formula:
-        raise ConfigError(f"formula must be a string 'response ~ terms', got {formula!r}",
-                          file=src, field="formula")
-    require_columns(data, [groups])
-    g = factor_column(data, groups)
-    if len(levels_of(g)) < 2:
-        raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
-                          f"{levels_of(g)!r}", file=src, field=groups)
-    used = _formula_columns(data, formula)
-    data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
-    for col in used:
-        _check_column(data, col)
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            model = smf.mixedlm(formula, data, groups=data[groups])
-            result = model.fit(reml=True)
-        except PatsyError as exc:
-            raise ConfigError(f"cannot build the model of formula {formula!r}: "
-                              f"{str(exc).splitlines()[0]}", file=src, field="formula") from None
-        except (ValueError, np.linalg.LinAlgError) as exc:
-            raise ConfigError(f"statsmodels cannot fit formula {formula!r}: {exc}", file=src,
-                              field="formula") from None
-    notes = list(dict.fromkeys(_warning_text(w) for w in caught
-                               if not issubclass(w.category, DeprecationWarning)))
-    if not result.converged and not any("converge" in n for n in notes):
-        notes.insert(0, "the REML fit did not converge")
-    note = "; ".join(notes)
+    result, note = fit_mixed_model(data, formula, groups)
     if note:
         warnings.warn(f"mixed_model {formula!r}: {note}", StatsWarning, stacklevel=2)
+    model = result.model
 
     fe = result.fe_params.index
     ci = result.conf_int().loc[fe]
@@ -134,6 +105,92 @@ def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
         "converged": bool(result.converged), "llf": float(result.llf), "formula": formula,
     })
     return out
+
+
+def fit_mixed_model(data: pd.DataFrame, formula: str, groups: str, *,
+                    reml: bool = True) -> tuple[Any, str]:
+    """The validated statsmodels fit behind :func:`mixed_model` (same checks and errors).
+
+    Args:
+        data, formula, groups: as :func:`mixed_model`. reml: REML (True) or maximum
+            likelihood (False: what a likelihood-ratio test of fixed effects needs).
+
+    Returns:
+        (``statsmodels`` ``MixedLMResults``, note): the note joins every warning of the fit
+        (empty when there was none); the caller decides how to report it.
+
+    Raises:
+        ConfigError: as :func:`mixed_model`.
+    """
+    data = require_frame(data)
+    src = source_of(data)
+    if not isinstance(formula, str) or "~" not in formula:
+        raise ConfigError(f"formula must be a string 'response ~ terms', got {formula!r}",
+                          file=src, field="formula")
+    require_columns(data, [groups])
+    g = factor_column(data, groups)
+    if len(levels_of(g)) < 2:
+        raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
+                          f"{levels_of(g)!r}", file=src, field=groups)
+    used = _formula_columns(data, formula)
+    data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
+    for col in used:
+        _check_column(data, col)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            model = smf.mixedlm(formula, data, groups=data[groups])
+            result = model.fit(reml=reml)
+        except PatsyError as exc:
+            raise ConfigError(f"cannot build the model of formula {formula!r}: "
+                              f"{str(exc).splitlines()[0]}", file=src, field="formula") from None
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise ConfigError(f"statsmodels cannot fit formula {formula!r}: {exc}", file=src,
+                              field="formula") from None
+    notes = list(dict.fromkeys(_warning_text(w) for w in caught
+                               if not issubclass(w.category, DeprecationWarning)))
+    if not result.converged and not any("converge" in n for n in notes):
+        notes.insert(0, f"the {'REML' if reml else 'ML'} fit did not converge")
+    return result, "; ".join(notes)
+
+
+
+def mixed_model_lr_test(data: pd.DataFrame, reduced: str, full: str, groups: str
+                        ) -> dict[str, Any]:
+    """Likelihood-ratio test of the fixed effects ``full`` adds to ``reduced`` (both fitted
+    by maximum likelihood on the same rows, random intercept per ``groups``).
+
+    Returns:
+        ``{"chi2", "df", "p", "llf_reduced", "llf_full", "note"}``: chi2 = 2 (llf_full -
+        llf_reduced), df = the difference in fixed-effect parameters, p its chi-square
+        upper tail (scipy); note: the fits' warnings.
+
+    Raises:
+        ConfigError: as :func:`mixed_model`, or ``full`` does not add a parameter.
+
+    Example:
+        >>> rng = np.random.default_rng(1)
+        >>> s = np.repeat([f"S{i}" for i in range(10)], 8)
+        >>> x, z = np.tile(np.arange(8.0), 10), rng.normal(size=80)
+        >>> y = x + np.repeat(rng.normal(0, 1, 10), 8) + rng.normal(0, .5, 80)
+        >>> r = mixed_model_lr_test(pd.DataFrame({"s": s, "x": x, "z": z, "y": y}),
+        ...                         "y ~ x", "y ~ x + z", "s")
+        >>> r["df"], r["p"] > 0.01
+        (1, True)
+    """
+    from scipy import stats as sps
+
+    red, n1 = fit_mixed_model(data, reduced, groups, reml=False)
+    ful, n2 = fit_mixed_model(data, full, groups, reml=False)
+    df = len(ful.fe_params) - len(red.fe_params)
+    if df < 1:
+        raise ConfigError(f"formula {full!r} adds no fixed effect to {reduced!r}",
+                          file=source_of(data), field="formula")
+    chi2 = max(0.0, 2.0 * (float(ful.llf) - float(red.llf)))
+    note = "; ".join(n for n in (n1, n2) if n)
+    return {"chi2": chi2, "df": int(df), "p": float(sps.chi2.sf(chi2, df)),
+            "llf_reduced": float(red.llf), "llf_full": float(ful.llf), "note": note}
 
 
 def _formula_columns(data: pd.DataFrame, formula: str) -> list[str]:

@@ -53,7 +53,8 @@ def seed_per_sample_anova(data: pd.DataFrame, dv: str,
 
     Args:
         data: long-format per-sample table.
-        dv: dependent variable (finite numbers; the seed: cumulative error or latency).
+        dv: dependent variable (finite numbers; the seed: eq. 6.5's e, its "cumulative
+            error", or latency).
         factors: the two factor columns (the seed: fixture with 6 levels, trial).
         interaction: also fit the factor interaction (every factor cell must have data).
             The seed's df suggest an additive model; with the interaction df2 shrinks by

@@ -38,8 +38,8 @@ def box_plot_section(vf: VfAnalysis) -> tuple[Section, list[dict[str, str]]]:
         "the subjects with every cell)."))
     out.blocks.append(TableBlock(
         "vf_cells_fixture", "Subject x fixture cells", fc,
-        "Mean cumulative error [m] and latency [s] per subject and fixture; trial_ids: the "
-        "trials averaged.", display="csv"))
+        "Mean per subject and fixture of each outcome (path_deviation [mm], latency [s], "
+        "eq65 [mm·s]); trial_ids: the trials averaged.", display="csv"))
     tc = vf.trial_cells
     if tc.empty:
         out.notes.append("no VF-free probe trial: no box plot per trial")

@@ -1,5 +1,7 @@
-"""The fixture-effect section: subject-level RM-ANOVAs, post hoc tests and the
-seed's per-sample ANOVA as a labelled replication."""
+"""The fixture-effect section, the seed's analysis design (secondary; the primary
+analysis is the probe model, :mod:`vasim.study.report.sections.transfer`): subject-level
+RM-ANOVAs per fixture and per probe trial, post hoc tests, the mixed model of every trial
+and the seed's per-sample ANOVA as a labelled replication."""
 
 from __future__ import annotations
 
@@ -16,7 +18,6 @@ from vasim.study.report.analysis import VfAnalysis, excluded_text
 from vasim.study.report.common import (
     LABEL_PAIRED,
     LABEL_TUKEY,
-    PATH_DEV_DV,
     VF_DVS,
     SectionOut,
     captured,
@@ -36,11 +37,13 @@ from vasim.study.report.primary import factor_anova_data
 from vasim.study.report.sections.gain import gain_blocks
 
 SEED_REPORTED: dict[tuple[str, str], str] = {
-    ("cum_error", "fixture"): "F(5, 98131) = 35.030", ("cum_error", "trial"):
+    ("eq65", "fixture"): "F(5, 98131) = 35.030", ("eq65", "trial"):
     "F(7, 98131) = 22.871", ("latency", "fixture"): "F(5, 98131) = 44.099",
     ("latency", "trial"): "F(7, 98131) = 87.344",
 }
-"""The seed's per-sample ANOVA results (section 6.4.4), shown beside the replication."""
+"""The seed's per-sample ANOVA results (section 6.4.4; its "error" is eq. 6.5's e), shown
+beside the replication."""
+SECTION_TITLE = "Effect of fixture: the seed's per-fixture RM-ANOVA (secondary)"
 
 
 
@@ -126,7 +129,7 @@ def _p_text(p: float) -> str:
 
 def _anova_sentence(r: dict[str, Any]) -> str:
     """One RM-ANOVA row in the usual reporting form."""
-    name = dict((dv, n) for dv, n, _ in (*VF_DVS, PATH_DEV_DV)).get(r["dv"], r["dv"])
+    name = dict((dv, n) for dv, n, _ in VF_DVS).get(r["dv"], r["dv"])
     gg = (f"; Greenhouse-Geisser eps = {r['eps_gg']:.3f}, {_p_text(r['p_gg'])}"
           if r["df1"] > 1 and not math.isnan(r["eps_gg"]) else "")
     return (f"{name} by {r['factor']} (n = {r['n_subjects']} subjects): "
@@ -144,8 +147,10 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
                  "baseline probes, which precede every block, never enter it)")
     cells_trial = "per subject: the probe trial of that number (one trial per cell)"
     intro: list[Block] = [Paragraph(
-        "Methods. Primary analysis (spec §3 decision): one-way repeated-measures ANOVAs on "
-        "subject-level cell means, one for the factor fixture (" + cells_fix + ") and one "
+        "Methods. Secondary analysis, the seed's design (section 6.4.4): the primary "
+        "analysis is the probe model of the section 'Transfer'. One-way repeated-measures "
+        "ANOVAs on subject-level cell means (spec §3 decision, instead of the seed's "
+        "per-sample ANOVA), one for the factor fixture (" + cells_fix + ") and one "
         "for the factor trial (" + cells_trial + "); the two factors are not crossed "
         "(assisted trials have no VF-free trial number), so no interaction is tested. "
         "Mauchly's test, Greenhouse-Geisser (p_gg) and Huynh-Feldt (p_hf) corrections and "
@@ -154,18 +159,18 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
         "Mauchly's p is R's mauchly.test. "
         "The 3 baseline trials always come first, so pooling them with the conditions "
         "would mix practice into the fixture factor: the VF-free level is the probe trials "
-        "that follow the blocks. In addition, a linear mixed model (statsmodels MixedLM, "
-        "REML: measure ~ fixture + log(practice), random intercept per subject, every "
-        "analysed trial, practice = the trial's position in the session) gives the "
-        "fixture effects (difference from 'none') adjusted for practice. The RM-ANOVA is "
-        "primary because it is the pre-specified analysis (spec §3), needs no assumption "
-        "on the shape of the practice curve and tests at the level of subjects; the mixed "
-        "model is the practice-adjusted sensitivity analysis (it assumes a log-linear "
-        "practice effect shared by all subjects and fixtures, and one random intercept).")]
+        "that follow the blocks. This compares performance *while assisted* with VF-free "
+        "performance, not what practice with a fixture leaves behind. Every condition runs "
+        "on the same trajectory variants (each assisted block on all six, the VF-free "
+        "trials in a balanced rotation), so a cell mean does not stand for one variant. "
+        "A linear mixed model over every analysed trial (statsmodels MixedLM, REML: "
+        "measure ~ fixture + log(practice) + variant, random intercept per subject, "
+        "practice = the trial's position in the session) gives the fixture effects "
+        "(difference from 'none') adjusted for practice and variant.")]
     if vf.trials.empty:
         out.notes.append("no analysed trial of a fixture condition or a VF-free probe in the "
                          "sessions of this protocol: no fixture analysis")
-        return out.section("fixture", "Effect of fixture", intro), []
+        return out.section("fixture", SECTION_TITLE, intro), []
     if "none" not in set(vf.fixture_cells["condition"]):
         out.notes.append("no VF-free (probe) trial: the fixture factor lacks the level "
                          "'none' and compares the fixtures only")
@@ -183,7 +188,8 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
     anova = pd.concat(a1 + a2, ignore_index=True) if a1 + a2 else pd.DataFrame()
     if len(anova):
         out.blocks.append(TableBlock(
-            "vf_rm_anova", "Subject-level RM-ANOVA (primary result)", anova,
+            "vf_rm_anova", "Subject-level RM-ANOVA per fixture and per probe trial (the "
+            "seed's design; secondary)", anova,
             "df1, df2: degrees of freedom (p and p(n-1)); F and uncorrected p_unc; eps_gg, "
             "p_gg: Greenhouse-Geisser; mauchly_p: Mauchly's test of sphericity (p as R's "
             "mauchly.test); np2: "
@@ -219,18 +225,18 @@ def fixture_effect_section(data: StudyData, vf: VfAnalysis
             "vf_seed_replication", "Replication of the seed's per-sample ANOVA (not the "
             "primary result)", rep,
             stats.SEED_LABEL + ". One row per trajectory point of every analysed trial "
-            "(e_i [m] or l_i [s]); factors fixture and trial (an assisted trial's trial "
+            "(eq. 6.5's e_i times the sample period [mm·s], or l_i [s]); factors fixture "
+            "and trial (an assisted trial's trial "
             "level = the VF-free trial closing its block); additive OLS model, type II SS. "
             "df2 counts points, not subjects: the p-values are not valid inference. "
             "'seed_reported' is the seed's published figure.",
             columns=("dv", "effect", "df1", "df2", "F", "p", "seed_reported", "n_rows")))
-    return out.section("fixture", "Effect of fixture", intro), prov
+    return out.section("fixture", SECTION_TITLE, intro), prov
 
 
 def _seed_replication(data: StudyData, vf: VfAnalysis, out: SectionOut
                       ) -> tuple[pd.DataFrame | None, list[dict[str, str]]]:
-    ok = vf.trials[vf.trials["cum_error"].notna() & vf.trials["latency"].notna()
-                   & vf.trials["stage"].notna()]
+    ok = vf.trials[vf.trials["latency"].notna() & vf.trials["stage"].notna()]
     if ok.empty:
         out.notes.append("seed replication not computed: no analysed trial with a stage")
         return None, []
@@ -238,7 +244,9 @@ def _seed_replication(data: StudyData, vf: VfAnalysis, out: SectionOut
     rows["trial"] = rows["stage"].astype(np.int64)
     rows["fixture"] = pd.Categorical(rows["fixture"], categories=list(vf.fixture_levels))
     parts = []
-    for dv, col in (("cum_error", "error_l1"), ("latency", "latency")):
+    for dv, col in (("eq65", "error_l1_mm_s"), ("latency", "latency")):
+        if col not in rows.columns:
+            continue
         d = rows[rows[col].notna()]
         try:
             r, msgs = captured(stats.seed_per_sample_anova, d, dv=col,
@@ -280,11 +288,13 @@ def _mixed_model_block(vf: VfAnalysis, out: SectionOut) -> list[dict[str, str]]:
     if not parts:
         return []
     out.blocks.append(TableBlock(
-        "vf_mixed_model", "Fixture effects adjusted for practice (linear mixed model)",
+        "vf_mixed_model", "Fixture effects over every trial adjusted for practice and "
+        "variant (linear mixed model; secondary)",
         pd.concat(parts, ignore_index=True),
-        "dv ~ C(fixture) + log_practice, random intercept per subject (REML). coef of "
-        "C(fixture)[T.x]: mean difference fixture x - 'none' (unit of the dv) at equal "
-        "practice; log_practice: change per e-fold of the practice count; se, z, p (Wald, "
+        "dv ~ C(fixture) + log_practice + C(variant), random intercept per subject (REML). "
+        "coef of C(fixture)[T.x]: mean difference fixture x - 'none' (unit of the dv) at "
+        "equal practice and variant; C(variant)[T.vk]: variant k - the first variant; "
+        "log_practice: change per e-fold of the practice count; se, z, p (Wald, "
         "two-sided), 95 % interval. Every analysed VF trial enters (vf_trials.csv).",
         columns=("dv", "term", "coef", "se", "z", "p", "ci_low", "ci_high", "n_obs",
                  "n_subjects")))

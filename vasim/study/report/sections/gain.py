@@ -46,7 +46,7 @@ def gain_blocks(data: StudyData, vf: VfAnalysis) -> list[Block]:
                         how="left")
     summaries = dict(zip(data.trials["id"], data.trials["summary_json"], strict=True))
     t["gain_mean"] = [_gain_mean(summaries.get(i)) for i in t["trial_id"]]
-    dvs = [c for c in ("cum_error", "latency", "path_deviation") if c in t.columns]
+    dvs = [c for c in ("path_deviation", "latency", "eq65") if c in t.columns]
     rows = []
     assisted = t[t["condition"].isin(gained) & ~t["probe"].astype(bool)]
     for cond in ordered_conditions(assisted["condition"], FIXTURE_ORDER):

@@ -32,23 +32,29 @@ from vasim.study.report.html_page import (
 )
 from vasim.study.store import GROUPS
 
+SEED_FIGURE: dict[str, str] = {"eq65": " (the seed's Fig. 6.17 measure)",
+                               "latency": " (as the seed's Fig. 6.18)"}
+"""The seed figure an outcome's learning curve corresponds to."""
+
 
 def learning_curve_section(data: StudyData, vf: VfAnalysis
                            ) -> tuple[Section, list[dict[str, str]]]:
     """Learning curves over the VF-free probe trials (seed Figs. 6.17-6.18)."""
     out = SectionOut()
     intro: list[Block] = [Paragraph(
-        "Methods. VF-free (probe) trials only, all on the original trajectory, plotted "
+        "Methods. VF-free (probe) trials only (on the assisted trials' variants, in "
+        "rotation: docs/study-design.md), plotted "
         "against the practice count n: the trial's position in the session (1-based, every "
         "trial counts, assisted ones included: probe 4 is the 10th trial), not the probe "
         "number, because practice accrues on every trial. Per practice count, the "
-        "mean over subjects and the interquartile range of the trial's cumulative error "
-        "E = Σ_i e_i (eq. 6.5, Manhattan error summed over the logged samples of each "
-        "point, summed over the points) and latency L = Σ_i l_i (time from the trial start "
-        "to the last reached point: the completion time when every point is reached)"
-        + (", and the mean path deviation (distance of the tool tip to the planned "
-           "polyline) [mm]" if PATH_DEV_DV in vf.dvs else "")
-        + ". Fit: power law of practice y = a·n^(-b) by least squares on the subject-level "
+        "mean over subjects and the interquartile range of"
+        + (" the mean path deviation (distance of the tool tip to the planned polyline, "
+           "mm; the accuracy measure)," if PATH_DEV_DV in vf.dvs else "")
+        + " the latency L = Σ_i l_i (time from the trial start to the last reached point: "
+        "the completion time when every point is reached, s) and the seed's eq. 6.5 "
+        "measure e (the Manhattan distance to the next point of interest integrated over "
+        "time, mm·s; it grows with the time spent, so it is not an accuracy measure)"
+        ". Fit: power law of practice y = a·n^(-b) by least squares on the subject-level "
         "points, with the 95 % pointwise confidence band of the fitted mean curve (delta "
         "method).")]
     tc = vf.trial_cells
@@ -103,8 +109,8 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
             fit_label=fit_label, xlabel=PRACTICE_XLABEL,
             split_after=vf.n_baseline + 0.5 if vf.n_baseline else None)
         out.blocks.append(FigureBlock(
-            f"learning_{dv}", f"Learning curve: {name} (as the seed's Fig. "
-            f"{'6.17' if dv == 'cum_error' else '6.18'})", figure_png(fig),
+            f"learning_{dv}", f"Learning curve: {name}" + SEED_FIGURE.get(dv, ""),
+            figure_png(fig),
             f"Mean (line) and interquartile range (shaded) over subjects per VF-free trial, "
             f"against the practice count n (the trial's position in the session); "
             f"dashed: power-law fit with its 95 % confidence band (hatched). Numbers: "
@@ -132,8 +138,11 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
     out.blocks.append(TableBlock(
         "vf_trials", "Analysed trials of the VF study", vf.trials,
         "One row per analysed trial (the completed attempt of each scheduled trial): "
-        "cum_error = Σ e_i [m], latency = Σ l_i over reached points [s]; stage = probe "
-        "number closing the trial's block (the seed replication's trial level).",
+        "path_deviation [mm] (and its RMS, maximum [mm] and fraction outside the tube), "
+        "latency = Σ l_i over reached points [s], eq65 = eq. 6.5's e integrated over time "
+        "[mm·s]; variant: trajectory variant; block_position: 0 baseline, 1.. the fixture "
+        "blocks; practised / previous: the fixture a probe closes / the one before; stage = "
+        "probe number closing the trial's block (the seed replication's trial level).",
         display="csv"))
     return out.section("learning", "Learning curves (VF-free trials)", intro), prov
 
