@@ -178,9 +178,10 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
         n_fig = sum(isinstance(b, FigureBlock) for s in sections for b in s.blocks)
         doc = ReportDoc(title=f"vasim study report: {data.protocol_name or 'no sessions'}",
                         meta=page_meta(data), sections=tuple(sections))
+        # assumed vs recovered effects of a simulated cohort (vasim.study.recovery)
         summary = build_summary({t.name: t.data for t in tables}, synthetic=data.synthetic,
-                                n_subjects=int(data.sessions["subject"].nunique()))
-        summary.update(recovery_summary(data))  # assumed vs recovered (vasim.study.recovery)
+                                n_subjects=int(data.sessions["subject"].nunique()),
+                                simulation=recovery_summary(data))
         with atomic_folder(out_dir, owned=report_files(out_dir), what="report") as tmp:
             names = write_files(tmp, data, tables, prov, render_html(doc), summary)
         bar.update()
