@@ -83,6 +83,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -598,11 +599,26 @@ class MRCPKernel:
             return False
         self.world.set_configuration(self.rsel, sol)
         if self.world.in_collision(self.rsel):
+            partner = self._nearest_body(self.rsel)
             self.world.set_configuration(self.rsel, q)
             self.state = next_state(self.state, KernelEvent.RSEL_COLLISION)
-            events.append(f"rsel_collision {self.rsel}: safety stop")
+            events.append(f"rsel_collision {self.rsel}: safety stop ({partner})")
             return False
         return True
+
+    def _nearest_body(self, robot: str) -> str:
+        """What ``robot`` would hit, for the safety stop's event (issue #26 §4: the cause
+        is named, not only the stop): the nearest other body and its signed distance at
+        the refused pose (negative: penetration), or a self-collision when no other body
+        is within 5 cm."""
+        best, dist = "", math.inf
+        for b in self._bodies(robot):
+            d = float(self.world.min_distance(robot, b, max_distance=0.05).distance)
+            if d < dist:
+                best, dist = b, d
+        if not best or not dist < 0.05:
+            return "a self-collision: no other body within 5 cm"
+        return f"nearest body {best} at {dist * 1e3:.1f} mm"
 
     def _bodies(self, robot: str) -> list[str]:
         return [b for b in (*self.world.robot_names(), *self.world.obstacle_names())
