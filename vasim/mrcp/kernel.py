@@ -38,7 +38,9 @@ a robot driver sends :attr:`CycleRecord.commands` to the controllers.
   ``grasp_tolerance``, closing the gripper centres it on the grasp pose.
 * ``texec`` needs ``texec_min_samples`` values of a series (a fit through fewer
   extrapolates noise); a series restarts after a gap (the TT cycles are not evaluated).
-* The transfer event names its cause: the index with the smallest ``texec`` of RSel.
+* The transfer event names its cause: the index with the smallest ``texec`` of RSel
+  (``hold`` when RSel could not follow the task for ``hold_transfer_s``, see
+  :class:`KernelConfig`).
 
 Cost options for arms or worlds with expensive queries: ``trajectory_ik="linear"`` and
 ``distance_points="ends"`` (see :class:`KernelConfig`); ``bench/mrcp.py`` prints both.
@@ -254,6 +256,8 @@ class MRCPKernel:
         self._seeds: dict[Key, FloatArray] = {}
         self._last_goals: dict[Key, float] = {}
         self._cooldown: dict[Key, float] = {}
+        self._held_since: float | None = None   # RSel has not followed the task since
+        self._t_now = 0.0
 
     # ------------------------------------------------------------------ geometry helpers
     def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
@@ -304,6 +308,7 @@ class MRCPKernel:
             self._last_q = q_meas
             return self._record(t, q_meas, evaluations, None, ["fault: no motion"])
         pos_now, rot_now = self._positions[-1], self._rotations[-1]
+        self._t_now = t
         if self.state is KernelState.TOP:
             evaluations = self._evaluate(t, q_meas, qdot, wrench, extras or {})
             continuity = self._decide(t, evaluations)
@@ -575,6 +580,11 @@ class MRCPKernel:
                 ttr = estimate_transfer(self.arms[r], q_meas[r], goal, grot, speed,
                                         cfg.ttc_samples, self._seeds.get((r, q))).total
             out[(r, q)] = Evaluation(dict(vals), te, te_min, ttr, te_min - ttr)
+        own = (self.rsel, self.cutp)
+        if (self._held_since is not None and own in out
+                and t - self._held_since >= cfg.hold_transfer_s):
+            e = out[own]                # held too long: no time left (KernelConfig)
+            out[own] = Evaluation(e.values, {**e.texec, "hold": 0.0}, 0.0, 0.0, 0.0)
         return out
 
     def _decide(self, t: float, ev: Mapping[Key, Evaluation]) -> Continuity:
@@ -593,10 +603,15 @@ class MRCPKernel:
         sol = arm.ik(goal, grot, q)
         if sol is None:
             events.append(f"rsel_hold {self.rsel}: task pose unreachable")
+            if self._held_since is None:
+                self._held_since = self._t_now
             return False
         if np.any(np.abs(sol - q) > arm.max_velocity * self.config.dt * (1.0 + 1e-9)):
             events.append(f"rsel_hold {self.rsel}: joint speed limit")
+            if self._held_since is None:
+                self._held_since = self._t_now
             return False
+        self._held_since = None
         self.world.set_configuration(self.rsel, sol)
         if self.world.in_collision(self.rsel):
             partner = self._nearest_body(self.rsel)
@@ -703,6 +718,7 @@ class MRCPKernel:
         if self.rcnt is None or self.target is None:
             raise RuntimeError("task transfer without a receiving robot")
         self.rsel, self.cutp = self.rcnt, self.target
+        self._held_since = None
         self.holders = (self.rsel,)
         self.state = next_state(self.state, KernelEvent.RELEASED)
         events.append(f"transfer_done {old} -> {self.rsel}@{self.cutp}")
