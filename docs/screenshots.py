@@ -13,8 +13,9 @@ What it does: a viewer on loopback (``scene="none"``: the static page without th
 abdomen keeps software WebGL responsive) with a temporary study store; free training for
 the subject code ``DOC01`` with the scripted operator (no person behind it); one trial
 run at 3x speed and stored, so the trainee's page shows its score card; then the
-experimenter's page with the "Fixture schema" folder open, FF's curve chosen and a
-second, running trial (the editor's operating point moves with the tool).
+experimenter's page (its "Fixture schema" folder is open by default) during a second,
+slow trial, and the same page scrolled to the f5PL editor with FF's curve chosen (the
+operating point is that trial's tool tip).
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ def shoot(out: Path) -> list[Path]:
 
                     # A second trial runs while the experimenter's page is shot: the live
                     # metrics and the editor's operating point are current.
-                    app.controller.speed = 0.5
+                    app.controller.speed = 0.2
                     n = app.snapshot.info.number
                     request("start", None, lambda: app.snapshot.info.number > n)
                     exp = browser.new_page(viewport=VIEWPORT)
@@ -110,7 +111,7 @@ def shoot(out: Path) -> list[Path]:
                     settle(exp, 3.0)
                     written.append(out / "experimenter.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    exp.get_by_text("Fixture schema (free training)").click(force=True)
+                    # the "Fixture schema" folder is open by default: choose FF's curve
                     exp.get_by_role("combobox", name="f5PL of").click(force=True)
                     exp.get_by_role("option", name="ff", exact=True).click(force=True)
                     exp.get_by_text("modulation curve (f5PL)").scroll_into_view_if_needed()
