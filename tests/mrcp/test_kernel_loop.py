@@ -208,7 +208,11 @@ def test_a_held_rsel_hands_the_task_over(hold_s: float) -> None:
         return
     assert starts and "cause=hold" in starts[0][1]
     assert holds[0][0] + hold_s - 1e-9 <= starts[0][0] <= holds[0][0] + hold_s + 0.05
-    assert events(recs, "transfer_done A -> B") and recs[-1].rsel == "B"
+    done = events(recs, "transfer_done A -> B")
+    assert done and recs[-1].rsel == "B"
+    # A is not handed the pose it could not follow straight back (abort_cooldown).
+    assert not [e for t, e in events(recs, "transfer_start A@0")
+                if t < done[0][0] + cfg.abort_cooldown]
 
 
 def test_hold_transfer_s_is_validated() -> None:

@@ -258,6 +258,7 @@ class MRCPKernel:
         self._cooldown: dict[Key, float] = {}
         self._held_since: float | None = None   # RSel has not followed the task since
         self._t_now = 0.0
+        self._tt_cause = ""
 
     # ------------------------------------------------------------------ geometry helpers
     def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
@@ -318,6 +319,7 @@ class MRCPKernel:
                 self._tt_start = t
                 cause = min(evaluations[(self.rsel, self.cutp)].texec.items(),
                             key=lambda kv: kv[1])[0]
+                self._tt_cause = cause
                 events.append(f"transfer_start {self.rcnt}@{self.target} "
                               f"(ntt={continuity.ntt:.2f}, cause={cause})")
         # Act: RSel follows the operator in TOp; the task is held in TT.
@@ -717,6 +719,11 @@ class MRCPKernel:
         old = self.rsel
         if self.rcnt is None or self.target is None:
             raise RuntimeError("task transfer without a receiving robot")
+        if self._tt_cause == "hold":
+            # The pose the old RSel could not follow is not handed straight back to it
+            # (as after an aborted transfer): eight_robots otherwise bounced the cube
+            # between R4 (holding) and R6 (at its wrist limit) every half second.
+            self._cooldown[(old, self.cutp)] = self._t_now + self.config.abort_cooldown
         self.rsel, self.cutp = self.rcnt, self.target
         self._held_since = None
         self.holders = (self.rsel,)
