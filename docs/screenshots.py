@@ -100,21 +100,23 @@ def shoot(out: Path) -> list[Path]:
                     trainee.screenshot(path=str(written[-1]), timeout=SHOT_MS)
                     trainee.close()
 
-                    # A second trial runs while the experimenter's page is shot: the live
-                    # metrics and the editor's operating point are current.
-                    app.controller.speed = 0.2
-                    n = app.snapshot.info.number
-                    request("start", None, lambda: app.snapshot.info.number > n)
                     exp = browser.new_page(viewport=VIEWPORT)
                     exp.goto(app.experimenter_url)
                     ready(exp)
-                    settle(exp, 3.0)
-                    written.append(out / "experimenter.png")
-                    exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
                     # the "Fixture schema" folder is open by default: choose FF's curve
                     exp.get_by_role("combobox", name="f5PL of").click(force=True)
                     exp.get_by_role("option", name="ff", exact=True).click(force=True)
-                    exp.get_by_text("modulation curve (f5PL)").scroll_into_view_if_needed()
+                    # A second, slow trial runs while the page is shot: the live metrics
+                    # and the editor's operating point are current.
+                    app.controller.speed = 0.2
+                    n = app.snapshot.info.number
+                    request("start", None, lambda: app.snapshot.info.number > n)
+                    settle(exp, 4.0)
+                    written.append(out / "experimenter.png")
+                    exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                    exp.mouse.move(1070, 600)             # over the control panel
+                    exp.mouse.wheel(0, 760)               # down to the f5PL editor
+                    exp.mouse.move(600, 790)              # away: no hint tooltip
                     settle(exp, 3.0)
                     written.append(out / "f5pl_editor.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
