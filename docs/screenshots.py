@@ -105,7 +105,8 @@ def shoot(out: Path) -> list[Path]:
                     ready(exp)
                     # the "Fixture schema" folder is open by default: choose FF's curve
                     exp.get_by_role("combobox", name="f5PL of").click(force=True, timeout=READY_MS)
-                    exp.get_by_role("option", name="ff", exact=True).click(force=True, timeout=READY_MS)
+                    exp.get_by_role("option", name="ff", exact=True).click(force=True,
+                                                                           timeout=READY_MS)
                     # A second, slow trial runs while the page is shot: the live metrics
                     # and the editor's operating point are current.
                     app.controller.speed = 0.2
