@@ -203,8 +203,9 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
         # The trial survived the reload: same trial, still running or done by itself.
         assert app.snapshot.info is info
         # The reloaded page's HUD (Trainee tab) shows that same trial.
-        # One trial number everywhere: the store id, as the experimenter's page says it.
-        assert info.title == f"trial {info.trial_id}"
+        # One trial name everywhere: its place in the schedule, as the experimenter's
+        # progress line counts it (issue #26 §6).
+        assert info.title == "trial 1 of 27" and app.panel.position == 1
         page.wait_for_function("(t) => document.body.innerText.includes(`${t} —`)",
                                arg=info.title, timeout=20_000)
         # A second tab pressing Start mid-trial is refused (notification), not a duplicate.

@@ -4,6 +4,7 @@ no joint limit is exceeded."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -178,3 +179,42 @@ def test_an_aborted_transfer_cools_down() -> None:
              and t > t_abort]
     assert not again or again[0] >= t_abort + 1.0 - 1e-9
     assert len(events(recs, "transfer_start")) >= 2       # other points were tried meanwhile
+
+
+class _Blind:
+    """An index that sees nothing coming (1 for everyone): only the hold can hand over."""
+
+    name = "blind"
+
+    def evaluate(self, ctx: EvalContext) -> float:
+        return 1.0
+
+
+@pytest.mark.parametrize("hold_s", [0.2, float("inf")])
+def test_a_held_rsel_hands_the_task_over(hold_s: float) -> None:
+    """Issue #26 §4: A carries the bar to the edge of its reach (0.55 m) while no index
+    warns; the task is held (``rsel_hold``: the joint speed at the stretched elbow). After
+    ``hold_transfer_s`` of holding, A has no time left and B takes the task over (cause
+    ``hold``); with the rule off A holds it to the end."""
+    arms, world, obj0 = two_robots()
+    cfg = KernelConfig(hold_transfer_s=hold_s)
+    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg, indices=[_Blind()])
+    recs = run(k, world, arms, lambda t: obj0 + np.array([0.1 * t, 0.0, 0.0]), 300)
+    holds = events(recs, "rsel_hold A")
+    assert holds
+    starts = events(recs, "transfer_start")
+    if math.isinf(hold_s):
+        assert not starts and recs[-1].rsel == "A"
+        return
+    assert starts and "cause=hold" in starts[0][1]
+    assert holds[0][0] + hold_s - 1e-9 <= starts[0][0] <= holds[0][0] + hold_s + 0.05
+    done = events(recs, "transfer_done A -> B")
+    assert done and recs[-1].rsel == "B"
+    # A is not handed the pose it could not follow straight back (abort_cooldown).
+    assert not [e for t, e in events(recs, "transfer_start A@0")
+                if t < done[0][0] + cfg.abort_cooldown]
+
+
+def test_hold_transfer_s_is_validated() -> None:
+    with pytest.raises(ValueError, match="hold_transfer_s"):
+        KernelConfig(hold_transfer_s=-1.0)

@@ -471,3 +471,21 @@ def test_a_db_directory_is_refused_at_start_up(tmp_path: Path,
     assert code == 2
     assert err.count("\n") == 1 and err.startswith("vasim serve: error:")
     assert "is a directory" in err and str(tmp_path) in err
+
+
+def test_a_protocol_trial_shows_its_own_condition_and_schedule_name(
+        ctl: TrainingController) -> None:
+    """Issue #26 §5-6: the greyed f5PL editor shows the running trial's schema (not the
+    free-training one), both pages name it "trial k of N", and free training gets its own
+    schema's curves back."""
+    free = f5pl_fields(load_schema(ctl.panel.schema))
+    assert free                                            # trajectory_following: 4 curves
+    run(ctl, Command("mode", "protocol"), Command("subject", "S05"),
+        Command("protocol", "vf_point_targeting"))
+    ctl.speed = 1.0
+    run(ctl, Command("start"))
+    assert ctl.info.title == "trial 1 of 27" and ctl.panel.position == 1
+    assert ctl.panel.f5pl == f5pl_fields(load_schema(ctl.info.config.schema))
+    assert ctl.panel.f5pl != free
+    run(ctl, Command("stop"), Command("mode", "free"))
+    assert ctl.panel.f5pl == free

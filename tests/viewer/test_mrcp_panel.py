@@ -295,3 +295,20 @@ def test_plot_values_and_texts() -> None:
     assert "<b>" not in text and "&lt;b&gt;cr&lt;/b&gt;" in text  # markdown is not sanitised
     assert "| 1.00 | R1 → R0 @ 1 |" in text and "| — |" in text
     assert "building" in status_text("x", None, 1.0)
+
+
+def test_a_safety_stop_is_shown_with_its_cause_and_the_scenario_restarts() -> None:
+    """Issue #26 §4: the panel names the stop's cause (not only "mode fault"), the event log
+    keeps it (no "fault: no motion" flood), and the next run starts after the pause."""
+    from tests.mrcp.colliding import CollidingScenario
+
+    with MrcpViewerApp(port=0, scenario=CollidingScenario(), coarse=True, speed=20.0,
+                       stop_pause_s=0.5) as a:
+        assert wait_for(lambda: a.live.stopped is not None, 60), a.errors
+        assert wait_for(lambda: "safety stop" in a.panel.status.content, 30)  # type: ignore[union-attr]
+        status = a.panel.status.content  # type: ignore[union-attr]
+        assert "rsel_collision R1" in status and "nearest body ball" in status
+        assert wait_for(lambda: a.live.run >= 2, 60)
+        assert not a.errors and a.alive()
+        h = a.live.history()
+        assert not [e for _, e in h.events if e.startswith("fault:")]

@@ -4,7 +4,8 @@
 through the MRCP kernel and prints its event log (each task transfer with the robot giving
 and receiving the task, the grasp point, NTT and the cause: the index whose ``texec`` was
 the smallest), then the invariant checks; ``--plot`` saves the Figs. 4.23-4.26-style plot.
-``vasim mrcp list`` names the scenarios. Exit code 1 when an invariant was violated.
+``vasim mrcp list`` names the scenarios. Exit code 1 when an invariant was violated or a
+safety stop ended the run (its cause is printed).
 """
 
 from __future__ import annotations
@@ -128,9 +129,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         from vasim.mrcp.plots import plot_run
 
         summary["plot"] = str(plot_run(res, args.plot))
+    failed = bool(res.violations) or res.stop is not None
     if args.json:
         print(dumps(summary, indent=2), file=out)       # strict JSON: inf/NaN -> null
-        return 1 if res.violations else 0
+        return 1 if failed else 0
     print(f"scenario {res.scenario}: {scenario.summary}", file=out)
     print(f"{len(res.samples)} cycles, {summary['duration']:.2f} s, robots "
           f"{', '.join(res.robots)}", file=out)
@@ -150,13 +152,12 @@ def cmd_run(args: argparse.Namespace) -> int:
             where = f" (stitch {st['stitch']})" if st.get("stitch") else ""
             print(f"  {st['t_start']:7.3f} - {st['t_end']:7.3f}  {st['mode']:<5} "
                   f"{st['name']}{where}", file=out)
-    if res.violations:
-        print(f"INVARIANTS VIOLATED ({len(res.violations)}):", file=out)
-        for v in res.violations[:20]:
-            print(f"  {v}", file=out)
-    else:
-        print("invariants: task always grasped, RSel never in collision, joint limits kept",
+    if res.stop is not None:
+        print(f"SAFETY STOP {res.stop}: the run ended there (no operator to acknowledge it)",
               file=out)
+    print(res.invariant_summary() + (":" if res.violations else ""), file=out)
+    for v in res.violations[:20]:
+        print(f"  {v}", file=out)
     if args.plot:
         print(f"plot: {summary['plot']}", file=out)
-    return 1 if res.violations else 0
+    return 1 if failed else 0

@@ -38,7 +38,9 @@ a robot driver sends :attr:`CycleRecord.commands` to the controllers.
   ``grasp_tolerance``, closing the gripper centres it on the grasp pose.
 * ``texec`` needs ``texec_min_samples`` values of a series (a fit through fewer
   extrapolates noise); a series restarts after a gap (the TT cycles are not evaluated).
-* The transfer event names its cause: the index with the smallest ``texec`` of RSel.
+* The transfer event names its cause: the index with the smallest ``texec`` of RSel
+  (``hold`` when RSel could not follow the task for ``hold_transfer_s``, see
+  :class:`KernelConfig`).
 
 Cost options for arms or worlds with expensive queries: ``trajectory_ik="linear"`` and
 ``distance_points="ends"`` (see :class:`KernelConfig`); ``bench/mrcp.py`` prints both.
@@ -83,6 +85,7 @@ Example:
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -253,6 +256,9 @@ class MRCPKernel:
         self._seeds: dict[Key, FloatArray] = {}
         self._last_goals: dict[Key, float] = {}
         self._cooldown: dict[Key, float] = {}
+        self._held_since: float | None = None   # RSel has not followed the task since
+        self._t_now = 0.0
+        self._tt_cause = ""
 
     # ------------------------------------------------------------------ geometry helpers
     def task_pose(self) -> tuple[FloatArray, FloatArray | None]:
@@ -303,6 +309,7 @@ class MRCPKernel:
             self._last_q = q_meas
             return self._record(t, q_meas, evaluations, None, ["fault: no motion"])
         pos_now, rot_now = self._positions[-1], self._rotations[-1]
+        self._t_now = t
         if self.state is KernelState.TOP:
             evaluations = self._evaluate(t, q_meas, qdot, wrench, extras or {})
             continuity = self._decide(t, evaluations)
@@ -312,6 +319,7 @@ class MRCPKernel:
                 self._tt_start = t
                 cause = min(evaluations[(self.rsel, self.cutp)].texec.items(),
                             key=lambda kv: kv[1])[0]
+                self._tt_cause = cause
                 events.append(f"transfer_start {self.rcnt}@{self.target} "
                               f"(ntt={continuity.ntt:.2f}, cause={cause})")
         # Act: RSel follows the operator in TOp; the task is held in TT.
@@ -574,6 +582,11 @@ class MRCPKernel:
                 ttr = estimate_transfer(self.arms[r], q_meas[r], goal, grot, speed,
                                         cfg.ttc_samples, self._seeds.get((r, q))).total
             out[(r, q)] = Evaluation(dict(vals), te, te_min, ttr, te_min - ttr)
+        own = (self.rsel, self.cutp)
+        if (self._held_since is not None and own in out
+                and t - self._held_since >= cfg.hold_transfer_s):
+            e = out[own]                # held too long: no time left (KernelConfig)
+            out[own] = Evaluation(e.values, {**e.texec, "hold": 0.0}, 0.0, 0.0, 0.0)
         return out
 
     def _decide(self, t: float, ev: Mapping[Key, Evaluation]) -> Continuity:
@@ -592,17 +605,37 @@ class MRCPKernel:
         sol = arm.ik(goal, grot, q)
         if sol is None:
             events.append(f"rsel_hold {self.rsel}: task pose unreachable")
+            if self._held_since is None:
+                self._held_since = self._t_now
             return False
         if np.any(np.abs(sol - q) > arm.max_velocity * self.config.dt * (1.0 + 1e-9)):
             events.append(f"rsel_hold {self.rsel}: joint speed limit")
+            if self._held_since is None:
+                self._held_since = self._t_now
             return False
+        self._held_since = None
         self.world.set_configuration(self.rsel, sol)
         if self.world.in_collision(self.rsel):
+            partner = self._nearest_body(self.rsel)
             self.world.set_configuration(self.rsel, q)
             self.state = next_state(self.state, KernelEvent.RSEL_COLLISION)
-            events.append(f"rsel_collision {self.rsel}: safety stop")
+            events.append(f"rsel_collision {self.rsel}: safety stop ({partner})")
             return False
         return True
+
+    def _nearest_body(self, robot: str) -> str:
+        """What ``robot`` would hit, for the safety stop's event (issue #26 §4: the cause
+        is named, not only the stop): the nearest other body and its signed distance at
+        the refused pose (negative: penetration), or a self-collision when no other body
+        is within 5 cm."""
+        best, dist = "", math.inf
+        for b in self._bodies(robot):
+            d = float(self.world.min_distance(robot, b, max_distance=0.05).distance)
+            if d < dist:
+                best, dist = b, d
+        if not best or not dist < 0.05:
+            return "a self-collision: no other body within 5 cm"
+        return f"nearest body {best} at {dist * 1e3:.1f} mm"
 
     def _bodies(self, robot: str) -> list[str]:
         return [b for b in (*self.world.robot_names(), *self.world.obstacle_names())
@@ -686,7 +719,13 @@ class MRCPKernel:
         old = self.rsel
         if self.rcnt is None or self.target is None:
             raise RuntimeError("task transfer without a receiving robot")
+        if self._tt_cause == "hold":
+            # The pose the old RSel could not follow is not handed straight back to it
+            # (as after an aborted transfer): eight_robots otherwise bounced the cube
+            # between R4 (holding) and R6 (at its wrist limit) every half second.
+            self._cooldown[(old, self.cutp)] = self._t_now + self.config.abort_cooldown
         self.rsel, self.cutp = self.rcnt, self.target
+        self._held_since = None
         self.holders = (self.rsel,)
         self.state = next_state(self.state, KernelEvent.RELEASED)
         events.append(f"transfer_done {old} -> {self.rsel}@{self.cutp}")

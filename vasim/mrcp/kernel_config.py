@@ -67,6 +67,12 @@ class KernelConfig:
             RCnt again for this long [s] (**decision**: otherwise the same blocked transfer
             would restart at once and keep the operator's input held).
         seed: seed of the planner's random force.
+        hold_transfer_s: RSel that could not follow the operator (``rsel_hold``: the task
+            pose unreachable or beyond its joint speed) for this long has no time left
+            (``texec`` 0, cause ``hold``), so a candidate that can take the task over does
+            [s] (**decision**, issue #26 §4: the predictor extrapolates the *achieved* task
+            pose, which a held task does not change, so RSel's indices alone kept it
+            holding a task it could not move: 11 s in ``eight_robots``); ``inf``: off.
     """
 
     dt: float = 0.018
@@ -94,6 +100,7 @@ class KernelConfig:
     tt_timeout: float = 5.0
     abort_cooldown: float = 1.0
     seed: int = 0
+    hold_transfer_s: float = 0.2
 
     def __post_init__(self) -> None:
         def bad(name: str, value: object, rule: str) -> ValueError:
@@ -106,6 +113,8 @@ class KernelConfig:
                 raise bad(name, v, "finite and > 0")
         if not (math.isfinite(self.abort_cooldown) and self.abort_cooldown >= 0.0):
             raise bad("abort_cooldown", self.abort_cooldown, "finite and >= 0")
+        if math.isnan(self.hold_transfer_s) or self.hold_transfer_s < 0.0:
+            raise bad("hold_transfer_s", self.hold_transfer_s, ">= 0 (inf: off)")
         for name in ("horizon", "stride", "window", "texec_window", "ttc_samples",
                      "texec_min_samples", "grasp_cycles"):
             if getattr(self, name) < 1:

@@ -28,6 +28,22 @@ Conventions (**decisions**, the seed has no path-deviation measure):
   (protocol parameter ``path_tolerance_m``, default 2 mm).
 * **Rate-independent e.** ``error_l1_mm_s`` = sum_j ||x(j) - g(j)||_1 w_j [mm s]: eq. 6.5
   times the sample period; the same number whatever the logging rate.
+* **Progress along the path** (issue #26 §6; :func:`path_progress`). A sample's progress
+  is the arc length of the planned path up to its projection onto the segment of its goal,
+  ``[p_(i-1), p_i]`` (clamped to it); a row with goal N has covered the whole path.
+  ``path_covered_frac`` is the largest progress over the trial divided by the path's
+  length. **Decision**: the progress of a sample counts however far off the path it is
+  (the deviation measures say how far); the goal index only advances by reaching points in
+  order, so the progress cannot jump ahead of the points reached.
+* **Deviation over the part attempted** (``path_dev_attempted_mm``). The time mean of the
+  distance rewards waiting: a tool that never leaves the start sits on the path (0 mm).
+  **Decision**: this measure averages the distance *along the path*, over the attempted
+  part ``[0, s_max]`` only: ``[0, s_max]`` is cut into bins of ``ATTEMPT_BIN_M`` (or 200
+  bins, whichever is coarser), a bin's value is the mean distance of the samples whose
+  progress falls in it, an empty bin (the tool passed it between two samples) takes the
+  value interpolated from its neighbours, and the measure is the mean over the bins. Time
+  spent anywhere does not weigh, and a trial that attempted nothing (``s_max = 0``) has no
+  value (NaN): it is never scored as accurate.
 * **Point targeting.** ``final_error`` is ``|x(n-1) - p_(N-1)|`` [m] (Euclidean, last
   sample); ``overshoot`` is how far the tip went past the last POI along the approach
   direction u = (p_(N-1) - p_(N-2)) / |...| (the start for N = 1):
@@ -49,6 +65,10 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
+ATTEMPT_BIN_M = 0.0005
+"""Arc-length bin of ``path_dev_attempted_mm`` [m] (0.5 mm; coarser for paths over 10 cm:
+at most 200 bins)."""
+
 DEFAULT_PATH_TOLERANCE = 0.002
 """Radius of the tolerance tube around the planned path [m] (protocol ``path_tolerance_m``)."""
 
@@ -60,7 +80,8 @@ PATH_POINT_COLUMNS: tuple[str, ...] = (
 
 PATH_TRIAL_KEYS: tuple[str, ...] = (
     "path_dev_mean_mm", "path_dev_rms_mm", "path_dev_max_mm", "path_dev_out_frac",
-    "error_l1_sum_mm_s", "final_error_mm", "overshoot_mm",
+    "error_l1_sum_mm_s", "final_error_mm", "overshoot_mm", "path_covered_frac",
+    "path_dev_attempted_mm",
 )
 """Per-trial keys of :func:`trial_path_deviation` (units in the names)."""
 
@@ -128,6 +149,85 @@ def path_distances(x: ArrayLike, goal_index: ArrayLike, points: ArrayLike,
     before = segment_distances(xa, nodes[np.maximum(g - 1, 0)], nodes[g])
     out[active] = np.minimum(own, before)
     return out
+
+
+def _nodes(x: FloatArray, points: ArrayLike, start: ArrayLike | None) -> FloatArray:
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    s0 = x[0] if start is None else np.asarray(start, dtype=np.float64).reshape(3)
+    return np.vstack([s0[None, :], p])
+
+
+def path_progress(x: ArrayLike, goal_index: ArrayLike, points: ArrayLike,
+                  start: ArrayLike | None = None) -> tuple[FloatArray, float]:
+    """Each sample's progress along the planned path [m] and the path's length [m]
+    (module conventions).
+
+    Args: as :func:`path_distances`.
+
+    Returns:
+        ``(s, length)``: ``s`` (n,) arc length [m] of the sample's projection onto the
+        segment of its goal (``length`` for rows with goal N); ``length`` the polyline's
+        length ``start -> p_0 -> ... -> p_(N-1)``.
+
+    Example:
+        >>> pts = [[0.01, 0.0, 0.0], [0.01, 0.01, 0.0]]
+        >>> s, L = path_progress([[0.004, 0.003, 0], [0.02, 0.002, 0], [0, 0, 0]], [0, 1, 2],
+        ...                      pts, start=[0, 0, 0])
+        >>> s.round(6).tolist(), round(L, 6)
+        ([0.004, 0.012, 0.02], 0.02)
+    """
+    xx = np.asarray(x, dtype=np.float64).reshape(-1, 3)
+    gi = np.asarray(goal_index, dtype=np.int64).reshape(-1)
+    if gi.shape[0] != xx.shape[0]:
+        raise ValueError(f"goal_index must have shape ({xx.shape[0]},), got {gi.shape}")
+    n_pts = np.asarray(points, dtype=np.float64).reshape(-1, 3).shape[0]
+    if xx.shape[0] == 0 or n_pts == 0:
+        return np.zeros(xx.shape[0]), 0.0
+    nodes = _nodes(xx, points, start)
+    seg = np.linalg.norm(np.diff(nodes, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    length = float(cum[-1])
+    g = np.clip(gi, 0, n_pts)
+    out = np.full(xx.shape[0], length)
+    active = g < n_pts
+    ga = g[active]
+    a, b = nodes[ga], nodes[ga + 1]
+    ab = b - a
+    den = (ab * ab).sum(axis=1)
+    num = ((xx[active] - a) * ab).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+    out[active] = cum[ga] + np.clip(np.nan_to_num(u, nan=0.0), 0.0, 1.0) * seg[ga]
+    return out, length
+
+
+def attempted_deviation(progress: ArrayLike, distance: ArrayLike,
+                        bin_m: float = ATTEMPT_BIN_M, max_bins: int = 200) -> float:
+    """Mean distance from the path along the attempted part ``[0, max(progress)]`` [same
+    unit as ``distance``] (module conventions: arc-length bins, empty bins interpolated;
+    NaN when nothing was attempted or no sample has a distance).
+
+    Example:
+        >>> round(attempted_deviation([0.0, 0.0, 0.0, 0.01], [0.0, 0.0, 0.0, 2.0]), 6)
+        1.0
+        >>> attempted_deviation([0.0, 0.0], [0.0, 0.0])
+        nan
+    """
+    s = np.asarray(progress, dtype=np.float64).reshape(-1)
+    d = np.asarray(distance, dtype=np.float64).reshape(-1)
+    ok = np.isfinite(s) & np.isfinite(d)
+    s, d = s[ok], d[ok]
+    if s.size == 0 or not float(s.max()) > 0.0:
+        return math.nan
+    s_max = float(s.max())
+    n_bins = max(1, min(max_bins, math.ceil(s_max / bin_m)))
+    k = np.minimum((s / s_max * n_bins).astype(np.int64), n_bins - 1)
+    sums = np.bincount(k, weights=d, minlength=n_bins)
+    counts = np.bincount(k, minlength=n_bins)
+    filled = counts > 0
+    centres = (np.arange(n_bins) + 0.5) / n_bins
+    values = np.interp(centres, centres[filled], sums[filled] / counts[filled])
+    return float(values.mean())
 
 
 def _weighted(d: FloatArray, w: FloatArray, tolerance: float) -> tuple[float, float, float,
@@ -219,7 +319,9 @@ def trial_path_deviation(
         ``path_dev_max_mm`` [mm] and ``path_dev_out_frac`` [0..1] over every sample with a
         goal; ``error_l1_sum_mm_s`` [mm s] (sum over points of ``error_l1_mm_s``);
         ``final_error_mm``, ``overshoot_mm`` [mm] for a single-POI (point-targeting) task,
-        NaN otherwise.
+        NaN otherwise; ``path_covered_frac`` [0..1] (largest progress over the path's
+        length) and ``path_dev_attempted_mm`` [mm] (mean distance along the attempted part;
+        NaN when nothing was attempted).
 
     Example:
         >>> import numpy as np
@@ -241,7 +343,13 @@ def trial_path_deviation(
         "error_l1_sum_mm_s": 1000.0 * float((err[active] * w[active]).sum())
         if active.any() else math.nan,
         "final_error_mm": math.nan, "overshoot_mm": math.nan,
+        "path_covered_frac": math.nan, "path_dev_attempted_mm": math.nan,
     }
+    progress, length = path_progress(xx, gi, points, start)
+    if progress.size and length > 0:
+        out["path_covered_frac"] = float(progress.max()) / length
+        out["path_dev_attempted_mm"] = 1000.0 * attempted_deviation(progress[active],
+                                                                    d[active])
     if n_pts == 1 and xx.shape[0]:
         target = np.asarray(points, dtype=np.float64).reshape(-1, 3)[-1]
         s0 = xx[0] if start is None else np.asarray(start, dtype=np.float64).reshape(3)
@@ -255,10 +363,13 @@ def trial_path_deviation(
 
 
 __all__ = [
+    "ATTEMPT_BIN_M",
     "DEFAULT_PATH_TOLERANCE",
     "PATH_POINT_COLUMNS",
     "PATH_TRIAL_KEYS",
+    "attempted_deviation",
     "path_distances",
+    "path_progress",
     "point_path_deviation",
     "segment_distances",
     "trial_path_deviation",

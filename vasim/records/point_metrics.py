@@ -393,6 +393,11 @@ def trial_summary(
         return float(np.nansum(v)) if n_points else 0.0
 
     lat = latency[reached]
+    dev = None if path_deviation is None else dict(path_deviation)
+    if dev is not None and completed:
+        # Every point reached is the whole path covered: the last point counts as reached
+        # within r_reach of it, before the tool's projection gets to the path's end.
+        dev["path_covered_frac"] = 1.0
     return {
         "n_points": n_points,
         "points_reached": n_reached,
@@ -403,8 +408,7 @@ def trial_summary(
         "total_path_l1": _nansum("path_l1") if path_l1 is None else float(path_l1),
         "total_path_l2": _nansum("path_l2") if path_l2 is None else float(path_l2),
         "duration": math.nan if duration is None else float(duration),
-        **{k: math.nan if path_deviation is None else float(path_deviation[k])
-           for k in PATH_TRIAL_KEYS},
+        **{k: math.nan if dev is None else float(dev[k]) for k in PATH_TRIAL_KEYS},
         "error_l1_sum_mm_s": _nansum("error_l1_mm_s"),   # needs no geometry
     }
 

@@ -144,6 +144,11 @@ TRIAL_METRICS: dict[str, tuple[str, str]] = {
     "path_dev_max_mm": ("mm", "largest distance of the tool tip to the planned path"),
     "path_dev_out_frac": ("1", "fraction of time outside the tolerance tube around the path "
                                "(MetricParams.path_tolerance_m, default 2 mm)"),
+    "path_covered_frac": ("1", "fraction of the planned path covered: largest progress "
+                               "along it (projection onto the goal's segment) over its length"),
+    "path_dev_attempted_mm": ("mm", "mean distance to the planned path along the part "
+                                    "attempted (arc-length bins; NaN when nothing was "
+                                    "attempted: not moving never scores as accurate)"),
     "final_error_mm": ("mm", "point targeting: distance of the last sample to the POI"),
     "overshoot_mm": ("mm", "point targeting: largest travel past the POI along the approach"),
     "mean_latency": ("s", "mean latency l_i over the reached points"),

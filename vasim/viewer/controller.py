@@ -274,6 +274,7 @@ class TrainingController(ConditionCommands):
             schedule_index=None if scheduled is None else scheduled.index,
             condition=None if scheduled is None else scheduled.condition,
             gain_plan=self._gain_plan(config, session, scheduled),
+            schedule_total=None if scheduled is None else len(session.schedule),
         )
         self.browser = device if isinstance(device, BrowserDevice) else None
         self.instrument = device if isinstance(device, LaparoscopicDevice) else None
@@ -443,9 +444,12 @@ class TrainingController(ConditionCommands):
         if isinstance(mapping, dict):
             self.input_mapping = InputMapping(**mapping)
         self._launch(cfg, mode="protocol", input_kind=kind, session=session, scheduled=nxt)
+        # The greyed f5PL editor shows the running trial's condition (issue #26 §5), not
+        # the free-training schema: the trial's own schema, as _launch loaded it.
         self._publish(running=True, summary=None, scorecard=None, input=kind,
-                      status=f"{self.info.title} running: scheduled trial {nxt.index + 1} "
-                      f"of {len(session.schedule)} ({nxt.condition})", **self._progress())
+                      f5pl=f5pl_fields(load_schema(cfg.schema)),
+                      status=f"{self.info.title} running ({nxt.condition}; store id "
+                      f"{self.info.trial_id})", **self._progress())
 
     def _free_config(self) -> TrialConfig:
         p = self.panel
@@ -470,6 +474,9 @@ class TrainingController(ConditionCommands):
             if value != "demo":
                 self.store()  # refuse early without a database
             self._close_trial(f"switched to {value} mode")
+            if value != "protocol":   # back from a protocol trial's f5PL (shown greyed)
+                self._publish(f5pl=f5pl_fields(self._schema_obj if self._schema_obj
+                                               is not None else load_schema(p.schema)))
             self._publish(mode=value, summary=None, running=False,
                           status={"demo": "demo: the scripted operator plays trials by itself",
                                   "free": "free training: pick a schema, then Start",

@@ -11,7 +11,9 @@ Threads (guides/architecture.md):
   0.25 s behind, it drops the debt rather than sprint to catch up). After each cycle it publishes
   an immutable :class:`MrcpFrame` (the runner's sample and the station's poses) and appends
   NTT, ``texec`` and ``tus`` per robot to a bounded history. A finished run starts again
-  (the scenario loops); a failing cycle ends that run, is logged and reported (a
+  (the scenario loops); a safety stop ends that run, its cause stays in the status line
+  and the station stays frozen for ``STOP_PAUSE_S`` before the next run (issue #26 §4); a
+  failing cycle ends that run, is logged and reported (a
   notification in every page), and the scenario restarts after a pause.
 * the **view thread** (:class:`MrcpViewerApp`) reads the latest frame, poses the station
   (:class:`~vasim.viewer.mrcp_view.StationView`) inside one ``server.atomic()`` block and
@@ -81,6 +83,8 @@ TUS_BOTTOM = -1.0
 REALTIME_WINDOW_S = 2.0
 #: A run more than this behind real time [s] drops the rest (no sprint to catch up).
 MAX_DEBT_S = 0.25
+#: After a safety stop the station stays frozen this long [s] before the scenario restarts.
+STOP_PAUSE_S = 5.0
 ROBOT_STROKES = ("#7048e8", "#0ca678", "#d6336c", "#1098ad", "#495057")  # not role colours
 
 
@@ -193,11 +197,13 @@ class LiveScenario:
         history_s: plotted window [s].
         on_error: called with a message when a run fails (from the scenario thread).
         retry_s: pause before a failed scenario restarts [s].
+        stop_pause_s: pause after a run ended by a safety stop [s] (the station stays as
+            it stopped, the panel names the cause).
     """
 
     def __init__(self, scenario: Any, options: Any, *, speed: float = 1.0,
                  history_s: float = 20.0, on_error: Callable[[str], None] | None = None,
-                 retry_s: float = 1.0):
+                 retry_s: float = 1.0, stop_pause_s: float = STOP_PAUSE_S):
         self.scenario = scenario
         self.options = options
         self.speed = float(speed)
@@ -218,6 +224,9 @@ class LiveScenario:
         self._reset_history([])
         self.operator: Any = None
         """The run's :class:`~vasim.mrcp.scenarios.runner.OperatorSwitch` (after prepare)."""
+        self.stop_pause_s = float(stop_pause_s)
+        self.stopped: tuple[str, int, str] | None = None
+        """The last safety stop: (scenario, run, ``RunResult.stop``), or None."""
 
     # -- lifecycle ---------------------------------------------------------------------
     def prepare(self) -> StationGeometry:
@@ -281,8 +290,16 @@ class LiveScenario:
                 self._t_wall0 = time.perf_counter()
                 self._clock: collections.deque[tuple[float, float]] = collections.deque(
                     maxlen=max(2, int(REALTIME_WINDOW_S / self.dt)))
-                run_setup(self.scenario.name, setup, self.options.duration, self._on_sample,
-                          operator=self.operator)
+                res = run_setup(self.scenario.name, setup, self.options.duration,
+                                self._on_sample, operator=self.operator)
+                if res.stop is not None:
+                    # The cause stays on the panel (status line and event log); the station
+                    # stays frozen for stop_pause_s before the scenario starts again.
+                    self.stopped = (res.scenario, self.run, res.stop)
+                    log.warning("MRCP scenario %s run %d: safety stop %s",
+                                self.scenario.name, self.run, res.stop)
+                    if self._stop.wait(self.stop_pause_s):
+                        break
             except _Stopped:
                 break
             except Exception as exc:
@@ -350,10 +367,18 @@ class LiveScenario:
 
 
 # --------------------------------------------------------------------------- the panel
-def status_text(scenario: str, frame: MrcpFrame | None, speed: float) -> str:
-    """The panel's status lines (markdown; only kernel-made strings, escaped)."""
+def status_text(scenario: str, frame: MrcpFrame | None, speed: float,
+                stopped: tuple[str, int, str] | None = None) -> str:
+    """The panel's status lines (markdown; only kernel-made strings, escaped); ``stopped``
+    (:attr:`LiveScenario.stopped`) adds the last safety stop and its cause."""
+    stop = ""
+    if stopped is not None:
+        _, run, cause = stopped
+        stop = f"  \n**safety stop** (run {run}) {html.escape(cause)}"
+        if frame is not None and frame.run == run:
+            stop += " — the run ended there; restarting shortly"
     if frame is None:
-        return f"**{html.escape(scenario)}**: building the station…"
+        return f"**{html.escape(scenario)}**: building the station…{stop}"
     s = frame.sample
     ntt = "∞" if math.isinf(s.ntt) else ("—" if math.isnan(s.ntt) else f"{s.ntt:.2f}")
     rcnt = f" → **{html.escape(str(s.rcnt))}**" if s.rcnt and s.rcnt != s.rsel else ""
@@ -361,7 +386,7 @@ def status_text(scenario: str, frame: MrcpFrame | None, speed: float) -> str:
         f" (behind: {frame.realtime:.2f}× real time)"
     text = (f"**{html.escape(scenario)}** · run {frame.run} · t = {s.t:5.2f} s{lag}  \n"
             f"holds the task: **{html.escape(s.rsel)}** @ point {s.cutp}{rcnt} · "
-            f"mode {html.escape(str(s.state))} · NTT {ntt}")
+            f"mode {html.escape(str(s.state))} · NTT {ntt}{stop}")
     sub = subtask_text(s)
     if sub is not None:       # a scenario with a state graph of subtasks (the suture)
         text += f"  \nsubtask: **{html.escape(sub)}**"
@@ -441,8 +466,9 @@ class MrcpPanel:
                              "dot: the held grasp point (CuTP); yellow: a sensing body.")
         self._log_key: tuple[int, int] = (-1, -1)
 
-    def show_status(self, frame: MrcpFrame | None, speed: float) -> None:
-        text = status_text(self.scenario, frame, speed)
+    def show_status(self, frame: MrcpFrame | None, speed: float,
+                    stopped: tuple[str, int, str] | None = None) -> None:
+        text = status_text(self.scenario, frame, speed, stopped)
         if self.status.content != text:
             self.status.content = text
 
@@ -486,6 +512,8 @@ class MrcpViewerApp(ErrorReporter):
         view_hz: rate of the station's pose updates [Hz].
         plot_hz: rate of the plots and event log [Hz].
         history_s: plotted window [s].
+        retry_s: pause before a failed run restarts [s]. stop_pause_s: pause after a run
+            ended by a safety stop [s].
 
     Raises:
         ConfigError: for an unknown scenario or a bad rate (before a socket is opened).
@@ -501,7 +529,7 @@ class MrcpViewerApp(ErrorReporter):
                  scenario: Any = "cube_rotation", *, seed: int = 0, coarse: bool = False,
                  speed: float = 1.0, duration: float | None = None, view_hz: float = 30.0,
                  plot_hz: float = 4.0, history_s: float = 20.0, retry_s: float = 1.0,
-                 token: str | None = None):
+                 stop_pause_s: float = STOP_PAUSE_S, token: str | None = None):
         from vasim.viewer.access import access_policy
 
         self.access = access_policy(host, token)
@@ -523,7 +551,7 @@ class MrcpViewerApp(ErrorReporter):
         self.live = LiveScenario(self.scenario, ScenarioOptions(seed=seed, duration=duration,
                                                                 coarse=coarse),
                                  speed=speed, history_s=history_s, on_error=self._report,
-                                 retry_s=retry_s)
+                                 retry_s=retry_s, stop_pause_s=stop_pause_s)
         self.server: viser.ViserServer | None = None
         self.station: StationView | None = None
         self.subtasks: SubtaskView | None = None
@@ -534,6 +562,7 @@ class MrcpViewerApp(ErrorReporter):
         self._thread: threading.Thread | None = None
         self.gizmo: Any = None
         self._shown_seq = -1
+        self._shown_stop: tuple[str, int, str] | None = None
         self._t_plot = 0.0
         self._stopped = False
         self.view_updates = 0
@@ -706,7 +735,8 @@ class MrcpViewerApp(ErrorReporter):
             return False
         frame = self.live.latest()
         new = frame is not None and frame.seq != self._shown_seq
-        if not new and not force_plots:
+        stopped = self.live.stopped
+        if not new and not force_plots and stopped == self._shown_stop:
             return False
         now = time.perf_counter()
         with server.atomic():
@@ -720,7 +750,9 @@ class MrcpViewerApp(ErrorReporter):
                         # the needle is 36 mm across: grasp-point markers of 3 mm, not 12
                         station.points.point_size = 0.003
                     self.subtasks.update(frame.sample)
-                panel.show_status(frame, self.speed)
+            if new or stopped != self._shown_stop:
+                self._shown_stop = stopped
+                panel.show_status(frame, self.speed, stopped)
             if force_plots or now - self._t_plot >= self.plot_period:
                 self._t_plot = now
                 panel.show_history(self.live.history())

@@ -30,8 +30,18 @@ from numpy.typing import NDArray
 
 from vasim.fixtures.logistic import Logistic5
 from vasim.records.path_deviation import path_distances
-from vasim.trials.vf import TrialFrame
+from vasim.trials.vf import TrialFrame, make_task
+from vasim.viewer.condition import shipped_name
 from vasim.viewer.controller import INPUTS, MODES, Command, PanelState, TrialInfo
+from vasim.viewer.f5pl_view import (
+    F5PL_LABELS,
+    F5PL_MEANING,
+    FixtureAxes,
+    editor_data,
+    fixture_axes,
+    operating_distance,
+    parameter_lines,
+)
 from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 from vasim.viewer.views import set_gui_value
 
@@ -63,6 +73,43 @@ def f5pl_curve(p: Logistic5, n: int = 80) -> tuple[FloatArray, FloatArray]:
     """
     x = np.linspace(0.0, 3.0 * p.c, n)
     return x, np.asarray(p(x), dtype=np.float64)
+
+
+CURVE_SERIES = (
+    viser.uplot.Series(label="distance [mm]"),
+    viser.uplot.Series(label="edited", stroke="#d9480f", width=2),
+    viser.uplot.Series(label="shipped", stroke="#495057", width=1.5, dash=(6.0, 4.0)),
+    viser.uplot.Series(label="now", stroke="#1971c2", width=0,
+                       points=viser.uplot.Series_Points(show=True, size=10, fill="#1971c2")),
+)
+"""The editor's curves: the edited f5PL, the shipped schema's (reference) and the current
+operating point, all in the fixture's output unit over the distance in mm."""
+
+
+def _curve_axes(x_label: str, y_label: str) -> tuple[viser.uplot.Axis, ...]:
+    return (viser.uplot.Axis(label=x_label), viser.uplot.Axis(label=y_label, size=60))
+
+
+DEFAULT_TASK_SCALE = 0.03
+"""D [m] of the editor's distance axis before the first trial (``Task.scale``'s default)."""
+
+EDITOR_INTERVAL_S = 0.5
+"""The f5PL editor's operating point is redrawn at most this often [s]."""
+
+
+def fixture_goal(info: TrialInfo, frame: TrialFrame) -> NDArray[np.float64]:
+    """The point a fixture measures its error to (as ``trials.vf`` does): the nearest point
+    of the current segment of the path (trajectory), or the current target (point)."""
+    tcp = np.asarray(frame.tcp, dtype=np.float64).reshape(3)
+    pts = np.asarray(info.points, dtype=np.float64).reshape(-1, 3)
+    i = min(int(frame.goal_index), len(pts) - 1)
+    if info.config.task != "trajectory":
+        return pts[i]
+    a = np.asarray(info.start, dtype=np.float64).reshape(3) if i == 0 else pts[i - 1]
+    ab = pts[i] - a
+    den = float(ab @ ab)
+    u = 0.0 if den <= 0 else min(1.0, max(0.0, float((tcp - a) @ ab) / den))
+    return a + u * ab
 
 
 def progress_text(p: PanelState) -> str:
@@ -182,6 +229,15 @@ class ExperimenterPanel:
         self._lat_trial: int | None = None
         self._lat_goal = 0
         self._shown_subject: str | None = None
+        self._schemas: dict[str, Any] = {}      # schema name -> loaded Schema (cache)
+        self._mode = panel.mode
+        self._free_schema = panel.schema
+        self._task = panel.task
+        self._trial_schema: str | None = None   # the running trial's schema (protocol)
+        self._trial_key: int | None = None
+        self._task_scale = DEFAULT_TASK_SCALE
+        self._operating: float | None = None
+        self._last_editor = -math.inf
 
         def on(handle: Any, fn: Callable[[Any], None]) -> None:
             def cb(event: Any) -> None:
@@ -218,14 +274,19 @@ class ExperimenterPanel:
             self.task = gui.add_dropdown("Task", ("trajectory", "point"),
                                          initial_value=panel.task)
             self.restart = gui.add_button("Restart demo trial")
-            self.fixture = gui.add_dropdown("f5PL of", ("—",), initial_value="—")
-            self.numbers = {k: gui.add_number(f"f5PL {k}", 1.0, step=1e-4) for k in F5PL_FIELDS}
+            self.fixture = gui.add_dropdown("f5PL of", ("—",), initial_value="—",
+                                            hint="the fixture whose modulation curve "
+                                                 "(f5PL) is shown and edited")
+            self.numbers = {k: gui.add_number(F5PL_LABELS[k], 1.0, step=1e-4,
+                                              hint=F5PL_MEANING[k]) for k in F5PL_FIELDS}
             self.apply = gui.add_button("Apply f5PL", hint="restarts the trial with the edit")
             x, y = np.array([0.0, 1.0]), np.array([0.0, 0.0])
+            nan = np.full(2, math.nan)
             self.curve = gui.add_uplot(
-                (x, y), (viser.uplot.Series(label="x"),
-                         viser.uplot.Series(label="f5PL", stroke="#d9480f", width=2)),
-                title="modulation curve", scales={"x": {"time": False}}, aspect=1.6)
+                (x, y, nan, nan), CURVE_SERIES, title="modulation curve (f5PL)",
+                scales={"x": {"time": False}}, axes=_curve_axes("distance [mm]", "output"),
+                aspect=1.4)
+            self.f5pl_text = gui.add_markdown("")
         with gui.add_folder("Live metrics"):
             self.metrics = gui.add_markdown("*no trial yet*")
         with gui.add_folder("Last trial and learning curve"):
@@ -279,8 +340,52 @@ class ExperimenterPanel:
             p = self.edited_params()
         except ValueError:
             return  # an invalid value is refused on Apply, with its message
-        x, y = f5pl_curve(p)
-        self.curve.data = (x, y)
+        self._draw(self.fixture.value, p)
+
+    def _schema(self, name: str) -> Any:
+        if name not in self._schemas:
+            from vasim.fixtures.schema import load_schema
+
+            self._schemas[name] = load_schema(name)
+        return self._schemas[name]
+
+    def shown_schema(self) -> str:
+        """The (shipped) schema whose f5PL the editor shows: the running trial's in
+        protocol mode (its condition, greyed), else the free-training choice."""
+        if self._mode == "protocol" and self._trial_schema is not None:
+            return shipped_name(self._trial_schema)
+        return shipped_name(self._free_schema)
+
+    def fixture_view(self, instance: str) -> tuple[FixtureAxes, Logistic5 | None] | None:
+        """The axes of fixture ``instance`` of the shown schema and its shipped f5PL (the
+        reference); None when the schema has no such fixture."""
+        try:
+            schema = self._schema(self.shown_schema())
+        except Exception:  # a schema that cannot be read: no axes (the curve stays)
+            return None
+        for fx in schema.fixtures:
+            if fx.name == instance:
+                ref = getattr(fx.params, "f5pl", None)
+                axes = fixture_axes(fx.kind, fx.params, schema.task if schema.task != "any"
+                                    else self._task, self._task_scale)
+                return axes, ref if isinstance(ref, Logistic5) else None
+        return None
+
+    def _draw(self, instance: str, p: Logistic5) -> None:
+        view = self.fixture_view(instance)
+        if view is None:
+            x, y = f5pl_curve(p)
+            nan = np.full(x.shape, math.nan)
+            self.curve.data = (x, y, nan, nan)
+            return
+        axes, ref = view
+        self.curve.data = editor_data(p, ref, axes, self._operating)
+        labels = _curve_axes(axes.x_label, axes.y_label)
+        if self.curve.axes != labels:
+            self.curve.axes = labels
+        text = parameter_lines(p, ref, axes, self._operating)
+        if self.f5pl_text.content != text:
+            self.f5pl_text.content = text
 
     def _show_f5pl(self, instance: str) -> None:
         p = self.f5pl.get(instance)
@@ -292,8 +397,7 @@ class ExperimenterPanel:
                 set_gui_value(self.numbers[k], float(getattr(p, k)))
         finally:
             self._local.syncing = False
-        x, y = f5pl_curve(p)
-        self.curve.data = (x, y)
+        self._draw(instance, p)
 
     # -- redraw ---------------------------------------------------------------------------
     def show(self, p: PanelState) -> None:
@@ -301,6 +405,7 @@ class ExperimenterPanel:
         if p.version == self.shown_version:
             return
         self.shown_version = p.version
+        self._mode, self._free_schema, self._task = p.mode, p.schema, p.task
         self._local.syncing = True
         try:
             self.status.content = md_escape(p.status) if p.status else ""
@@ -353,7 +458,10 @@ class ExperimenterPanel:
 
     def show_live(self, info: TrialInfo, frame: TrialFrame, now: float | None = None,
                   *, force: bool = False, outcome: str | None = None) -> None:
-        """Collects the per-point latencies and rewrites the live metrics (rate-limited)."""
+        """Collects the per-point latencies and rewrites the live metrics (rate-limited);
+        keeps the f5PL editor's operating point (and, for a new trial, its schema and
+        scale) current."""
+        self._follow_trial(info, frame)
         if self._lat_trial != info.number:
             self._lat_trial, self._lat_goal, self.latencies = info.number, 0, []
         if frame.goal_index > self._lat_goal:
@@ -368,6 +476,30 @@ class ExperimenterPanel:
         if text != self.metrics_md:
             self.metrics_md = text
             self.metrics.content = text
+        if now - self._last_editor >= EDITOR_INTERVAL_S:
+            self._last_editor = now
+            current = self.f5pl.get(self.fixture.value)
+            if current is not None:
+                try:   # the fields (an edit being typed) if valid, else the current curve
+                    current = self.edited_params()
+                except ValueError:
+                    pass
+                self._draw(self.fixture.value, current)
+
+    def _follow_trial(self, info: TrialInfo, frame: TrialFrame) -> None:
+        if self._trial_key != info.number:
+            self._trial_key = info.number
+            self._trial_schema = info.schema
+            try:
+                self._task_scale = float(make_task(info.config).scale)
+            except Exception:   # the editor keeps the last scale; the trial is unaffected
+                self._task_scale = DEFAULT_TASK_SCALE
+        view = self.fixture_view(self.fixture.value)
+        if frame.done or view is None:
+            self._operating = None
+            return
+        goal = fixture_goal(info, frame)
+        self._operating = operating_distance(frame.tcp, goal, view[0].per_axis)
 
 
 __all__ = [
@@ -375,6 +507,7 @@ __all__ = [
     "NO_PROTOCOL",
     "ExperimenterPanel",
     "f5pl_curve",
+    "fixture_goal",
     "gain_text",
     "md_escape",
     "metrics_text",

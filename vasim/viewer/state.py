@@ -68,6 +68,7 @@ class TrialInfo:
         condition label (protocol mode). gain_plan: how its fixture gain is set
         (``panel.gain_plan``: ``"constant"``, ``"scheduled (gain 75 %)"``,
         ``"adaptive 25-100 %"``); the current value is each frame's ``gain``.
+        schedule_total: the session's scheduled trials (protocol mode), for the title.
     """
 
     number: int
@@ -85,11 +86,14 @@ class TrialInfo:
     schedule_index: int | None = None
     condition: str | None = None
     gain_plan: str = "constant"
+    schedule_total: int | None = None
 
     @property
     def title(self) -> str:
-        """The trial's name on every page (``trainee.trial_title``: the store id)."""
-        return trial_title(self.trial_id, self.number)
+        """The trial's name on every page (``trainee.trial_title``: "trial 1 of 38" in a
+        protocol's schedule, else the store id)."""
+        pos = None if self.schedule_index is None else self.schedule_index + 1
+        return trial_title(self.trial_id, self.number, pos, self.schedule_total)
 
 
 @dataclass(frozen=True)

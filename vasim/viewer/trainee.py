@@ -4,9 +4,17 @@ trial ended, and the score card after it. Pure text builders plus the rate-limit
 :class:`HudView` shell; every string reaches viser markdown escaped (viser does not
 sanitise it).
 
-**One trial number everywhere** (:func:`trial_title`): a stored trial is named by its store
-id ("trial 12") on every page and in every status line; a demo run, which is never
-stored, is "demo run 3 (not stored)" — the server's own counter never poses as a trial id.
+**One trial number everywhere** (:func:`trial_title`): a protocol trial is named by its place
+in the schedule ("trial 1 of 38") on every page and in every status line, another stored
+trial by its store id ("trial 12"); a demo run, which is never stored, is "demo run 3 (not
+stored)" — the server's own counter never poses as a trial id.
+
+**Not moving never scores best** (issue #26 §6): the score card shows how much of the path
+was covered and the distance from the path *along the part attempted*
+(``vasim.records.path_deviation``: ``path_covered_frac``, ``path_dev_attempted_mm``); a
+trial that attempted nothing has no distance ("—, nothing attempted"), and
+:func:`score_key` orders trials by points reached, then the path covered, then the
+distance, then the time, so a trial without motion ranks below every trial that moved.
 
 **How a trial ended** (:data:`OUTCOME_TEXT`): the store's outcome vocabulary in words; a
 trial that runs out of time says "time ran out", never "done".
@@ -39,12 +47,20 @@ OUTCOME_TEXT: dict[str, str] = {
 """A trial's outcome (``vasim.study.store.vocabulary.TRIAL_OUTCOMES``) in words."""
 
 
-def trial_title(trial_id: int | None, number: int) -> str:
-    """The trial's name on every page: its store id, or the demo run's counter.
+def trial_title(trial_id: int | None, number: int, position: int | None = None,
+                total: int | None = None) -> str:
+    """The trial's name on every page: its place in the protocol's schedule ("trial 1 of
+    38"), else its store id, else the demo run's counter.
 
-    >>> trial_title(12, 40), trial_title(None, 3)
-    ('trial 12', 'demo run 3 (not stored)')
+    **Decision** (issue #26 §6): a protocol trial is named by its place in the schedule on
+    both pages (the experimenter's progress line counts the same way); the store id, which
+    also counts other subjects' and free trials, names only trials outside a schedule.
+
+    >>> trial_title(12, 40), trial_title(None, 3), trial_title(57, 4, 1, 38)
+    ('trial 12', 'demo run 3 (not stored)', 'trial 1 of 38')
     """
+    if position is not None and total is not None:
+        return f"trial {position} of {total}"
     return f"trial {trial_id}" if trial_id is not None else f"demo run {number} (not stored)"
 
 
@@ -193,14 +209,41 @@ SCORE_METRICS: tuple[tuple[str, str, str, float, int], ...] = (
     # (trial metric name, label, unit, factor from the stored unit, decimals)
     ("duration", "Time", "s", 1.0, 1),
     ("points_reached", "Points reached", "", 1.0, 0),
-    ("path_dev_mean_mm", "Mean distance from the path", "mm", 1.0, 1),
+    ("path_covered_frac", "Path covered", "%", 100.0, 0),
+    ("path_dev_attempted_mm", "Mean distance from the path (part attempted)", "mm", 1.0, 1),
     ("path_dev_max_mm", "Maximum distance from the path", "mm", 1.0, 1),
     ("contact_count", "Tissue contacts", "", 1.0, 0),
     ("excessive_force_time", "Excessive-force time", "s", 1.0, 1),
     ("path_l2", "Path length", "mm", 1e3, 0),
 )
-"""The score card's rows: ``vasim.records.trial_metrics`` names (``path_dev_*_mm`` are read
-by name and shown as "—" while absent), in plain units."""
+"""The score card's rows: ``vasim.records.trial_metrics`` names (shown as "—" while absent,
+e.g. a trial stored before the metric existed), in plain units."""
+
+NOTHING_ATTEMPTED = "nothing attempted"
+"""The distance rows' note when the trial covered none of the path."""
+
+RANK_ORDER = ("points reached", "path covered", "distance from the path", "time")
+"""What :func:`score_key` compares, in order."""
+
+
+def score_key(metrics: Mapping[str, float]) -> tuple[float, float, float, float]:
+    """A trial's rank (larger is better): points reached, then the fraction of the path
+    covered, then the (negated) mean distance along the part attempted, then the (negated)
+    time. A missing or undefined value ranks worst (a trial that attempted nothing has no
+    distance, so it never beats one that moved).
+
+    >>> still = {"points_reached": 0, "path_covered_frac": 0.0, "duration": 180.0}
+    >>> moved = {"points_reached": 0, "path_covered_frac": 0.1,
+    ...          "path_dev_attempted_mm": 9.0, "duration": 180.0}
+    >>> score_key(moved) > score_key(still)
+    True
+    """
+    def get(name: str, sign: float) -> float:
+        v = _value(metrics, name, 1.0)
+        return -math.inf if v is None else sign * v
+
+    return (get("points_reached", 1.0), get("path_covered_frac", 1.0),
+            get("path_dev_attempted_mm", -1.0), get("duration", -1.0))
 
 
 @dataclass(frozen=True)
@@ -225,6 +268,9 @@ class ScoreCard:
         rows: the metrics. n_earlier: the trainee's earlier trials averaged in ``earlier``.
         n_benchmark: trials behind the benchmark (0: no benchmark).
         gate: the proficiency gate's verdict on this trial (a gated block), or None.
+        attempted: False when the trial covered none of the path (its distance rows are
+        "—, nothing attempted"). better_than: earlier trials it ranks above
+        (:func:`score_key`).
     """
 
     title: str
@@ -234,6 +280,8 @@ class ScoreCard:
     n_earlier: int = 0
     n_benchmark: int = 0
     gate: GateCard | None = None
+    attempted: bool = True
+    better_than: int = 0
 
 
 @dataclass(frozen=True)
@@ -315,12 +363,17 @@ def score_card(metrics: Mapping[str, float], *, title: str, outcome: str | None,
             benchmark column).
         gate: the proficiency gate's verdict (:func:`gate_card`), shown under the rows.
     """
+    still = _value(metrics, "path_covered_frac", 1.0) == 0.0
     rows = tuple(
-        ScoreRow(name, label, unit, _value(metrics, name, f), _mean(earlier, name, f),
-                 _mean(benchmark, name, f), dec)
+        ScoreRow(name, label, unit,
+                 None if still and name.startswith("path_dev") else _value(metrics, name, f),
+                 _mean(earlier, name, f), _mean(benchmark, name, f), dec)
         for name, label, unit, f, dec in SCORE_METRICS)
+    mine = score_key(metrics)
     return ScoreCard(title=title, outcome=outcome, n_points=int(n_points), rows=rows,
-                     n_earlier=len(earlier), n_benchmark=len(benchmark), gate=gate)
+                     n_earlier=len(earlier), n_benchmark=len(benchmark), gate=gate,
+                     attempted=not still,
+                     better_than=sum(mine > score_key(e) for e in earlier))
 
 
 _GATE_ACTION_TEXT = {
@@ -440,6 +493,8 @@ def score_card_markdown(card: ScoreCard | None) -> str:
         this = _fmt(r.value, r.decimals, r.unit)
         if r.name == "points_reached" and r.value is not None:
             this = f"{r.value:.0f} of {card.n_points}"
+        if r.name.startswith("path_dev") and not card.attempted:
+            this = f"— ({NOTHING_ATTEMPTED})"
         cells = [this]
         if card.n_earlier:
             cells.append(_fmt(r.earlier, r.decimals, r.unit))
@@ -448,12 +503,16 @@ def score_card_markdown(card: ScoreCard | None) -> str:
         lines.append(f"| {esc(r.label)} | " + " | ".join(esc(c) for c in cells) + " |")
     if not card.n_earlier:
         lines.append("\n*Your first trial of this kind: later trials are compared with it.*")
+    else:
+        lines.append(f"\nBetter than {card.better_than} of your {card.n_earlier} earlier "
+                     f"trials (by {', then '.join(RANK_ORDER)}).")
     if card.gate is not None:
         lines += ["", gate_markdown(card.gate)]
     return "\n".join(lines)
 
 
-__all__ = ["OUTCOME_TEXT", "SCORE_METRICS", "GateCard", "GateRow", "HudInfo", "HudView",
+__all__ = ["NOTHING_ATTEMPTED", "OUTCOME_TEXT", "RANK_ORDER", "SCORE_METRICS", "GateCard",
+           "GateRow", "HudInfo", "HudView",
            "ScoreCard", "ScoreRow", "audio_text", "frame_outcome", "gate_card",
            "gate_markdown", "hud_markdown", "instruction", "score_card",
-           "score_card_markdown", "state_text", "trial_title"]
+           "score_card_markdown", "score_key", "state_text", "trial_title"]

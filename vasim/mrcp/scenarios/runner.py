@@ -8,6 +8,12 @@ holds it, RSel among the holders, and RSel's TCP is at the held point), RSel nev
 no joint leaves its limits. Violations are collected (:attr:`RunResult.violations`), never
 raised, so a run always yields its log and plot.
 
+**Decision** (a safety stop, issue #26 §4): the kernel refuses RSel's step into a collision
+and stops (FAULT) until an operator acknowledges it; a scripted run has no operator, so the
+run ends at the stop with its cause (:attr:`RunResult.stop`, the kernel's event naming the
+nearest body) instead of logging "fault: no motion" every cycle, and its invariant line
+(:meth:`RunResult.invariant_summary`) says that RSel was kept out of collision by the stop.
+
 **Decision** (the controller): the kernel poses its world at the commanded configurations
 and the scenario runs with an ideal controller (the measured configuration is the
 commanded one, as in the kernel's own tests); the kernel already bounds every joint step by
@@ -31,6 +37,7 @@ import numpy as np
 from vasim.core.geometry import matrix_from_rotvec, rotvec_from_matrix
 from vasim.mrcp.interfaces import FloatArray
 from vasim.mrcp.kernel import CycleRecord, MRCPKernel
+from vasim.mrcp.modes import KernelState
 from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
 
 
@@ -76,7 +83,9 @@ class Sample:
 
 @dataclass
 class RunResult:
-    """A finished run: samples, the event log, invariant violations, the final state."""
+    """A finished run: samples, the event log, invariant violations, the final state, and
+    the safety stop that ended it (``stop``: ``"t=5.670: rsel_collision R4: safety stop
+    (nearest body R3 at -0.4 mm)"``; None when the run reached its duration)."""
 
     scenario: str
     robots: list[str]
@@ -85,6 +94,18 @@ class RunResult:
     notes: dict[str, Any] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
     """Scenario-specific sections of the summary (the suture's ``subtasks``)."""
+    stop: str | None = None
+
+    def invariant_summary(self) -> str:
+        """One line on the invariants that never contradicts a safety stop of the run: RSel
+        was kept out of collision *by* the stop, and the run says so (issue #26 §4)."""
+        if self.violations:
+            end = "" if self.stop is None else f"; the safety stop ({self.stop}) ended the run"
+            return f"INVARIANTS VIOLATED ({len(self.violations)}){end}"
+        if self.stop is not None:
+            return (f"invariants: task always grasped, joint limits kept; RSel was kept out of "
+                    f"collision only by the safety stop ({self.stop}), which ended the run")
+        return "invariants: task always grasped, RSel never in collision, joint limits kept"
 
     def events(self, prefix: str = "") -> list[tuple[float, str]]:
         """``(t, event)`` of every event starting with ``prefix``."""
@@ -109,7 +130,8 @@ class RunResult:
                 "cycles": len(self.samples), "transfers": self.transfers(),
                 "events": [{"t": round(t, 4), "event": e} for t, e in self.events()],
                 "violations": self.violations, "final_rsel": self.samples[-1].rsel
-                if self.samples else None, "notes": self.notes, **self.extra}
+                if self.samples else None, "safety_stop": self.stop,
+                "invariants": self.invariant_summary(), "notes": self.notes, **self.extra}
 
 
 def _parse_start(event: str) -> dict[str, Any]:
@@ -304,6 +326,7 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
     robots = list(setup.arms)
     samples: list[Sample] = []
     violations: list[str] = []
+    stop: str | None = None
     total = setup.duration if duration is None else duration
     try:
         for i in range(math.floor(total / cfg.dt + 1e-9)):
@@ -326,9 +349,16 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
             samples.append(s)
             if progress is not None:
                 progress(s)
+            if rec.state is KernelState.FAULT:
+                # The safety stop ends a scripted run: nobody acknowledges it, and the
+                # cycles after it would only log "fault: no motion" (issue #26 §4).
+                cause = next((e for e in rec.events if e.startswith("rsel_collision")),
+                             "fault")
+                stop = f"t={t:.3f}: {cause}"
+                break
     finally:
         setup.close()
-    return RunResult(name, robots, samples, violations, dict(setup.notes))
+    return RunResult(name, robots, samples, violations, dict(setup.notes), stop)
 
 
 def run(scenario: Scenario, options: ScenarioOptions | None = None,
