@@ -358,7 +358,7 @@ def run_setup(name: str, setup: Setup, duration: float | None = None,
                 break
     finally:
         setup.close()
-    return RunResult(name, robots, samples, violations, dict(setup.notes), stop)
+    return RunResult(name, robots, samples, violations, dict(setup.notes), stop=stop)
 
 
 def run(scenario: Scenario, options: ScenarioOptions | None = None,
