@@ -1,6 +1,7 @@
 """Real-browser tests of the viewer: Debian's headless Chromium driven by playwright.
 
-Every test here carries the ``browser`` marker (``pytest -m "not browser"`` leaves them out).
+Every test here carries the ``browser`` marker (given in tests/conftest.py; ``pytest -m "not
+browser"`` leaves them out).
 They skip, with the reason, only when ``/usr/bin/chromium`` (or ``$VASIM_CHROMIUM``) or the
 playwright package is missing (``make test`` installs both; never ``playwright install``,
 which downloads).
@@ -22,17 +23,6 @@ LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backgro
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}
 READY_TIMEOUT_MS = 45_000  # page-to-first-frame stalls of 5-11 s happen under load
-
-
-def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "browser: runs in a real headless Chromium (playwright)")
-
-
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    here = os.path.dirname(__file__)
-    for item in items:
-        if str(item.fspath).startswith(here):
-            item.add_marker(pytest.mark.browser)
 
 
 def missing_browser() -> str | None:
@@ -71,7 +61,7 @@ def wait_ready(page: Any, node: str = "/tool/tip") -> None:
                   "requestAnimationFrame(() => r(true))))")
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 20.0, step: float = 0.05) -> bool:
+def wait_for(cond: Callable[[], bool], timeout: float = 45.0, step: float = 0.05) -> bool:
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         if cond():
