@@ -34,7 +34,8 @@ def _run(workers: int, trials: int = TRIALS) -> tuple[float, float, int]:
         db = Path(tmp) / "bench.sqlite"
         rep = simulate_cohort(db, protocol, n_subjects=SUBJECTS, n_surgeons=1, seed=7,
                               workers=workers, progress=True,
-                              max_trials_per_subject=trials)
+                              max_trials_per_subject=trials,
+                              max_trial_time=1.0 if SMOKE else None)
         sim, wall, n = rep.sim_seconds, rep.wall_seconds, rep.trials_run
     return sim, wall, n
 
