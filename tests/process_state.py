@@ -5,11 +5,15 @@ tests/conftest.py; issue #31).
 :func:`snapshot` before the test, :func:`undo_changes` after its teardown: it lists what
 changed and puts back what it can (handlers, variables, directory), so one leak cannot
 cascade into the tests after it. Threads cannot be put back: they get ``grace_s`` to end
-(a stopped server's threads wind down asynchronously), then they are reported.
+(a stopped server's threads wind down asynchronously), then they are reported. Threads are
+checked per module (:func:`leftover_threads`): a module-scoped fixture (a viewer app shared
+by the module's tests) may start threads lazily during a test and stops them only at the
+end of the module.
 """
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import threading
@@ -69,9 +73,12 @@ def _name(handler: object) -> str:
     return getattr(handler, "__qualname__", None) or repr(handler)
 
 
-def undo_changes(before: ProcessState, grace_s: float = 10.0) -> list[str]:
+def undo_changes(before: ProcessState, grace_s: float = 10.0, *,
+                 threads: bool = True) -> list[str]:
     """What changed since ``before`` (empty: nothing), after putting handlers, variables and
-    the working directory back; threads started since get ``grace_s`` seconds to end."""
+    the working directory back; with ``threads``, threads started since get ``grace_s``
+    seconds to end (an executor's idle workers end when it is collected: one
+    ``gc.collect()`` first)."""
     problems = []
     for number, handler in _handlers().items():
         old = before.handlers.get(number, handler)
@@ -93,6 +100,14 @@ def undo_changes(before: ProcessState, grace_s: float = 10.0) -> list[str]:
     if os.getcwd() != before.cwd:
         problems.append(f"the working directory changed to {os.getcwd()}")
         os.chdir(before.cwd)
+    if not threads:
+        return problems
+    return problems + leftover_threads(before, grace_s)
+
+
+def leftover_threads(before: ProcessState, grace_s: float = 10.0) -> list[str]:
+    """Threads started since ``before`` that are still running after ``grace_s`` seconds."""
+    gc.collect()
     t_end = time.monotonic() + grace_s
     while True:
         left = [t for t in threading.enumerate()
@@ -101,7 +116,7 @@ def undo_changes(before: ProcessState, grace_s: float = 10.0) -> list[str]:
         if not left or time.monotonic() >= t_end:
             break
         time.sleep(0.05)
-    if left:
-        problems.append(f"threads still running {grace_s:g} s after the test: "
-                        + ", ".join(f"{t.name} ({type(t).__name__})" for t in left))
-    return problems
+    if not left:
+        return []
+    return [f"threads still running {grace_s:g} s after the test: "
+            + ", ".join(f"{t.name} ({type(t).__name__})" for t in left)]
