@@ -29,12 +29,15 @@ def test_every_bench_module_is_smoke_run_or_says_why_not() -> None:
 def test_a_failing_benchmark_fails_the_smoke_run(capsys: pytest.CaptureFixture[str]) -> None:
     assert bench_main.smoke(["bench.no_such_benchmark"]) == 1
     out = capsys.readouterr().out
-    assert "bench.no_such_benchmark ... FAILED (exit 1" in out
+    assert "[1/1] bench.no_such_benchmark: FAILED (exit 1" in out
     assert "No module named bench.no_such_benchmark" in out
     assert "0 of 1 benchmarks ran in smoke mode" in out and "failed: bench.no_such_benchmark" in out
 
 
-def test_an_unknown_option_is_a_one_line_error() -> None:
-    p = subprocess.run([sys.executable, "-m", "bench", "--smokey"], cwd=ROOT,
+@pytest.mark.parametrize(("args", "needle"), [(["--smokey"], "--smokey"),
+                                               (["--smoke", "--jobs", "0"], "--jobs: got 0")])
+def test_bad_options_are_a_one_line_error(args: list[str], needle: str) -> None:
+    p = subprocess.run([sys.executable, "-m", "bench", *args], cwd=ROOT,
                        capture_output=True, text=True, timeout=120)
-    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "--smokey" in p.stderr
+    err = p.stderr.strip().splitlines()
+    assert p.returncode == 2 and needle in err[-1] and "Traceback" not in p.stderr
