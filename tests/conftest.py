@@ -32,9 +32,16 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from tests.markers import marks_for
 from tests.process_state import leftover_threads, snapshot, undo_changes
+
+# Hypothesis's own wall-clock checks fail a property test on a loaded machine: the 200 ms
+# per-example deadline (20 @given tests had it) and the too_slow health check (data
+# generation timed). Both off for the whole suite; what is tested is the property.
+settings.register_profile("vasim", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("vasim")
 
 THREAD_GRACE_S = 10.0
 """How long threads a test started may take to end after its teardown [s]."""

@@ -33,3 +33,11 @@ def test_a_node_gets_the_markers_of_its_folder_file_or_test() -> None:
     assert marks_for("tests/study/power/test_driver.py::test_a") == ["cluster"]
     assert marks_for("tests/study/power/test_drivers.py::test_a") == []
     assert marks_for("tests/core/test_config.py::test_a") == []
+
+
+def test_hypothesis_has_no_wall_clock_checks() -> None:
+    """tests/conftest.py's profile: no per-example deadline, no too_slow health check."""
+    from hypothesis import HealthCheck, settings
+
+    assert settings.default.deadline is None
+    assert HealthCheck.too_slow in settings.default.suppress_health_check
