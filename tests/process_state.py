@@ -27,7 +27,9 @@ PERSISTENT_THREADS: tuple[Callable[[threading.Thread], bool], ...] = (
 )
 """Threads a library keeps for the life of the process by design (not leaks)."""
 
-_SIGNALS = sorted(set(signal.valid_signals()) - {signal.SIGKILL, signal.SIGSTOP})
+_SIGNALS = sorted(set(signal.valid_signals()) - {signal.SIGKILL, signal.SIGSTOP, signal.SIGALRM})
+"""Every handler but SIGALRM's: pytest-timeout sets it around each test and puts it back
+early when the test fails (its pytest_exception_interact hook)."""
 _PYTEST_VARIABLES = ("PYTEST_CURRENT_TEST",)  # pytest rewrites it in every phase
 
 

@@ -23,6 +23,7 @@ LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-backgro
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}
 READY_TIMEOUT_MS = 45_000  # page-to-first-frame stalls of 5-11 s happen under load
+ACTION_TIMEOUT_MS = 90_000  # clicks and navigations (Playwright's default: 30 s)
 
 
 def missing_browser() -> str | None:
@@ -45,9 +46,27 @@ def browser() -> Iterator[Any]:
     with sync_playwright() as p:
         b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=LAUNCH_ARGS)
         try:
-            yield b
+            yield _Browser(b)
         finally:
             b.close()
+
+
+class _Browser:
+    """The browser, whose pages wait :data:`ACTION_TIMEOUT_MS` for an action (a click, a
+    navigation) instead of Playwright's 30 s: a page rendering software WebGL on a loaded
+    2-core machine has taken longer to take a click (issue #31)."""
+
+    def __init__(self, browser: Any) -> None:
+        self._browser = browser
+
+    def new_page(self, **kwargs: Any) -> Any:
+        page = self._browser.new_page(**kwargs)
+        page.set_default_timeout(ACTION_TIMEOUT_MS)
+        page.set_default_navigation_timeout(ACTION_TIMEOUT_MS)
+        return page
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._browser, name)
 
 
 def wait_ready(page: Any, node: str = "/tool/tip") -> None:
