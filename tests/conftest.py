@@ -43,14 +43,22 @@ from tests.process_state import leftover_threads, snapshot, undo_changes
 settings.register_profile("vasim", deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile("vasim")
 
+LONG_TIMEOUT_S = 900
+"""pytest-timeout's limit for browser and Ray tests (pyproject: 300 s for the others): a
+hang guard, not a speed check; a real-time page or a Ray cluster on a 2-core machine at a
+load of 30-40 has needed more than 300 s."""
+
 THREAD_GRACE_S = 10.0
 """How long threads a test started may take to end after its teardown [s]."""
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     for item in items:  # node ids are relative to the rootdir, the repository root
-        for mark in marks_for(item.nodeid):
+        marks = marks_for(item.nodeid)
+        for mark in marks:
             item.add_marker(getattr(pytest.mark, mark))
+        if {"browser", "cluster"} & set(marks) and item.get_closest_marker("timeout") is None:
+            item.add_marker(pytest.mark.timeout(LONG_TIMEOUT_S))
 
 
 # -- the guard ------------------------------------------------------------------------
