@@ -22,8 +22,8 @@ CHROMIUM = os.environ.get("VASIM_CHROMIUM", "/usr/bin/chromium")   # as .ci/ensu
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}
-READY_TIMEOUT_MS = 45_000  # page-to-first-frame stalls of 5-11 s happen under load
-ACTION_TIMEOUT_MS = 90_000  # clicks and navigations (Playwright's default: 30 s)
+READY_TIMEOUT_MS = 120_000  # page-to-first-frame stalls of 5-11 s at load 1-3, > 45 s at 30-40
+ACTION_TIMEOUT_MS = 180_000  # clicks, navigations (Playwright: 30 s; > 90 s seen at load 40)
 
 
 def missing_browser() -> str | None:

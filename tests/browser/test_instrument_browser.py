@@ -95,7 +95,7 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
     try:
         trainee.goto(app.url)
         wait_ready(trainee)
-        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=45_000)
+        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=120_000)
         # The trainee page shows no experimenter control.
         for role, name in EXPERIMENTER_ONLY:
             assert trainee.get_by_role(role, name=name).count() == 0, name  # type: ignore[arg-type]
@@ -117,7 +117,7 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         assert dev is not None and dev.mapping.sensitivity == 0.5 and info.trial_id is not None
         # The trainee's page names the trial as the store does and tells what to do.
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"{info.title} — running", timeout=45_000)
+                                  arg=f"{info.title} — running", timeout=120_000)
         assert "points along the path" in trainee.inner_text("body")
         # The trainee's camera is the endoscope: dragging over the view does not orbit it.
         client = next(iter(app.server.get_clients().values()))   # type: ignore[union-attr]
@@ -163,9 +163,9 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         assert wait_for(lambda: not app.panel.running, timeout=60), app.panel.status
         trainee.wait_for_function(
             "(t) => document.body.innerText.includes(t)",
-            arg=f"{info.title} — ended: stopped by the experimenter", timeout=45_000)
+            arg=f"{info.title} — ended: stopped by the experimenter", timeout=120_000)
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"Score card — {info.title}", timeout=45_000)
+                                  arg=f"Score card — {info.title}", timeout=120_000)
         body = trainee.inner_text("body")
         assert "running" not in body.split("Score card")[0].split(info.title)[1][:20]
         assert "Points reached" in body and "Path length" in body
