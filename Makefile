@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test bench lint clean
+.PHONY: install run test check bench lint clean
 
 install: $(STAMP)
 
@@ -19,12 +19,28 @@ $(STAMP): pyproject.toml
 run: install
 	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080 --db study.sqlite
 
+# pytest caches the assert-rewritten test modules as bytecode; with PYTHONDONTWRITEBYTECODE
+# set (some shells and containers set it) every run rewrites all ~250 of them again: ~6 s of
+# the ~17 s of CPU collection takes, which each parallel worker pays.
+PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
+
+# The whole suite (CI): lint, then the tests in two phases -- in parallel (pytest-xdist, one
+# worker per core, a test file per worker) all but the browser and Ray tests, then those two
+# groups one test at a time (each paces real time or starts process trees sized to the
+# machine's cores) -- then every benchmark in its seconds-long smoke mode. Each phase prints
+# its slowest 20 tests.
 test: install
 	.ci/ensure-chromium
 	$(VENV)/bin/ruff check vasim tests bench
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
-	$(PY) -m pytest
+	$(PYTEST) -n auto --dist loadfile -m "not browser and not cluster" --durations=20
+	$(PYTEST) -m "browser or cluster" --durations=20
+	$(PY) -m bench --smoke
+
+# A developer's quick loop (a few minutes): no slow, browser or Ray tests, in parallel.
+check: install
+	$(PYTEST) -n auto --dist loadfile -m "not slow and not browser and not cluster"
 
 bench: install
 	$(PY) -m bench

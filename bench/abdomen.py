@@ -58,7 +58,12 @@ from vasim.abdomen.integrate import OrganSolver
 from vasim.abdomen.model import AnchorRule, OrganModel, OrganParams, build_organ
 from vasim.abdomen.scene import ScenePhysics, load_scene
 
-SIZES = (7, 14, 28)
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+SIZES = (7, 14) if SMOKE else (7, 14, 28)
+BIG = SIZES[-1]  # the "7,842-node" organ of stage 4 (1,962 nodes in the smoke run)
+
 """Geodesic frequencies: 10 f² + 2 nodes = 492, 1,962, 7,842 (the guide's S, M, L)."""
 EXTENTS = (0.12, 0.08, 0.06)
 DRAM_SPRINGS_PER_S = 0.7e9
@@ -126,7 +131,9 @@ def vasim_model(mesh: trimesh.Trimesh, k: float, *, volume: bool = False) -> Org
     """The guide's spring model of ``mesh``, anchored at the same 5 nodes as pybullet; with
     ``volume``, an organ: interior nodes and spokes of stiffness k / 2 as well."""
     n = len(mesh.vertices)
-    rule = AnchorRule(to="point", point=(0.0, 0.0, 1.0), fraction=5 / n)  # replaced below
+    # 0.5 m above the origin (the top of the scene bounds, far above the 6 cm ellipsoid):
+    # its nearest nodes are the top ones; replaced below by exactly the 5 pybullet anchors
+    rule = AnchorRule(to="point", point=(0.0, 0.0, 0.5), fraction=5 / n)
     params = OrganParams(stiffness=k, bending_stiffness=0.1 * k, mass=1.0, damping=0.0,
                          volume=volume, volume_stiffness=0.5 * k,
                          mass_distribution="uniform", anchors=(rule,))
@@ -277,8 +284,9 @@ def main() -> None:
     stages: list[tuple[str, Callable[[], object]]] = []
     meshes = {f: ellipsoid(f) for f in SIZES}
     results: dict[str, object] = {}
-    vasim_steps = {7: 400, 14: 200, 28: 50}
-    bullet_steps = {7: 300, 14: 100, 28: 25}
+    vasim_steps = {7: 3, 14: 2} if SMOKE else {7: 400, 14: 200, 28: 50}
+    bullet_steps = {7: 3, 14: 2} if SMOKE else {7: 300, 14: 100, 28: 25}
+    stab_steps, big_steps, pre_steps = (3, 2, 2) if SMOKE else (250, 60, 100)  # stages 2, 4, 6
     for f in SIZES:
         n = len(meshes[f].vertices)
         stages.append((f"vasim {n} nodes, k=100, dt=1 ms", lambda f=f: results.__setitem__(
@@ -286,27 +294,29 @@ def main() -> None:
         stages.append((f"pybullet {n} nodes, k=100, dt=1 ms", lambda f=f: results.__setitem__(
             f"b{f}", run_pybullet(meshes[f], 100.0, 1e-3, bullet_steps[f]))))
     stages.append(("stability: vasim 1962 nodes, k=1000, dt=4 ms", lambda: results.__setitem__(
-        "vstab", run_vasim(vasim_model(meshes[14], 1000.0), 4e-3, 250))))
+        "vstab", run_vasim(vasim_model(meshes[14], 1000.0), 4e-3, stab_steps))))
     stages.append(("stability: pybullet 1962 nodes, k=1000, dt=4 ms",
                    lambda: results.__setitem__("bstab", run_pybullet(meshes[14], 1000.0, 4e-3,
-                                                                     250))))
-    stages.append(("default abdomen", lambda: results.__setitem__("abd", run_abdomen())))
+                                                                     stab_steps))))
+    stages.append(("default abdomen", lambda: results.__setitem__(
+        "abd", run_abdomen(5, 5) if SMOKE else run_abdomen())))
     budget = {"max_newton": 1, "max_iterations": 1, "cg_tol": 0.1}
     stages.append(("7842-node organ at dt=16 ms", lambda: results.__setitem__(
-        "big", run_vasim(vasim_model(meshes[28], 100.0, volume=True), 16e-3, 60, **budget))))
+        "big", run_vasim(vasim_model(meshes[BIG], 100.0, volume=True), 16e-3, big_steps,
+                         **budget))))
     stages.append(("7842-node organ at dt=16 ms, k=1000", lambda: results.__setitem__(
-        "big1000", run_vasim(vasim_model(meshes[28], 1000.0, volume=True), 16e-3, 60,
+        "big1000", run_vasim(vasim_model(meshes[BIG], 1000.0, volume=True), 16e-3, big_steps,
                              **budget))))
     stages.append(("7842-node membrane at dt=16 ms", lambda: results.__setitem__(
-        "bigm", run_vasim(vasim_model(meshes[28], 100.0), 16e-3, 60,
+        "bigm", run_vasim(vasim_model(meshes[BIG], 100.0), 16e-3, big_steps,
                           **{**budget, "max_iterations": 12, "cg_tol": 0.05}))))
     for pre in ("diagonal", "factor"):
         stages.append((f"preconditioner {pre}: 1962 nodes k=100 1 ms", lambda pre=pre:
                        results.__setitem__(f"p{pre}1", run_vasim(
-                           vasim_model(meshes[14], 100.0), 1e-3, 100, preconditioner=pre))))
+                           vasim_model(meshes[14], 100.0), 1e-3, pre_steps, preconditioner=pre))))
         stages.append((f"preconditioner {pre}: 1962 nodes k=1000 4 ms", lambda pre=pre:
                        results.__setitem__(f"p{pre}4", run_vasim(
-                           vasim_model(meshes[14], 1000.0), 4e-3, 100, preconditioner=pre))))
+                           vasim_model(meshes[14], 1000.0), 4e-3, pre_steps, preconditioner=pre))))
     t_start = time.perf_counter()
     bar = tqdm(stages, desc="bench.abdomen", file=sys.stderr, disable=not sys.stderr.isatty())
     for label, run in bar:

@@ -29,6 +29,7 @@ one core" the goals are stated in. Medians unless said otherwise.
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import sys
 import tempfile
@@ -49,7 +50,11 @@ from vasim.abdomen.contact import (
 from vasim.abdomen.integrate import OrganSolver
 from vasim.abdomen.world import Abdomen
 
-SIZES = (7, 14, 28)
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+SIZES = (7,) if SMOKE else (7, 14, 28)
+WORLD_STEPS = 5 if SMOKE else 200
 """Geodesic frequencies of the guide's ellipsoids: 492, 1,962, 7,842 nodes."""
 PROBE_R = 0.0025
 APPROACH = 0.002
@@ -263,15 +268,15 @@ def run_pybullet_probe(freq: int, steps: int, margin: float | None = None) -> di
 def main() -> None:
     t0 = time.perf_counter()
     log("default abdomen, every organ integrated, tool pressing the liver")
-    full = run_world(True, 200)
+    full = run_world(True, WORLD_STEPS)
     log("default abdomen, every organ integrated, tool withdrawn")
-    free = run_world(True, 200, withdrawn=True)
+    free = run_world(True, WORLD_STEPS, withdrawn=True)
     log("default abdomen as a headless trial runs it (organs asleep until touched)")
-    sleepy = run_world(False, 200)
+    sleepy = run_world(False, WORLD_STEPS)
     log("contact detection and the 1 kHz patch force")
-    patch = run_patch()
+    patch = run_patch(200) if SMOKE else run_patch()
     probes: dict[int, tuple[dict, dict, dict, dict]] = {}
-    steps = {7: 200, 14: 160, 28: 60}
+    steps = {7: 20} if SMOKE else {7: 200, 14: 160, 28: 60}
     for f in SIZES:
         log(f"ellipsoid {10 * f * f + 2} nodes: vasim (sphere probe, shaft, no probe)")
         vs = run_vasim_probe(f, steps[f])
@@ -281,7 +286,8 @@ def main() -> None:
         bm = run_pybullet_probe(f, steps[f], margin=0.001)
         probes[f] = (vs, vshaft, vfree, bm)
     log("1962-node ellipsoid: pybullet, default collision margin")
-    bdef = run_pybullet_probe(14, 120)
+    mid = SIZES[-1] if SMOKE else 14  # the 1,962-node ellipsoid (492 in the smoke run)
+    bdef = run_pybullet_probe(mid, 20 if SMOKE else 120)
     log(f"done in {time.perf_counter() - t0:.0f} s")
 
     print(f"1. default abdomen ({full['nodes']} nodes incl. the kinematic wall), dt = 4 ms; "
@@ -325,7 +331,7 @@ def main() -> None:
     print(f"   1962 nodes, pybullet default margin: {bdef['ms']:.2f} | {bdef['cpu']:.2f} "
           f"ms/step in contact ({bdef['contact_steps']}/{bdef['steps']} steps, up to "
           f"{bdef['max_contacts']} points): vasim "
-          f"{bdef['cpu'] / probes[14][0]['cpu']:.0f}x faster")
+          f"{bdef['cpu'] / probes[mid][0]['cpu']:.0f}x faster")
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ run rather than across runs.
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import time
 from collections.abc import Callable
@@ -34,6 +35,10 @@ from vasim.fixtures.schema import load_schema
 from vasim.fixtures.types import TaskState
 from vasim.tasks import trajectory_task
 from vasim.trials.vf import TrialConfig, TrialRunner
+
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
 
 
 def _states(n: int) -> list[TaskState]:
@@ -50,7 +55,7 @@ def _states(n: int) -> list[TaskState]:
     ]
 
 
-def _median_us(run: Callable[[], None], n: int, repeats: int = 5) -> float:
+def _median_us(run: Callable[[], None], n: int, repeats: int = 1 if SMOKE else 5) -> float:
     """Median over ``repeats`` runs of ``run`` (``n`` steps each), in µs per step."""
     per_run = []
     for _ in range(repeats):
@@ -60,7 +65,8 @@ def _median_us(run: Callable[[], None], n: int, repeats: int = 5) -> float:
     return statistics.median(per_run)
 
 
-def _fixture_step_cost(schema_name: str, n: int = 5000) -> tuple[float, float, float]:
+def _fixture_step_cost(schema_name: str,
+                       n: int = 200 if SMOKE else 5000) -> tuple[float, float, float]:
     """µs per step of (public scale_motion + render, float-level scale_motion_xyz +
     render_xyz) and µs per ``outputs()``."""
     states = _states(n)
@@ -92,7 +98,7 @@ def _fixture_step_cost(schema_name: str, n: int = 5000) -> tuple[float, float, f
     return _median_us(public, n), _median_us(floats, n), _median_us(outputs, n)
 
 
-def _per_fixture_costs(n: int = 2000) -> list[tuple[str, float, float]]:
+def _per_fixture_costs(n: int = 50 if SMOKE else 2000) -> list[tuple[str, float, float]]:
     """(fixture, µs per public call, µs per float-level core call), schema parameters."""
     states = _states(n)
     params = {f.kind: f.params for f in load_schema("trajectory_following").fixtures}
@@ -130,11 +136,12 @@ def _per_fixture_costs(n: int = 2000) -> list[tuple[str, float, float]]:
             for name in publics]
 
 
-def _trial_throughput(n_trials: int = 3) -> tuple[float, float, float]:
+def _trial_throughput(n_trials: int = 1 if SMOKE else 3) -> tuple[float, float, float]:
     """(simulated s per wall s, µs per control step, simulated s per trial), median."""
     ratios, step_us, sim = [], [], []
     for seed in tqdm(range(n_trials), desc="scripted trials", leave=False):
-        runner = TrialRunner(TrialConfig(schema="trajectory_following", seed=seed))
+        cut = {"max_time": 1.0} if SMOKE else {}
+        runner = TrialRunner(TrialConfig(schema="trajectory_following", seed=seed, **cut))
         t0 = time.perf_counter()
         while not runner.done:
             runner.advance(1.0)

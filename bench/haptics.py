@@ -63,8 +63,11 @@ from vasim.trials.realtime import (
 )
 from vasim.trials.vf import TrialConfig
 
-SECONDS = float(os.environ.get("VASIM_BENCH_HAPTICS_S", "10"))
-TRIAL_SECONDS = 30.0
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+SECONDS = float(os.environ.get("VASIM_BENCH_HAPTICS_S", "0.4" if SMOKE else "10"))
+TRIAL_SECONDS = 0.4 if SMOKE else 30.0
 VIEWER_HZ = 60.0
 
 

@@ -71,11 +71,15 @@ from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 
 BUDGET_MS = 18.0
-CYCLES = int(os.environ.get("VASIM_BENCH_MRCP_N", "150"))
-WARMUP = 20
-SPEEDUP_CYCLES = 60          # per run, 2 alternating runs per variant
-SCENARIO_S = 3.0             # simulated seconds of the eight_robots scenario per variant
-BROWSER_S = 8.0              # wall seconds of the served scenario
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+CYCLES = int(os.environ.get("VASIM_BENCH_MRCP_N", "3" if SMOKE else "150"))
+WARMUP = 2 if SMOKE else 20
+SPEEDUP_CYCLES = 3 if SMOKE else 60  # per run, 2 alternating runs per variant
+SCENARIO_S = 0.2 if SMOKE else 3.0  # simulated seconds of the eight_robots scenario per variant
+BROWSER_S = 1.0 if SMOKE else 8.0   # wall seconds of the served scenario
+ROBOT_COUNTS = (2,) if SMOKE else (2, 4, 8, 16)
 
 
 @dataclass
@@ -232,7 +236,8 @@ def _pct(values: list[float], q: float) -> float:
     return float(np.percentile(values, q))
 
 
-def batch_speedup(n: int = 8, cycles: int = SPEEDUP_CYCLES) -> tuple[float, float, float]:
+def batch_speedup(n: int = 2 if SMOKE else 8,
+                  cycles: int = SPEEDUP_CYCLES) -> tuple[float, float, float]:
     """CPU p50 [ms] of the ``n``-robot default cycle with the trajectory IK batched across
     robots and with one ``arm.ik`` call per point, alternating runs (the same cycles: the
     batch changes no configuration), and their ratio."""
@@ -381,7 +386,7 @@ def main() -> None:
         if factory is None:
             print(f"{name:8s} not available")
             continue
-        for n in (2, 4, 8, 16):
+        for n in ROBOT_COUNTS:
             try:
                 st = factory(n)
                 wall, cpu, pairs = time_cycles(st, CYCLES, traj, dist)
@@ -401,7 +406,7 @@ def main() -> None:
           f"{'cpu p50':>8s} {'cpu p99':>8s} {'wall p50':>8s} {'wall p99':>8s} "
           f"{'p50 gain':>8s} {'p99 gain':>8s}")
     print(f"{'':6s} {'batched':>35s} {'per robot':>35s}")
-    for n in (2, 4, 8, 16):
+    for n in ROBOT_COUNTS:
         print(batch_distances_comparison(n).row(), flush=True)
     c_on, c_off, ratio = batch_speedup()
     print(f"8 RX60B default, trajectory IK batched across robots (one compiled call a cycle) "

@@ -43,7 +43,8 @@ from typing import Any
 from bench.mrcp import CYCLES, WARMUP, rx60b_station, six_indices, time_cycles
 from vasim.mrcp.kernel import KernelConfig, MRCPKernel
 
-ROBOTS = int(os.environ.get("VASIM_BENCH_MRCP_ROBOTS", "8"))
+ROBOTS = int(os.environ.get("VASIM_BENCH_MRCP_ROBOTS",
+                            "2" if os.environ.get("VASIM_BENCH_SMOKE") == "1" else "8"))
 
 
 @dataclass

@@ -28,6 +28,7 @@ per distance).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
@@ -46,6 +47,9 @@ from vasim.mrcp.rpq import (
 )
 
 N_CONFIGURATIONS = 9216
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
 
 
 def log(msg: str) -> None:
@@ -163,10 +167,12 @@ def main(argv: list[str] | None = None) -> None:
     pairs = seed_test_bed_pairs(robot)
     if args.quick:
         pairs = pairs[::16]
+    if SMOKE:
+        pairs = pairs[::1024]
     warm = facing_pair(robot, 0.6)      # compile / load the kernels outside the timing
     RPQ(warm).collide("a", "b")
     warm.close()
-    world_costs(robot, 50 if args.quick else 200)
+    world_costs(robot, 5 if SMOKE else 50 if args.quick else 200)
     log(f"{len(pairs)} configurations per distance")
     quick = ", every 16th (--quick)" if args.quick else ""
     print(f"two RX60B facing each other, {len(pairs)} joint configurations per distance "
@@ -188,7 +194,7 @@ def main(argv: list[str] | None = None) -> None:
     print(f"answers identical (RPQ = brute force = pybullet whole-body) on every "
           f"configuration; overall speed-up over brute force x{tot['bf'] / tot['rpq']:.1f}, "
           f"over pybullet's whole-body query x{tot['pb'] / tot['rpq']:.2f}")
-    why_shares_differ(robot, 16 if args.quick else 1)
+    why_shares_differ(robot, 1024 if SMOKE else 16 if args.quick else 1)
 
 
 if __name__ == "__main__":

@@ -23,6 +23,7 @@ condition's mean relative to VF-free at both steps (are the fixture effects kept
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -36,9 +37,13 @@ from vasim.study.power.driver import run_power
 from vasim.study.protocol import load_protocol
 
 PROTOCOL = "vf_learning_curve"
-SUBJECTS = 3
-MAX_TIME = 3.0      # s per trial: the cohort's 114 trials stay short
-COHORTS = 4
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+SUBJECTS = 2 if SMOKE else 3
+MAX_TIME = 0.3 if SMOKE else 3.0  # s per trial: the cohort's 114 trials stay short
+COHORTS = 1 if SMOKE else 4
+WORKERS = (1,) if SMOKE else (1, 2)
 
 
 def where_time_goes() -> None:
@@ -66,7 +71,7 @@ def ray_throughput() -> None:
     design = PowerDesign(subjects=(SUBJECTS,), cohorts=COHORTS, dt=COARSE_DT,
                          max_trial_time=MAX_TIME)
     rates = {}
-    for workers in (1, 2):
+    for workers in WORKERS:
         res = run_power(protocol, design, workers=workers, progress=False)
         n = design.n_cohorts
         steady = n / max(res.wall_seconds - res.ray_seconds, 1e-9)
@@ -77,6 +82,8 @@ def ray_throughput() -> None:
               f"{n / res.wall_seconds:.4f} cohorts/s, "
               f"{steady:.4f} without the start, {n / res.cpu_seconds:.4f} per task CPU s",
               flush=True)
+    if 2 not in rates:
+        return
     print(f"  2 vs 1 workers: {rates[2][0] / rates[1][0]:.2f}x "
           f"({rates[2][1] / rates[1][1]:.2f}x without Ray's start); tasks' wall >> CPU means "
           "they waited for cores other processes held")

@@ -27,6 +27,7 @@ imports included) against the 30 s goal.
 from __future__ import annotations
 
 import math
+import os
 import re
 import subprocess
 import sys
@@ -44,7 +45,11 @@ from vasim.study.protocol import generate_schedule, load_protocol
 from vasim.study.session import SessionSettings, record_answers, start_session
 from vasim.study.store import TrialStore
 
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
 N_SUBJECTS = 46
+FIXTURE_SUBJECTS = 2 if SMOKE else N_SUBJECTS
 N_SURGEONS = 31
 N_POINTS = 30
 GOAL_S = 30.0
@@ -141,7 +146,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "bench_report.sqlite"
         t0 = time.perf_counter()
-        n = build_store(db, progress=sys.stderr.isatty())
+        n = build_store(db, n_subjects=FIXTURE_SUBJECTS, progress=sys.stderr.isatty())
         t_build = time.perf_counter() - t0
         out = Path(tmp) / "report"
         t0 = time.perf_counter()
@@ -153,7 +158,7 @@ def main() -> None:
             raise SystemExit(f"vasim report failed ({proc.returncode}): {proc.stderr.strip()}")
         size = (out / "index.html").stat().st_size
         n_csv = len(list((out / "tables").glob("*.csv")))
-    label = f"{N_SUBJECTS} subjects x 38 trials x {N_POINTS} points"
+    label = f"{FIXTURE_SUBJECTS} subjects x 38 trials x {N_POINTS} points"
     print(f"{'fixture: ' + label:<52} {n:8d} trials in {t_build:6.1f} s")
     print(f"{'vasim report (subprocess, imports included)':<52} {wall:8.2f} s")
     print(f"{'  goal':<52} {GOAL_S:8.2f} s  ({wall / GOAL_S:.2f} of the goal)")

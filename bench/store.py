@@ -7,6 +7,7 @@ synchronous=FULL), plus rows per second.
 
 from __future__ import annotations
 
+import os
 import statistics
 import tempfile
 import time
@@ -20,8 +21,13 @@ from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.study.store import TrialStore
 
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+FINISH_N = 5000 if SMOKE else 100_000
 
-def _append_cost(n: int = 20_000, repeats: int = 5) -> float:
+
+def _append_cost(n: int = 1000 if SMOKE else 20_000, repeats: int = 1 if SMOKE else 5) -> float:
     buf = SampleBuffer(capacity=n)
     x, g, f = np.array([0.1, 0.2, 0.3]), np.array([0.0, 0.0, 0.01]), np.array([1.0, 0, 0])
     ms = np.ones(3)
@@ -35,7 +41,7 @@ def _append_cost(n: int = 20_000, repeats: int = 5) -> float:
     return statistics.median(runs)
 
 
-def _finish_cost(n: int = 100_000, repeats: int = 3) -> float:
+def _finish_cost(n: int = FINISH_N, repeats: int = 1 if SMOKE else 3) -> float:
     rng = np.random.default_rng(0)
     buf = SampleBuffer(capacity=n)
     buf.extend(k=np.arange(n), t=np.arange(n) * 1e-3, x=rng.normal(size=(n, 3)),
@@ -57,8 +63,8 @@ def main() -> None:
     fin = _finish_cost()
     print(f"{'SampleBuffer.append (in the 1 kHz loop)':<52} {app:8.2f} µs/sample")
     print(f"{'  share of the 1 ms haptic budget':<52} {app / 10:8.2f} %")
-    print(f"{'finish_trial, 100,000 samples, one transaction':<52} {fin:8.3f} s")
-    print(f"{'  rows made durable per second':<52} {100_000 / fin:8.0f}")
+    print(f"{f'finish_trial, {FINISH_N:,} samples, one transaction':<52} {fin:8.3f} s")
+    print(f"{'  rows made durable per second':<52} {FINISH_N / fin:8.0f}")
 
 
 if __name__ == "__main__":

@@ -18,9 +18,13 @@ from pathlib import Path
 from vasim.study.cohort import simulate_cohort
 from vasim.study.protocol import load_protocol
 
-SUBJECTS = 2
-TRIALS = 8  # per subject: baseline + the first block's trials (conditions vary by subject)
-SHORT_TRIALS = 2  # per subject, for the start-up share
+SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
+"""``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
+figures mean nothing)."""
+SUBJECTS = 1 if SMOKE else 2
+# per subject: baseline + the first block's trials (conditions vary by subject)
+TRIALS = 2 if SMOKE else 8
+SHORT_TRIALS = 1 if SMOKE else 2  # per subject, for the start-up share
 FULL_SUBJECTS, FULL_TRIALS = 46, 38
 
 
@@ -30,7 +34,8 @@ def _run(workers: int, trials: int = TRIALS) -> tuple[float, float, int]:
         db = Path(tmp) / "bench.sqlite"
         rep = simulate_cohort(db, protocol, n_subjects=SUBJECTS, n_surgeons=1, seed=7,
                               workers=workers, progress=True,
-                              max_trials_per_subject=trials)
+                              max_trials_per_subject=trials,
+                              max_trial_time=1.0 if SMOKE else None)
         sim, wall, n = rep.sim_seconds, rep.wall_seconds, rep.trials_run
     return sim, wall, n
 
@@ -38,7 +43,7 @@ def _run(workers: int, trials: int = TRIALS) -> tuple[float, float, int]:
 def main() -> None:
     cores = os.cpu_count() or 1
     rows = []
-    for workers in dict.fromkeys((1, cores)):
+    for workers in dict.fromkeys((1,) if SMOKE else (1, cores)):
         print(f"simulating {SUBJECTS} subjects x {TRIALS} trials with {workers} worker(s) ...",
               flush=True)
         sim, wall, n = _run(workers)

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import pytest
 
 
-def wait_until(cond: Callable[[], object], *, what: str, timeout: float = 10.0,
+def wait_until(cond: Callable[[], object], *, what: str, timeout: float = 30.0,
                step: float = 0.01) -> None:
     """Polls ``cond`` every ``step`` seconds until it is truthy.
 

@@ -20,4 +20,4 @@ def test_fails_after_the_deadline_naming_what_it_waited_for() -> None:
     t0 = time.monotonic()
     with pytest.raises(pytest.fail.Exception, match=r"0\.05 s waiting for the moon"):
         wait_until(lambda: False, what="the moon", timeout=0.05, step=0.01)
-    assert 0.05 <= time.monotonic() - t0 < 5.0
+    assert 0.05 <= time.monotonic() - t0 < 60.0  # it ends, no hang (how soon: the load)

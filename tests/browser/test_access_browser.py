@@ -77,7 +77,7 @@ def test_a_foreign_page_cannot_open_the_viewer_websocket(browser: Any, viewer: V
     try:
         page.goto(foreign_site)
         page.wait_for_function(
-            "() => document.getElementById('out').textContent !== 'pending'", timeout=20_000)
+            "() => document.getElementById('out').textContent !== 'pending'", timeout=120_000)
         assert page.inner_text("#out") == "REFUSED"
     finally:
         page.close()

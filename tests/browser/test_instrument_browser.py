@@ -95,7 +95,7 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
     try:
         trainee.goto(app.url)
         wait_ready(trainee)
-        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=30_000)
+        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=120_000)
         # The trainee page shows no experimenter control.
         for role, name in EXPERIMENTER_ONLY:
             assert trainee.get_by_role(role, name=name).count() == 0, name  # type: ignore[arg-type]
@@ -110,14 +110,14 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         n0 = app.snapshot.info.number
         exp.get_by_role("button", name="Start trial").click(force=True)
         assert wait_for(lambda: app.snapshot.info.number > n0
-                        and app.controller.instrument is not None, timeout=30), app.errors[-3:]
+                        and app.controller.instrument is not None, timeout=60), app.errors[-3:]
         exp.close()   # the experimenter's 3-D view would compete with the trainee's for the CPU
         dev = app.controller.instrument
         info = app.snapshot.info
         assert dev is not None and dev.mapping.sensitivity == 0.5 and info.trial_id is not None
         # The trainee's page names the trial as the store does and tells what to do.
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"{info.title} — running", timeout=30_000)
+                                  arg=f"{info.title} — running", timeout=120_000)
         assert "points along the path" in trainee.inner_text("body")
         # The trainee's camera is the endoscope: dragging over the view does not orbit it.
         client = next(iter(app.server.get_clients().values()))   # type: ignore[union-attr]
@@ -140,13 +140,16 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         assert wait_for(lambda: dev.target.insertion > depth0 + 0.004), dev.target
         if locked:
             trainee.keyboard.press("Escape")
-        # The keyboard: five points of the trajectory, in a closed loop.
-        reached = _steer(app, trainee, 5, timeout=150.0)
+        # The keyboard: five points of the trajectory, in a closed loop. What is asserted is
+        # the behaviour (the points were reached; the page's key input was applied), not how
+        # many input batches a page on a loaded machine happens to send (issue #31).
+        batches0 = app.instrument_input.batches
+        reached = _steer(app, trainee, 5, timeout=400.0)   # a closed loop: slow under load
         assert reached >= 5, (reached, app.snapshot.frame.t, app.instrument_input.batches,
                               app.errors[-3:])
-        assert app.instrument_input.batches > 20
+        assert app.instrument_input.batches > batches0   # the keys' batches were applied
         sent = trainee.evaluate("() => window.__vasimInput.sent")
-        assert sent >= app.instrument_input.batches
+        assert sent >= app.instrument_input.batches      # every applied batch came from the page
         # The endoscope's view is drawn (not blank) while the trainee works.
         shot = tmp_path / "endoscope.png"
         trainee.screenshot(path=str(shot))
@@ -157,12 +160,12 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         exp.goto(app.experimenter_url)
         wait_ready(exp)
         exp.get_by_role("button", name="Stop trial").click(force=True)
-        assert wait_for(lambda: not app.panel.running, timeout=30), app.panel.status
+        assert wait_for(lambda: not app.panel.running, timeout=60), app.panel.status
         trainee.wait_for_function(
             "(t) => document.body.innerText.includes(t)",
-            arg=f"{info.title} — ended: stopped by the experimenter", timeout=30_000)
+            arg=f"{info.title} — ended: stopped by the experimenter", timeout=120_000)
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"Score card — {info.title}", timeout=30_000)
+                                  arg=f"Score card — {info.title}", timeout=120_000)
         body = trainee.inner_text("body")
         assert "running" not in body.split("Score card")[0].split(info.title)[1][:20]
         assert "Points reached" in body and "Path length" in body

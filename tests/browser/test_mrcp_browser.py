@@ -79,4 +79,4 @@ def test_screenshot_is_not_blank(page: Any) -> None:
         seen.append(float((view.min(axis=2) < 235).mean()))
         return seen[-1] > 0.03  # robots, cube and floor grid on a white background
 
-    assert wait_for(drawn, timeout=30.0, step=0.5), seen[-3:]
+    assert wait_for(drawn, timeout=60.0, step=0.5), seen[-3:]

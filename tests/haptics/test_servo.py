@@ -276,7 +276,7 @@ def test_realtime_errors_stay_in_the_thread() -> None:
     plant = Spy(fail_at=3)
     loop = ServoLoop(EmulatorDevice(hand=_hand), plant)
     loop.start()
-    wait_until(lambda: not loop.running, what="the servo loop to stop", timeout=5.0)
+    wait_until(lambda: not loop.running, what="the servo loop to stop", timeout=30.0)
     loop.stop()
     assert isinstance(loop.error, RuntimeError) and plant.calls == ["start", "stop"]
 

@@ -32,7 +32,8 @@ from vasim.viewer.views import (
 )
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 3.0, step: float = 0.02) -> bool:
+def wait_for(cond: Callable[[], bool], timeout: float = 30.0, step: float = 0.02) -> bool:
+    """Polls ``cond`` until it holds (generous: a loaded 2-core machine stalls for seconds)."""
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         if cond():
@@ -105,7 +106,7 @@ def test_vg_and_ff_schema_draws_both_arrows_and_the_ghost(app: ViewerApp) -> Non
         seen.update(app.arrows.kinds)
         return {"guidance", "force"} <= seen
 
-    assert wait_for(both, timeout=5.0), seen
+    assert wait_for(both), seen
     assert wait_for(lambda: app.ghost.handle.visible)
     text = app.hud.text
     assert "Points reached" in text and "From the path" in text and "To the next point" in text
@@ -156,8 +157,9 @@ def test_restart_and_bad_commands_do_not_kill_the_app(app: ViewerApp) -> None:
 
 
 def test_view_thread_keeps_updating(app: ViewerApp) -> None:
-    s = app.stats()
-    assert s["view_updates"] > 10
+    n = app.stats()["view_updates"]   # how many so far depends on the machine's load
+    wait_until(lambda: app.stats()["view_updates"] >= n + 5, what="five more view updates",
+               timeout=30.0, step=0.05)
 
 
 # -- trial loop, stop ------------------------------------------------------------------
@@ -167,7 +169,7 @@ def test_trials_loop_and_stop_joins_everything() -> None:
     a = ViewerApp(port=0, schema="none", max_time=0.3, pause_s=0.1).start()
     port = a.port
     try:
-        assert wait_for(lambda: a.snapshot.info.number >= 3, timeout=5.0)
+        assert wait_for(lambda: a.snapshot.info.number >= 3)
         assert a.snapshot.info.config.variant >= 1  # the next trajectory variant
         assert a.snapshot.info.config.seed >= 2
     finally:

@@ -21,6 +21,7 @@ from vasim.viewer.controller import Command, TrainingController
 
 def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         tmp_path: Path) -> None:
+    t_test = time.time()
     db = tmp_path / "s.sqlite"
     c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.3)
 
@@ -73,5 +74,8 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         rec = json.loads(ev[ev["kind"] == SITTING_EVENT]["detail"].iloc[0])
         assert (rec["sitting"], rec["block"], rec["delay_days"], rec["simulated"]) == (
             2, "retention", 7.0, False)
-        # the real gap between trial 13's (aged) end and trial 14's start, in days
-        assert 7.0 + 1 / 1440 <= rec["elapsed_days"] < 7.0 + 2 / 1440
+        # the real gap between trial 13's (aged) end and trial 14's start, in days: 7 d 1 min
+        # plus the real time between them, which this test's own run time bounds (a fixed
+        # "< 1 min" would depend on how loaded the machine is)
+        ran_days = (time.time() - t_test) / 86400
+        assert 7.0 + 1 / 1440 <= rec["elapsed_days"] <= 7.0 + 1 / 1440 + ran_days
