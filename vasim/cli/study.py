@@ -92,7 +92,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     rt.add_argument("--in-process", action="store_true",
                     help="run the servo loop as a thread of this process instead of its "
                          "own process (the viewer's way; less steady on a loaded host)")
-    rt.add_argument("--replay", type=int, default=None, metavar="TRIAL_ID",
+    rt.add_argument("--replay", type=bounded_int(ID), default=None, metavar="TRIAL_ID",
                     help="re-run a stored real-time trial from its recording (needs --db) "
                          "and compare it with the stored samples and metrics")
     p.set_defaults(func=_cmd_trial)

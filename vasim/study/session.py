@@ -57,7 +57,6 @@ Example:
 from __future__ import annotations
 
 import secrets
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -638,15 +637,16 @@ def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
     Raises:
         ConfigError: unreadable file, invalid TOML, or other top-level tables.
     """
+    from vasim.core.config import parse_toml  # the one TOML reader (nesting checked)
+
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError("answers file not found", file=p) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read answers file: {exc}", file=p) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"invalid TOML: {exc}", file=p) from exc
+    data = parse_toml(text, file=p, kind="answers file")
     for key, value in data.items():
         if key not in ("pre", "post") or not isinstance(value, dict):
             raise ConfigError(f"expected [pre] and [post] tables, got {key} = {value!r}",
