@@ -50,9 +50,10 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--seed", type=bounded_int(SEED), default=7, help="base seed (default 7)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
-    r.add_argument("--address", default=None,
-                   help="Ray cluster to join (ray://HEAD:10001, or auto on a node); "
-                        "default: a local Ray on this machine")
+    r.add_argument("--address", type=ray_address, default=None,
+                   help="Ray cluster to join (HEAD:6379 on a node of it, ray://HEAD:10001 "
+                        "from anywhere, or auto on a node); checked first (it must answer "
+                        "within a few seconds); default: a local Ray on this machine")
     r.add_argument("--workers", type=workers, default=None,
                    help="CPUs of the local Ray (default: number of cores)")
     r.add_argument("--out", type=Path, default=None,
@@ -63,6 +64,35 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="no progress output (default: a bar on a terminal, a line every 15 s "
                         "in a log file)")
     r.set_defaults(func=_cmd_power)
+
+
+def ray_address(text: str) -> str:
+    """``--address``: the syntax of a Ray address (``vasim.study.power.driver
+    .parse_ray_address``), refused at parse time with exit code 2 (``''`` included)."""
+    from vasim.core.errors import ConfigError
+    from vasim.study.power.driver import parse_ray_address
+
+    try:
+        parse_ray_address(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+    return text
+
+
+def _sigterm_as_interrupt() -> None:
+    """SIGTERM ends a power run like Ctrl-C (``KeyboardInterrupt``: Ray is shut down in the
+    driver's ``finally`` and the command exits 130), where it would otherwise kill the
+    driver without that (issue #30 item 4)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
@@ -94,6 +124,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
                          p_column="p_gg" if args.p == "gg" else "p_unc", base_effects=base)
     if args.out is not None:   # before the run: a bad --out must not waste the cohorts
         args.out.mkdir(parents=True, exist_ok=True)
+    _sigterm_as_interrupt()
     res = run_power(protocol, design, address=args.address, workers=args.workers,
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
@@ -132,4 +163,4 @@ def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
     return f", effects of {' and '.join(parts)}" if parts else ""
 
 
-__all__ = ["effect_sources", "register_power"]
+__all__ = ["effect_sources", "ray_address", "register_power"]
