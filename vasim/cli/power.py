@@ -115,6 +115,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
     scale, base = resolve_effects(protocol.power, cli_scale=args.effect_scale)
     if args.effects is not None:
         base = load_effects(args.effects, base=base)
+        check_effects_labels(args.effects, protocol.name, protocol.conditions)
     sources = effect_sources(protocol.power is not None and bool(protocol.power.effects),
                              args.effects)
     design = PowerDesign(subjects=parse_subjects(args.subjects), cohorts=args.cohorts,
@@ -149,6 +150,27 @@ def _cmd_power(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_effects_labels(path: Path, protocol: str, conditions: tuple[str, ...]) -> None:
+    """Refuses an ``--effects`` table whose label is not a condition of the protocol.
+
+    **Decision** (issue #30 item 6): as a protocol's own ``[power.effects]`` labels are
+    (``vasim.study.protocol.power``): a misspelt label (``[f]`` for ``[ff]``) was silently
+    unused, and the run then reported power for the calibration's effects as if the file's.
+    A file shared between protocols must therefore hold only labels of the protocol it is
+    given with.
+
+    Raises:
+        ConfigError: naming the file, the label and the protocol's conditions.
+    """
+    from vasim.core.config import fail, parse_toml
+
+    data = parse_toml(path.read_text(encoding="utf-8"), file=path, kind="effects")
+    for label in data:
+        if label not in conditions:
+            raise fail(label, f"a condition of protocol {protocol!r} ({', '.join(conditions)}); "
+                       "remove or rename that table", field=str(label), file=path)
+
+
 def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
     """What the header names besides the calibration: the protocol's ``[power.effects]``
     and the ``--effects`` file, when used.
@@ -163,4 +185,4 @@ def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
     return f", effects of {' and '.join(parts)}" if parts else ""
 
 
-__all__ = ["effect_sources", "ray_address", "register_power"]
+__all__ = ["check_effects_labels", "effect_sources", "ray_address", "register_power"]
