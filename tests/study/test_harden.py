@@ -411,15 +411,20 @@ def test_formula_code_is_refused_before_patsy(long_csv: Path, tmp_path: Path,
     monkeypatch.chdir(tmp_path)
     import patsy
 
-    def never(*_a: object, **_k: object) -> None:
-        raise AssertionError("patsy must not see a refused formula")
+    evaluated: list[str] = []
+    real_eval = patsy.EvalEnvironment.eval
 
-    monkeypatch.setattr(patsy.EvalEnvironment, "eval", never)
+    def spy(self: object, expr: str, *a: object, **k: object) -> object:
+        evaluated.append(expr)       # (before the fix the code then ran: PWNED was made)
+        return real_eval(self, expr, *a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(patsy.EvalEnvironment, "eval", spy)
     code, _, err = _run(["stats", "mixed-model", "--csv", str(long_csv), "--formula", formula,
                          "--groups", "subject"], capsys)
+    assert not (tmp_path / "PWNED").exists()
+    assert evaluated == []           # patsy never evaluated a term of a refused formula
     line = _one_line_error(err)
     assert code == 2 and "field 'formula'" in line and str(long_csv) in line
-    assert not (tmp_path / "PWNED").exists()
 
 
 def test_whitelisted_formulas_still_fit(long_csv: Path,
