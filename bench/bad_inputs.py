@@ -363,7 +363,8 @@ def run_round_case(case: RoundCase) -> tuple[str, str]:
         ok = code == 130 and "interrupted" in err
         return ("handled" if ok else "wrong"), f"exit {code} {took:.1f} s after the signal"
     if case.expect == "refused":
-        if code == 2 and len(lines) == 1 and all(w in lines[0] for w in case.words):
+        if code == 2 and len(lines) == 1 and all(w in lines[0] for w in case.words) and (
+                case.check is None or case.check()):
             return "refused", lines[0][:300]
         return "wrong", f"exit {code}: {(lines or err.splitlines() or ['(nothing)'])[-1][:300]}"
     text = out + err

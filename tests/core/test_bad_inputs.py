@@ -10,6 +10,7 @@ import importlib.util
 import math
 import sys
 import tomllib
+from collections import Counter
 from pathlib import Path
 from types import ModuleType
 
@@ -227,7 +228,37 @@ def test_parse_batch_drops_a_400_digit_integer() -> None:
     from vasim.viewer.instrument_input import parse_batch
 
     for key in ("dx", "dy", "wheel", "sx", "sy", "ins", "roll"):
-        assert parse_batch('{"%s": %s}' % (key, "9" * 400)) is None
-        assert parse_batch('{"%s": -%s}' % (key, "9" * 400)) is None
-    assert parse_batch('{"dx": %s}' % ("9" * 300)) is not None  # 1e300 is a finite float
-    assert parse_batch('{"dx": %s}' % ("9" * 5000)) is None      # beyond int parsing limits
+        assert parse_batch(f'{{"{key}": {"9" * 400}}}') is None
+        assert parse_batch(f'{{"{key}": -{"9" * 400}}}') is None
+    assert parse_batch(f'{{"dx": {"9" * 300}}}') is not None  # 1e300 is a finite float
+    assert parse_batch(f'{{"dx": {"9" * 5000}}}') is None      # beyond int parsing limits
+
+
+def test_the_round_tells_its_outcomes_apart() -> None:
+    """bench/bad_inputs.py's issue #30 round: each outcome of a case is recognised (the
+    case runs in a forked process; a hang is killed at its time limit)."""
+    import time
+
+    b = _bench()
+
+    def refuse() -> None:
+        raise ConfigError("got 1, expected 2", file="f.toml", field="x")
+
+    def crash() -> None:
+        raise ValueError("boom")
+
+    cases = [
+        (b.RoundCase("t", "refused", call=refuse, words=("f.toml", "field 'x'")), "refused"),
+        (b.RoundCase("t", "unclear", call=refuse, words=("field 'y'",)), "wrong"),
+        (b.RoundCase("t", "silent", call=lambda: None), "wrong"),      # refusal was due
+        (b.RoundCase("t", "handled", call=lambda: True, expect="handled"), "handled"),
+        (b.RoundCase("t", "check", call=lambda: False, expect="handled"), "wrong"),
+        (b.RoundCase("t", "crash", call=crash), "traceback"),
+        (b.RoundCase("t", "hang", call=lambda: time.sleep(60), timeout=1.0), "hang"),
+        (b.RoundCase("t", "cli", ["trial", "--replay", "1" * 30, "--db", "x.db"],
+                     words=("argument --replay",)), "refused"),
+    ]
+    for case, expected in cases:
+        assert b.run_round_case(case)[0] == expected, case.what
+    table = b.round_table({"3": Counter(refused=2, hang=1)})
+    assert table.splitlines()[1].split() == ["#30.3", "3", "2", "0", "0", "1", "0"]

@@ -94,7 +94,8 @@ export HOME="$HOMEDIR"; unset NUMBA_CACHE_DIR XDG_CACHE_HOME
 "$PY" -m vasim --version
 "$PY" -c "import vasim.abdomen.integrate; print('kernels imported')"
 mkdir -p "$ROCACHE" && mount --bind "$ROCACHE" "$ROCACHE" && mount -o remount,bind,ro "$ROCACHE"
-NUMBA_CACHE_DIR="$ROCACHE" "$PY" -c "import vasim.abdomen.integrate; print('read-only NUMBA_CACHE_DIR: kernels imported')"
+NUMBA_CACHE_DIR="$ROCACHE" "$PY" -c "import vasim.abdomen.integrate; \
+print('read-only NUMBA_CACHE_DIR: kernels imported')"
 """
 
 

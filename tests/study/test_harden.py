@@ -576,7 +576,7 @@ def test_unreachable_addresses_fail_within_seconds(silent_server: int, http_serv
 def test_init_in_thread_times_out_and_passes_errors() -> None:
     from vasim.study.power.driver import _init_in_thread
 
-    with pytest.raises(ConfigError, match="did not answer within 0.5 s"):
+    with pytest.raises(ConfigError, match=r"did not answer within 0\.5 s"):
         _init_in_thread(lambda: time.sleep(30), 0.5, "the Ray cluster 'x'")
 
     def boom() -> None:

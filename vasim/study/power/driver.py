@@ -213,7 +213,7 @@ def probe_ray_address(host: str, port: int, timeout: float = ADDRESS_CHECK_S) ->
                           field="--address")
 
 
-def _init_in_thread(init: Callable[[], None], timeout: float | None, what: str) -> None:
+def _init_in_thread(init: Callable[[], object], timeout: float | None, what: str) -> None:
     """Runs ``init`` (``ray.init``) in a helper thread while this thread waits, so that
     Ctrl-C / SIGTERM reach the command at once; ``timeout`` [s] (None: none) bounds it.
 
