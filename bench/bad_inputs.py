@@ -309,9 +309,12 @@ def _child(case: RoundCase, conn: Any) -> None:
                 assert case.call is not None
                 try:
                     result = case.call()
-                    code = 0 if result is not False else 1
-                    if result not in (None, True, False):
-                        print(repr(result))
+                    if isinstance(result, int) and not isinstance(result, bool):
+                        code = result          # an exit code (a call that runs vasim)
+                    else:
+                        code = 0 if result is not False else 1
+                        if result not in (None, True, False):
+                            print(repr(result))
                 except ConfigError as exc:
                     print(f"error: {exc}", file=sys.stderr)
                     code = 2

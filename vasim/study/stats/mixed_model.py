@@ -210,8 +210,8 @@ def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
     if len(levels_of(g)) < 2:
         raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
                           f"{levels_of(g)!r}", file=src, field=groups)
-    check_formula(formula, [str(c) for c in data.columns], source=src)
     used = _formula_columns(data, formula)
+    check_formula(formula, [str(c) for c in data.columns], source=src)  # before patsy
     data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
     for col in used:
         _check_column(data, col)
