@@ -620,3 +620,20 @@ def test_a_join_that_hangs_stops_on_sigterm_and_ctrl_c(sig: str) -> None:
     assert proc.returncode == 130, err[-2000:]
     assert "interrupted" in err and "Traceback" not in err
     assert took < 30, took
+
+
+@pytest.mark.parametrize("command", [
+    ["study", "export", "--db", "x.sqlite"],
+    ["study", "power", "--protocol", "vf_learning_curve", "--subjects", "4", "--cohorts", "1"],
+    ["report", "--db", "x.sqlite"],
+])
+def test_every_out_naming_a_file_is_refused_at_parse(
+        command: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue #30 item 8: `--out afile` said only "afile: File exists"."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for out in (afile, afile / "sub" / "deeper"):
+        code, _, err = _run([*command, "--out", str(out)], capsys)
+        line = _one_line_error(err)
+        assert code == 2 and "argument --out" in line
+        assert f"{afile} is a file, not a folder" in line

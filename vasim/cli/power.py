@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from vasim.cli.args import bounded_float, bounded_int, workers
+from vasim.cli.args import bounded_float, bounded_int, output_folder, workers
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, TRIAL_TIME_S
 
 
@@ -56,7 +56,7 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                         "within a few seconds); default: a local Ray on this machine")
     r.add_argument("--workers", type=workers, default=None,
                    help="CPUs of the local Ray (default: number of cores)")
-    r.add_argument("--out", type=Path, default=None,
+    r.add_argument("--out", type=output_folder, default=None,
                    help="folder for power.csv, power_cohorts.csv and power.png")
     r.add_argument("--keep-cohorts", type=Path, default=None, metavar="DIR",
                    help="write each cohort's study database into DIR (default: none)")

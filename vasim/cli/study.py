@@ -20,7 +20,7 @@ import math
 import sys
 from pathlib import Path
 
-from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
+from vasim.cli.args import bounded_float, bounded_int, output_folder, subject_code, workers
 from vasim.cli.power import register_power
 from vasim.core.bounds import (
     GAIN,
@@ -414,7 +414,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     r = ss.add_parser("export", help="write tidy tables (CSV / Parquet)")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--out", type=Path, required=True, help="output folder")
+    r.add_argument("--out", type=output_folder, required=True, help="output folder")
     r.add_argument("--format", default="csv", help="csv, parquet or csv,parquet")
     r.add_argument("--tables", default=None,
                    help="comma-separated subset of: samples, trials, trial_metrics, "
