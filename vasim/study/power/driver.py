@@ -264,6 +264,13 @@ def init_ray(address: str | None, workers: int | None) -> int:
                           "always runs on Ray)", field="--workers")
     if address is not None:
         target = parse_ray_address(address)
+        if address.startswith("ray://"):   # Ray Client needs grpcio (the ray[client] extra)
+            from ray.client_builder import get_ray_client_dependency_error
+
+            missing = get_ray_client_dependency_error()
+            if missing is not None:
+                raise ConfigError(f"could not join the Ray cluster {address!r}: {missing}"
+                                  f"{_join_hint(address)}", field="--address")
         if target is not None:
             probe_ray_address(*target)
     try:
