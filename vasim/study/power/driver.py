@@ -36,7 +36,7 @@ included; a local Ray's processes end with it).
   start or join then runs in a helper thread the main thread waits on, so Ctrl-C and
   SIGTERM (turned into ``KeyboardInterrupt`` by the command line) end the command at once
   even while Ray's C++ client retries, and a join that takes longer than
-  :data:`JOIN_TIMEOUT_S` is an error.
+  :data:`JOIN_TIMEOUT_S` is an error. A local Ray starts in the main thread, as before.
 """
 
 from __future__ import annotations
@@ -277,10 +277,9 @@ def init_ray(address: str | None, workers: int | None) -> int:
         if address:
             _init_in_thread(lambda: ray.init(address=address, log_to_driver=False),
                             JOIN_TIMEOUT_S, f"the Ray cluster {address!r}")
-        else:
-            _init_in_thread(lambda: ray.init(
-                num_cpus=workers or (os.cpu_count() or 1), include_dashboard=False,
-                log_to_driver=False, _node_ip_address="127.0.0.1"), None, "a local Ray")
+        else:   # a local start: in this thread, as before (it does not hang)
+            ray.init(num_cpus=workers or (os.cpu_count() or 1), include_dashboard=False,
+                     log_to_driver=False, _node_ip_address="127.0.0.1")
     except KeyboardInterrupt:
         raise
     except ConfigError:
