@@ -266,6 +266,458 @@ def issue_cases() -> Iterator[Case]:
            lambda: parse_scene('name = "s"\n[organs.liver]\nmass = 1e-300\n', source="s.toml"))
 
 
+# -- issue #30: the second hardening round, replayed end to end ----------------------------
+ROUND_OUTCOMES: tuple[str, ...] = ("refused", "handled", "traceback", "hang", "wrong")
+"""How a round case ends: ``refused`` (exit 2, or a ConfigError, with one line saying what
+is wrong, checked for the words that make it clear), ``handled`` (exit 0 and the result
+checked: the right session stored, the folder's mode kept, ...), ``traceback``, ``hang``
+(no end within the case's time limit), ``wrong`` (anything else: a silent exit 0 where a
+refusal was due, an unclear message, a failed check)."""
+
+
+@dataclasses.dataclass
+class RoundCase:
+    """One input of the round: ``argv`` for ``vasim`` (run in a forked process), or ``call``
+    (a function run there); ``expect`` is ``"refused"`` or ``"handled"``; ``words`` must all
+    be in the refusal (or, handled, in stdout + stderr); ``check`` (handled) must return
+    True; ``signal_after`` sends ``signal`` that many seconds after ``ready()`` is true
+    (a hang ended by Ctrl-C / SIGTERM: handled when it exits 130)."""
+
+    item: str
+    what: str
+    argv: list[str] | None = None
+    call: Callable[[], Any] | None = None
+    expect: str = "refused"
+    words: tuple[str, ...] = ()
+    check: Callable[[], bool] | None = None
+    timeout: float = 240.0
+    signal: int | None = None
+    signal_after: float = 3.0
+    ready: Callable[[], bool] | None = None
+
+
+def _child(case: RoundCase, conn: Any) -> None:
+    """Runs one case in the forked process; sends (exit code, stdout, stderr)."""
+    import traceback
+
+    from vasim.core.errors import ConfigError
+
+    out, err = io.StringIO(), io.StringIO()
+    code: int | None
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            if case.argv is not None:
+                from vasim.cli import main as vasim_main
+
+                code = vasim_main(case.argv)
+            else:
+                assert case.call is not None
+                try:
+                    result = case.call()
+                    if isinstance(result, int) and not isinstance(result, bool):
+                        code = result          # an exit code (a call that runs vasim)
+                    else:
+                        code = 0 if result is not False else 1
+                        if result not in (None, True, False):
+                            print(repr(result))
+                except ConfigError as exc:
+                    print(f"error: {exc}", file=sys.stderr)
+                    code = 2
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    except BaseException:
+        err.write(traceback.format_exc())
+        code = 1
+    conn.send((code, out.getvalue(), err.getvalue()))
+    conn.close()
+
+
+def run_round_case(case: RoundCase) -> tuple[str, str]:
+    """Runs ``case`` in a forked process with its time limit; returns (outcome, detail)."""
+    import multiprocessing as mp
+    import os
+    import time
+
+    ctx = mp.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(case, child), daemon=True)
+    t0 = time.monotonic()
+    proc.start()
+    child.close()
+    if case.signal is not None:
+        while case.ready is not None and not case.ready() and proc.is_alive() \
+                and time.monotonic() - t0 < case.timeout:
+            time.sleep(0.1)
+        time.sleep(case.signal_after)
+        if proc.is_alive() and proc.pid is not None:
+            os.kill(proc.pid, case.signal)
+            t0 = time.monotonic()      # from now on: how long it takes to stop
+    got = parent.poll(case.timeout if case.signal is None else 60.0)
+    if not got:
+        proc.kill()
+        proc.join()
+        return "hang", f"no end within {case.timeout:g} s"
+    try:
+        code, out, err = parent.recv()
+    except EOFError:
+        proc.join()
+        return "traceback", f"the process died (exit {proc.exitcode})"
+    proc.join(10)
+    took = time.monotonic() - t0
+    if "Traceback" in err:
+        return "traceback", err.strip().splitlines()[-1][:200]
+    lines = [ln for ln in err.splitlines() if "error:" in ln]
+    if case.signal is not None:
+        ok = code == 130 and "interrupted" in err
+        return ("handled" if ok else "wrong"), f"exit {code} {took:.1f} s after the signal"
+    if case.expect == "refused":
+        if code == 2 and len(lines) == 1 and all(w in lines[0] for w in case.words) and (
+                case.check is None or case.check()):
+            return "refused", lines[0][:300]
+        return "wrong", f"exit {code}: {(lines or err.splitlines() or ['(nothing)'])[-1][:300]}"
+    text = out + err
+    if code == 0 and all(w in text for w in case.words) and (case.check is None
+                                                             or case.check()):
+        return "handled", (err.strip().splitlines() or out.strip().splitlines() or [""])[-1][
+            :300]
+    return "wrong", f"exit {code}: {(err.strip().splitlines() or ['check failed'])[-1][:300]}"
+
+
+_TINY = """name = "tiny"
+description = "two short trials"
+task = "trajectory"
+reach_radius_m = 0.005
+max_trial_time_s = 0.05
+
+[[blocks]]
+name = "b"
+condition = "none"
+variants = [0]
+repetitions = 2
+probe = true
+counterbalance = false
+"""
+_RETENTION = """name = "tret"
+description = "one trial, then a retention probe a day later"
+task = "trajectory"
+reach_radius_m = 0.005
+max_trial_time_s = 0.05
+
+[[blocks]]
+name = "a"
+condition = "ff"
+variants = [0]
+counterbalance = false
+
+[[blocks]]
+name = "r"
+condition = "none"
+phase = "retention"
+delay_days = 1.0
+variants = [0]
+probe = true
+counterbalance = false
+"""
+
+
+def _server(reply: bytes | None) -> tuple[int, list[Any]]:
+    """A local TCP server on a free port (``reply`` after the client's first bytes; None:
+    silence); returns the port and the list its connections are appended to."""
+    import socket
+    import threading
+
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(16)
+    conns: list[Any] = []
+
+    def serve() -> None:
+        while True:
+            try:
+                c, _ = srv.accept()
+            except OSError:
+                return
+            conns.append(c)
+            if reply is not None:
+                with contextlib.suppress(OSError):
+                    c.recv(64)
+                    c.sendall(reply)
+
+    threading.Thread(target=serve, daemon=True).start()
+    conns.append(srv)
+    return int(srv.getsockname()[1]), conns
+
+
+def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
+    """The cases of issue #30 items 3-8 (``smoke``: one or two per item, no Ray, no
+    session runs beyond the setup)."""
+    import os
+    import signal
+    import sqlite3
+    import stat
+
+    from vasim.cli import main as vasim_main
+
+    def quiet(argv: list[str]) -> int:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(
+                io.StringIO()):
+            return vasim_main(argv)
+
+    tiny, ret = tmp / "tiny.toml", tmp / "tret.toml"
+    tiny.write_text(_TINY, encoding="utf-8")
+    ret.write_text(_RETENTION, encoding="utf-8")
+    db, rdb = tmp / "x.sqlite", tmp / "r.sqlite"
+    assert quiet(["study", "run", "--protocol", str(tiny), "--db", str(db), "--subject", "D9",
+                  "--no-progress"]) == 0
+    assert quiet(["study", "run", "--protocol", str(ret), "--db", str(rdb), "--subject", "R1",
+                  "--no-progress"]) == 0
+    run = ["study", "run", "--protocol", str(tiny), "--db", str(db), "--no-progress"]
+
+    def notes_of(path: Path) -> list[Any]:
+        con = sqlite3.connect(path)
+        try:
+            return [r[0] for r in con.execute("SELECT notes FROM sessions ORDER BY id")]
+        finally:
+            con.close()
+
+    # item 3: a finished subject gets a second session
+    yield RoundCase("3", "study run twice for D9", [*run, "--subject", "D9"],
+                    words=("already completed protocol 'tiny'", "--again"))
+    if not smoke:
+        yield RoundCase("3", "--again for a subject without a completed session",
+                        [*run, "--subject", "D8", "--again", "x"],
+                        words=("no completed session",))
+        yield RoundCase("3", "study run --again REASON", [*run, "--subject", "D9", "--again",
+                                                         "device failed"], expect="handled",
+                        check=lambda: notes_of(db)[-1].endswith("device failed"))
+
+    # item 4: study power --address
+    power = ["study", "power", "--protocol", "vf_learning_curve", "--subjects", "4",
+             "--cohorts", "1", "--address"]
+    bad_addresses = ["127.0.0.1:99999", "", "x" * 10_000 + ":1"]
+    if not smoke:
+        bad_addresses += ["127.0.0.1:1", "[::1]:1", "no-such-host.invalid:6379"]
+    for a in bad_addresses:
+        yield RoundCase("4", f"--address {a[:30]!r}", [*power, a], timeout=120,
+                        words=("--address",))
+    if not smoke:
+        silent, _ = _server(None)
+        http1, _ = _server(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+        yield RoundCase("4", "--address of a server that never answers",
+                        [*power, f"127.0.0.1:{silent}"], timeout=120,
+                        words=("no answer within",))
+        yield RoundCase("4", "--address of an HTTP/1.1 server", [*power, f"127.0.0.1:{http1}"],
+                        timeout=120, words=("not a Ray head",))
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            port, conns = _server(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
+            yield RoundCase("4", f"a gRPC server that is no Ray head, then {sig.name}",
+                            [*power, f"127.0.0.1:{port}"], expect="handled", signal=sig,
+                            ready=lambda conns=conns: len(conns) > 1, timeout=240)
+
+    # item 5: tracebacks
+    from vasim.study.power.design import parse_effects
+
+    deep = "x = " + "[" * 50_000 + "]" * 50_000 + "\n"
+    loaders: list[tuple[str, Callable[[], Any]]] = [
+        (name, lambda load=load, name=name: load(deep, f"{name}.toml"))
+        for name, load in _deep_loaders(tmp)]
+    loaders.append(("effects", lambda: parse_effects(deep, file="effects.toml")))
+    for name, thunk in loaders[:2] if smoke else loaders:
+        yield RoundCase("5", f"{name}: 50,000 nested brackets", call=thunk,
+                        words=("nested 50000 levels deep",))
+    yield RoundCase("5", "trial --replay 99999999999999999999999",
+                    ["trial", "--replay", "99999999999999999999999", "--db", str(db)],
+                    words=("argument --replay",))
+
+    def huge_batch() -> bool:
+        from vasim.viewer.instrument_input import parse_batch
+
+        return parse_batch('{"dx": %s}' % ("9" * 400)) is None
+
+    yield RoundCase("5", "a 400-digit integer in the trainee's input", call=huge_batch,
+                    expect="handled")
+
+    def numba_ro() -> bool:
+        import tempfile
+
+        from vasim.core import numba_cache
+
+        blocker = tmp / "ro.file"
+        blocker.write_text("not a folder")
+        os.environ["NUMBA_CACHE_DIR"] = str(blocker / "mine")
+        os.environ["XDG_CACHE_HOME"] = str(blocker / "cache")
+        numba_cache._PACKAGE = blocker / "vasim"
+        tempfile.tempdir = str(tmp)
+        chosen = numba_cache.configure_numba_cache()
+        return chosen is not None and numba_cache.writable_dir(chosen)
+
+    yield RoundCase("5", "NUMBA_CACHE_DIR=<read-only> on a read-only install", call=numba_ro,
+                    expect="handled", words=("is not a writable folder",))
+    resume = ["study", "resume", "--subject", "R1", "--no-progress"]
+    for value in ([None] if smoke else ["not a date", None]):
+        edited = tmp / f"r-{value}.sqlite"
+        edited.write_bytes(rdb.read_bytes())
+        con = sqlite3.connect(edited)
+        con.execute("UPDATE trials SET ended_at = ?", (value,))
+        con.commit()
+        con.close()
+        yield RoundCase("5", f"resume after ended_at = {value!r}",
+                        [*resume, "--db", str(edited)],
+                        words=(f"has ended_at = {value!r}", "--simulate-delay"))
+
+    # item 6: silent wrong
+    from vasim.study.protocol import parse_protocol
+
+    head = 'name = "p"\ndescription = "d"\ntask = "trajectory"\n'
+    yield RoundCase("6", "gain_schedule of 4 stages on 2 trials", call=lambda: parse_protocol(
+        head + '[[blocks]]\nname = "f"\ncondition = "ff_faded"\nschema = "ff"\n'
+        'variants = [1, 2]\ngain_schedule = [1.0, 0.75, 0.5, 0.25]\n', source="p.toml"),
+        words=("blocks[0].gain_schedule", "would skip stages"))
+    yield RoundCase("6", "delay_days on the first block", call=lambda: parse_protocol(
+        head + '[[blocks]]\nname = "a"\ncondition = "none"\ndelay_days = 3.0\n'
+        "counterbalance = false\n", source="p.toml"), words=("blocks[0].delay_days",))
+    eff = tmp / "effects.toml"
+    eff.write_text("[f]\naccuracy = 0.8\n", encoding="utf-8")
+    if not smoke:
+        yield RoundCase("6", "--effects with an unknown label",
+                        ["study", "power", "--protocol", "vf_learning_curve", "--subjects",
+                         "4", "--cohorts", "1", "--effects", str(eff)],
+                        words=("field 'f'", "a condition of protocol"))
+    export = ["study", "export", "--db", str(db), "--no-progress", "--out"]
+    folder = tmp / "ex755"
+    folder.mkdir()
+    folder.chmod(0o755)
+    yield RoundCase("6", "re-export into a 755 folder",
+                    [*export, str(folder), "--tables", "sessions"], expect="handled",
+                    check=lambda: stat.S_IMODE(folder.stat().st_mode) == 0o755)
+    yield RoundCase("6", "export --tables ''", [*export, str(tmp / "e1"), "--tables", ""],
+                    words=("--tables",))
+    csv = tmp / "mm.csv"
+    rng = np.random.default_rng(0)
+    rows = ["subject,fixture,trial,error"] + [
+        f"S{s},{f},{t},{1 + 0.3 * (f == 'ff') + 0.1 * t + rng.normal(0, 0.2):.4f}"
+        for s in range(8) for f in ("ff", "none") for t in range(3)]
+    csv.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    mm = ["stats", "mixed-model", "--csv", str(csv), "--groups", "subject", "--formula"]
+    yield RoundCase("6", "--factors nope", [*mm, "error ~ C(fixture) + trial", "--factors",
+                                            "nope"], words=("--factors", "'nope'"))
+
+    # item 7: code in a formula
+    pwned = tmp / "PWNED"
+    for formula in ([f"error ~ I(__import__('os').system('touch {pwned}'))"] + (
+            [] if smoke else ["error ~ I(__import__('os'))", "error ~ trial.__class__",
+                              "error ~ np.os.system('id')"])):
+        yield RoundCase("7", f"--formula {formula[:40]!r}", [*mm, formula],
+                        words=("field 'formula'",), check=lambda: not pwned.exists())
+
+    # item 8: unclear messages
+    afile = tmp / "afile"
+    afile.write_text("x")
+    yield RoundCase("8", "--out under a file", [*export, str(afile / "sub")],
+                    words=(f"{afile} is a file",))
+    if not smoke:
+        yield RoundCase("8", "--out naming a file", [*export, str(afile)], words=(str(afile),))
+
+        def full_disk() -> Any:
+            import errno
+
+            import vasim.study.export as ex
+
+            def fail(db: Any, out_dir: Path, *_a: Any) -> None:
+                raise OSError(errno.ENOSPC, "No space left on device", str(out_dir / "x"))
+
+            ex._export_into = fail  # type: ignore[assignment]  # the forked case's own copy
+            return vasim_main([*export, str(tmp / "full")])
+
+        yield RoundCase("8", "a full disk", call=full_disk,
+                        words=(f"{tmp / 'full'}: No space left on device",))
+
+        def read_only() -> Any:
+            import errno
+            import tempfile
+
+            def refuse(prefix: str = "", dir: Any = None, **_k: Any) -> str:
+                raise PermissionError(errno.EACCES, "Permission denied", f"{dir}/{prefix}x")
+
+            tempfile.mkdtemp = refuse  # type: ignore[assignment]  # the forked case's own
+            return vasim_main([*export, str(tmp / "ro" / "ex")])
+
+        yield RoundCase("8", "a read-only output folder", call=read_only,
+                        words=(f"{tmp / 'ro' / 'ex'}: Permission denied",))
+    future = tmp / "future.sqlite"
+    future.write_bytes(rdb.read_bytes())
+    con = sqlite3.connect(future)
+    con.execute("UPDATE trials SET ended_at = '2099-01-01T00:00:00+00:00'")
+    con.commit()
+    con.close()
+    yield RoundCase("8", "a sitting stored while the clock was fast",
+                    [*resume, "--db", str(future)], words=("in the future", "clock"))
+    if not smoke:
+        changed = tmp / "changed.sqlite"
+        changed.write_bytes(rdb.read_bytes())
+        edited = tmp / "tret_edited.toml"
+        edited.write_text(_RETENTION.replace("0.05", "0.06").replace('"tret"', '"tret"'),
+                          encoding="utf-8")
+        yield RoundCase("8", "resume after the protocol file changed",
+                        [*resume, "--db", str(changed), "--protocol", str(edited),
+                         "--simulate-delay"], expect="handled",
+                        words=("has changed since session 1 started",
+                               "resumes with the protocol stored with it"))
+
+
+def _deep_loaders(tmp: Path) -> list[tuple[str, Callable[[str, str], Any]]]:
+    from vasim.abdomen.scene import parse_scene
+    from vasim.fixtures.schema import parse_schema
+    from vasim.mrcp.dh import parse_robot
+    from vasim.study.protocol import parse_protocol
+    from vasim.study.session import load_answers_file
+
+    def answers(text: str, src: str) -> Any:
+        p = tmp / "answers.toml"
+        p.write_text(text, encoding="utf-8")
+        return load_answers_file(p)
+
+    return [("protocol", lambda t, s: parse_protocol(t, source=s)),
+            ("schema", lambda t, s: parse_schema(t, source=s)),
+            ("scene", lambda t, s: parse_scene(t, source=s)),
+            ("robot", lambda t, s: parse_robot(t, file=s)),
+            ("answers", answers)]
+
+
+def run_round(smoke: bool = False, show: bool = True) -> tuple[dict[str, Counter[str]],
+                                                                list[str]]:
+    """Runs the issue #30 round; returns outcome counts per item and one line per case."""
+    from vasim.core.progress import progress_bar
+
+    counts: dict[str, Counter[str]] = {}
+    lines: list[str] = []
+    with tempfile.TemporaryDirectory() as d:
+        cases = list(round_cases(Path(d), smoke=smoke))
+        bar = progress_bar(len(cases), "issue #30 round", "case", enabled=show)
+        for case in cases:
+            outcome, detail = run_round_case(case)
+            counts.setdefault(case.item, Counter())[outcome] += 1
+            lines.append(f"[{case.item}] {outcome:<9} {case.what}: {detail}")
+            bar.update(1)
+        bar.close()
+    return counts, lines
+
+
+def round_table(counts: dict[str, Counter[str]]) -> str:
+    """The round's table: per item, how many cases ended in each outcome."""
+    head = f"{'item':<6} {'tried':>5} " + " ".join(f"{o:>9}" for o in ROUND_OUTCOMES)
+    rows = [head]
+    total: Counter[str] = Counter()
+    for item in sorted(counts):
+        c = counts[item]
+        total.update(c)
+        rows.append(f"#30.{item:<2} {sum(c.values()):>5} "
+                    + " ".join(f"{c[o]:>9}" for o in ROUND_OUTCOMES))
+    rows.append(f"{'total':<6} {sum(total.values()):>5} "
+                + " ".join(f"{total[o]:>9}" for o in ROUND_OUTCOMES))
+    return "\n".join(rows)
+
+
 def run_catalogue(stride: int = 1, extremes: tuple[Any, ...] = EXTREMES,
                   ) -> tuple[dict[str, Counter[str]], list[str]]:
     """Runs every case; returns outcome counts per category and the 'other' cases."""
@@ -298,15 +750,29 @@ def table(counts: dict[str, Counter[str]]) -> str:
     return "\n".join(rows)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
+    """``python -m bench bad_inputs`` / ``python bench/bad_inputs.py [--smoke]``: the
+    catalogue of extreme values (``--smoke``: every 9th field) and the issue #30 round
+    (``--smoke``: a few cases per item, no Ray)."""
     import time
 
+    args = sys.argv[1:] if argv is None else argv
+    smoke = "--smoke" in args or SMOKE
     t0 = time.perf_counter()
-    counts, others = run_catalogue(40, EXTREMES[:3]) if SMOKE else run_catalogue()
+    counts, others = run_catalogue(stride=9 if smoke else 1)
     print(table(counts))
     print(f"({time.perf_counter() - t0:.1f} s)")
     for o in others[:50]:
         print("other:", o)
+    t0 = time.perf_counter()
+    rcounts, lines = run_round(smoke=smoke, show=sys.stderr.isatty())
+    print()
+    print("issue #30 round (each case in its own process; outcomes: refused with a one-line "
+          "message, handled, traceback, hang, wrong)")
+    print(round_table(rcounts))
+    print(f"({time.perf_counter() - t0:.1f} s)")
+    for line in lines:
+        print(line)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import argparse
 import ipaddress
 import re
 from collections.abc import Callable
+from pathlib import Path
 
 from vasim.core.bounds import Bound, workers_bound
 from vasim.core.config import check_int, check_number, show
@@ -96,4 +97,26 @@ def host_address(text: str) -> str:
     return text
 
 
-__all__ = ["bounded_float", "bounded_int", "host_address", "subject_code", "workers"]
+def output_folder(text: str) -> Path:
+    """``--out``: a folder (created if missing), refused at parse time when it, or a folder
+    above it, is a file (issue #30 item 8: "afile: File exists" named neither the option
+    nor what was wrong).
+
+    Example:
+        >>> output_folder("report/")
+        PosixPath('report')
+    """
+    if not text:
+        raise argparse.ArgumentTypeError("got '', expected a folder")
+    path = Path(text)
+    for p in (path, *path.parents):
+        if p.exists() and not p.is_dir():
+            what = "" if p == path else f" (under {show(str(p))})"
+            raise argparse.ArgumentTypeError(
+                f"got {show(text)}{what}: {p} is a file, not a folder; expected a folder "
+                "(created if missing)")
+    return path
+
+
+__all__ = ["bounded_float", "bounded_int", "host_address", "output_folder", "subject_code",
+           "workers"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from vasim.cli.args import bounded_float, bounded_int, workers
+from vasim.cli.args import bounded_float, bounded_int, output_folder, workers
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, TRIAL_TIME_S
 
 
@@ -54,12 +54,13 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--seed", type=bounded_int(SEED), default=7, help="base seed (default 7)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
-    r.add_argument("--address", default=None,
-                   help="Ray cluster to join (ray://HEAD:10001, or auto on a node); "
-                        "default: a local Ray on this machine")
+    r.add_argument("--address", type=ray_address, default=None,
+                   help="Ray cluster to join (HEAD:6379 on a node of it, ray://HEAD:10001 "
+                        "from anywhere, or auto on a node); checked first (it must answer "
+                        "within a few seconds); default: a local Ray on this machine")
     r.add_argument("--workers", type=workers, default=None,
                    help="CPUs of the local Ray (default: number of cores)")
-    r.add_argument("--out", type=Path, default=None,
+    r.add_argument("--out", type=output_folder, default=None,
                    help="folder for power.csv, power_cohorts.csv and power.png")
     r.add_argument("--keep-cohorts", type=Path, default=None, metavar="DIR",
                    help="write each cohort's study database into DIR (default: none)")
@@ -67,6 +68,35 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                    help="no progress output (default: a bar on a terminal, a line every 15 s "
                         "in a log file)")
     r.set_defaults(func=_cmd_power)
+
+
+def ray_address(text: str) -> str:
+    """``--address``: the syntax of a Ray address (``vasim.study.power.driver
+    .parse_ray_address``), refused at parse time with exit code 2 (``''`` included)."""
+    from vasim.core.errors import ConfigError
+    from vasim.study.power.driver import parse_ray_address
+
+    try:
+        parse_ray_address(text)
+    except ConfigError as exc:
+        raise argparse.ArgumentTypeError(exc.reason) from None
+    return text
+
+
+def _sigterm_as_interrupt() -> None:
+    """SIGTERM ends a power run like Ctrl-C (``KeyboardInterrupt``: Ray is shut down in the
+    driver's ``finally`` and the command exits 130), where it would otherwise kill the
+    driver without that (issue #30 item 4)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    signal.signal(signal.SIGTERM, handler)
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
@@ -92,6 +122,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
                                   base=scenario.fixtures)
     if args.effects is not None:
         base = load_effects(args.effects, base=base)
+        check_effects_labels(args.effects, protocol.name, protocol.conditions)
     sources = effect_sources(protocol.power is not None and bool(protocol.power.effects),
                              args.effects)
     design = PowerDesign(subjects=parse_subjects(args.subjects), cohorts=args.cohorts,
@@ -102,6 +133,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
                          scenario=scenario)
     if args.out is not None:   # before the run: a bad --out must not waste the cohorts
         args.out.mkdir(parents=True, exist_ok=True)
+    _sigterm_as_interrupt()
     res = run_power(protocol, design, address=args.address, workers=args.workers,
                     keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
@@ -127,6 +159,27 @@ def _cmd_power(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_effects_labels(path: Path, protocol: str, conditions: tuple[str, ...]) -> None:
+    """Refuses an ``--effects`` table whose label is not a condition of the protocol.
+
+    **Decision** (issue #30 item 6): as a protocol's own ``[power.effects]`` labels are
+    (``vasim.study.protocol.power``): a misspelt label (``[f]`` for ``[ff]``) was silently
+    unused, and the run then reported power for the calibration's effects as if the file's.
+    A file shared between protocols must therefore hold only labels of the protocol it is
+    given with.
+
+    Raises:
+        ConfigError: naming the file, the label and the protocol's conditions.
+    """
+    from vasim.core.config import fail, parse_toml
+
+    data = parse_toml(path.read_text(encoding="utf-8"), file=path, kind="effects")
+    for label in data:
+        if label not in conditions:
+            raise fail(label, f"a condition of protocol {protocol!r} ({', '.join(conditions)}); "
+                       "remove or rename that table", field=str(label), file=path)
+
+
 def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
     """What the header names besides the scenario: the protocol's ``[power.effects]``
     and the ``--effects`` file, when used.
@@ -141,4 +194,4 @@ def effect_sources(protocol_effects: bool, effects_file: Path | None) -> str:
     return f", effects of {' and '.join(parts)}" if parts else ""
 
 
-__all__ = ["effect_sources", "register_power"]
+__all__ = ["check_effects_labels", "effect_sources", "ray_address", "register_power"]

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from vasim.cli.args import output_folder
+
 _EPILOG = """\
 writes:
   OUT/index.html          one self-contained page (figures embedded, no script)
@@ -36,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--db", type=Path, required=True, help="SQLite study database (read only)")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=output_folder, required=True, help="output folder")
     p.add_argument("--protocol", default=None, metavar="NAME",
                    help="protocol to report (needed when the database holds several)")
     p.add_argument("--no-progress", action="store_true",

@@ -226,6 +226,7 @@ def cmd_mixed_model(args: argparse.Namespace) -> int:
 
     factors = [f.strip() for f in str(args.factors).split(",") if f.strip()]
     data = read_long_csv(args.csv, text_columns=[args.groups, *factors])
+    _check_factors(data, factors, args.formula, str(args.csv))
     fit, notes = _run(lambda: mixed_model(data, args.formula, args.groups))
     out = sys.stdout
     attrs = fit.attrs
@@ -254,6 +255,23 @@ def cmd_mixed_model(args: argparse.Namespace) -> int:
     # The StatsWarning repeats the note column, which is printed instead.
     _print_notes([str(fit["note"].iloc[0])] if fit["note"].iloc[0] else [], out)
     return 0
+
+
+def _check_factors(data: pd.DataFrame, factors: list[str], formula: str, source: str) -> None:
+    """``--factors``: each a column of the file and of the formula (issue #30 item 6: an
+    unknown factor was silently ignored, its column then read as numbers)."""
+    from vasim.study.stats.mixed_model import check_formula, formula_columns
+
+    columns = [str(c) for c in data.columns]
+    check_formula(formula, columns, source=source)
+    used = formula_columns(formula, columns)
+    for f in factors:
+        if f not in columns:
+            raise ConfigError(f"got {f!r}, expected a column of the file ("
+                              f"{', '.join(columns)})", file=source, field="--factors")
+        if f not in used:
+            raise ConfigError(f"got {f!r}, expected a column the formula {formula!r} uses "
+                              f"({', '.join(used)})", file=source, field="--factors")
 
 
 def cmd_tukey(args: argparse.Namespace) -> int:

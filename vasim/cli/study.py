@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from vasim.cli.args import bounded_float, bounded_int, subject_code, workers
+from vasim.cli.args import bounded_float, bounded_int, output_folder, subject_code, workers
 from vasim.cli.power import register_power
 from vasim.core.bounds import (
     EFFECT_SCALE,
@@ -94,7 +94,7 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     rt.add_argument("--in-process", action="store_true",
                     help="run the servo loop as a thread of this process instead of its "
                          "own process (the viewer's way; less steady on a loaded host)")
-    rt.add_argument("--replay", type=int, default=None, metavar="TRIAL_ID",
+    rt.add_argument("--replay", type=bounded_int(ID), default=None, metavar="TRIAL_ID",
                     help="re-run a stored real-time trial from its recording (needs --db) "
                          "and compare it with the stored samples and metrics")
     p.set_defaults(func=_cmd_trial)
@@ -387,6 +387,10 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                    help="trial time limit [s] (default: the protocol's)")
     r.add_argument("--answers", type=Path, default=None,
                    help="TOML file with [pre] and [post] questionnaire answers")
+    r.add_argument("--again", default=None, metavar="REASON",
+                   help="run the protocol again for a subject who completed it, for this "
+                        "reason (stored with the new session); without it such a run is "
+                        "refused")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_run)
 
@@ -412,7 +416,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     r = ss.add_parser("export", help="write tidy tables (CSV / Parquet)")
     r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--out", type=Path, required=True, help="output folder")
+    r.add_argument("--out", type=output_folder, required=True, help="output folder")
     r.add_argument("--format", default="csv", help="csv, parquet or csv,parquet")
     r.add_argument("--tables", default=None,
                    help="comma-separated subset of: samples, trials, trial_metrics, "
@@ -545,7 +549,7 @@ def _print_next_sitting(store: object, session_id: int) -> None:
 def _cmd_run(args: argparse.Namespace) -> int:
     from vasim.records.trial_meta import validate_subject_code
     from vasim.study.protocol import load_protocol
-    from vasim.study.session import SessionSettings, run_session, start_session
+    from vasim.study.session import SessionSettings, check_again, run_session, start_session
     from vasim.study.store import TrialStore
 
     settings = SessionSettings(operator=args.operator, skill=args.skill,
@@ -560,7 +564,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for q, table in load_answers_file(args.answers).items():
             validate_answers(protocol, q, table, source=str(args.answers))  # type: ignore[arg-type]  # a parsed answers table
     with TrialStore(_new_db(args.db)) as store:
-        sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings)
+        notes = check_again(store, protocol.name, args.subject, args.again)
+        sid = start_session(store, protocol, args.subject, seed=args.seed, settings=settings,
+                            notes=notes)
+        if notes is not None:
+            print(f"session {sid}: {notes}", file=sys.stderr)
         recorded = _record_file_answers(store, sid, args.answers, ("pre",))
         print(f"session {sid} started: {protocol.n_trials} trials, seed "
               f"{store.session(sid)['seed']}", file=sys.stderr)
@@ -578,9 +586,13 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     from vasim.study.session import find_session, run_session
     from vasim.study.store import TrialStore
 
+    name, given = _protocol_ref(args.protocol)
     with TrialStore(_existing_db(args.db)) as store:
         sid = find_session(store, subject=args.subject, session_id=args.session,
-                           protocol=args.protocol)
+                           protocol=name)
+        note = stored_protocol_note(store, sid, given)
+        if note:
+            print(note, file=sys.stderr)
         if store.recovered:
             print(f"marked interrupted (writer gone): trials {store.recovered}",
                   file=sys.stderr)
@@ -598,6 +610,51 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     return 0
 
 
+def _protocol_ref(ref: str | None) -> tuple[str | None, Path | None]:
+    """``resume --protocol``: (the protocol name sessions are stored under, the file it
+    names if it is a path). A path's name is read from the file (its stem if the file no
+    longer parses)."""
+    if ref is None:
+        return None, None
+    p = Path(ref)
+    if p.suffix != ".toml" and not p.is_file():
+        return ref, None
+    from vasim.study.protocol import load_protocol
+
+    try:
+        return load_protocol(p).name, p
+    except ConfigError:
+        return p.stem, p
+
+
+def stored_protocol_note(store: object, session_id: int, given: Path | None) -> str | None:
+    """A note when the protocol file (``given``, else the shipped file of the stored name)
+    differs from the text stored with the session, else None (issue #30 item 8).
+
+    **Decision**: a resumed session always runs the protocol stored with it (the module
+    docstring of :mod:`vasim.study.session`); an edited file is not an error, but the
+    experimenter is told which protocol runs, and how to run the edited one.
+    """
+    import hashlib
+
+    from vasim.study.protocol import protocol_path
+    from vasim.study.store import TrialStore
+
+    assert isinstance(store, TrialStore)
+    row = store.session(session_id)
+    try:
+        path = given if given is not None else protocol_path(str(row["protocol"]))
+        text = path.read_text(encoding="utf-8")
+    except (ConfigError, OSError, UnicodeDecodeError):
+        return None      # no file of that name here: nothing to compare
+    if hashlib.sha256(text.encode("utf-8")).hexdigest() == row["protocol_sha256"]:
+        return None
+    return (f"note: {path} has changed since session {session_id} started "
+            f"({str(row['created_at'])[:19]}); the session resumes with the protocol stored "
+            "with it, as it was then (to run the edited file, abort this session and start "
+            "a new one with `vasim study run`)")
+
+
 def _cmd_list(args: argparse.Namespace) -> int:
     from vasim.study.store import TrialStore
 
@@ -612,6 +669,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
                    created=[str(c)[:19] for c in df["created_at"]])
     cols = ["id", "subject", "protocol", "status", "progress", "n_interrupted", "next",
             "seed", "operator", "created"]
+    if "notes" in df and df["notes"].notna().any():   # e.g. why a session was run --again
+        df = df.assign(notes=df["notes"].fillna("-"))
+        cols.append("notes")
     print(df[cols].rename(columns={"n_interrupted": "interrupted"}).to_string(index=False))
     return 0
 

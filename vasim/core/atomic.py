@@ -18,6 +18,12 @@ truncated file beside a manifest that vouches for it. Two tools:
 says which are its own) are carried into the new folder before the swap — hard-linked,
 which is instant and takes no space, or copied where links are impossible — so swapping
 the folder never deletes anything a user put there.
+
+**Decisions** (issue #30 items 6 and 8): the new folder gets the permission bits of the
+folder it replaces (a first export: those ``mkdir`` gives under the umask), not the 0700 of
+a temporary folder; and a file-system error while writing (a full disk, a read-only
+folder, a path under a file) is re-raised as an ``OSError`` naming the user's folder, not
+the internal ``.<name>.tmp-*`` one, with what to check.
 """
 
 from __future__ import annotations
@@ -130,13 +136,24 @@ def atomic_folder(target: str | os.PathLike[str], *,
     """
     out = Path(target)
     if out.exists() and not out.is_dir():
-        raise ConfigError(f"the {what} folder {out} is a file", field="--out")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    _remove_leftovers(out)
-    foreign = [] if not out.is_dir() else sorted(
-        p.relative_to(out) for p in out.rglob("*")
-        if (p.is_file() or p.is_symlink()) and not owned(p.relative_to(out)))
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+        raise ConfigError(f"the {what} folder {out} is a file; name a folder", field="--out")
+    blocker = next((a for a in out.parents if a.exists() and not a.is_dir()), None)
+    if blocker is not None:
+        raise ConfigError(f"the {what} folder {out} cannot be made: {blocker} is a file, not "
+                          "a folder; name a folder", field="--out")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        _remove_leftovers(out)
+        foreign = [] if not out.is_dir() else sorted(
+            p.relative_to(out) for p in out.rglob("*")
+            if (p.is_file() or p.is_symlink()) and not owned(p.relative_to(out)))
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    except OSError as exc:
+        raise _named(exc, out, what) from exc
+    try:
+        os.chmod(tmp, _folder_mode(out))
+    except OSError:
+        pass    # a file system without modes: the temporary folder's are kept
     try:
         yield tmp
         for rel in foreign:  # the user's files survive the swap
@@ -165,9 +182,37 @@ def atomic_folder(target: str | os.PathLike[str], *,
         else:
             os.replace(tmp, out)
         _fsync_dir(out.parent)
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise _named(exc, out, what) from exc
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _folder_mode(out: Path) -> int:
+    """The permission bits the written folder gets: the existing folder's, else those of
+    a new folder under the current umask."""
+    if out.is_dir():
+        return out.stat().st_mode & 0o7777
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o777 & ~mask
+
+
+def _named(exc: OSError, out: Path, what: str) -> OSError:
+    """``exc`` re-worded for the user: the path is their folder ``out`` (not the internal
+    temporary one), with a hint for a full disk or a folder without write permission."""
+    import errno
+
+    reason = exc.strerror or str(exc)
+    if exc.errno == errno.ENOSPC or exc.errno == errno.EDQUOT:
+        reason += f" (the {what} needs room for a complete new copy beside the old one)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        reason += (f" (the {what} writes a new folder in {out.parent} and swaps it in: that "
+                   "folder must be writable)")
+    new = OSError(exc.errno, reason, str(out))
+    return new
 
 
 __all__ = ["atomic_file", "atomic_folder", "exchange"]

@@ -16,6 +16,13 @@ them; the functions are what the five former toolkits had in common, worded once
 
 **Decision**: a UTF-8 byte-order mark at the start of a TOML text is stripped (editors on
 Windows write one; ``tomllib`` would report "invalid statement at line 1").
+
+**Decision** (issue #30 item 5): :func:`parse_toml` is the one place TOML is parsed, and it
+refuses arrays and inline tables nested more than :data:`MAX_TOML_NESTING` levels deep before
+``tomllib`` sees them (``tomllib`` recurses once per level and raised ``RecursionError`` at
+about 500 levels in every loader: schemas, protocols, scenes, robots, ``--effects``, answer
+files). No shipped or sensible file nests more than 4 levels; a ``RecursionError`` that
+still escapes ``tomllib`` is reported the same way.
 """
 
 from __future__ import annotations
@@ -32,6 +39,9 @@ from vasim.core.bounds import MAX_MESSAGE_CHARS, Bound
 from vasim.core.errors import ConfigError
 
 BOM = "\ufeff"
+
+MAX_TOML_NESTING = 64
+"""Deepest nesting of arrays / inline tables :func:`parse_toml` accepts (shipped files: 4)."""
 
 
 def show(value: object, limit: int = MAX_MESSAGE_CHARS) -> str:
@@ -77,10 +87,77 @@ def parse_toml(text: object, *, file: str | Path | None = None, kind: str = "TOM
         raise ConfigError(f"{kind} text must be a string, got {type(text).__name__}", file=file)
     if text.startswith(BOM):
         text = text[len(BOM):]
+    depth, line = toml_nesting(text)
+    if depth > MAX_TOML_NESTING:
+        raise ConfigError(f"invalid {kind}: arrays or inline tables nested {depth} levels deep "
+                          f"at line {line}, expected at most {MAX_TOML_NESTING}", file=file)
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"invalid TOML: {exc}", file=file) from exc
+    except RecursionError:
+        raise ConfigError(f"invalid {kind}: nested too deeply for the TOML reader, expected "
+                          f"at most {MAX_TOML_NESTING} levels of arrays or inline tables",
+                          file=file) from None
+
+
+def toml_nesting(text: str) -> tuple[int, int]:
+    """The deepest nesting of ``[``/``{`` in value position of a TOML text and the line
+    (1-based) where it is first reached; brackets inside strings and comments are skipped,
+    and table headers (``[a]``, ``[[a]]`` at the start of a line) count nothing. A linear
+    scan without recursion: it only decides whether ``tomllib`` may be trusted with the
+    text (an unbalanced text is left to ``tomllib``'s own error).
+
+    >>> toml_nesting('a = [[1, 2], {b = "[[["}]  # [[[\n[[t]]\nc = 1')
+    (2, 1)
+    """
+    depth = best = 0
+    line = best_line = 1
+    i, n = 0, len(text)
+    at_line_start = True
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line += 1
+            at_line_start = True
+            i += 1
+            continue
+        if c in " \t\r":
+            i += 1
+            continue
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if c == "[" and at_line_start and depth == 0:   # a table header: skip the line's key
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        at_line_start = False
+        if c in "\"'":
+            triple = text.startswith(c * 3, i)
+            quote = c * 3 if triple else c
+            j = i + len(quote)
+            while j < n:
+                if c == '"' and text[j] == "\\":
+                    j += 2
+                    continue
+                if text.startswith(quote, j):
+                    break
+                if not triple and text[j] == "\n":
+                    break
+                j += 1
+            line += text.count("\n", i, j)
+            i = j + len(quote)
+            continue
+        if c in "[{":
+            depth += 1
+            if depth > best:
+                best, best_line = depth, line
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return best, best_line
 
 
 def check_table(value: object, field: str | None = None, *, file: str | Path | None = None,
@@ -278,6 +355,7 @@ def check_str_tuple(value: object, field: str, *, unique: bool = True, empty: bo
 
 __all__ = [
     "BOM",
+    "MAX_TOML_NESTING",
     "check_array_of_tables",
     "check_bool",
     "check_choice",
@@ -296,4 +374,5 @@ __all__ = [
     "parse_toml",
     "rewrap",
     "show",
+    "toml_nesting",
 ]

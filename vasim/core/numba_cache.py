@@ -13,9 +13,13 @@ folder of ``$XDG_CACHE_HOME/vasim/numba``, ``~/.cache/vasim/numba`` and
 ``<tempdir>/vasim-numba-<uid>`` and says so in one line on stderr when it had to use the
 temporary folder (kernels are then recompiled after a reboot).
 
-**Decision**: a user-set ``NUMBA_CACHE_DIR`` is always respected; if no folder at all is
-writable the import goes on and numba's own error names the kernel (nothing vasim could
-do would cache; compiling without a cache needs the source changed).
+**Decision**: a user-set ``NUMBA_CACHE_DIR`` is respected when it is writable, or when
+numba can fall back on its in-tree or user-wide cache. A user-set folder that is not
+writable while the install and home are read-only too (issue #30 item 5: "RuntimeError:
+cannot cache function" at import) is replaced by the first writable folder above, with one
+line on stderr naming the user's folder and the one used. If no folder at all is writable
+the import goes on and numba's own error names the kernel (nothing vasim could do would
+cache; compiling without a cache needs the source changed).
 """
 
 from __future__ import annotations
@@ -51,9 +55,10 @@ def configure_numba_cache() -> Path | None:
 
     Returns:
         The folder chosen, or None when nothing had to change (numba's in-tree or user-wide
-        cache works, or ``NUMBA_CACHE_DIR`` is already set).
+        cache works, or ``NUMBA_CACHE_DIR`` is already set to a writable folder).
     """
-    if os.environ.get("NUMBA_CACHE_DIR"):
+    user_set = os.environ.get("NUMBA_CACHE_DIR")
+    if user_set and writable_dir(Path(user_set)):
         return None
     if writable_dir(_PACKAGE / "abdomen" / "__pycache__"):
         return None
@@ -68,7 +73,11 @@ def configure_numba_cache() -> Path | None:
     for folder in [*candidates, temp]:
         if writable_dir(folder):
             os.environ["NUMBA_CACHE_DIR"] = str(folder)
-            if folder == temp:
+            if user_set:
+                print(f"vasim: NUMBA_CACHE_DIR={user_set} is not a writable folder (and the "
+                      f"install and home folders are read-only); compiled kernels are cached "
+                      f"in {folder}", file=sys.stderr)
+            elif folder == temp:
                 print(f"vasim: the install and home folders are read-only; compiled kernels "
                       f"are cached in {folder}", file=sys.stderr)
             return folder

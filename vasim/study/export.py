@@ -362,6 +362,9 @@ def export_study(
         raise ConfigError(f"unknown export format(s) {bad or fmts} (formats: "
                           f"{', '.join(FORMATS)})", field="format")
     names = list(dict.fromkeys(tables))
+    if not names:   # issue #30 item 6: `--tables ''` wrote only a manifest and exited 0
+        raise ConfigError(f"got no table, expected one or more of {', '.join(EXPORT_TABLES)}",
+                          field="--tables")
     for t in names:
         table_columns(t)
     out_dir = Path(out)

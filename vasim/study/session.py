@@ -60,7 +60,6 @@ Example:
 from __future__ import annotations
 
 import secrets
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -321,14 +320,64 @@ class Session:
 
 
 # ------------------------------------------------------------------------ lifecycle
+MAX_REASON_CHARS = 500
+"""Longest ``--again`` reason (one line)."""
+
+
+def check_again(store: TrialStore, protocol: str, subject: str, again: str | None,
+                ) -> str | None:
+    """The rule of a second session (issue #30 item 3): a subject who *completed* a session
+    of ``protocol`` gets another only with a reason (``again``, ``vasim study run --again
+    REASON``), which is stored with the new session; ``again`` without such a session is
+    refused too (the reason would be false).
+
+    **Decision**: only a *completed* session of the same protocol (by name) counts: an
+    aborted one frees the subject (as before), a running one is refused by the store
+    ("resume it"), and another protocol is another study. The rule is the command line's;
+    library callers (the cohort simulator, which resumes its own subjects, and the viewer)
+    decide for themselves.
+
+    Returns:
+        The note to store with the new session (None: no ``again``).
+
+    Raises:
+        ConfigError: (field ``--again``) naming the subject, the protocol, the completed
+            session(s) and what to do; or an empty, multi-line or over-long reason.
+    """
+    done = store.sessions(subject=subject, protocol=protocol, status="completed")
+    ids = ", ".join(str(int(i)) for i in done["id"])
+    if again is None:
+        if done.empty:
+            return None
+        ended = str(done["ended_at"].iloc[-1] or "")[:19]
+        raise ConfigError(
+            f"subject {subject!r} already completed protocol {protocol!r} in {store.path} "
+            f"(session{'s' if len(done) > 1 else ''} {ids}{', ended ' + ended if ended else ''}"
+            "); to run it again give the "
+            "reason with --again 'REASON' (stored with the new session), or use another "
+            "subject code", field="--again")
+    if not isinstance(again, str) or not again.strip() or "\n" in again \
+            or len(again) > MAX_REASON_CHARS:
+        raise ConfigError(f"got {again!r:.80}, expected a one-line reason of 1-"
+                          f"{MAX_REASON_CHARS} characters", field="--again")
+    if done.empty:
+        raise ConfigError(f"subject {subject!r} has no completed session of protocol "
+                          f"{protocol!r} in {store.path}; --again is only for running a "
+                          "completed protocol again (leave it out)", field="--again")
+    return (f"again after completed session{'s' if len(done) > 1 else ''} {ids}: "
+            f"{again.strip()}")
+
+
 def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
-                  seed: int | None = None, settings: SessionSettings | None = None) -> int:
+                  seed: int | None = None, settings: SessionSettings | None = None,
+                  notes: str | None = None) -> int:
     """Creates a session: seed, protocol text and realised schedule, in one transaction.
 
     Args:
         store: the study store. protocol: the protocol (its ``text`` is stored).
         subject: subject code. seed: randomisation seed (None: a fresh one, ``new_seed``).
         settings: how the trials run (default ``SessionSettings()``).
+        notes: stored with the session (``sessions.notes``; e.g. :func:`check_again`'s).
 
     Returns:
         The session id.
@@ -350,7 +399,7 @@ def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
     return store.create_session(
         SessionMeta(subject=subject, protocol=protocol.name, protocol_toml=text, seed=seed,
                     operator=OPERATOR_LABEL if settings.operator == "scripted"
-                    else settings.operator, config=settings.to_record()),
+                    else settings.operator, config=settings.to_record(), notes=notes),
         [t.as_row() for t in schedule])
 
 
@@ -514,11 +563,40 @@ def sitting_record(store: TrialStore, session: Session, st: ScheduledTrial, dela
                            "simulated": bool(simulate), "elapsed_days": None}
     tid = session.completed[st.index - 1] if st.index else None
     if tid is not None:
-        last = pd.Timestamp(store.trial(tid)["ended_at"])
+        raw = store.trial(tid)["ended_at"]
+        last = stored_time(raw)
+        if last is None:
+            # issue #30 item 5: a hand-edited ended_at ('not a date', NULL) was a traceback
+            if not simulate:
+                raise StoreError(
+                    f"{store.path}: trial {tid} (session {session.id}, the trial before "
+                    f"sitting {rec['sitting']}) has ended_at = {raw!r}, not an ISO 8601 time, "
+                    "so the sitting's delay cannot be measured; repair trials.ended_at of "
+                    "that trial, or pass --simulate-delay to record a simulated delay")
+            rec["previous_ended_at_invalid"] = None if raw is None else str(raw)
+            return rec
         then = pd.Timestamp.now(tz=last.tz) if at is None else pd.Timestamp(at)
         rec["elapsed_days"] = (then - last).total_seconds() / 86_400
         rec["previous_ended_at"] = last.isoformat()
     return rec
+
+
+def stored_time(value: object) -> pd.Timestamp | None:
+    """A stored ISO 8601 time (UTC when it has no offset), or None when it is missing or
+    not a time (a hand-edited store).
+
+    >>> stored_time("2026-11-20T10:00:00+00:00").isoformat(), stored_time("not a date")
+    ('2026-11-20T10:00:00+00:00', None)
+    """
+    if not isinstance(value, str) or not value.strip():
+        return None
+    try:
+        t = pd.Timestamp(value)
+    except (ValueError, OverflowError, TypeError):
+        return None
+    if pd.isna(t):
+        return None
+    return t if t.tz is not None else t.tz_localize("UTC")
 
 
 def _check_delay(store: TrialStore, session: Session, st: ScheduledTrial, delay: float,
@@ -658,15 +736,16 @@ def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
     Raises:
         ConfigError: unreadable file, invalid TOML, or other top-level tables.
     """
+    from vasim.core.config import parse_toml  # the one TOML reader (nesting checked)
+
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
+        text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ConfigError("answers file not found", file=p) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"cannot read answers file: {exc}", file=p) from exc
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"invalid TOML: {exc}", file=p) from exc
+    data = parse_toml(text, file=p, kind="answers file")
     for key, value in data.items():
         if key not in ("pre", "post") or not isinstance(value, dict):
             raise ConfigError(f"expected [pre] and [post] tables, got {key} = {value!r}",
@@ -682,6 +761,7 @@ __all__ = [
     "SessionSettings",
     "abort_session",
     "after_simulated_trial",
+    "check_again",
     "check_sitting_due",
     "find_session",
     "load_answers_file",
@@ -693,5 +773,6 @@ __all__ = [
     "sitting_begins",
     "sitting_record",
     "start_session",
+    "stored_time",
     "trial_seed",
 ]

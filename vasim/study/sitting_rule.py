@@ -51,7 +51,24 @@ class EarlySitting:
         return (f"session {session_id} of subject {subject!r}: sitting {self.sitting} "
                 f"(block {self.block!r}) begins {self.delay_days:g} d after the previous "
                 f"trial (ended {self.previous_ended_at.isoformat()}), due "
-                f"{self.due.isoformat()} (in {format_wait(self.remaining_days)}); {remedy}")
+                f"{self.due.isoformat()} (in {format_wait(self.remaining_days)})"
+                f"{self.future_hint}; {remedy}")
+
+    @property
+    def future_hint(self) -> str:
+        """When the previous trial's stored end lies after ``now`` (issue #30 item 8: a
+        sitting stored while the clock was 30 days fast): a note saying so, else ``""``.
+
+        **Decision**: the rule itself is unchanged (the delay counts from the stored end,
+        so a sitting cannot be begun early by a wrong clock either way); the message says
+        that the stored time is in the future, by how much, and what to check.
+        """
+        ahead = (self.previous_ended_at - self.now).total_seconds() / SECONDS_PER_DAY
+        if ahead <= 0:
+            return ""
+        return (f"; note: the previous trial's stored end is {format_wait(ahead)} in the "
+                "future: the clock was fast when it was stored, or is slow now; check the "
+                "clock of this computer (`date -u`) and of the one that ran it")
 
 
 def format_wait(days: float) -> str:

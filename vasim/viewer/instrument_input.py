@@ -163,6 +163,8 @@ def parse_batch(text: str) -> Increment | None:
         (3.0, -1.0, 0.03)
         >>> parse_batch('{"dx": "NaN"}') is None, parse_batch("not json") is None
         (True, True)
+        >>> parse_batch('{"dx": 1' + 400 * '0' + '}') is None
+        True
     """
     if not isinstance(text, str) or not text or len(text) > MAX_BATCH_CHARS:
         return None
@@ -175,9 +177,15 @@ def parse_batch(text: str) -> Increment | None:
     vals: dict[str, float] = {}
     for key in ("dx", "dy", "wheel", "sx", "sy", "ins", "roll"):
         v = raw.get(key, 0.0)
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        if isinstance(v, bool) or not isinstance(v, int | float):
             return None
-        vals[key] = float(v)
+        try:  # an integer beyond the float range (400 digits) is malformed too (issue #30)
+            x = float(v)
+        except OverflowError:
+            return None
+        if not math.isfinite(x):
+            return None
+        vals[key] = x
     return Increment(dx_px=vals["dx"], dy_px=vals["dy"], wheel=vals["wheel"],
                      insert_s=vals["ins"], roll_s=vals["roll"], stick_x_s=vals["sx"],
                      stick_y_s=vals["sy"])

@@ -116,6 +116,12 @@ class Block:
         check_bool(self.probe, "probe")
         check_bool(self.counterbalance, "counterbalance")
         check_int(self.probes_after, "probes_after", bound=PROBES_AFTER)
+        n_own = len(self.variants) * self.repetitions
+        if self.gain_schedule is not None and len(self.gain_schedule) > n_own:
+            # issue #30: 4 stages on 2 trials silently ran only 2 of them
+            raise fail(list(self.gain_schedule), f"at most {n_own} stage(s), one per trial of "
+                       f"the block's {n_own} trial(s) (a longer schedule would skip stages; "
+                       "drop stages or add variants/repetitions)", field="gain_schedule")
         check_block_phase(self)
 
     @property

@@ -193,6 +193,11 @@ def check_protocol_phases(protocol: Protocol) -> None:
                             else "the probe variant of appended probes")
                     raise fail(v, f"an untrained variant (variant {v} is run in {what})",
                                field=f"blocks[{i}].variants[{j}]")
+    if blocks and blocks[0].delay_days > 0:
+        # issue #30: accepted, exported as a later sitting, yet everything ran at once
+        raise fail(blocks[0].delay_days, "0 on the first block (a delay counts from the "
+                   "previous trial; the first block has none: give the delay to the block "
+                   "that begins the later sitting)", field="blocks[0].delay_days")
     worst = sum(max_trials(b) for b in blocks)
     if worst > TRIALS_PER_SESSION.high:
         raise fail(worst, f"at most {TRIALS_PER_SESSION.high:,} trials per session with "

@@ -17,8 +17,8 @@ These are the fields of ``vasim study power``'s ``--effect-scale`` and ``--effec
 
 * A ``[power.effects]`` label must be one of the protocol's conditions: the planning values
   of a protocol belong to its conditions, and a misspelt label (``[power.effects.f]``)
-  would otherwise be silently unused. (An ``--effects`` file stays free-form: it may be
-  shared between protocols.)
+  would otherwise be silently unused. The labels of an ``--effects`` file are held to the
+  same rule (issue #30; ``vasim.cli.power.check_effects_labels``).
 * Precedence (:func:`resolve_effects`): the calibration
   (``vasim.operator.learning.SEED_EFFECTS``), then the protocol's ``[power.effects]``
   field by field, then an ``--effects`` file field by field; the scale is

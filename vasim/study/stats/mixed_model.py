@@ -38,6 +38,124 @@ MIXED_MODEL_COLUMNS: tuple[str, ...] = (
 
 _NAME = re.compile(r"Q\(\s*['\"]([^'\"]+)['\"]\s*\)|[A-Za-z_][A-Za-z0-9_.]*")
 
+# -- the formula whitelist (issue #30 item 7) ---------------------------------------------
+TRANSFORMS: tuple[str, ...] = (
+    "C", "Q", "I", "center", "standardize", "scale",
+    "np.log", "np.log2", "np.log10", "np.log1p", "np.exp", "np.sqrt", "np.abs",
+    "np.square",
+)
+"""Functions a formula may call: patsy's ``C`` (categorical), ``Q`` (quoted column name),
+``I`` (arithmetic), ``center``/``standardize``/``scale``, and numpy's monotone transforms."""
+CONTRASTS: tuple[str, ...] = ("Treatment", "Sum", "Diff", "Helmert", "Poly")
+"""Contrast codings allowed as ``C(column, Treatment('ff'))`` (second argument of C)."""
+KEYWORDS: tuple[str, ...] = ("reference", "levels", "omit")
+"""Keyword arguments of the contrasts (``Treatment(reference='ff')``)."""
+OPERATORS: tuple[str, ...] = ("~", "+", "-", "*", "/", ":", "**", "(", ")", ",", "=")
+"""The formula operators and punctuation allowed."""
+MAX_FORMULA_CHARS = 2000
+
+_TOKEN = re.compile(r"""\s*(?:(?P<str>'[^'\\\n]*'|"[^"\\\n]*")|(?P<num>\d+(?:\.\d+)?)|"""
+                    r"""(?P<name>[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)|"""
+                    r"""(?P<op>\*\*|[~+\-*/:(),=]))""")
+
+
+def check_formula(formula: str, columns: list[str], *, source: str | None = None) -> None:
+    """Refuses a formula that is anything but column names, operators and known transforms
+    (issue #30 item 7: patsy *evaluates* formula terms as Python, so ``I(__import__('os')
+    .system(...))`` ran the code).
+
+    Allowed: the columns of the data (as names, or quoted with ``Q("a b")``), the operators
+    :data:`OPERATORS`, numbers, the calls :data:`TRANSFORMS` (a column's values
+    transformed), the contrasts :data:`CONTRASTS` as the second argument of ``C`` with
+    a quoted level or :data:`KEYWORDS`; a string only inside ``Q`` (naming a column) or a
+    contrast (a level). Nothing else reaches patsy: no attribute access, subscripts,
+    other names or calls.
+
+    **Decision**: a whitelist of tokens checked before patsy, rather than a sandboxed
+    evaluation environment, because patsy evaluates its terms with ``eval`` in the
+    caller's namespace and Python offers no safe sandbox for ``eval``.
+
+    Raises:
+        ConfigError: (field ``formula``) naming the token and what is allowed.
+
+    Examples:
+        >>> check_formula("y ~ C(f, Treatment('a')) + np.log(x) + I(x ** 2)", ["y", "f", "x"])
+        >>> check_formula("y ~ I(__import__('os'))", ["y"])
+        Traceback (most recent call last):
+        ...
+        vasim.core.errors.ConfigError: field 'formula': got '__import__' at character 6 of \
+"y ~ I(__import__('os'))", expected a transform (C, Q, I, center, standardize, scale, \
+np.log, np.log2, np.log10, np.log1p, np.exp, np.sqrt, np.abs, np.square) or, as C's \
+second argument, a contrast (Treatment, Sum, Diff, Helmert, Poly)
+    """
+    cols = set(columns)
+    col_text = (f"a column ({', '.join(map(str, columns[:MAX_LISTED]))}"
+                f"{', ...' if len(columns) > MAX_LISTED else ''})")
+    what = f"{col_text} or a transform ({', '.join(TRANSFORMS)})"
+
+    def refuse(token: str, pos: int, expected: str) -> ConfigError:
+        shown = formula if len(formula) <= 120 else formula[:120] + "..."
+        return ConfigError(f"got {token!r} at character {pos} of {shown!r}, expected "
+                           f"{expected}", file=source, field="formula")
+
+    if not isinstance(formula, str) or len(formula) > MAX_FORMULA_CHARS:
+        raise ConfigError(f"formula must be a string of at most {MAX_FORMULA_CHARS} "
+                          f"characters, got {str(formula)[:80]!r}", file=source,
+                          field="formula")
+    tokens: list[tuple[str, str, int]] = []
+    pos = 0
+    while pos < len(formula):
+        if formula[pos:].strip() == "":
+            break
+        m = _TOKEN.match(formula, pos)
+        if m is None or m.end() == pos:
+            start = len(formula) - len(formula[pos:].lstrip())
+            raise refuse(formula[start:start + 1], start,
+                         f"a column, a number, a transform or one of {' '.join(OPERATORS)}")
+        kind = m.lastgroup or "op"
+        tokens.append((kind, m.group(kind), m.start(kind)))
+        pos = m.end()
+    if sum(1 for k, t, _ in tokens if k == "op" and t == "~") != 1:
+        raise ConfigError(f"formula must have exactly one '~' (response ~ terms), got "
+                          f"{formula!r}", file=source, field="formula")
+    stack: list[str | None] = []        # the call each open parenthesis belongs to
+    for i, (kind, tok, at) in enumerate(tokens):
+        nxt = tokens[i + 1][1] if i + 1 < len(tokens) else ""
+        prev = tokens[i - 1][1] if i else ""
+        inside = stack[-1] if stack else None
+        if kind == "name":
+            if nxt == "(":
+                if tok in TRANSFORMS or (tok in CONTRASTS and inside == "C" and prev == ","):
+                    continue
+                raise refuse(tok, at, f"a transform ({', '.join(TRANSFORMS)}) or, as "
+                             f"C's second argument, a contrast ({', '.join(CONTRASTS)})")
+            if nxt == "=" and tok in KEYWORDS and inside in CONTRASTS:
+                continue
+            if tok in CONTRASTS and inside == "C" and prev == ",":
+                continue              # C(f, Sum)
+            if tok not in cols:
+                raise refuse(tok, at, what)
+        elif kind == "str":
+            if inside == "Q" and prev == "(" and nxt == ")":
+                if tok[1:-1] not in cols:
+                    raise refuse(tok, at, f"inside Q(), {col_text}")
+                continue
+            if inside in CONTRASTS:
+                continue              # a level: Treatment('ff'), reference='ff'
+            raise refuse(tok, at, "a string only in Q(\"column\") or as a contrast's level")
+        elif kind == "op":
+            if tok == "(":
+                stack.append(prev if tokens[i - 1][0] == "name" and i else None)
+            elif tok == ")":
+                if not stack:
+                    raise refuse(tok, at, "a matching '('")
+                stack.pop()
+            elif tok == "=" and not (inside in CONTRASTS and prev in KEYWORDS):
+                raise refuse(tok, at, f"'=' only after a contrast keyword ({', '.join(KEYWORDS)})")
+    if stack:
+        raise ConfigError(f"formula {formula!r} has an unclosed '('", file=source,
+                          field="formula")
+
 
 def mixed_model(data: pd.DataFrame, formula: str, groups: str) -> pd.DataFrame:
     """Fits ``formula`` with a random intercept per ``groups`` level by REML.
@@ -133,6 +251,7 @@ def fit_mixed_model(data: pd.DataFrame, formula: str, groups: str, *,
         raise ConfigError(f"need at least 2 levels of {groups!r} for random intercepts, found "
                           f"{levels_of(g)!r}", file=src, field=groups)
     used = _formula_columns(data, formula)
+    check_formula(formula, [str(c) for c in data.columns], source=src)  # before patsy
     data = _numbers_where_read_as_text(data, [c for c in used if c != groups])
     for col in used:
         _check_column(data, col)

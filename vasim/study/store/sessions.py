@@ -30,6 +30,8 @@ class SessionMeta:
         seed: the randomisation seed of the schedule, an integer in [0, 2**63).
         operator: the input device, e.g. ``"scripted"``.
         config: how the trials are run (JSON-serialisable), or None.
+        notes: a note stored with the session (``sessions.notes``), e.g. why a subject
+            who completed the protocol runs it again (``vasim study run --again``).
     """
 
     subject: str
@@ -38,6 +40,7 @@ class SessionMeta:
     seed: int
     operator: str
     config: Mapping[str, Any] | None = None
+    notes: str | None = None
 
     def __post_init__(self) -> None:
         validate_subject_code(self.subject)
@@ -104,9 +107,10 @@ class SessionWriters(StoreConnection):
                 cur = con.execute(
                     "INSERT INTO sessions (subject, protocol, protocol_toml, protocol_sha256, "
                     "seed, status, created_at, operator, n_trials, config_json, "
-                    "vasim_version) VALUES (?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?)",
+                    "vasim_version, notes) VALUES (?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?)",
                     (meta.subject, meta.protocol, meta.protocol_toml, sha, int(meta.seed),
-                     now(), meta.operator, len(rows), to_json(meta.config), __version__))
+                     now(), meta.operator, len(rows), to_json(meta.config), __version__,
+                     meta.notes))
                 sid = cur.lastrowid
                 assert sid is not None
                 con.executemany(
