@@ -56,7 +56,13 @@ from vasim.haptics.laparoscopic import InputMapping
 from vasim.records.path_deviation import path_distances
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
-from vasim.viewer.access import access_policy, guarded_server, viewer_url
+from vasim.viewer.access import (
+    access_policy,
+    guarded_server,
+    new_token,
+    same_token,
+    viewer_url,
+)
 from vasim.viewer.audio import AudioStream
 from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,
@@ -137,6 +143,9 @@ class ViewerApp(ErrorReporter):
         control_hz, view_hz: rates of the controller and view threads [Hz].
         audio_hz: rate of the AG parameter stream [Hz].
         trial_factory: builds live trials (default ``make_live_trial``).
+        token: the trainee page's access token (required beyond loopback; ``--expose``).
+        experimenter_token: the experimenter page's token; must differ from ``token``;
+            None with a ``token``: a fresh one is drawn (read ``experimenter_url``).
         optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
             every person-driven trial).
         countdown_s: the start cue before a person-driven trial [s] (0: none).
@@ -173,10 +182,19 @@ class ViewerApp(ErrorReporter):
         trial_factory: Callable[..., Any] | None = None,
         token: str | None = None,
         experimenter_port: int | None = None,
+        experimenter_token: str | None = None,
         optics: float = 0.0,
         countdown_s: float = 3.0,
     ):
-        self.access = access_policy(host, token)
+        # Two pages, two tokens (issue #30.1): the trainee's token never opens the
+        # experimenter's page. Given only the trainee's, the experimenter's is drawn here.
+        if token and experimenter_token is None:
+            experimenter_token = new_token()
+        if token and experimenter_token and same_token(experimenter_token, token):
+            raise ConfigError("the experimenter's token must differ from the trainee's "
+                              "(one token per page)", field="experimenter_token")
+        self.access = access_policy(host, token, role="trainee")
+        self.exp_access = access_policy(host, experimenter_token, role="experimenter")
         self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
@@ -239,7 +257,7 @@ class ViewerApp(ErrorReporter):
             exp_port = self.requested_experimenter_port
             if exp_port != 0 and exp_port == self.server.get_port():
                 exp_port += 1
-            self.exp_server = guarded_server(self.host, exp_port, self.access)
+            self.exp_server = guarded_server(self.host, exp_port, self.exp_access)
             self.server.gui.configure_theme(control_width="medium", show_logo=False)
             self.exp_server.gui.configure_theme(control_width="large")
             self._build_scene()
@@ -306,7 +324,7 @@ class ViewerApp(ErrorReporter):
     @property
     def experimenter_url(self) -> str:
         """Address of the experimenter's page (with the token of an exposed viewer)."""
-        return viewer_url(self.host, self.experimenter_port, self.access.token)
+        return viewer_url(self.host, self.experimenter_port, self.exp_access.token)
 
     @property
     def url(self) -> str:
