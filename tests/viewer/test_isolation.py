@@ -280,3 +280,33 @@ def test_150_simultaneous_connections_cause_no_loop_errors(
     assert not [e for e in new_errors if "deque" in e or "viewer error" in e], new_errors
     assert not [r for r in caplog.records if "deque mutated" in r.getMessage()]
     assert isolation.installed()
+
+
+def test_a_trainee_connection_cannot_reach_the_experimenter_s_controls(app: ViewerApp) -> None:
+    """Every input of the experimenter's page, addressed by its id from the trainee's
+    websocket with a plausible new value (and a Start click): nothing changes, nothing is
+    queued for the controller."""
+    e = app.exp_server
+    assert e is not None
+    inputs = list(e.gui._gui_input_handle_from_uuid.values())
+    assert inputs
+    before = {h._impl.uuid: h._impl.value for h in inputs}
+    def choices() -> tuple[Any, ...]:
+        p = app.controller.panel
+        return (p.mode, p.input, p.schema, p.task, p.subject, p.label, p.protocol,
+                p.condition, repr(p.f5pl))
+
+    panel_before = choices()
+    url = f"ws://127.0.0.1:{app.port}/"
+    with connect(url, subprotocols=[SUBPROTOCOL], open_timeout=30) as ws:
+        ws.send(msgspec.msgpack.encode(camera()))
+        for uuid, value in before.items():
+            new: Any = (not value if isinstance(value, bool) else
+                        value + 1 if isinstance(value, int | float) else
+                        "free" if isinstance(value, str) else value)
+            ws.send(msgspec.msgpack.encode({"type": "GuiUpdateMessage", "uuid": uuid,
+                                            "updates": {"value": new}}))
+        _recv_for(ws, 1.5)
+    assert {h._impl.uuid: h._impl.value for h in inputs} == before
+    assert app.commands.empty()
+    assert choices() == panel_before

@@ -64,6 +64,7 @@ from vasim.viewer.access import (
     viewer_url,
 )
 from vasim.viewer.audio import AudioStream
+from vasim.viewer.chrome import experimenter_chrome, lock_trainee_chrome
 from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,
     Command,
@@ -258,8 +259,8 @@ class ViewerApp(ErrorReporter):
             if exp_port != 0 and exp_port == self.server.get_port():
                 exp_port += 1
             self.exp_server = guarded_server(self.host, exp_port, self.exp_access)
-            self.server.gui.configure_theme(control_width="medium", show_logo=False)
-            self.exp_server.gui.configure_theme(control_width="large")
+            lock_trainee_chrome(self.server)  # before any other GUI (chrome.py)
+            experimenter_chrome(self.exp_server)
             self._build_scene()
             self._build_gui()
             self.mrcp_panel = self._build_mrcp_panel()
