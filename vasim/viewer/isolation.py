@@ -261,6 +261,9 @@ def install() -> None:
     with _install_lock:
         if _installed:
             return
+        from vasim.viewer import flow
+
+        flow.install()
         _infra._message_consumer = _guarded_consumer
         _infra.AsyncMessageBuffer = _LoopSafeBuffer  # type: ignore[misc]
         _installed = True
