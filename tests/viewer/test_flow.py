@@ -70,6 +70,7 @@ def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> No
     async def main() -> None:
         f = PageFlow()
         f.acking, f.last_ack = True, time.monotonic()
+        f.last_progress = f.last_ack
         marks = type("M", (), {"seq": 0})()
         sock = _PacedSocket(_Socket(), f, marks, counted=True)  # type: ignore[arg-type]
         for i in range(MAX_AHEAD - 1):
@@ -79,16 +80,19 @@ def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> No
         third = asyncio.ensure_future(sock.send(b"w"))
         await asyncio.sleep(0.2)
         assert not third.done() and f.ahead() == MAX_AHEAD   # waits for the page
-        f.last_ack = time.monotonic()
-        f.applied_seq = 1
-        f.applied(1)
+        # Each window counts the newest mark read before it was pulled (a lower bound).
+        assert list(f.in_flight) == [0, 1]
+        f.last_ack = f.last_progress = time.monotonic()
+        f.applied_seq = 0
+        f.applied(0)
         assert f.event is not None
         f.event.set()
         await asyncio.wait_for(third, 1.0)
         assert f.ahead() == MAX_AHEAD - 1
         # A page silent for STALE_S is no longer paced (the stall counted).
         f.in_flight.extend(range(10, 10 + MAX_AHEAD))
-        f.last_ack = time.monotonic() - flow.STALE_S - 1
+        f.last_ack = time.monotonic()                     # heartbeats, no progress
+        f.last_progress = time.monotonic() - flow.STALE_S - 1
         await asyncio.wait_for(sock.send(b"w"), 1.0)
         assert f.stalls == 1 and not f.acking
 
@@ -191,3 +195,36 @@ def test_a_stored_trial_records_the_pages_update_rate(app: ViewerApp) -> None:
                       "realtime_factor_recent"}
     assert t["view_update_hz"] > 0
     assert app.controller.viewer_timing is not None
+
+
+def test_a_page_that_acknowledges_what_it_applied_is_never_starved(app: ViewerApp) -> None:
+    """A well-behaved page (it acknowledges the newest frame mark each window brings) keeps
+    getting frames: the credit never waits on a mark that was not sent (no deadlock)."""
+    with connect(f"ws://127.0.0.1:{app.port}/", subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+                 open_timeout=30, max_size=None) as ws:
+        ws.send(msgspec.msgpack.encode({
+            "type": "ViewerCameraMessage", "wxyz": [1.0, 0, 0, 0], "position": [0, -0.3, 0.1],
+            "fov": 1.0, "near": 0.01, "far": 100.0, "image_height": 600, "image_width": 800,
+            "look_at": [0.0, 0, 0], "up_direction": [0.0, 0, 1]}))
+        uuid, applied, first = None, -1, None
+        t_end = time.monotonic() + 60
+        while time.monotonic() < t_end:
+            try:
+                msgs = _decode(ws.recv(timeout=1.0))  # type: ignore[arg-type]
+            except TimeoutError:
+                msgs = []
+            for m in msgs:
+                found = re.search(r'var UUID = "([^"]+)", NODE', str(m.get("source", "")))
+                uuid = found.group(1) if found else uuid
+                if m.get("name") == flow.MARK_NODE and m["type"] == "SetPositionMessage":
+                    applied = max(applied, round(m["position"][0]))
+            if uuid is not None and applied >= 0:
+                ws.send(msgspec.msgpack.encode({
+                    "type": "GuiUpdateMessage", "uuid": uuid,
+                    "updates": {"value": f'{{"seq": {applied}, "q": 0}}'}}))
+                if first is None:
+                    first, t_end = applied, time.monotonic() + 4.0
+        assert first is not None
+        page = app.acks.pages()[max(app.acks.pages())]
+        assert page.acking and page.stalls == 0
+        assert applied - first >= 10, (first, applied)   # 20 Hz for 4 s, minus the load

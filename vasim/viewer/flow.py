@@ -22,8 +22,8 @@ backlogs of thousands of messages, a displayed clock 15-55 s late. Here:
   latest-wins per node per client, and each page's update rate adapts to what it can
   draw. A page that never acknowledges (no script: a bare websocket client) is not
   paced; the script repeats its acknowledgement every :data:`HEARTBEAT_S`, and a page
-  silent for :data:`STALE_S` while its stream waits is unpaced until it acknowledges
-  again (the stall is counted).
+  that applies no new frame for :data:`STALE_S` while its stream waits is unpaced until
+  it acknowledges again (the stall is counted).
 
 The figures per page (update rate, frames in flight, queued messages, displayed-clock lag)
 feed the "running behind" notices and the trial record (``ViewerApp.flow_stats``).
@@ -48,8 +48,9 @@ MAX_AHEAD = 2
 """Windows of updates a page may have in flight (sent, its frame mark not yet applied)
 before its stream waits."""
 STALE_S = 30.0
-"""A page silent this long while its stream waits is no longer paced (a broken page
-script must not freeze its stream; pacing resumes with its next acknowledgement)."""
+"""A page that applies no new frame this long while its stream waits is no longer paced
+(a broken page script must not freeze its stream; pacing resumes with its next
+acknowledgement)."""
 HEARTBEAT_S = 1.0
 """The page repeats its acknowledgement this often even when nothing new was applied."""
 RATE_WINDOW_S = 3.0
@@ -122,6 +123,8 @@ class PageFlow:
         self.stalls = 0
         self.acks: collections.deque[float] = collections.deque()
         self.last_ack = 0.0
+        self.last_progress = 0.0
+        """When the page last applied a new mark (or first acknowledged)."""
         self.total_acks = 0
         """Acknowledgements of new frames since the page connected."""
         self.event: asyncio.Event | None = None
@@ -137,7 +140,7 @@ class PageFlow:
         if self.event is None:
             self.event = asyncio.Event()
         while self.acking and self.ahead() >= MAX_AHEAD:
-            left = self.last_ack + STALE_S - time.monotonic()
+            left = self.last_progress + STALE_S - time.monotonic()
             if left <= 0:  # the page went silent: unpaced until it speaks again
                 self.stalls += 1
                 self.acking = False
@@ -198,22 +201,28 @@ class _PacedSocket:
 
     def __init__(self, ws: Any, flow: PageFlow, marks: FrameMarks | None, counted: bool):
         self._ws, self._flow, self._marks, self._counted = ws, flow, marks, counted
+        self._pulled = self._mark()
+
+    def _mark(self) -> int:
+        return self._marks.seq if self._marks is not None else 0
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._ws, name)
 
     async def send(self, data: Any) -> None:
-        flow = self._flow
-        seq = self._marks.seq if self._marks is not None else 0
+        # The window being sent was pulled after ``_pulled`` was read, so every mark up to
+        # ``_pulled`` had reached viser's buffer: once the page has applied this window its
+        # mark is >= ``_pulled`` (a lower bound: never a window counted applied too late).
+        flow, seq = self._flow, self._pulled
         await self._ws.send(data)
         flow.windows += 1
-        if not flow.acking:
-            return
-        if self._counted:
-            flow.in_flight.append(seq)
-            flow.applied(flow.applied_seq)
-            flow.max_ahead = max(flow.max_ahead, flow.ahead())
-        await flow.credit()
+        if flow.acking:
+            if self._counted:
+                flow.in_flight.append(seq)
+                flow.applied(flow.applied_seq)
+                flow.max_ahead = max(flow.max_ahead, flow.ahead())
+            await flow.credit()
+        self._pulled = self._mark()  # read before the producer pulls its next window
 
 
 _original_producer = _infra._message_producer
@@ -246,9 +255,13 @@ def acknowledge(port: int, client_id: int, text: str) -> bool:
     if not (-1 <= seq < 2**53 and 0 <= queued < 2**31):
         return False
     flow = registry.page(port, client_id)
+    now = time.monotonic()
+    if not flow.acking:
+        flow.last_progress = now
     flow.acking = True
-    flow.last_ack = time.monotonic()
+    flow.last_ack = now
     if seq > flow.applied_seq:
+        flow.last_progress = now
         flow.applied_seq = seq
         flow.acks.append(time.monotonic())
         flow.total_acks += 1
