@@ -95,12 +95,14 @@ class FrameMarks:
     def mark(self, t_trial: float) -> int:
         """Marks one more frame (call inside the frame's ``atomic()`` block); returns it."""
         with self._lock:
-            self.seq += 1
-            self._t[self.seq] = float(t_trial)
+            seq = self.seq + 1
+            self._t[seq] = float(t_trial)
             while len(self._t) > 4000:
                 self._t.popitem(last=False)
-            seq = self.seq
-        self.node.position = (float(seq), 0.0, 0.0)
+            # Pushed before ``seq`` is published: a producer reading ``seq`` knows the
+            # mark is already in viser's buffer (its lower bound holds).
+            self.node.position = (float(seq), 0.0, 0.0)
+            self.seq = seq
         return seq
 
     def trial_time(self, seq: int) -> float | None:
