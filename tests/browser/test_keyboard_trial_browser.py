@@ -83,6 +83,7 @@ def _steer_all(app: ViewerApp, page: Any, timeout: float) -> int:
     return int(app.snapshot.frame.goal_index)
 
 
+@pytest.mark.timeout(900)  # a 180 s trial (3x its limit in wall time on a loaded host)
 def test_a_whole_trial_by_keyboard_on_a_throttled_laptop_page(app: ViewerApp,
                                                               browser: Any) -> None:
     page = browser.new_page(viewport=LAPTOP)
