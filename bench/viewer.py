@@ -28,6 +28,17 @@ Figures per run:
 * the trial: servo rate achieved [Hz] and the physics thread's rate [Hz]
   (``RealtimeTrial.timing()``), or the viewer's sim thread's control rate.
 
+4. the same Chromium page at a laptop's 1280x800 with its CPU throttled 4x (DevTools
+   ``Emulation.setCPUThrottlingRate``), the trainee driving the instrument (a keyboard
+   trial): the page's **backlog** (messages waiting in its queue, sampled every 50 ms:
+   max and p95), the **displayed-clock lag** (trial time now minus the trial time of the
+   frame the page has applied, from its acknowledgements: p50 and max [s]), windows of
+   updates in flight, the page's update rate, and the **control-to-photon latency** (a key press in
+   the page to the first animation frame that shows the tool tip moved, page clock,
+   median of several presses [ms]). Goals (issue #26.2): backlog < 10 messages, lag
+   < 0.5 s, latency < 150 ms.
+
+``--smoke``: 2 s runs (checks that everything runs; figures are not meaningful).
 The host is shared (other jobs run), so compare the two runs within one invocation.
 """
 
@@ -35,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import time
 from typing import Any
 
@@ -149,6 +161,101 @@ def _measure(app: Any, seconds: float, page: Any = None,
     return out
 
 
+BACKLOG_JS = """() => {
+  const m = window.__viserMutable;
+  const b = window.__vasimBacklog = {samples: []};
+  setInterval(() => { b.samples.push(m.messageQueue.length); }, 50);
+  return true;
+}"""
+
+LATENCY_JS = """(key) => { window.__vasimLatency = undefined; new Promise((resolve) => {
+  const m = window.__viserMutable, tip = () => m.nodeRefFromName['/tool/tip'];
+  const p0 = tip().position.clone();
+  let t0 = null;
+  const onKey = (e) => { if (e.code === key && t0 === null) { t0 = e.timeStamp; } };
+  window.addEventListener('keydown', onKey, true);
+  const give_up = performance.now() + 20000;
+  const look = (now) => {
+    if (t0 !== null && tip().position.distanceTo(p0) > 1e-5) {
+      window.removeEventListener('keydown', onKey, true); resolve(now - t0); return; }
+    if (now > give_up) { window.removeEventListener('keydown', onKey, true);
+      resolve(null); return; }
+    requestAnimationFrame(look);
+  };
+  requestAnimationFrame(look);
+}).then((ms) => { window.__vasimLatency = ms; }); return true; }"""
+
+
+def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dict[str, float]:
+    """Run 4: a 1280x800 page, CPU throttled ``rate``x, a keyboard trial (module doc)."""
+    import numpy as np
+
+    from tests.browser.conftest import wait_ready
+    from vasim.viewer.controller import Command
+
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    try:
+        page.goto(app.url)
+        wait_ready(page, "/organs/liver")
+        page.wait_for_function("() => window.__vasimFlow && window.__vasimFlow.acks > 0",
+                               timeout=60_000)
+        cdp = page.context.new_cdp_session(page)
+        cdp.send("Emulation.setCPUThrottlingRate", {"rate": rate})
+        for kind, value in (("mode", "free"), ("input", "laparoscopic"), ("start", None)):
+            app.submit(Command(kind, value))
+        t_end = time.monotonic() + 60
+        while app.controller.instrument is None and time.monotonic() < t_end:
+            time.sleep(0.05)
+        if app.controller.instrument is None:
+            raise RuntimeError(f"the keyboard trial did not start: {app.errors[-3:]}")
+        while app.controller.countdown_until is not None and time.monotonic() < t_end:
+            time.sleep(0.05)
+        time.sleep(1.0)
+        page.evaluate(BACKLOG_JS)
+        lags, ahead, rates = [], [], []
+        t_end = time.monotonic() + seconds
+        while time.monotonic() < t_end:
+            f = app.flow_stats()
+            lags.append(f["trainee_clock_lag_s_max"])
+            ahead.append(f["trainee_windows_ahead_max"])
+            rates.append(f["trainee_page_update_hz_min"])
+            time.sleep(0.25)
+        latencies = []
+        for i in range(5):
+            key = "ArrowRight" if i % 2 == 0 else "ArrowLeft"
+            page.evaluate(LATENCY_JS, key)
+            page.keyboard.down(key)
+            time.sleep(0.25)
+            page.keyboard.up(key)
+            try:
+                page.wait_for_function("() => window.__vasimLatency !== undefined",
+                                       timeout=60_000)
+            except Exception:  # a page this slow: no figure rather than no bench
+                break
+            ms = page.evaluate("() => window.__vasimLatency")
+            if ms is not None:
+                latencies.append(float(ms))
+            time.sleep(0.5)
+        backlog = np.array(page.evaluate("() => window.__vasimBacklog.samples"), dtype=float)
+        factor = app.flow_stats()["realtime_factor_recent"]
+        app.submit(Command("stop"))
+    finally:
+        page.close()
+    lag = np.array([x for x in lags if x == x])
+    return {
+        "backlog_max": float(backlog.max()) if len(backlog) else float("nan"),
+        "backlog_p95": float(np.percentile(backlog, 95)) if len(backlog) else float("nan"),
+        "lag_p50": float(np.median(lag)) if len(lag) else float("nan"),
+        "lag_max": float(lag.max()) if len(lag) else float("nan"),
+        "windows_ahead_max": float(max(ahead, default=float("nan"))),
+        "page_update_hz": float(np.nanmedian(rates)) if rates else float("nan"),
+        "latency_ms_p50": float(np.median(latencies)) if latencies else float("nan"),
+        "latency_ms_max": float(max(latencies)) if latencies else float("nan"),
+        "latency_n": float(len(latencies)),
+        "realtime_factor": factor,
+    }
+
+
 def _pct(costs: Any, q: float) -> float:
     import numpy as np
 
@@ -167,10 +274,15 @@ def _browser_missing() -> str | None:
 
 
 def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
+    import tempfile
+
     from vasim.viewer import ViewerApp
 
     rows: list[tuple[str, dict[str, float]]] = []
-    app = ViewerApp(port=0, schema="trajectory_following", scene="default").start()
+    tmp = tempfile.TemporaryDirectory(prefix="vasim-bench-viewer-")
+    # A store: the throttled run's keyboard trial is a free-training trial (stored).
+    app = ViewerApp(port=0, schema="trajectory_following", scene="default",
+                    db=os.path.join(tmp.name, "bench.sqlite")).start()
     try:
         time.sleep(2.0)  # kernels compiled, the first trial under way
         rows.append(("no browser", _measure(app, seconds)))
@@ -194,18 +306,27 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
                 wait_ready(page, "/organs/liver")
                 page.evaluate(COUNTER_JS)
                 rows.append(("one headless Chromium attached", _measure(app, seconds, page)))
+                page.close()
+                rows.append(("Chromium 1280x800, CPU 4x slower", _throttled(app, b, seconds)))
             finally:
                 b.close()
     finally:
         app.stop()
+        tmp.cleanup()
     return rows
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description="browser viewer: cost, streaming, loop rates")
     parser.add_argument("--seconds", type=float, default=SECONDS, help="length of each run [s]")
-    args = parser.parse_args([] if argv is None else argv)
+    parser.add_argument("--smoke", action="store_true", help="2 s runs: checks it all runs")
+    args = parser.parse_args(sys.argv[1:] if argv is None and __name__ == "__main__"
+                             else [] if argv is None else argv)
+    if args.smoke:
+        args.seconds = 2.0
     rows = run(args.seconds)
+    throttled = [r for name, r in rows if name.startswith("Chromium 1280")]
+    rows = [(name, r) for name, r in rows if not name.startswith("Chromium 1280")]
     print(f"default abdomen, trajectory_following (VG, FF, MS, Mag, AG), {args.seconds:g} s "
           "per run, scripted operator in real time")
     head = (f"{'run':32s} {'view ms p50':>11s} {'p95':>6s} {'view/s':>7s} {'CPU/s':>6s} "
@@ -230,6 +351,17 @@ def main(argv: list[str] | None = None) -> None:
     if len(rows) == 3:
         print(f"tool-tip updates received by the browser: "
               f"{rows[2][1].get('browser_tip_per_s', 0):.1f}/s (target >= 30/s)")
+    for t in throttled:
+        print("Chromium 1280x800, CPU throttled 4x, keyboard trial (goals: backlog < 10 "
+              "messages, lag < 0.5 s, latency < 150 ms):")
+        print(f"  backlog (messages in the page's queue): max {t['backlog_max']:.0f}, p95 "
+              f"{t['backlog_p95']:.0f}; windows of updates in flight max "
+              f"{t['windows_ahead_max']:.0f}")
+        print(f"  displayed-clock lag: p50 {t['lag_p50']:.2f} s, max {t['lag_max']:.2f} s; "
+              f"page updates {t['page_update_hz']:.1f}/s; loop {t['realtime_factor']:.2f}x "
+              "real time")
+        print(f"  control-to-photon latency: p50 {t['latency_ms_p50']:.0f} ms, max "
+              f"{t['latency_ms_max']:.0f} ms ({t['latency_n']:.0f} key presses)")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from vasim.viewer.access import (
     COOKIE,
     AccessPolicy,
     access_policy,
+    cookie_name,
     is_loopback_name,
     new_token,
     viewer_url,
@@ -123,10 +124,10 @@ def test_an_exposed_server_needs_its_token() -> None:
         with urllib.request.urlopen(app.url, timeout=20) as r:
             assert r.status == 200
             cookie = r.headers["Set-Cookie"]
-        assert cookie.startswith(f"{COOKIE}={token}")
+        assert cookie.startswith(f"{cookie_name('trainee')}={token}")
         with pytest.raises(InvalidStatus):
             _ws(app.port, origin=f"http://127.0.0.1:{app.port}")
         _ws(app.port, origin=f"http://127.0.0.1:{app.port}",
-            additional_headers={"Cookie": f"{COOKIE}={token}"})
+            additional_headers={"Cookie": f"{cookie_name('trainee')}={token}"})
     finally:
         app.stop()

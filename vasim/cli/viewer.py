@@ -38,8 +38,9 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                    help="interface to bind (default 127.0.0.1: this machine only; any other "
                         "address needs --expose)")
     p.add_argument("--expose", action="store_true",
-                   help="allow a --host beyond this machine; every page (trainee and "
-                        "experimenter) then needs the access token printed with the URL")
+                   help="allow a --host beyond this machine; every page then needs the "
+                        "access token printed with its URL (the trainee's and the "
+                        "experimenter's pages have different tokens)")
     p.add_argument("--port", type=bounded_int(PORT), default=8080,
                    help="TCP port (default 8080; if busy, the next free port is used and "
                         "printed; 0 picks any free port)")

@@ -14,12 +14,23 @@ on every HTTP request and websocket handshake, before viser sees it:
 * **Loopback means loopback.** On a loopback bind the ``Host`` header must be a loopback
   name (``127.0.0.1``, ``localhost``, ``[::1]``): a DNS-rebinding page whose name resolves
   to 127.0.0.1 sends its own name and is refused.
-* **Exposed means a token.** Binding beyond loopback needs an explicit ``--expose`` (the
-  CLI) and then a random token, printed with the URL at start (``?token=...``). The page
-  request carrying it gets a ``SameSite=Strict`` cookie; every later request (scripts, the
-  websocket) must carry the cookie or the token. Both roles (trainee and experimenter)
-  need it. **Decision**: a cookie rather than a token in every URL, because viser's client
-  opens its websocket and loads its assets without the page's query string.
+* **Exposed means a token -- one per page.** Binding beyond loopback needs an explicit
+  ``--expose`` (the CLI) and then random tokens, printed with the URLs at start
+  (``?token=...``). The trainee's page and the experimenter's page each have their own
+  token (issue #30.1): the trainee's token never opens the experimenter's page. The page
+  request carrying a token gets a ``SameSite=Strict`` cookie named after the page's role
+  (``vasim_token_trainee``, ``vasim_token_experimenter``); every later request (scripts,
+  the websocket) must carry that cookie or the token. **Decisions**: a cookie rather than
+  a token in every URL, because viser's client opens its websocket and loads its assets
+  without the page's query string; one cookie *name per role* because browsers do not
+  separate cookies by port, so both pages open in one browser would otherwise overwrite
+  each other's cookie (and each page reads only its own).
+* **Compared as bytes, in constant time.** Tokens are compared with
+  ``hmac.compare_digest`` on their UTF-8 bytes, so any text a client sends (``%C3%A9``,
+  an unpaired surrogate) is a plain mismatch: HTTP 403, logged, never a 500.
+
+Every refusal is logged (logger ``vasim.viewer.access``, WARNING) with the page's role, the
+client's address, the path without its query (a token is never logged) and the reason.
 
 The websocket server belongs to viser; :func:`guarded_server` installs the check as the
 server's ``process_request`` hook while viser binds it (viser 1.1 calls
@@ -29,9 +40,11 @@ for).
 
 from __future__ import annotations
 
+import hmac
 import http
 import http.cookies
 import ipaddress
+import logging
 import secrets
 import threading
 from collections.abc import Callable, Iterator
@@ -45,8 +58,35 @@ import websockets.asyncio.server
 
 from vasim.core.errors import ConfigError
 
+log = logging.getLogger(__name__)
+
 COOKIE = "vasim_token"
-"""Name of the cookie that carries the token of an exposed viewer."""
+"""Name of the cookie that carries the token of an exposed single-page viewer (the MRCP
+station); a role's page uses :func:`cookie_name` of its role."""
+
+
+def cookie_name(role: str | None) -> str:
+    """The cookie carrying the token of the page of ``role`` (None: a single-page viewer).
+
+    Example:
+        >>> cookie_name("trainee"), cookie_name(None)
+        ('vasim_token_trainee', 'vasim_token')
+    """
+    return COOKIE if not role else f"{COOKIE}_{role}"
+
+
+def same_token(given: str | bytes | None, token: str) -> bool:
+    """True when ``given`` equals ``token``: a constant-time comparison of UTF-8 bytes
+    (any text, even non-ASCII or an unpaired surrogate, compares without raising).
+
+    Example:
+        >>> same_token("\u00e9", "abc"), same_token("abc", "abc"), same_token(None, "abc")
+        (False, True, False)
+    """
+    if given is None:
+        return False
+    a = given if isinstance(given, bytes) else given.encode("utf-8", "surrogatepass")
+    return hmac.compare_digest(a, token.encode("utf-8"))
 
 _LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1"})
 
@@ -87,10 +127,13 @@ class AccessPolicy:
     Attributes:
         loopback_only: the server is bound to a loopback address (Host must be loopback).
         token: the token an exposed viewer requires, or None (loopback binds only).
+        role: the page's role (``"trainee"``, ``"experimenter"``; None: a single-page
+            viewer): names the cookie and the log lines.
     """
 
     loopback_only: bool
     token: str | None = None
+    role: str | None = None
 
     def __post_init__(self) -> None:
         if not self.loopback_only and not self.token:
@@ -123,12 +166,16 @@ class AccessPolicy:
 
     def grants_cookie(self, path: str) -> bool:
         """True when the request carries the token in its query (set the cookie)."""
-        return self.token is not None and self._query_token(path) is not None \
-            and secrets.compare_digest(self._query_token(path) or "", self.token)
+        return self.token is not None and same_token(self._query_token(path), self.token)
+
+    @property
+    def cookie(self) -> str:
+        """Name of this page's cookie."""
+        return cookie_name(self.role)
 
     def cookie_header(self) -> str:
         """The ``Set-Cookie`` value that lets the browser's later requests through."""
-        return f"{COOKIE}={self.token}; Path=/; HttpOnly; SameSite=Strict"
+        return f"{self.cookie}={self.token}; Path=/; HttpOnly; SameSite=Strict"
 
     @staticmethod
     def _query_token(path: str) -> str | None:
@@ -137,16 +184,15 @@ class AccessPolicy:
 
     def _has_token(self, path: str, headers: Any) -> bool:
         assert self.token is not None
-        given = self._query_token(path)
-        if given is not None and secrets.compare_digest(given, self.token):
+        if same_token(self._query_token(path), self.token):
             return True
         cookie = http.cookies.SimpleCookie()
         try:
             cookie.load(headers.get("Cookie") or "")
         except http.cookies.CookieError:
             return False
-        morsel = cookie.get(COOKIE)
-        return morsel is not None and secrets.compare_digest(morsel.value, self.token)
+        morsel = cookie.get(self.cookie)
+        return morsel is not None and same_token(morsel.value, self.token)
 
 
 def is_loopback(host: str) -> bool:
@@ -159,8 +205,8 @@ def is_loopback(host: str) -> bool:
         return False
 
 
-def access_policy(host: str, token: str | None) -> AccessPolicy:
-    """The policy of a viewer bound to ``host``.
+def access_policy(host: str, token: str | None, role: str | None = None) -> AccessPolicy:
+    """The policy of a viewer (page of ``role``) bound to ``host``.
 
     Raises:
         ConfigError: ``host`` is beyond loopback and no token was given (the CLI makes one
@@ -169,7 +215,7 @@ def access_policy(host: str, token: str | None) -> AccessPolicy:
     if not is_loopback(host) and not token:
         raise ConfigError(f"host {host!r} exposes the viewer beyond this machine: it needs "
                           "an access token (vasim serve --expose makes one)", field="host")
-    return AccessPolicy(loopback_only=is_loopback(host), token=token or None)
+    return AccessPolicy(loopback_only=is_loopback(host), token=token or None, role=role)
 
 
 def viewer_url(host: str, port: int, token: str | None) -> str:
@@ -186,6 +232,15 @@ def viewer_url(host: str, port: int, token: str | None) -> str:
     return f"http://{host}:{port}/" + (f"?token={token}" if token else "")
 
 
+def _peer(connection: Any) -> str:
+    """``host:port`` of a connection's client (best effort, for the log)."""
+    try:
+        addr = connection.remote_address
+        return f"{addr[0]}:{addr[1]}"
+    except Exception:
+        return "?"
+
+
 _serve_lock = threading.Lock()
 
 
@@ -197,8 +252,16 @@ def _guarded_serve(policy: AccessPolicy) -> Iterator[None]:
     def serve(handler: Any, *args: Any, process_request: Callable[..., Any] | None = None,
               **kwargs: Any) -> Any:
         def check(connection: Any, request: Any) -> Any:
-            reason = policy.refusal(request.path, request.headers)
+            try:
+                reason = policy.refusal(request.path, request.headers)
+            except Exception as exc:  # a request the policy cannot read is refused
+                reason = f"unreadable request ({type(exc).__name__})"
             if reason is not None:
+                log.warning("vasim viewer (%s page): refused %s %s from %s: %s",
+                            policy.role or "single", "websocket" if
+                            request.headers.get("Upgrade") else "request",
+                            urlsplit(request.path).path[:80],
+                            _peer(connection), reason)
                 return connection.respond(http.HTTPStatus.FORBIDDEN,
                                           f"vasim viewer: refused: {reason}\n")
             response = process_request(connection, request) if process_request else None
@@ -217,10 +280,14 @@ def _guarded_serve(policy: AccessPolicy) -> Iterator[None]:
 
 
 def guarded_server(host: str, port: int, policy: AccessPolicy) -> viser.ViserServer:
-    """A ``viser.ViserServer`` bound to ``host:port`` whose every request passes ``policy``."""
+    """A ``viser.ViserServer`` bound to ``host:port`` whose every request passes ``policy``
+    and whose every client message is validated (:mod:`vasim.viewer.isolation`)."""
+    from vasim.viewer import isolation
+
+    isolation.install()
     with _guarded_serve(policy):
         return viser.ViserServer(host=host, port=port, verbose=False)
 
 
-__all__ = ["COOKIE", "AccessPolicy", "access_policy", "guarded_server", "is_loopback",
-           "is_loopback_name", "new_token", "viewer_url"]
+__all__ = ["COOKIE", "AccessPolicy", "access_policy", "cookie_name", "guarded_server",
+           "is_loopback", "is_loopback_name", "new_token", "same_token", "viewer_url"]

@@ -56,8 +56,15 @@ from vasim.haptics.laparoscopic import InputMapping
 from vasim.records.path_deviation import path_distances
 from vasim.study.protocol import available_protocols
 from vasim.trials.vf import TrialFrame, tool_trocar
-from vasim.viewer.access import access_policy, guarded_server, viewer_url
+from vasim.viewer.access import (
+    access_policy,
+    guarded_server,
+    new_token,
+    same_token,
+    viewer_url,
+)
 from vasim.viewer.audio import AudioStream
+from vasim.viewer.chrome import experimenter_chrome, lock_trainee_chrome
 from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,
     Command,
@@ -66,6 +73,7 @@ from vasim.viewer.controller import (
     schema_choices,
 )
 from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose, task_target
+from vasim.viewer.flow import PageAcks, RateMeter, behind_notice, page_stats, registry
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
@@ -137,6 +145,9 @@ class ViewerApp(ErrorReporter):
         control_hz, view_hz: rates of the controller and view threads [Hz].
         audio_hz: rate of the AG parameter stream [Hz].
         trial_factory: builds live trials (default ``make_live_trial``).
+        token: the trainee page's access token (required beyond loopback; ``--expose``).
+        experimenter_token: the experimenter page's token; must differ from ``token``;
+            None with a ``token``: a fresh one is drawn (read ``experimenter_url``).
         optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
             every person-driven trial).
         countdown_s: the start cue before a person-driven trial [s] (0: none).
@@ -173,10 +184,19 @@ class ViewerApp(ErrorReporter):
         trial_factory: Callable[..., Any] | None = None,
         token: str | None = None,
         experimenter_port: int | None = None,
+        experimenter_token: str | None = None,
         optics: float = 0.0,
         countdown_s: float = 3.0,
     ):
-        self.access = access_policy(host, token)
+        # Two pages, two tokens (issue #30.1): the trainee's token never opens the
+        # experimenter's page. Given only the trainee's, the experimenter's is drawn here.
+        if token and experimenter_token is None:
+            experimenter_token = new_token()
+        if token and experimenter_token and same_token(experimenter_token, token):
+            raise ConfigError("the experimenter's token must differ from the trainee's "
+                              "(one token per page)", field="experimenter_token")
+        self.access = access_policy(host, token, role="trainee")
+        self.exp_access = access_policy(host, experimenter_token, role="experimenter")
         self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
@@ -227,6 +247,15 @@ class ViewerApp(ErrorReporter):
         self.mrcp_panel: Any = None
         """The MRCP panel (None: the scene has no slave station)."""
         self._stopped = False
+        self.view_hz = float(view_hz)
+        self.speed = float(speed)
+        self.rate = RateMeter()
+        """The loop's recent realtime factor as the pages see it (frame.t per wall s)."""
+        self._notices: dict[tuple[int, int], Any] = {}
+        self._notice_lock = threading.Lock()
+        self._next_notice = 0.0
+        self._trial_flow: tuple[float, int, dict[tuple[int, int], int]] = (0.0, 0, {})
+        self.controller.viewer_timing = self.viewer_timing
 
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> ViewerApp:
@@ -239,14 +268,16 @@ class ViewerApp(ErrorReporter):
             exp_port = self.requested_experimenter_port
             if exp_port != 0 and exp_port == self.server.get_port():
                 exp_port += 1
-            self.exp_server = guarded_server(self.host, exp_port, self.access)
-            self.server.gui.configure_theme(control_width="medium", show_logo=False)
-            self.exp_server.gui.configure_theme(control_width="large")
+            self.exp_server = guarded_server(self.host, exp_port, self.exp_access)
+            lock_trainee_chrome(self.server)  # before any other GUI (chrome.py)
+            experimenter_chrome(self.exp_server)
+            self.acks = PageAcks(self.server)
+            self.exp_acks = PageAcks(self.exp_server)
             self._build_scene()
             self._build_gui()
             self.mrcp_panel = self._build_mrcp_panel()
             self.server.on_client_connect(self._guard(self._on_connect))
-            self.exp_server.on_client_connect(self._guard(self.exp_camera.on_connect))
+            self.exp_server.on_client_connect(self._guard(self._on_exp_connect))
             self._t_started = time.perf_counter()
             for target, name in ((self._control_loop, "vasim-viewer-control"),
                                  (self._view_loop, "vasim-viewer-view")):
@@ -306,7 +337,7 @@ class ViewerApp(ErrorReporter):
     @property
     def experimenter_url(self) -> str:
         """Address of the experimenter's page (with the token of an exposed viewer)."""
-        return viewer_url(self.host, self.experimenter_port, self.access.token)
+        return viewer_url(self.host, self.experimenter_port, self.exp_access.token)
 
     @property
     def url(self) -> str:
@@ -495,7 +526,19 @@ class ViewerApp(ErrorReporter):
                               field="scene")
         return None
 
+    def _on_exp_connect(self, client: viser.ClientHandle) -> None:
+        self.exp_camera.on_connect(client)
+        self._install_flow(client, self.exp_acks)
+
+    def _install_flow(self, client: viser.ClientHandle, acks: PageAcks) -> None:
+        """The page's acknowledgement script and its "running behind" line (flow.py)."""
+        notice = client.gui.add_markdown("", visible=False)
+        with self._notice_lock:
+            self._notices[(acks.port, client.client_id)] = notice
+        acks.install(client)
+
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        self._install_flow(client, self.acks)
         self.camera.on_connect(client)
         self.audio.install(client)
         self.instrument_input.install(client)
@@ -578,9 +621,11 @@ class ViewerApp(ErrorReporter):
                 self.score.content = card
                 self.score.visible = bool(card)
             self.drag.update(frame.tcp, info.input == "browser" and not frame.done)
+            self.acks.marks.mark(frame.t)
         assert self.exp_server is not None
         with self.exp_server.atomic():
             self.exp_views.update(info, frame, new_trial=new_trial)
+            self.exp_acks.marks.mark(frame.t)
             self.panel_view.show_live(info, frame, force=True if new_trial or frame.done
                                      or ctl.outcome[1] is not None else False,
                                      outcome=ctl.outcome[1]
@@ -591,10 +636,68 @@ class ViewerApp(ErrorReporter):
         if self.light.pose is not self.camera.target:
             self.light.follow(self.camera.target)
         self.audio.update(out.audio)
+        if new_trial:
+            self.rate.reset()
+            self._trial_flow = (time.monotonic(), self._view_updates, {
+                k: f.total_acks for k, f in registry.pages.copy().items()})
+        if frame is not self._shown_frame and not frame.done and ctl.countdown_until is None:
+            self.rate.add(frame.t)
         self._shown, self._shown_frame = info, frame
+        self._show_notices(frame.t)
         self._view_costs.append(time.thread_time() - t0)
         self._view_updates += 1
         return True
+
+    def _show_notices(self, t_trial: float, now: float | None = None) -> None:
+        """Each page's "running behind" line (flow.py), at most twice a second."""
+        now = time.monotonic() if now is None else now
+        if now < self._next_notice:
+            return
+        self._next_notice = now + 0.5
+        factor = self.rate.factor()
+        with self._notice_lock:
+            notices = list(self._notices.items())
+        for (port, cid), handle in notices:
+            acks = self.acks if port == self.acks.port else self.exp_acks
+            page = acks.pages().get(cid)
+            if page is None:  # gone: forget its line
+                with self._notice_lock:
+                    self._notices.pop((port, cid), None)
+                continue
+            t_shown = acks.marks.trial_time(page.applied_seq)
+            lag = None if t_shown is None else max(0.0, t_trial - t_shown)
+            text = behind_notice(factor, self.speed, page, self.view_hz, lag)
+            try:
+                if text != handle.content:
+                    handle.content = text
+                    handle.visible = bool(text)
+            except Exception:  # a page closing meanwhile: the next round forgets it
+                log.debug("notice for client %s not updated", cid, exc_info=True)
+
+    def flow_stats(self) -> dict[str, float]:
+        """The pages' stream figures (flow.py): per page kind, the slowest page's update
+        rate, frames in flight, queued messages, displayed-clock lag, stalls; and the loop's
+        recent realtime factor."""
+        t = self._snapshot.frame.t
+        out = {f"trainee_{k}": v for k, v in page_stats(self.acks, t).items()}
+        out.update({f"experimenter_{k}": v for k, v in page_stats(self.exp_acks, t).items()})
+        factor = self.rate.factor()
+        out["realtime_factor_recent"] = float("nan") if factor is None else factor
+        return out
+
+    def viewer_timing(self) -> dict[str, float]:
+        """What the trial record stores about the viewer (``timing_json["viewer"]``): view
+        updates per wall second during the trial, the trainee pages' update rates (mean
+        over the trial; the slowest page), the loop's recent realtime factor."""
+        t0, n0, acks0 = self._trial_flow
+        wall = time.monotonic() - t0 if t0 else 0.0
+        rates = [(f.total_acks - acks0.get((self.acks.port, cid), 0)) / wall
+                 for cid, f in self.acks.pages().items() if f.acking and wall > 0]
+        factor = self.rate.factor()
+        return {"view_update_hz": (self._view_updates - n0) / wall if wall > 0 else 0.0,
+                "trainee_page_update_hz": min(rates) if rates else float("nan"),
+                "trainee_pages": float(len(rates)),
+                "realtime_factor_recent": float("nan") if factor is None else factor}
 
     def _hud_info(self, info: TrialInfo, frame: TrialFrame) -> HudInfo:
         out = frame.outputs

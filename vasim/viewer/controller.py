@@ -168,6 +168,9 @@ class TrainingController(ConditionCommands):
             None = None
         """The trainee view's (right, up) axes for a task's points and start (the app's
         endoscope aims per task); None: ``screen`` for every trial."""
+        self.viewer_timing: Callable[[], dict[str, float]] | None = None
+        """The viewer's figures stored in a trial's ``timing_json["viewer"]`` (page update
+        rates beside the loop's: issue #26.2); None: none."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
         self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]  # valid
@@ -380,6 +383,11 @@ class TrainingController(ConditionCommands):
         assert trial is not None
         timing = trial.timing()
         out: dict[str, Any] | None = timing.to_dict() if hasattr(timing, "to_dict") else None
+        if out is not None and self.viewer_timing is not None:
+            try:  # the pages' update rates beside the loop's (issue #26.2)
+                out["viewer"] = self.viewer_timing()
+            except Exception:
+                log.exception("the viewer's timing of trial %s failed", trial_id)
         recording = getattr(trial, "recording", None)
         if callable(recording) and out is not None:
             try:

@@ -20,6 +20,7 @@ Frame: the scene's world frame, metres, ``z`` up (set on the server by the app).
 
 from __future__ import annotations
 
+import logging
 import math
 import threading
 import time
@@ -35,6 +36,8 @@ from numpy.typing import NDArray
 from vasim.abdomen.anatomy import Organ
 from vasim.core.geometry import matrix_z_to
 from vasim.fixtures.types import Arrow, CameraView
+
+log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]
@@ -586,6 +589,9 @@ class CameraController:
         """False: Mag output is ignored and the user orbits freely."""
         self.writes = 0
         """Number of per-client camera writes so far (for tests and stats)."""
+        self.failures = 0
+        """Per-client camera writes that failed (that client skipped, the others served)."""
+        self._failed: set[int] = set()
 
     def apply_initial(self) -> None:
         """Sets the server's initial camera (what a new page shows before connecting)."""
@@ -636,15 +642,26 @@ class CameraController:
             self._push_all(force=True)
 
     def _push_all(self, *, force: bool = False) -> None:
+        """Gives every client the target pose. Per-client isolation (issue #30.2): a client
+        whose camera cannot be written (its state is bad) is skipped and logged once per
+        connection; the others still get theirs."""
         with self._lock:
             clients = self.server.get_clients()
             for cid in list(self._sent):
                 if cid not in clients:
                     del self._sent[cid]
+            self._failed &= set(clients)
             for client in clients.values():
                 last = self._sent.get(client.client_id)
                 if force or last is None or not self._target.close_to(last):
-                    self._write(client, self._target)
+                    try:
+                        self._write(client, self._target)
+                    except Exception as exc:
+                        self.failures += 1
+                        if client.client_id not in self._failed:
+                            self._failed.add(client.client_id)
+                            log.warning("camera of client %s not written (skipped): %s: %s",
+                                        client.client_id, type(exc).__name__, exc)
 
     def _write(self, client: viser.ClientHandle, pose: CameraPose) -> None:
         with client.atomic():
