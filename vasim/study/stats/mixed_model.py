@@ -312,6 +312,21 @@ def mixed_model_lr_test(data: pd.DataFrame, reduced: str, full: str, groups: str
             "llf_reduced": float(red.llf), "llf_full": float(ful.llf), "note": note}
 
 
+def formula_columns(formula: str, columns: list[str]) -> list[str]:
+    """The columns (of ``columns``) a formula names, as names or in ``Q("...")``, in order.
+
+    >>> formula_columns('y ~ C(f) + Q("a b") + np.log(x)', ["x", "y", "f", "a b", "z"])
+    ['y', 'f', 'a b', 'x']
+    """
+    known = set(columns)
+    out: list[str] = []
+    for m in _NAME.finditer(formula):
+        name = m.group(1) or m.group(0)
+        if name in known and name not in out:
+            out.append(name)
+    return out
+
+
 def _formula_columns(data: pd.DataFrame, formula: str) -> list[str]:
     """The data columns a formula names (identifiers and ``Q("...")``); at least one."""
     src = source_of(data)
