@@ -30,7 +30,7 @@ def tiny(name: str, tmp_path: Path, *replacements: tuple[str, str]) -> Path:
 def simulate_and_report(protocol: Path, tmp_path: Path) -> tuple[Path, Path]:
     db, out = tmp_path / "study.db", tmp_path / "report"
     assert main(["study", "simulate", "--protocol", str(protocol), "--subjects", "2",
-                 "--db", str(db), "--max-time", "1.2", "--workers", "0",
+                 "--db", str(db), "--max-time", "3", "--workers", "0",
                  "--no-progress"]) == 0
     assert main(["report", "--db", str(db), "--out", str(out), "--no-progress"]) == 0
     assert (out / "index.html").is_file() and (out / "summary.json").is_file()
@@ -48,7 +48,9 @@ def levels(out: Path, expected: list[str]) -> None:
 def test_vf_fading_simulates_and_reports(tmp_path: Path):
     protocol = tiny("vf_fading", tmp_path,
                     ("variants = [1, 2, 3, 4]\nrepetitions = 2", "variants = [1]\nrepetitions = 2"),
-                    ("repetitions = 3", "repetitions = 1"))
+                    ("repetitions = 3", "repetitions = 1"),
+                    # two trials per block: a two-stage schedule (a longer one is refused)
+                    ("gain_schedule = [1.0, 0.75, 0.5, 0.25]", "gain_schedule = [1.0, 0.5]"))
     db, out = simulate_and_report(protocol, tmp_path)
     levels(out, ["none", "Mag", "Mag faded", "Mag adaptive", "FF", "FF faded",
                  "FF adaptive"])

@@ -24,21 +24,14 @@ systematically (Friedman test, p > 0.05) and the range is printed.
 
 from __future__ import annotations
 
-import json
-import math
-from pathlib import Path
-
 import numpy as np
 import pandas as pd
-import pytest
 from scipy import stats
 
-from vasim.cli import main
 from vasim.operator.scenario import load_scenario
 from vasim.study.power.outcome import outcome_cohort
 from vasim.study.protocol import load_protocol
 from vasim.study.recovery import estimate_effects
-from vasim.study.store import TrialStore
 
 FIX = ("vg", "ag", "ms", "mag", "ff")
 
@@ -63,38 +56,3 @@ def test_outcome_engine_cohort_without_fixture_effect_has_no_preference():
     ratings = pd.DataFrame([a["rating"] for a in ans])
     est = estimate_effects(coh.trials)
     _check(best, ratings, [est["fixtures"][c]["p"] for c in FIX], max_range=1.5)
-
-
-ONE_PATH = "vf_learning_curve_one_path"
-
-
-@pytest.mark.slow
-@pytest.mark.timeout(3600)
-def test_scripted_cohort_without_fixture_effect_has_no_preference(tmp_path: Path):
-    text = load_protocol("vf_learning_curve").text
-    assert text is not None
-    proto = tmp_path / f"{ONE_PATH}.toml"
-    proto.write_text(text.replace('name = "vf_learning_curve"', f'name = "{ONE_PATH}"')
-                     .replace("variants = [1, 2, 3, 4, 5, 6]", "variants = [0]\nrepetitions = 6"),
-                     encoding="utf-8")
-    db = tmp_path / "null.sqlite"
-    assert main(["study", "simulate", "--protocol", str(proto), "--subjects", "10",
-                 "--effect-scale", "0", "--max-time", "3", "--workers", "2", "--db", str(db),
-                 "--no-progress"]) == 0
-    assert main(["report", "--db", str(db), "--out", str(tmp_path / "r"),
-                 "--no-progress"]) == 0
-    s = json.loads((tmp_path / "r" / "summary.json").read_text(encoding="utf-8"))
-    assert s["assumed_effects"]["effect_scale"] == 0.0
-    assert all(v["ratio"] == 1.0 for v in s["assumed_effects"]["fixtures"].values())
-    rec = s["recovered_effects"]["fixtures"]
-    print("\nscripted null cohort:", {c: (round(s["best_share"][c], 2), s["ratings"][c],
-                                         round(rec[c]["ratio"], 3), round(rec[c]["p"], 3))
-                                     for c in FIX})
-    with TrialStore(db, readonly=True) as st:
-        a = st.answers()
-    ratings = a[a["item"] == "rating"].pivot(index="session_id", columns="key",
-                                             values="value_num")
-    print("mean ratings", ratings.mean().round(2).to_dict())
-    _check({c: s["best_share"][c] for c in FIX}, ratings, [rec[c]["p"] for c in FIX],
-           max_range=None)
-    assert all(math.isfinite(rec[c]["ci_low"]) for c in FIX)

@@ -68,7 +68,7 @@ def test_covariates_and_the_variant_confound():
 
 def test_not_enough_data_is_said_not_hidden():
     est = estimate_effects(_frame({"ff": 0.7}, n_subjects=1))
-    assert "error" in est and est["fixtures"] == {}
+    assert "not_estimated" in est and est["fixtures"] == {}
 
 
 def test_outcome_cohorts_are_reproducible_and_follow_the_scenario():

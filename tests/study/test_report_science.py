@@ -324,7 +324,10 @@ def test_summary_json_schema_and_values(study: tuple[Path, Path]) -> None:
                       "measure_correlations", "ratings", "best_share", "worst_share",
                       "assumed_effects", "recovered_effects"}
     assert s["synthetic"] is True and s["n_subjects"] == 8 and s["primary"] == "mixed_model"
-    assert s["assumed_effects"] is None and s["recovered_effects"] is None
+    # a synthetic cohort: the analysis' estimate of the fixture effects (vasim.study.recovery)
+    # beside the stored scenario's assumption (None when the sessions stored no scenario)
+    assert "fixtures" in s["recovered_effects"]
+    assert s["assumed_effects"] is None or "fixtures" in s["assumed_effects"]
     assert set(s["measures"]) == {"path_deviation", "latency", "eq65"}
     assert '"error"' not in (out / "summary.json").read_text()
     aov = _csv(out, "vf_rm_anova")

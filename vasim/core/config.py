@@ -102,7 +102,7 @@ def parse_toml(text: object, *, file: str | Path | None = None, kind: str = "TOM
 
 
 def toml_nesting(text: str) -> tuple[int, int]:
-    """The deepest nesting of ``[``/``{`` in value position of a TOML text and the line
+    r"""The deepest nesting of ``[``/``{`` in value position of a TOML text and the line
     (1-based) where it is first reached; brackets inside strings and comments are skipped,
     and table headers (``[a]``, ``[[a]]`` at the start of a line) count nothing. A linear
     scan without recursion: it only decides whether ``tomllib`` may be trusted with the

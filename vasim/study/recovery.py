@@ -93,7 +93,7 @@ def estimate_effects(frame: pd.DataFrame, *, level: float = 0.95) -> dict[str, A
         ``{"quantity", "model", "n_subjects", "n_trials", "variant_in_model",
         "fixtures": {c: {"ratio", "ci_low", "ci_high", "p", "coef", "se"}},
         "carry_per_fixture": {...}, "after_block": {...}}`` (ratios exp(coef)); a fixture
-        the model cannot estimate gets None values; ``"error"`` when the fit fails.
+        the model cannot estimate gets None values; ``"not_estimated"`` when the fit fails.
     """
     from statsmodels.regression.mixed_linear_model import MixedLM
 
@@ -110,7 +110,7 @@ def estimate_effects(frame: pd.DataFrame, *, level: float = 0.95) -> dict[str, A
     fixtures = sorted(c for c in df["condition"].unique() if c != VF_FREE)
     if df.empty or not fixtures or (df["condition"] == VF_FREE).sum() == 0 \
             or df["subject"].nunique() < 2:
-        out["error"] = "needs assisted and unassisted trials of at least 2 subjects"
+        out["not_estimated"] = "needs assisted and unassisted trials of at least 2 subjects"
         return out
     df = design_covariates(df)
     df["y"] = np.log(df[PATH_DEV].astype(float))
@@ -137,7 +137,7 @@ def estimate_effects(frame: pd.DataFrame, *, level: float = 0.95) -> dict[str, A
         except (ValueError, np.linalg.LinAlgError) as exc:
             errors.append(f"{method}: {exc}")
     if fit is None:
-        out["error"] = f"mixed model failed ({'; '.join(errors)})"
+        out["not_estimated"] = f"mixed model failed ({'; '.join(errors)})"
         return out
     out["optimizer"] = method
     z = float(stats.norm.ppf(0.5 + level / 2.0))
@@ -200,7 +200,7 @@ def recovery_summary(data: Any) -> dict[str, Any]:
             sc = scenario_from_text(str(recs[0]["text"]))
             assumed = sc.assumed_record(float(recs[0].get("effect_scale", 1.0)))
         elif len(recs) > 1:
-            assumed = {"error": f"the sessions ran {len(recs)} scenarios or effect scales"}
+            assumed = {"not_declared": f"the sessions ran {len(recs)} scenarios or effect scales"}
     return {"assumed_effects": assumed, "recovered_effects": recovered}
 
 

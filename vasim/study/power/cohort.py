@@ -62,7 +62,7 @@ from vasim.trials.lifecycle import stored_trial
 from vasim.trials.registry import TRIAL_KINDS
 from vasim.trials.vf import TrialConfig
 
-POINT_READ = ("point", "reached", "t_reached", "error_l1", "latency")
+POINT_READ = ("point", "reached", "t_reached", "error_l1", "error_l1_mm_s", "latency")
 """The per-point columns the report reads (``load_study``)."""
 
 
@@ -167,7 +167,8 @@ def simulate_in_memory(protocol: Protocol, subjects: Sequence[SimulatedSubject],
     points = pd.concat(point_frames, ignore_index=True) if point_frames else \
         pd.DataFrame(columns=["trial_id", *POINT_READ])
     points = points.astype({"trial_id": np.int64, "point": np.int64, "t_reached": np.float64,
-                            "error_l1": np.float64, "latency": np.float64})
+                            "error_l1": np.float64, "error_l1_mm_s": np.float64,
+                            "latency": np.float64})
     points["reached"] = points["reached"].astype(bool)
     metrics = pd.DataFrame.from_dict(metric_rows, orient="index").astype(float)
     metrics.index = pd.Index(metrics.index.astype(np.int64), name="trial_id")

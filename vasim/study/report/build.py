@@ -181,7 +181,7 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
         # assumed vs recovered effects of a simulated cohort (vasim.study.recovery)
         summary = build_summary({t.name: t.data for t in tables}, synthetic=data.synthetic,
                                 n_subjects=int(data.sessions["subject"].nunique()),
-                                simulation=recovery_summary(data))
+                                simulation=recovery_summary(data) if data.synthetic else None)
         with atomic_folder(out_dir, owned=report_files(out_dir), what="report") as tmp:
             names = write_files(tmp, data, tables, prov, render_html(doc), summary)
         bar.update()
