@@ -29,7 +29,8 @@ def test_writable_dir_tells_a_folder_from_one_under_a_file(tmp_path: Path) -> No
 
 def test_nothing_changes_when_the_package_folder_is_writable(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "")   # registers the undo: the code sets it
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
     monkeypatch.setattr(numba_cache, "_PACKAGE", tmp_path / "vasim")
     assert numba_cache.configure_numba_cache() is None
     assert "NUMBA_CACHE_DIR" not in os.environ
@@ -46,7 +47,8 @@ def test_a_user_set_cache_dir_is_respected(tmp_path: Path,
 def test_read_only_install_and_home_fall_back_to_the_user_folder_then_temp(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", "")   # registers the undo: the code sets it
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
     monkeypatch.setattr(numba_cache, "_PACKAGE", _unwritable(tmp_path, "vasim"))
     # numba's own user-wide folder is unwritable, vasim's user folder too: temp is used.
     monkeypatch.setenv("XDG_CACHE_HOME", str(_unwritable(tmp_path, "cache")))

@@ -533,27 +533,38 @@ def _listener(reply: bytes | None) -> tuple[socket.socket, threading.Thread, lis
     return srv, t, conns
 
 
-@pytest.fixture
-def silent_server() -> Iterator[int]:
-    srv, _, conns = _listener(None)
-    yield srv.getsockname()[1]
+def _stop(srv: socket.socket, t: threading.Thread, conns: list[socket.socket]) -> None:
+    """Ends a listener: shutdown wakes its blocked accept() (close alone does not)."""
+    try:
+        srv.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass
     srv.close()
+    t.join(5)
     for c in conns:
         c.close()
+
+
+@pytest.fixture
+def silent_server() -> Iterator[int]:
+    srv, t, conns = _listener(None)
+    yield srv.getsockname()[1]
+    _stop(srv, t, conns)
 
 
 @pytest.fixture
 def http_server() -> Iterator[int]:
-    srv, _, conns = _listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+    srv, t, conns = _listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
     yield srv.getsockname()[1]
-    srv.close()
-    for c in conns:
-        c.close()
+    _stop(srv, t, conns)
 
 
 def test_unreachable_addresses_fail_within_seconds(silent_server: int, http_server: int,
-                                                   ) -> None:
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     from vasim.study.power.driver import init_ray
+
+    monkeypatch.setenv("RAY_CLIENT_MODE", "")   # Ray's client sets it: undone after the test
+    monkeypatch.delenv("RAY_CLIENT_MODE")
 
     free = socket.socket()
     free.bind(("127.0.0.1", 0))
@@ -595,7 +606,7 @@ def test_a_join_that_hangs_stops_on_sigterm_and_ctrl_c(sig: str) -> None:
     for minutes; SIGTERM / SIGINT end the command within seconds (exit 130)."""
     import signal
 
-    srv, _, conns = _listener(_SETTINGS_FRAME)
+    srv, t, conns = _listener(_SETTINGS_FRAME)
     port = srv.getsockname()[1]
     try:
         proc = subprocess.Popen(
@@ -612,9 +623,7 @@ def test_a_join_that_hangs_stops_on_sigterm_and_ctrl_c(sig: str) -> None:
         _, err = proc.communicate(timeout=120)
         took = time.monotonic() - t0
     finally:
-        srv.close()
-        for c in conns:
-            c.close()
+        _stop(srv, t, conns)
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 130, err[-2000:]

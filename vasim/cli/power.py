@@ -5,6 +5,8 @@ from Monte Carlo cohorts of a declared scenario's operator on Ray (issue #18 ite
 from __future__ import annotations
 
 import argparse
+import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 from vasim.cli.args import bounded_float, bounded_int, output_folder, workers
@@ -83,20 +85,27 @@ def ray_address(text: str) -> str:
     return text
 
 
-def _sigterm_as_interrupt() -> None:
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
     """SIGTERM ends a power run like Ctrl-C (``KeyboardInterrupt``: Ray is shut down in the
     driver's ``finally`` and the command exits 130), where it would otherwise kill the
-    driver without that (issue #30 item 4)."""
+    driver without that (issue #30 item 4); the previous handler is restored afterwards
+    (the command may run inside another program, e.g. a test process)."""
     import signal
     import threading
 
     if threading.current_thread() is not threading.main_thread():
+        yield
         return
 
     def handler(signum: int, frame: object) -> None:
         raise KeyboardInterrupt(f"signal {signum}")
 
-    signal.signal(signal.SIGTERM, handler)
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _cmd_power(args: argparse.Namespace) -> int:
@@ -133,9 +142,9 @@ def _cmd_power(args: argparse.Namespace) -> int:
                          scenario=scenario)
     if args.out is not None:   # before the run: a bad --out must not waste the cohorts
         args.out.mkdir(parents=True, exist_ok=True)
-    _sigterm_as_interrupt()
-    res = run_power(protocol, design, address=args.address, workers=args.workers,
-                    keep_dir=args.keep_cohorts, progress=not args.no_progress)
+    with _sigterm_as_interrupt():
+        res = run_power(protocol, design, address=args.address, workers=args.workers,
+                        keep_dir=args.keep_cohorts, progress=not args.no_progress)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
     print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator of "
           f"scenario {scenario.name} ({scenario.sha256[:12]}){sources}, effect scale "
