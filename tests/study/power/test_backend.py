@@ -49,14 +49,15 @@ def _children_left(timeout: float = 20.0) -> list[psutil.Process]:
         time.sleep(0.25)
 
 
+@pytest.mark.timeout(900)   # a local Ray's start alone took 36 s on the loaded machine
 def test_process_pool_and_ray_give_the_same_cohorts(tiny_protocol: Protocol) -> None:
     pytest.importorskip("ray")
-    design = PowerDesign(subjects=(3,), cohorts=2, dt=COARSE_DT, max_trial_time=0.6, seed=5)
+    design = PowerDesign(subjects=(2,), cohorts=2, dt=COARSE_DT, max_trial_time=0.4, seed=5)
     pool = run_power(tiny_protocol, design, workers=2, progress=False, backend="processes")
     ray = run_power(tiny_protocol, design, workers=2, progress=False, backend="ray")
     assert (pool.backend, ray.backend) == ("processes", "ray")
     assert list(pool.cohorts.columns) == list(COHORT_COLUMNS)
-    assert len(pool.cohorts) == 2 * 6 and pool.n_trials == ray.n_trials == 2 * 3 * 8
+    assert len(pool.cohorts) == 2 * 6 and pool.n_trials == ray.n_trials == 2 * 2 * 8
     # a cohort is a pure function of its seed: the same numbers, bit for bit
     pd.testing.assert_frame_equal(pool.cohorts, ray.cohorts, check_exact=True)
     pd.testing.assert_frame_equal(pool.power, ray.power, check_exact=True)
