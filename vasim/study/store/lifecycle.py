@@ -30,7 +30,7 @@ import pandas as pd
 from vasim import __version__
 from vasim.core.errors import ConfigError, StoreError
 from vasim.records.point_metrics import POINT_COLUMNS
-from vasim.records.samples import COLUMN_SPECS, SampleBuffer
+from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.study.store.connection import StoreConnection
 from vasim.study.store.liveness import is_writer, proc_token, process_alive
@@ -418,16 +418,8 @@ def _packed(samples: SampleBuffer | None, path: object, tid: int,
     """
     if samples is None or len(samples) == 0:
         return []
-    v = samples.view()
-    flat = {}
-    for name, _dtype, parts in COLUMN_SPECS:
-        a = v[name]
-        if len(parts) == 1:
-            flat[parts[0]] = a
-        else:
-            flat.update({p: a[:, j] for j, p in enumerate(parts)})
     try:
-        return pack_columns(flat)
+        return pack_columns(samples.columns())
     except StoreError as e:
         raise StoreError(f"trial store {path}: cannot store trial {tid}: {e}") from e
 
