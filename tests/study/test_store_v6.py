@@ -131,16 +131,26 @@ floats = arrays(np.float64, st.integers(0, 300),
 def test_float32_columns_round_trip_to_the_nearest_float32(a: np.ndarray) -> None:
     dt = packing.storage_dtype("x_x", a)
     back = packing.decode(packing.encode(a, dt), dt.newbyteorder("<").str, a.size)
-    finite = a[np.isfinite(a)]
-    if finite.size and np.max(np.abs(finite)) > np.finfo(np.float32).max:
-        assert dt == np.float64                  # would overflow: kept exact
+    with np.errstate(over="ignore"):
+        f32 = a.astype(np.float32)
+    if np.any(np.isinf(f32) & np.isfinite(a)):
+        assert dt == np.float64                  # float32 would turn a value into inf: exact
         expected = a
     else:
         assert dt == np.float32
-        with np.errstate(over="ignore"):
-            expected = a.astype(np.float32)
+        expected = f32
     np.testing.assert_array_equal(back.astype(np.float64), expected.astype(np.float64))
     assert np.array_equal(np.signbit(back), np.signbit(expected))   # -0.0 and -nan too
+
+
+def test_a_column_float32_cannot_hold_is_stored_exactly() -> None:
+    a = np.array([1e39, 0.1, -np.inf, np.nan])
+    assert packing.storage_dtype("f_x", a) == np.float64
+    assert packing.storage_dtype("f_x", a[1:]) == np.float32    # inf and NaN need no float64
+    cols = {c: np.zeros(4, FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
+    cols.update(k=np.arange(4), f_x=a)
+    back = packing.unpack_columns(packing.pack_columns(cols))
+    assert back["f_x"].tobytes() == a.tobytes()
 
 
 @settings(max_examples=100, deadline=None)

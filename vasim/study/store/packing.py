@@ -67,18 +67,24 @@ STORAGE_DTYPES: dict[str, np.dtype[Any]] = {
 }
 """The dtype each flat sample column is stored in (little-endian on disk)."""
 
-_F32_MAX = float(np.finfo(np.float32).max)
-
-
 def storage_dtype(name: str, values: NDArray[Any]) -> np.dtype[Any]:
     """The dtype ``values`` of column ``name`` are stored in: ``STORAGE_DTYPES``, except a
     float32 column holding a finite value float32 cannot represent (stored float64)."""
+    return _stored(name, values).dtype
+
+
+def _stored(name: str, values: NDArray[Any]) -> NDArray[Any]:
+    """``values`` cast to their storage dtype (:func:`storage_dtype`), one pass for the
+    common case: a float32 cast whose result has no inf needs no further check."""
     dt = STORAGE_DTYPES[name]
-    if dt == np.float32 and values.size:
-        finite = values[np.isfinite(values)]
-        if finite.size and float(np.max(np.abs(finite))) > _F32_MAX:
-            return np.dtype(np.float64)
-    return dt
+    if dt != np.float32:
+        return np.asarray(values, dtype=dt)
+    with np.errstate(over="ignore"):
+        f = np.asarray(values).astype(np.float32)
+    inf = np.isinf(f)
+    if bool(inf.any()) and bool(np.any(inf & np.isfinite(values))):
+        return np.asarray(values, dtype=np.float64)   # a finite value beyond float32
+    return f
 
 
 def encode(values: NDArray[Any], dtype: np.dtype[Any]) -> bytes:
@@ -161,8 +167,9 @@ def pack_columns(columns: Mapping[str, NDArray[Any]],
         v = np.asarray(columns[name])
         if order is not None:
             v = v[order]
-        dt = storage_dtype(name, v)
-        rows.append((name, dt.newbyteorder("<").str, int(v.size), CODEC, encode(v, dt)))
+        s = _stored(name, v)
+        rows.append((name, s.dtype.newbyteorder("<").str, int(s.size), CODEC,
+                     encode(s, s.dtype)))
     return rows
 
 

@@ -20,14 +20,17 @@ when each version was applied. A store from a newer vasim is refused (``StoreErr
 older one is migrated in one transaction by the steps in ``MIGRATIONS`` (version 1 -> 2
 adds tables and columns, no row is rewritten; version 2 -> 3 rebuilds ``trials`` because
 SQLite cannot drop a NOT NULL: ``subject`` becomes nullable, ``label`` and ``outcome`` are
-added and ``outcome`` is filled from the stored summaries, see ``OUTCOME_FROM_V2_SQL``).
+added and ``outcome`` is filled from the stored summaries, see ``OUTCOME_FROM_V2_SQL``;
+version 5 -> 6 packs every trial's ``samples`` rows into ``sample_columns`` and drops
+``samples``, the one step that is Python (``DATA_STEPS``), after which the store is
+VACUUMed once to give the freed pages back).
 Versions add tables and nullable or defaulted columns; they never rename a column. A store
 opened read-only is never migrated: a version-2 store is read as it is (``outcome`` computed
-by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL); a version-1 store must be opened
-writable once.
+by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL; a version-2 to -5 store's samples
+are read from its ``samples`` rows); a version-1 store must be opened writable once.
 
-Schema, version 5 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v5" mark
-what versions 2 to 5 added):
+Schema, version 6 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v6" mark
+what versions 2 to 6 added):
 
 ``schema_version``
     ``version`` INTEGER PK, ``applied_at`` TEXT.
@@ -62,9 +65,17 @@ what versions 2 to 5 added):
     ``n_points``), ``'stopped'`` by the experimenter (Stop, Ctrl-C), ``'interrupted'`` the
     writing process died, ``'failed'`` an error or an abort by the system (e.g. repeated MRCP
     safety stops); NULL while running or when unknown).
-``samples`` — one row per logged step, WITHOUT ROWID, PK (trial_id, k).
-    ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL [s] since trial start;
-    ``x_x, x_y, x_z`` REAL [m] TCP; ``g_x, g_y, g_z`` REAL [m] goal; ``goal_index`` INTEGER;
+``sample_columns`` (v6) — a trial's samples, one row per column, PK (trial_id, name).
+    ``trial_id`` -> trials.id; ``name`` TEXT (a ``samples.FRAME_COLUMNS`` name, the columns
+    of the version-5 ``samples`` table below); ``dtype`` TEXT (numpy dtype of the stored
+    values, e.g. ``'<f4'``); ``n`` INTEGER (values: the trial's samples, in order of k);
+    ``codec`` TEXT (``'shuffle-zlib1'``); ``data`` BLOB. What each column keeps (float32
+    for most float columns, exact for k, t and the integers) is stated in
+    ``vasim.study.store.packing``. A trial without samples has no rows.
+``samples`` (versions 1 to 5; dropped by version 6) — one row per logged step, WITHOUT
+    ROWID, PK (trial_id, k). ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL
+    [s] since trial start; ``x_x, x_y, x_z`` REAL [m] TCP; ``g_x, g_y, g_z`` REAL [m]
+    goal; ``goal_index`` INTEGER;
     ``f_x, f_y, f_z`` REAL [N] rendered force; ``ms_x, ms_y, ms_z`` REAL MS factors;
     ``zoom`` REAL Mag magnification; ``audio_pitch`` REAL, ``audio_period`` REAL [s],
     ``audio_volume`` REAL AG outputs; ``contact`` INTEGER (0/1); v2: ``fc_x, fc_y, fc_z``
@@ -129,7 +140,8 @@ what versions 2 to 5 added):
     that closes the trial; version-1 trials have none.
 
 Floats round-trip exactly (SQLite REAL is an IEEE double) with two SQLite caveats: NaN is
-stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0.
+stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Sample
+columns keep the precision ``vasim.study.store.packing`` states (NaN and -0.0 survive).
 
 """
 
