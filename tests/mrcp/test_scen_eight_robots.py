@@ -4,10 +4,6 @@ collision risk, before R0 has to refuse the operator."""
 
 from __future__ import annotations
 
-import pytest
-
-pytest.importorskip("vasim.mrcp.backend")
-
 from tests.mrcp.test_scen_common import scenario_run
 
 

@@ -213,8 +213,11 @@ def _serve_args(**kw) -> argparse.Namespace:
     return argparse.Namespace(**base)
 
 
-def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(monkeypatch, capsys) -> None:
+def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(
+    monkeypatch, capsys, tmp_path
+) -> None:
     monkeypatch.setattr("vasim.viewer.app.ViewerApp", _FakeApp)
+    monkeypatch.chdir(tmp_path)  # a named study.sqlite lands here, not in the checkout
     # Without --expose a public bind is refused before anything starts.
     with pytest.raises(ConfigError, match="add --expose"):
         viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080))
