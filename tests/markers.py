@@ -23,7 +23,19 @@ MARKS: dict[str, tuple[str, ...]] = {
 """Marker -> the files (``path.py``), folders (``path/``) or tests (``path.py::name``) it
 applies to, relative to the repository root."""
 
-SLOW: tuple[str, ...] = ()
+SLOW: tuple[str, ...] = (
+    # figures: CI's --durations on 2 xdist workers, 2026-11-28 (setup = a module fixture)
+    "tests/mrcp/test_study_e2e.py",                       # 108 s setup: a teleop study + report
+    "tests/trials/test_teleop.py",                        # 60 s setup: every mode run and stored
+    # 31 s
+    "tests/trials/test_chapter5.py::test_the_bench_runs_a_tiny_cohort_and_prints_it_beside_table_5_1",
+    "tests/study/power/test_coarse.py::test_coarse_step_keeps_the_per_trial_means",  # 17 s
+    # 15 s
+    "tests/viewer/test_sitting.py::test_the_browser_records_the_sitting_that_begins_the_retention_block",
+    "tests/study/test_fading_schemas_e2e.py",             # 14 s + 11 s: two simulated protocols
+    "tests/mrcp/test_kernel_edges.py::test_cli_json_is_strict",  # 11 s
+    "tests/study/test_export_atomic.py::test_a_sigkilled_re_export_leaves_a_complete_set",  # 11 s
+)
 """Places marked ``slow``: longer than ~10 s on an idle 2-core machine (``--durations``; the
 measured figure beside each)."""
 
