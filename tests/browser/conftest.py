@@ -22,7 +22,15 @@ CHROMIUM = os.environ.get("VASIM_CHROMIUM", "/usr/bin/chromium")   # as .ci/ensu
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}
-READY_TIMEOUT_MS = 120_000  # page-to-first-frame stalls of 5-11 s at load 1-3, > 45 s at 30-40
+WAIT_S = 180.0
+"""How long a test waits for a condition the page or server will reach (a bound against a
+hang, not a timing goal): at load 25-48 on 2 cores (the suite beside six other agents) a
+combobox choice took over 45 s to reach the server and a first MRCP wrist turn over 60 s."""
+
+WAIT_MS = int(WAIT_S * 1000)
+"""The same, for Playwright's waits (ms)."""
+
+READY_TIMEOUT_MS = WAIT_MS  # page-to-first-frame stalls of 5-11 s at load 1-3, > 45 s at 30-40
 ACTION_TIMEOUT_MS = 180_000  # clicks, navigations (Playwright: 30 s; > 90 s seen at load 40)
 
 
@@ -80,7 +88,7 @@ def wait_ready(page: Any, node: str = "/tool/tip") -> None:
                   "requestAnimationFrame(() => r(true))))")
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = 45.0, step: float = 0.05) -> bool:
+def wait_for(cond: Callable[[], bool], timeout: float = WAIT_S, step: float = 0.05) -> bool:
     t_end = time.monotonic() + timeout
     while time.monotonic() < t_end:
         if cond():

@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import VIEWPORT, wait_ready
+from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_ready
 from vasim.viewer.access import new_token
 from vasim.viewer.app import ViewerApp
 
@@ -77,7 +77,7 @@ def test_a_foreign_page_cannot_open_the_viewer_websocket(browser: Any, viewer: V
     try:
         page.goto(foreign_site)
         page.wait_for_function(
-            "() => document.getElementById('out').textContent !== 'pending'", timeout=120_000)
+            "() => document.getElementById('out').textContent !== 'pending'", timeout=WAIT_MS)
         assert page.inner_text("#out") == "REFUSED"
     finally:
         page.close()

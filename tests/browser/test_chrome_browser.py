@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import wait_ready
+from tests.browser.conftest import WAIT_MS, wait_ready
 from vasim.viewer import ViewerApp
 from vasim.viewer.chrome import HIDDEN_ICONS
 
@@ -39,7 +39,7 @@ def test_the_trainee_page_has_none_of_viser_s_controls(browser: Any, app: Viewer
         page.goto(app.url)
         wait_ready(page)
         page.wait_for_function("() => document.body.innerText.includes('Points reached')",
-                               timeout=45_000)
+                               timeout=WAIT_MS)
         # viser did render its settings toggle (it is in the page), but it is not shown.
         assert page.locator("svg.tabler-icon-adjustments").count() >= 1
         assert _visible_icons(page, HIDDEN_ICONS + CONFIG_ICONS) == []

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_for, wait_ready
+from tests.browser.conftest import WAIT_MS, wait_for, wait_ready
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.study.store import TrialStore
 from vasim.viewer.app import ViewerApp
@@ -95,7 +95,7 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
     try:
         trainee.goto(app.url)
         wait_ready(trainee)
-        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=120_000)
+        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=WAIT_MS)
         # The trainee page shows no experimenter control.
         for role, name in EXPERIMENTER_ONLY:
             assert trainee.get_by_role(role, name=name).count() == 0, name  # type: ignore[arg-type]
@@ -110,14 +110,14 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         n0 = app.snapshot.info.number
         exp.get_by_role("button", name="Start trial").click(force=True)
         assert wait_for(lambda: app.snapshot.info.number > n0
-                        and app.controller.instrument is not None, timeout=60), app.errors[-3:]
+                        and app.controller.instrument is not None), app.errors[-3:]
         exp.close()   # the experimenter's 3-D view would compete with the trainee's for the CPU
         dev = app.controller.instrument
         info = app.snapshot.info
         assert dev is not None and dev.mapping.sensitivity == 0.5 and info.trial_id is not None
         # The trainee's page names the trial as the store does and tells what to do.
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"{info.title} — running", timeout=120_000)
+                                  arg=f"{info.title} — running", timeout=WAIT_MS)
         assert "points along the path" in trainee.inner_text("body")
         # The trainee's camera is the endoscope: dragging over the view does not orbit it.
         client = next(iter(app.server.get_clients().values()))   # type: ignore[union-attr]
@@ -160,12 +160,12 @@ def test_a_trainee_reaches_five_points_with_keyboard_and_mouse(app: ViewerApp, b
         exp.goto(app.experimenter_url)
         wait_ready(exp)
         exp.get_by_role("button", name="Stop trial").click(force=True)
-        assert wait_for(lambda: not app.panel.running, timeout=60), app.panel.status
+        assert wait_for(lambda: not app.panel.running), app.panel.status
         trainee.wait_for_function(
             "(t) => document.body.innerText.includes(t)",
-            arg=f"{info.title} — ended: stopped by the experimenter", timeout=120_000)
+            arg=f"{info.title} — ended: stopped by the experimenter", timeout=WAIT_MS)
         trainee.wait_for_function("(t) => document.body.innerText.includes(t)",
-                                  arg=f"Score card — {info.title}", timeout=120_000)
+                                  arg=f"Score card — {info.title}", timeout=WAIT_MS)
         body = trainee.inner_text("body")
         assert "running" not in body.split("Score card")[0].split(info.title)[1][:20]
         assert "Points reached" in body and "Path length" in body

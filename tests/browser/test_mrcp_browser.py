@@ -48,13 +48,13 @@ def node_pose(page: Any, name: str) -> list[float] | None:
 
 def test_robot_nodes_exist_and_move_in_the_browser(app: MrcpViewerApp, page: Any) -> None:
     for name in [*ROBOT_NODES, "/mrcp/task/body", "/mrcp/obstacles/view_cone"]:
-        assert wait_for(lambda n=name: node_pose(page, n) is not None, 20), name
+        assert wait_for(lambda n=name: node_pose(page, n) is not None), name
     # The poses the server sent arrive: R1's wrist turns with the cube it holds.
     first = node_pose(page, "/mrcp/robots/R1/link6")
-    # (60 s: a wait, not a timing goal; on a loaded 2-core host the kernel, the server and
+    # (WAIT_S: a wait, not a timing goal; on a loaded 2-core host the kernel, the server and
     # software WebGL share the cores and the first wrist turn took over 20 s once.)
     assert wait_for(lambda: not np.allclose(node_pose(page, "/mrcp/robots/R1/link6"), first,
-                                            atol=1e-4), 60)
+                                            atol=1e-4))
     server_pos = np.asarray(app.station.links["R0"][0].position)  # type: ignore[union-attr]
     assert np.allclose(node_pose(page, "/mrcp/robots/R0/link0")[:3], server_pos, atol=1e-6)
 
@@ -62,7 +62,7 @@ def test_robot_nodes_exist_and_move_in_the_browser(app: MrcpViewerApp, page: Any
 def test_mrcp_tab_draws_its_plots(page: Any) -> None:
     # uPlot charts: NTT, texec and tus per robot.
     assert wait_for(lambda: page.evaluate(
-        "() => document.querySelectorAll('.uplot canvas').length") >= 3, 20)
+        "() => document.querySelectorAll('.uplot canvas').length") >= 3)
     text = page.evaluate("() => document.body.innerText")
     assert "holds the task" in text and "NTT" in text
 
@@ -79,4 +79,4 @@ def test_screenshot_is_not_blank(page: Any) -> None:
         seen.append(float((view.min(axis=2) < 235).mean()))
         return seen[-1] > 0.03  # robots, cube and floor grid on a white background
 
-    assert wait_for(drawn, timeout=60.0, step=0.5), seen[-3:]
+    assert wait_for(drawn, step=0.5), seen[-3:]

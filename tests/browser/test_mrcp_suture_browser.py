@@ -33,8 +33,7 @@ def test_suture_page_shows_needle_thread_and_subtask(browser: Any, app: MrcpView
             return bool(pg.evaluate("(n) => !!window.__viserMutable.nodeRefFromName[n]", name))
 
         for name in ("/mrcp/task/body", "/mrcp/obstacles/tissue_left", "/mrcp/suture/thread"):
-            assert wait_for(lambda n=name: node(n), 60), name
-        assert wait_for(lambda: "subtask:" in pg.evaluate("() => document.body.innerText"),
-                        60)
+            assert wait_for(lambda n=name: node(n)), name
+        assert wait_for(lambda: "subtask:" in pg.evaluate("() => document.body.innerText"))
     finally:
         pg.close()

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import VIEWPORT, wait_for, wait_ready
+from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_for, wait_ready
 from vasim.study.store import TrialStore
 from vasim.viewer import ViewerApp
 
@@ -112,7 +112,7 @@ def test_page_loads_and_the_3d_view_is_not_blank(page: Any) -> None:
         # Organs, tool and trajectory fill much of the view, shaded (not a flat fill).
         return seen[-1][0] > 0.15 and seen[-1][1] > 20
 
-    assert wait_for(drawn, timeout=60.0, step=0.5), seen[-3:]
+    assert wait_for(drawn, step=0.5), seen[-3:]
 
 
 def test_overlays_appear_for_the_selected_schema_and_move(app: ViewerApp, page: Any) -> None:
@@ -136,12 +136,12 @@ def test_audio_synth_receives_ag_parameter_updates(app: ViewerApp, page: Any) ->
     state = "() => window.__vasimAudio && {count: window.__vasimAudio.count, " \
             "params: window.__vasimAudio.params, enabled: window.__vasimAudio.enabled}"
     page.wait_for_function("() => window.__vasimAudio && window.__vasimAudio.params "
-                           "&& window.__vasimAudio.params.on", timeout=120_000)
+                           "&& window.__vasimAudio.params.on", timeout=WAIT_MS)
     c0 = page.evaluate(state)["count"]
     # A stream, not one message: more updates keep arriving (the 20 Hz rate itself is a
     # benchmark figure, bench/viewer.py; counting per wall second fails on a loaded machine).
     page.wait_for_function("(c0) => window.__vasimAudio.count >= c0 + 5", arg=c0,
-                           timeout=120_000)
+                           timeout=WAIT_MS)
     s = page.evaluate(state)
     p = s["params"]
     assert set(p) == {"on", "pitch", "period", "volume", "beep"}
@@ -149,7 +149,7 @@ def test_audio_synth_receives_ag_parameter_updates(app: ViewerApp, page: Any) ->
     # The page's control enables the synth (a click is the gesture browsers require).
     assert not s["enabled"]
     page.get_by_role("button", name="Enable audio").click(force=True)
-    page.wait_for_function("() => window.__vasimAudio.enabled", timeout=120_000)
+    page.wait_for_function("() => window.__vasimAudio.enabled", timeout=WAIT_MS)
 
 
 def test_the_trainee_page_shows_no_experimenter_control(app: ViewerApp, page: Any,
@@ -176,9 +176,9 @@ def test_experimenter_starts_a_trial_and_the_store_holds_it(app: ViewerApp, exp_
     page.get_by_role("button", name="Start trial").click(force=True)
     assert wait_for(lambda: app.snapshot.info.number > n0 and app.snapshot.info.trial_id)
     tid = app.snapshot.info.trial_id
-    assert wait_for(lambda: "stored" in app.panel.status, timeout=60), app.panel.status
+    assert wait_for(lambda: "stored" in app.panel.status), app.panel.status
     page.wait_for_function("() => document.body.innerText.includes('stored')",
-                           timeout=120_000)
+                           timeout=WAIT_MS)
     with closing(TrialStore(db, readonly=True)) as st:
         row = st.trials(subject="S07").set_index("id").loc[tid]
         assert row["status"] == "completed" and row["operator"] == "scripted"
@@ -206,9 +206,12 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
         # The reloaded page's HUD (Trainee tab) shows that same trial.
         # One trial name everywhere: its place in the schedule, as the experimenter's
         # progress line counts it (issue #26 §6).
-        assert info.title == "trial 1 of 27" and app.panel.position == 1
+        # The panel's position is the trial running, or the next once this one is done (a
+        # loaded machine can finish the slowed trial during the reload).
+        assert info.title == "trial 1 of 27"
+        assert app.panel.position == 1 or (app.snapshot.frame.done and app.panel.position == 2)
         page.wait_for_function("(t) => document.body.innerText.includes(`${t} —`)",
-                               arg=info.title, timeout=120_000)
+                               arg=info.title, timeout=WAIT_MS)
         # A second tab pressing Start mid-trial is refused (notification), not a duplicate.
         second = browser.new_page(viewport=VIEWPORT)
         try:
@@ -220,7 +223,7 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
                 assert wait_for(lambda: len(app.errors) > errors or app.snapshot.frame.done)
         finally:
             second.close()
-        assert wait_for(lambda: "stored" in app.panel.status, timeout=60), app.panel.status
+        assert wait_for(lambda: "stored" in app.panel.status), app.panel.status
     finally:
         app.controller.speed = 3.0
     with closing(TrialStore(db, readonly=True)) as st:

@@ -256,7 +256,8 @@ class LiveScenario:
                                         daemon=True)
         self._thread.start()
 
-    def stop(self, timeout: float = 5.0) -> None:
+    def stop(self, timeout: float = 60.0) -> None:
+        # A generous join: a scenario's build (not interruptible) took over 5 s at load 25.
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=timeout)
