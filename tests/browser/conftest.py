@@ -12,21 +12,17 @@ from __future__ import annotations
 
 import importlib.util
 import os
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
+
+from tests.polling import WAIT_S
 
 CHROMIUM = os.environ.get("VASIM_CHROMIUM", "/usr/bin/chromium")   # as .ci/ensure-chromium
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                "--disable-component-update", "--disable-sync", "--no-first-run"]
 VIEWPORT = {"width": 820, "height": 520}
-WAIT_S = 180.0
-"""How long a test waits for a condition the page or server will reach (a bound against a
-hang, not a timing goal): at load 25-48 on 2 cores (the suite beside six other agents) a
-combobox choice took over 45 s to reach the server and a first MRCP wrist turn over 60 s."""
-
 WAIT_MS = int(WAIT_S * 1000)
 """The same, for Playwright's waits (ms)."""
 
@@ -88,10 +84,3 @@ def wait_ready(page: Any, node: str = "/tool/tip") -> None:
                   "requestAnimationFrame(() => r(true))))")
 
 
-def wait_for(cond: Callable[[], bool], timeout: float = WAIT_S, step: float = 0.05) -> bool:
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        time.sleep(step)
-    return cond()

@@ -11,14 +11,13 @@ import subprocess
 import sys
 import time
 import urllib.request
-from collections.abc import Callable
 from types import SimpleNamespace
 from typing import ClassVar
 
 import numpy as np
 import pytest
 
-from tests.polling import wait_until
+from tests.polling import wait_for, wait_until
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError
@@ -30,16 +29,6 @@ from vasim.viewer.views import (
     arrow_mesh,
     arrow_vertices,
 )
-
-
-def wait_for(cond: Callable[[], bool], timeout: float = 30.0, step: float = 0.02) -> bool:
-    """Polls ``cond`` until it holds (generous: a loaded 2-core machine stalls for seconds)."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        time.sleep(step)
-    return cond()
 
 
 @pytest.fixture(scope="module")

@@ -133,7 +133,7 @@ def app() -> Iterator[MrcpViewerApp]:
     a = MrcpViewerApp(port=0, scenario="mrcp:cube_rotation", coarse=True, speed=1.0,
                       view_hz=20.0, plot_hz=2.0).start()
     try:
-        assert wait_for(lambda: a.live.latest() is not None, timeout=20.0)
+        assert wait_for(lambda: a.live.latest() is not None)
         yield a
     finally:
         a.stop()
@@ -157,7 +157,7 @@ def test_app_switches_to_the_gizmo_and_back(app: MrcpViewerApp) -> None:
         seen.append((f.sample.t, f.sample.task_position.copy()))  # type: ignore[union-attr]
         return bool(np.linalg.norm(f.sample.task_position - target) < 1e-6)  # type: ignore[union-attr]
 
-    assert wait_for(reached, timeout=20.0, step=0.01)
+    assert wait_for(reached, step=0.01)
     for (t0, p0), (t1, p1) in itertools.pairwise(seen):
         if t1 > t0:
             assert np.linalg.norm(p1 - p0) <= 0.2 * (t1 - t0) + 1e-6

@@ -4,23 +4,13 @@ the endoscope's light following the scope (issue #19 §1, §4; issue #20 §1, §
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from tests.polling import wait_for
 from vasim.viewer import ViewerApp
 from vasim.viewer.controller import Command
-
-
-def wait_for(cond: Callable[[], bool], timeout: float = 30.0) -> bool:
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        if cond():
-            return True
-        time.sleep(0.05)
-    return cond()
 
 
 def test_a_timed_out_trial_on_both_pages(tmp_path: Path) -> None:
@@ -34,11 +24,13 @@ def test_a_timed_out_trial_on_both_pages(tmp_path: Path) -> None:
         title = f"trial {info.trial_id}"
         assert wait_for(lambda: f"**{title}** — running" in app.hud.text), app.hud.text
         assert "s left)" in app.hud.text
-        assert wait_for(lambda: f"**{title}** — ended: time ran out" in app.hud.text,
-                        timeout=30), app.hud.text
+        ended = f"**{title}** — ended: time ran out"
+        assert wait_for(lambda: ended in app.hud.text), app.hud.text
         assert "done" not in app.hud.text and "s left)" not in app.hud.text
-        assert wait_for(lambda: f"Score card — {title}" in app.score.content), app.errors
-        assert "**time ran out**" in app.score.content and app.score.visible
+        # the card's text and its visibility are two updates: wait for both
+        assert wait_for(lambda: f"Score card — {title}" in app.score.content
+                        and app.score.visible), app.errors
+        assert "**time ran out**" in app.score.content
         # The experimenter's page names the same trial the same way.
         assert wait_for(lambda: f"| Trial | {title} (free, ended: time ran out) |"
                         in app.panel_view.metrics_md), app.panel_view.metrics_md
