@@ -26,7 +26,7 @@ from tests.docs.doc_blocks import PARSE, ROOT, RUN, Block, all_blocks
 
 pytestmark = pytest.mark.slow
 
-TIMEOUT_S = 180.0
+TIMEOUT_S = 300.0
 """Per-example limit [s]: a hang guard for a loaded 2-core machine, not a speed check
 (an example is meant to take seconds)."""
 
