@@ -3,6 +3,7 @@ existing file and, with ``#anchor``, to a heading of it (issue #27 item 2)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -103,3 +104,19 @@ def test_anchor_and_block_parsing(tmp_path: Path) -> None:
     assert [(b.lang, b.body) for b in blocks(page)] == [
         ("sh", "# not a heading\necho [x](nowhere.md)\n"), ("python", "print(1)\n")]
     assert links(page) == [(17, "p.md#a-code-heading")]
+
+
+_PATH = re.compile(r"`((?:vasim|tests|bench|protocols|docs)/[A-Za-z0-9_./*-]+)`")
+
+PATHS = [(path, m[1]) for path in doc_files()
+         for m in _PATH.finditer(path.read_text(encoding="utf-8"))]
+
+
+def test_named_repository_paths_exist() -> None:
+    """A module, test or data file a page names in code (`vasim/...py`) exists: a renamed
+    file would otherwise leave the docs pointing nowhere."""
+    assert len(PATHS) >= 50
+    missing = [f"{p.relative_to(ROOT)}: {name}" for p, name in PATHS
+               if not (list(ROOT.glob(name.rstrip("/."))) if "*" in name
+                       else (ROOT / name.rstrip("/.")).exists())]
+    assert not missing, "paths named in the docs that do not exist: " + "; ".join(missing)
