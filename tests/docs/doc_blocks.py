@@ -7,7 +7,10 @@ docs/developer.md, "Docs and their examples".
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+import sys
 import textwrap
 import unicodedata
 from dataclasses import dataclass
@@ -43,7 +46,8 @@ class Block:
 
     @property
     def id(self) -> str:
-        return f"{self.path.relative_to(ROOT)}:{self.line}"
+        where = self.path.relative_to(ROOT) if self.path.is_relative_to(ROOT) else self.path
+        return f"{where}:{self.line}"
 
 
 _FENCE = re.compile(r"^( *)(`{3,}|~{3,})\s*([^\s`]*)")
@@ -162,3 +166,35 @@ def _prose_with_code(path: Path) -> str:
             continue
         kept.append(line.replace("`", ""))
     return "\n".join(kept)
+
+
+# -- running an example -------------------------------------------------------------------
+
+
+def example_env() -> dict[str, str]:
+    """The examples' environment: this interpreter's ``bin/`` first on ``PATH`` (its
+    ``vasim`` and ``python``), the checkout first on ``PYTHONPATH``."""
+    env = dict(os.environ)
+    env["PATH"] = str(Path(sys.executable).parent) + os.pathsep + env.get("PATH", "")
+    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"]
+                                     if env.get("PYTHONPATH") else "")
+    env.pop("VIRTUAL_ENV", None)
+    return env
+
+
+def run_block(block: Block, cwd: Path, timeout: float) -> subprocess.CompletedProcess[str]:
+    """Runs a ``sh`` block as one bash script (``set -euo pipefail``) or a ``python`` block
+    in a fresh interpreter, in ``cwd``.
+
+    Raises:
+        ValueError: for a block of another language.
+        subprocess.TimeoutExpired: past ``timeout`` [s].
+    """
+    if block.lang == "sh":
+        cmd = ["bash", "-c", "set -euo pipefail\n" + block.body]
+    elif block.lang == "python":
+        cmd = [sys.executable, "-c", block.body]
+    else:
+        raise ValueError(f"{block.id}: a {block.lang!r} block is not run")
+    return subprocess.run(cmd, cwd=cwd, env=example_env(), capture_output=True, text=True,
+                          timeout=timeout, stdin=subprocess.DEVNULL)

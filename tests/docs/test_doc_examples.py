@@ -14,7 +14,6 @@ numpy, pandas and numba: seconds on a loaded machine).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import tomllib
@@ -22,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.docs.doc_blocks import PARSE, ROOT, RUN, Block, all_blocks
+from tests.docs.doc_blocks import PARSE, ROOT, RUN, Block, all_blocks, run_block
 
 pytestmark = pytest.mark.slow
 
@@ -35,22 +34,6 @@ RUNNABLE = [b for b in BLOCKS if b.lang in RUN]
 PARSED = [b for b in BLOCKS if b.lang in PARSE and "..." not in b.body]
 
 
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    bin_dir = str(Path(sys.executable).parent)
-    env["PATH"] = bin_dir + os.pathsep + env.get("PATH", "")
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"]
-                                     if env.get("PYTHONPATH") else "")
-    env.pop("VIRTUAL_ENV", None)
-    return env
-
-
-def _command(block: Block) -> list[str]:
-    if block.lang == "sh":
-        return ["bash", "-c", "set -euo pipefail\n" + block.body]
-    return [sys.executable, "-c", block.body]
-
-
 def test_there_are_examples_to_run() -> None:
     """The docs show runnable examples of each kind (a broken extractor would find none)."""
     langs = {b.lang for b in RUNNABLE}
@@ -60,8 +43,8 @@ def test_there_are_examples_to_run() -> None:
 
 def test_the_vasim_on_path_is_this_checkout(tmp_path: Path) -> None:
     """The examples' ``vasim`` and ``python`` run this checkout's code."""
-    out = subprocess.run(["python", "-c", "import vasim; print(vasim.__file__)"], cwd=tmp_path,
-                         env=_env(), capture_output=True, text=True, timeout=TIMEOUT_S)
+    out = run_block(Block(tmp_path, 1, "sh", "python -c 'import vasim; print(vasim.__file__)'\n"),
+                    tmp_path, TIMEOUT_S)
     assert out.returncode == 0, out.stderr
     assert Path(out.stdout.strip()).resolve().is_relative_to(ROOT)
     assert Path(sys.executable).parent.joinpath("vasim").exists()
@@ -70,8 +53,7 @@ def test_the_vasim_on_path_is_this_checkout(tmp_path: Path) -> None:
 @pytest.mark.parametrize("block", RUNNABLE, ids=[b.id for b in RUNNABLE])
 def test_example_runs(block: Block, tmp_path: Path) -> None:
     try:
-        out = subprocess.run(_command(block), cwd=tmp_path, env=_env(), capture_output=True,
-                             text=True, timeout=TIMEOUT_S, stdin=subprocess.DEVNULL)
+        out = run_block(block, tmp_path, TIMEOUT_S)
     except subprocess.TimeoutExpired:
         pytest.fail(f"{block.id}: the example did not end within {TIMEOUT_S:.0f} s "
                     "(make it quicker, or show it in a ```text block)")

@@ -31,7 +31,8 @@ def test_the_diagram_is_the_layers_contract() -> None:
 
 
 def test_the_readme_layer_order_is_the_contract() -> None:
-    m = re.search(r"the package: (core < .*?) \(", " ".join(README.read_text(encoding="utf-8").split()))
+    flat = " ".join(README.read_text(encoding="utf-8").split())
+    m = re.search(r"the package: (core < .*?) \(", flat)
     assert m, "README.md has no line 'the package: core < ... ('"
     order = [set(step.strip().split("|")) for step in m[1].split("<")]
     assert order == _contract_layers()[::-1]
