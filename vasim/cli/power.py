@@ -52,7 +52,7 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--coarse", action="store_true",
                    help="2 ms control step instead of 1 ms, ~1.5x faster: dry runs and the "
                         "practice effect only (the per-trial means stay within 10 %%, but the "
-                        "fixture effects shrink: README 'Power planning')")
+                        "fixture effects shrink: docs/researcher.md, 'Power planning')")
     r.add_argument("--seed", type=bounded_int(SEED), default=7, help="base seed (default 7)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")

@@ -61,7 +61,7 @@ MRCP -> k_thread, EM StdT/MRCP -> theta_N, ET MRCP+Cam/MRCP -> c_cam), by the se
 between two pilot cohorts (:func:`secant_fit`; ``bench/chapter5.py --fit`` runs it and
 prints the pilot moments). What a calibrated model reproduces of Table 5.1 it reproduces by
 construction; the other moments (StdT's ET, Q's ratios, the spreads, the tests) are its
-predictions, compared in ``bench/chapter5.py`` and the README.
+predictions, compared in ``bench/chapter5.py`` and docs/seed-chapter5.md.
 
 Example:
     >>> from vasim.operator.profile import OperatorProfile
