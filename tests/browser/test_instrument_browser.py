@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import WAIT_MS, wait_for, wait_ready
+from tests.browser.conftest import WAIT_MS, wait_ready
+from tests.polling import wait_for
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.study.store import TrialStore
 from vasim.viewer.app import ViewerApp

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import VIEWPORT, wait_for, wait_ready
+from tests.browser.conftest import VIEWPORT, wait_ready
+from tests.polling import wait_for
 from vasim.viewer.mrcp_panel import MrcpViewerApp
 
 ROBOT_NODES = [f"/mrcp/robots/{r}/link{k}" for r in ("R0", "R1") for k in range(7)]

@@ -9,7 +9,8 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import VIEWPORT, wait_for, wait_ready
+from tests.browser.conftest import VIEWPORT, wait_ready
+from tests.polling import wait_for
 from vasim.viewer.mrcp_panel import MrcpViewerApp
 
 

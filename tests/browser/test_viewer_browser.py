@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_for, wait_ready
+from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_ready
+from tests.polling import wait_for
 from vasim.study.store import TrialStore
 from vasim.viewer import ViewerApp
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tests.browser.conftest import wait_for
+from tests.polling import wait_for
 from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
 from vasim.mrcp.scenarios.runner import OperatorSwitch, run

@@ -23,7 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from tests.browser.conftest import wait_for
+from tests.polling import wait_for
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario

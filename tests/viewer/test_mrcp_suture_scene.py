@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from tests.browser.conftest import wait_for
+from tests.polling import wait_for
 from vasim.viewer.mrcp_panel import MrcpViewerApp, status_text
 from vasim.viewer.mrcp_view import SubtaskView, needle_mesh, subtask_text
 
