@@ -1,0 +1,222 @@
+"""Store schema version 6: packed sample columns (vasim/study/store/packing.py, schema.py,
+readers.py; issue #27 item 5).
+
+The migration runs on ``data/store_v5.sqlite``, written by the schema-5 vasim itself
+(``data/make_store_v5.py``); the reference values are what that store reads as before the
+migration (read-only, the version-5 row reader). The float32 rounding the tests expect is
+done here with numpy, independently of the store's code.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+import vasim.study.store.packing as packing
+from vasim.core.errors import StoreError
+from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
+from vasim.study.export import EXPORT_TABLES, export_study, read_export
+from vasim.study.store import SCHEMA_VERSION, TrialStore
+
+V5_STORE = Path(__file__).parent / "data" / "store_v5.sqlite"
+EXACT = ("k", "t", "goal_index", "contact", "delicate", "clutch", "in_view")
+
+
+def as_stored(frame: pd.DataFrame) -> pd.DataFrame:
+    """The sample frame rounded as schema 6 keeps it: floats other than k and t to float32."""
+    out = frame.copy()
+    for c in FRAME_COLUMNS:
+        if c not in EXACT:
+            out[c] = out[c].to_numpy(np.float64).astype(np.float32).astype(np.float64)
+    return out
+
+
+@pytest.fixture
+def v5(tmp_path: Path) -> Path:
+    p = tmp_path / "v5.sqlite"
+    shutil.copyfile(V5_STORE, p)
+    return p
+
+
+def _snapshot(path: Path) -> dict[str, object]:
+    with TrialStore(path, readonly=True) as ro:
+        trials = ro.trials()
+        ids = [int(i) for i in trials["id"]]
+        return {"version": ro.schema_version, "trials": trials,
+                "samples": {i: ro.samples(i) for i in ids},
+                "points": {i: ro.point_metrics(i) for i in ids},
+                "metrics": ro.trial_metrics(), "events": {i: ro.events(i) for i in ids}}
+
+
+def test_a_store_written_by_the_v5_code_migrates_with_the_stated_precision(v5: Path):
+    before = _snapshot(v5)
+    assert before["version"] == 5
+    samples_before: dict[int, pd.DataFrame] = before["samples"]  # type: ignore[assignment]
+    assert [len(s) for s in samples_before.values()] == [250, 250, 250]
+    size_before = v5.stat().st_size
+    with TrialStore(v5) as st_:
+        assert st_.schema_version == SCHEMA_VERSION == 6
+        assert [v for v, _ in st_.con.execute("SELECT * FROM schema_version")] == list(
+            range(1, 7))
+        tables = {r[0] for r in st_.con.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table'")}
+        assert "samples" not in tables and "sample_columns" in tables
+        assert st_.integrity_check() == "ok"
+        assert st_.con.execute("PRAGMA foreign_key_check").fetchall() == []
+    after = _snapshot(v5)
+    pd.testing.assert_frame_equal(after["trials"], before["trials"])  # type: ignore[arg-type]
+    pd.testing.assert_frame_equal(after["metrics"], before["metrics"])  # type: ignore[arg-type]
+    for tid, s in samples_before.items():
+        got = after["samples"][tid]  # type: ignore[index]
+        pd.testing.assert_frame_equal(got, as_stored(s), check_exact=True)
+        for c in EXACT:
+            assert got[c].to_numpy().tobytes() == s[c].to_numpy().tobytes(), c
+        rel = np.abs(got.to_numpy(np.float64) - s.to_numpy(np.float64))
+        assert np.all(rel <= 2.0**-24 * np.abs(s.to_numpy(np.float64)))
+        pd.testing.assert_frame_equal(after["points"][tid],  # type: ignore[index]
+                                      before["points"][tid], check_exact=True)  # type: ignore[index]
+        pd.testing.assert_frame_equal(after["events"][tid],  # type: ignore[index]
+                                      before["events"][tid])  # type: ignore[index]
+    # the FF trial ran at gain 0.75 (exact in float32) and rendered forces
+    ff = after["samples"][1]  # type: ignore[index]
+    assert set(ff["gain"]) == {0.75} and ff[["f_x", "f_y", "f_z"]].abs().to_numpy().max() > 0
+    # VACUUM gave the per-sample rows' pages back: without it the file could only grow
+    # (the fixed cost of the trial rows, configs and schemas dominates so small a store)
+    assert v5.stat().st_size < 0.8 * size_before, (size_before, v5.stat().st_size)
+
+
+def test_exports_of_the_migrated_store_match_within_the_stated_precision(v5: Path,
+                                                                         tmp_path: Path):
+    old = export_study(v5, tmp_path / "old", formats=("csv",))     # read-only: still v5
+    with TrialStore(v5):
+        pass                                                          # migrates
+    new = export_study(v5, tmp_path / "new", formats=("csv",))
+    for table in EXPORT_TABLES:
+        a, b = read_export(old, table), read_export(new, table)
+        if table == "samples":
+            a = as_stored(a)
+        pd.testing.assert_frame_equal(b, a, check_exact=True, obj=table)
+
+
+def test_a_failed_migration_leaves_the_v5_store_untouched(v5: Path, monkeypatch):
+    def boom(_cols: object) -> object:
+        raise sqlite3.OperationalError("disk I/O error (simulated)")
+
+    monkeypatch.setattr(packing, "pack_columns", boom)
+    with pytest.raises(StoreError, match="simulated"):
+        TrialStore(v5)
+    con = sqlite3.connect(v5)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 5
+    assert con.execute("SELECT count(*) FROM samples").fetchone()[0] == 3 * 250
+    names = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
+    assert "sample_columns" not in names
+    con.close()
+
+
+# ---------------------------------------------------------------------------- the codec
+floats = arrays(np.float64, st.integers(0, 300),
+                elements=st.floats(allow_nan=True, allow_infinity=True, width=64))
+
+
+@settings(max_examples=200, deadline=None)
+@given(floats)
+def test_float32_columns_round_trip_to_the_nearest_float32(a: np.ndarray) -> None:
+    dt = packing.storage_dtype("x_x", a)
+    back = packing.decode(packing.encode(a, dt), dt.newbyteorder("<").str, a.size)
+    with np.errstate(over="ignore"):
+        f32 = a.astype(np.float32)
+    if np.any(np.isinf(f32) & np.isfinite(a)):
+        assert dt == np.float64                  # float32 would turn a value into inf: exact
+        expected = a
+    else:
+        assert dt == np.float32
+        expected = f32
+    np.testing.assert_array_equal(back.astype(np.float64), expected.astype(np.float64))
+    assert np.array_equal(np.signbit(back), np.signbit(expected))   # -0.0 and -nan too
+
+
+def test_a_column_float32_cannot_hold_is_stored_exactly() -> None:
+    a = np.array([1e39, 0.1, -np.inf, np.nan])
+    assert packing.storage_dtype("f_x", a) == np.float64
+    assert packing.storage_dtype("f_x", a[1:]) == np.float32    # inf and NaN need no float64
+    cols = {c: np.zeros(4, FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
+    cols.update(k=np.arange(4), f_x=a)
+    back = packing.unpack_columns(packing.pack_columns(cols))
+    assert back["f_x"].tobytes() == a.tobytes()
+
+
+@settings(max_examples=100, deadline=None)
+@given(arrays(np.float64, st.integers(0, 200),
+              elements=st.floats(allow_nan=True, allow_infinity=True, width=64)),
+       arrays(np.int64, st.integers(0, 5), elements=st.integers(-2**63, 2**63 - 1)))
+def test_exact_columns_round_trip_bit_for_bit(t: np.ndarray, k: np.ndarray) -> None:
+    for name, a in (("t", t), ("k", k)):
+        dt = packing.storage_dtype(name, a)
+        assert dt == FRAME_DTYPES[name]
+        back = packing.decode(packing.encode(a, dt), dt.str, a.size)
+        assert back.tobytes() == a.astype(dt).tobytes()
+
+
+def _columns(n: int, k: np.ndarray) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(4)
+    out = {c: rng.normal(size=n).astype(FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
+    out["k"] = k
+    return out
+
+
+def test_samples_are_stored_in_step_order_and_duplicates_refused() -> None:
+    cols = _columns(5, np.array([3, 1, 4, 0, 2]))
+    back = packing.unpack_columns(packing.pack_columns(cols))
+    order = np.argsort(cols["k"])
+    assert back["k"].tolist() == [0, 1, 2, 3, 4]
+    np.testing.assert_array_equal(back["t"], cols["t"][order])
+    with pytest.raises(StoreError, match="duplicate step k = 1"):
+        packing.pack_columns(_columns(4, np.array([0, 1, 1, 2])))
+
+
+def test_a_damaged_or_foreign_blob_is_a_store_error() -> None:
+    rows = packing.pack_columns(_columns(3, np.arange(3)))
+    name, dtype, n, codec, blob = rows[1]
+    for bad, match in (((name, dtype, n, codec, b"junk"), "does not inflate"),
+                       ((name, dtype, n + 1, codec, blob), "expected 4 values"),
+                       ((name, dtype, n, "zstd", blob), "codec 'zstd'")):
+        with pytest.raises(StoreError, match=match):
+            packing.unpack_columns([rows[0], bad, *rows[2:]])
+    with pytest.raises(StoreError, match="lack the columns"):
+        packing.unpack_columns(rows[:-1])
+
+
+def test_an_empty_trial_stores_no_blob_and_reads_empty(tmp_path: Path) -> None:
+    from vasim.records.trial_meta import TrialMeta
+
+    with TrialStore(tmp_path / "s.db") as s:
+        tid = s.begin_trial(TrialMeta(subject="S01", task="trajectory"))
+        s.finish_trial(tid, SampleBuffer())
+        assert s.con.execute("SELECT count(*) FROM sample_columns").fetchone()[0] == 0
+        df = s.samples(tid)
+        assert df.empty and list(df.columns) == list(FRAME_COLUMNS)
+        assert s.trial(tid)["n_samples"] == 0
+
+
+def test_a_real_trial_is_about_ten_times_smaller(tmp_path: Path) -> None:
+    """Bytes a sample of a simulated FF trial: packed blobs vs the version-5 row estimate
+    (bench/store.py measures files; here the blobs alone, against 33 8-byte values)."""
+    from vasim.trials.registry import run_trial
+    from vasim.trials.vf import TrialConfig
+
+    with TrialStore(tmp_path / "s.db") as s:
+        res, tid = run_trial(TrialConfig(schema="ff", seed=3, max_time=2.0, scene="none",
+                                         subject="S01"), s)
+        blob = s.con.execute("SELECT sum(length(data)) FROM sample_columns WHERE "
+                             "trial_id = ?", (tid,)).fetchone()[0]
+    n = len(res.samples)
+    assert n == 2000
+    assert blob / n < 0.15 * 8 * len(FRAME_COLUMNS), blob / n
