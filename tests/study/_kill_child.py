@@ -13,9 +13,6 @@ begins a third trial, prints ``{"trial3": id}`` and:
   the trial row, then waits, so the kill lands *inside* the open write transaction, after
   SQLite has spilled uncommitted pages to the (freshly truncated) WAL: the page cache is made
   tiny, so N > 0 proves the spill.
-
-``samples_sha`` is of the samples as the store keeps them (schema 6: float32 for most float
-columns, vasim/study/store/packing.py), rounded here independently of the store's code.
 """
 
 from __future__ import annotations
@@ -40,13 +37,8 @@ N_POINTS = 8
 
 
 def samples_sha(frame: pd.DataFrame) -> str:
-    """sha256 of the samples' values as stored (k and t exact, other floats rounded to
-    float32; as float64, FRAME_COLUMNS order)."""
-    frame = frame[list(FRAME_COLUMNS)].copy()
-    for c in FRAME_COLUMNS:
-        if c not in ("k", "t") and frame[c].dtype == np.float64:
-            frame[c] = frame[c].to_numpy().astype(np.float32).astype(np.float64)
-    block = np.ascontiguousarray(frame.to_numpy(dtype=np.float64))
+    """sha256 of the samples' values (float64, FRAME_COLUMNS order)."""
+    block = np.ascontiguousarray(frame[list(FRAME_COLUMNS)].to_numpy(dtype=np.float64))
     return hashlib.sha256(block.tobytes()).hexdigest()
 
 

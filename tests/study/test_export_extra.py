@@ -55,7 +55,7 @@ def test_parquet_without_pyarrow_is_one_line_naming_the_extra(db: Path,
 
 def test_a_broken_module_inside_an_extra_is_not_called_missing(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    pytest.importorskip("pyarrow")
+    import pyarrow  # noqa: F401  (installed with the test dependencies: the parquet extra)
     # pyarrow is installed but one of its modules fails: the real error, not "install it"
     for name in [m for m in sys.modules if m.startswith(("pyarrow.parquet", "pyarrow._parquet"))]:
         monkeypatch.delitem(sys.modules, name)     # pyarrow.parquet and what it imported

@@ -225,17 +225,7 @@ def test_meta_validation():
 
 
 # -------------------------------------------------------------------------- lifecycle
-def stored_precision(frame: pd.DataFrame) -> pd.DataFrame:
-    """``frame`` as the store keeps it (vasim/study/store/packing.py): k, t and the integer
-    columns exact, every other float column rounded to the nearest float32."""
-    out = frame.copy()
-    for c in FRAME_COLUMNS:
-        if c not in ("k", "t") and out[c].dtype == np.float64:
-            out[c] = out[c].to_numpy().astype(np.float32).astype(np.float64)
-    return out
-
-
-def test_roundtrip_keeps_the_stated_precision(store: TrialStore):
+def test_roundtrip_is_exact(store: TrialStore):
     buf = random_buffer(5000, seed=3)
     v = buf.view()
     pm, summary = evaluate_trial(v["t"], v["x"], v["g"], v["goal_index"], 4)
@@ -249,20 +239,14 @@ def test_roundtrip_keeps_the_stated_precision(store: TrialStore):
                        timing={"p99_us": 120.5, "overruns": 0})
 
     back = store.samples(tid)
-    full = buf.to_frame()
-    expected = stored_precision(full)
-    pd.testing.assert_frame_equal(back, expected, check_exact=True)
-    # exact columns bit for bit; the float32 ones within 2^-24 of the value (relative)
-    for c in ("k", "t", "goal_index", "contact", "in_view"):
-        assert back[c].to_numpy().tobytes() == full[c].to_numpy().tobytes(), c
-    for c in ("x_x", "g_z", "f_y", "ms_x", "zoom", "audio_pitch", "audio_volume"):
-        a, b = back[c].to_numpy(), full[c].to_numpy()
-        assert not np.array_equal(a, b), c             # random doubles: really rounded
-        assert np.all(np.abs(a - b) <= 2.0**-24 * np.abs(b)), c
+    pd.testing.assert_frame_equal(back, buf.to_frame(), check_exact=True)
+    # every column bit for bit (schema 6 packs them losslessly, vasim/study/store/packing.py)
+    for c in FRAME_COLUMNS:
+        assert back[c].to_numpy().tobytes() == buf.to_frame()[c].to_numpy().tobytes(), c
     pd.testing.assert_frame_equal(store.point_metrics(tid), pm, check_exact=True)
     again = store.sample_buffer(tid)
     assert again.active_fixtures == "VG"
-    pd.testing.assert_frame_equal(again.to_frame(), expected, check_exact=True)
+    pd.testing.assert_frame_equal(again.to_frame(), buf.to_frame(), check_exact=True)
 
     tr = store.trial(tid)
     assert tr["status"] == "completed" and tr["n_samples"] == 5000
@@ -530,7 +514,7 @@ def test_v1_store_is_migrated_to_v3_in_place(tmp_path: Path):
         s = st.samples(1)
         assert list(s.columns) == list(FRAME_COLUMNS)
         # the v1 values are untouched; the new columns read their "not measured" defaults
-        assert s["x_x"].tolist() == [float(np.float32(r[3])) for r in rows]  # float32
+        assert s["x_x"].tolist() == [r[3] for r in rows]
         assert s["contact"].tolist() == [0, 1, 0]
         assert (s[["fc_x", "fc_y", "fc_z", "tc_x", "tc_y", "tc_z"]] == 0.0).all().all()
         assert (s["delicate"] == 0).all() and (s["clutch"] == 0).all()

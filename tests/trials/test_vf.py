@@ -128,10 +128,7 @@ def test_cli_trial_stores_samples_and_metrics(tmp_path: Path, capsys) -> None:
                - samples.loc[samples.goal_index == i, ["g_x", "g_y", "g_z"]].to_numpy()).sum()
         for i in range(len(metrics))
     )
-    # the metrics come from the full-precision buffer, the stored x and g are float32 (store
-    # schema 6, vasim/study/store/packing.py): each within 2^-24 of its value (relative)
-    xg = samples[["x_x", "x_y", "x_z", "g_x", "g_y", "g_z"]].abs().to_numpy().sum()
-    assert abs(metrics["error_l1"].sum() - e) <= 2.0**-24 * xg + 1e-12 * e
+    assert metrics["error_l1"].sum() == pytest.approx(e, rel=1e-12)
 
 
 def test_cli_errors_are_one_line_exit_2(tmp_path: Path) -> None:

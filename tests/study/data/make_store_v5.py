@@ -1,7 +1,7 @@
 """Writes ``store_v5.sqlite``: a study store as vasim wrote it at schema version 5, before
 the packed samples of version 6 (the fixture of ``tests/study/test_store_v6.py``).
 
-Run with the vasim of a schema-5 commit (it was made from main at 1725547, 2026-11-27):
+Run with the vasim of a schema-5 commit (it was made from main at 66e4d98, 2026-11-28):
 ``PYTHONPATH=<that checkout> python tests/study/data/make_store_v5.py OUT.sqlite``. Three
 short headless trials (FF with gain 0.75, VG, VF-free) of subject S01, then VACUUM, so
 the file stays small.

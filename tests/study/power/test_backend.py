@@ -51,7 +51,6 @@ def _children_left(timeout: float = 20.0) -> list[psutil.Process]:
 
 @pytest.mark.timeout(900)   # a local Ray's start alone took 36 s on the loaded machine
 def test_process_pool_and_ray_give_the_same_cohorts(tiny_protocol: Protocol) -> None:
-    pytest.importorskip("ray")
     design = PowerDesign(subjects=(2,), cohorts=2, dt=COARSE_DT, max_trial_time=0.4, seed=5)
     pool = run_power(tiny_protocol, design, workers=2, progress=False, backend="processes")
     ray = run_power(tiny_protocol, design, workers=2, progress=False, backend="ray")
@@ -77,7 +76,7 @@ def test_without_ray_auto_is_the_process_pool(monkeypatch: pytest.MonkeyPatch) -
 
 
 def test_with_ray_auto_keeps_the_local_ray() -> None:
-    pytest.importorskip("ray")
+    # Ray is installed with the test dependencies (`make test`: the cluster extra)
     assert choose_backend("auto") == "ray"
     assert choose_backend("auto", "auto") == "ray"
 

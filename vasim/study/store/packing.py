@@ -1,40 +1,43 @@
-"""How a trial's samples are stored: one compressed blob per column (schema version 6,
-issue #27 item 5).
+"""How a trial's samples are stored: one losslessly compressed blob per column (schema
+version 6, issue #27 item 5).
 
 Version 5 stored one SQLite row of 33 columns per sample: ~120 bytes a sample on disk
 (measured on a simulated ``vf_learning_curve`` subject, 416,015 samples in 50 MB), so the
-seed's 46-subject cohort took ~2.3 GB. Version 6 stores each trial's column as one blob:
-the values in their *storage dtype* (below), byte-shuffled (byte j of every value together:
-the high bytes of a smooth signal repeat) and deflated with ``zlib`` (level 1): ~12.5 bytes
-a sample on the same subject, ~10x less, so a 46-subject cohort is ~250 MB.
+seed's 46-subject cohort took ~2.3 GB. Version 6 stores each trial's column as one blob: the
+values in their buffer dtype (``vasim.records.samples.FRAME_DTYPES``), each value's bit
+pattern replaced by its wrapping integer difference from the previous value's (smooth
+signals and constant columns give small differences: zero or few non-zero bytes), the bytes
+shuffled (byte j of every value together) and deflated with ``zlib`` (level 1). On the
+simulated trials of ``bench/store.py`` that is ~27 bytes a sample, ~4.5x less than version 5,
+so a 46-subject cohort is ~0.5 GB.
 
-Precision kept per column (the **decision**; every reader returns the buffer dtypes of
-``vasim.records.samples`` as before, so the float32 columns come back as float64 whose value
-is the nearest float32 of what was written):
+Precision kept per column (the **decision**): **every column bit for bit**.
 
 ===========================================  ========  ====================================
 columns                                      stored    precision kept
 ===========================================  ========  ====================================
 ``k``                                        int64     exact
-``t`` [s]                                    float64   exact (latencies and times are
-                                                       differences of t)
-``x_*``, ``g_*`` [m]                         float32   relative 2^-24 (6.0e-8): <= 3.0e-8 m
-                                                       (0.03 um) in the +-0.5 m workspace
-``f_*``, ``fc_*`` [N], ``tc_*`` [N m]        float32   relative 2^-24: <= 6e-7 N at 10 N
-``ms_*``, ``zoom``, ``audio_pitch``,         float32   relative 2^-24 (0, 1, 0.5, 440 ...
-``audio_period`` [s], ``audio_volume``,                are exact)
+``t`` [s], ``x_*``, ``g_*`` [m],             float64   exact: every bit, NaN payloads, +-inf
+``f_*``, ``fc_*`` [N], ``tc_*`` [N m],                 and -0.0 included (version 5 stored
+``ms_*``, ``zoom``, ``audio_pitch``,                   NaN as NULL and read -0.0 as 0.0)
+``audio_period`` [s], ``audio_volume``,
 ``gain``
 ``goal_index``                               int32     exact
 ``contact``, ``delicate``, ``clutch``,       int8      exact
 ``in_view``
 ===========================================  ========  ====================================
 
-NaN, +-inf and -0.0 survive (version 5 stored NaN as NULL and read -0.0 as 0.0). A float32
-column with a finite value beyond float32's range (|v| > 3.4e38, which would become inf) is
-stored as float64 instead: each blob names its dtype, so the reader needs no policy.
-Position errors of 0.03 um are 5 orders of magnitude below the 5 mm reach radius and the
-0.1 mm resolution of the path-deviation measures; the stored per-point and per-trial
-metrics are computed from the full-precision buffer before it is stored.
+Why lossless everywhere and not float32 where the precision would do (0.03 um in the
+workspace): a replay (``vasim trial --replay``, the viewer's replay), the teleoperation
+recomputations and the exports compare stored samples with recomputed ones exactly (e.g.
+``abs=1e-12``), and a store is the record of what a trial did; float32 broke those
+comparisons (it was tried on branch ``lean``, 2026-11-27, at ~12 bytes a sample, and
+reverted). The delta step is lossless for any bit pattern (integer subtraction modulo 2^64 is
+a bijection, undone by a wrapping cumulative sum), so no column needs a policy.
+The compressor is the standard library's ``zlib``: ``lzma`` or ``zlib`` level 9 gave ~5 %
+smaller blobs at 5-40x the packing time (``bench/store.py``'s measurement, 2026-11-28);
+the position columns, whose low mantissa bits are the operator model's noise, are most of
+what is left and no lossless coder removes that.
 """
 
 from __future__ import annotations
@@ -49,54 +52,37 @@ from numpy.typing import NDArray
 from vasim.core.errors import StoreError
 from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES
 
-CODEC = "shuffle-zlib1"
-"""Name of the blob encoding: byte shuffle, then ``zlib.compress(level=1)``.
+CODEC = "delta-shuffle-zlib1"
+"""Name of the blob encoding: wrapping first differences of the values' bit patterns (as
+signed integers of the value's width), byte shuffle, then ``zlib.compress(level=1)``.
 
-**Decision**: level 1, not 6: 5 % larger blobs (12.5 vs 11.9 bytes a sample) for ~1.8x
-faster packing (``bench/store.py``); the stdlib's zlib, no compression dependency."""
+**Decision**: level 1, not 6 or 9: ~5 % larger blobs for 2-4x faster packing
+(``bench/store.py``); the stdlib's zlib, no compression dependency."""
 
 ZLIB_LEVEL = 1
 
-EXACT_COLUMNS: frozenset[str] = frozenset({"k", "t"})
-"""Float or integer columns stored in their buffer dtype, exactly."""
+STORAGE_DTYPES: dict[str, np.dtype[Any]] = {c: np.dtype(FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
+"""The dtype each flat sample column is stored in (little-endian on disk): its buffer dtype."""
 
-STORAGE_DTYPES: dict[str, np.dtype[Any]] = {
-    c: np.dtype(np.float32) if FRAME_DTYPES[c] is np.float64 and c not in EXACT_COLUMNS
-    else np.dtype(FRAME_DTYPES[c])
-    for c in FRAME_COLUMNS
-}
-"""The dtype each flat sample column is stored in (little-endian on disk)."""
-
-def storage_dtype(name: str, values: NDArray[Any]) -> np.dtype[Any]:
-    """The dtype ``values`` of column ``name`` are stored in: ``STORAGE_DTYPES``, except a
-    float32 column holding a finite value float32 cannot represent (stored float64)."""
-    return _stored(name, values).dtype
-
-
-def _stored(name: str, values: NDArray[Any]) -> NDArray[Any]:
-    """``values`` cast to their storage dtype (:func:`storage_dtype`), one pass for the
-    common case: a float32 cast whose result has no inf needs no further check."""
-    dt = STORAGE_DTYPES[name]
-    if dt != np.float32:
-        return np.asarray(values, dtype=dt)
-    with np.errstate(over="ignore"):
-        f = np.asarray(values).astype(np.float32)
-    inf = np.isinf(f)
-    if bool(inf.any()) and bool(np.any(inf & np.isfinite(values))):
-        return np.asarray(values, dtype=np.float64)   # a finite value beyond float32
-    return f
+_BITS: dict[int, np.dtype[Any]] = {n: np.dtype(f"<i{n}") for n in (1, 2, 4, 8)}
+"""The signed integer type of each value width: the bit patterns the delta step works on."""
 
 
 def encode(values: NDArray[Any], dtype: np.dtype[Any]) -> bytes:
-    """``values`` as ``dtype`` (little-endian), byte-shuffled and deflated.
+    """``values`` as ``dtype`` (little-endian), delta-coded, byte-shuffled and deflated.
 
-    >>> a = np.array([0.5, 1.0, -0.0, np.nan])
-    >>> back = decode(encode(a, np.dtype(np.float32)), "<f4", 4)
-    >>> back.dtype.str, back[:3].tolist(), bool(np.isnan(back[3])), bool(np.signbit(back[2]))
-    ('<f4', [0.5, 1.0, -0.0], True, True)
+    >>> a = np.array([0.5, 1.0, -0.0, np.nan, np.inf])
+    >>> back = decode(encode(a, np.dtype(np.float64)), "<f8", 5)
+    >>> back.tobytes() == a.tobytes(), bool(np.signbit(back[2]))
+    (True, True)
     """
     a = np.ascontiguousarray(values, dtype=dtype.newbyteorder("<"))
-    shuffled = a.view(np.uint8).reshape(a.size, a.itemsize).T.tobytes()
+    bits = a.view(_BITS[a.itemsize])
+    d = np.empty_like(bits)
+    if bits.size:
+        d[0] = bits[0]
+        np.subtract(bits[1:], bits[:-1], out=d[1:])   # wraps modulo 2^(8 * itemsize)
+    shuffled = d.view(np.uint8).reshape(d.size, d.itemsize).T.tobytes()
     return zlib.compress(shuffled, ZLIB_LEVEL)
 
 
@@ -106,7 +92,13 @@ def decode(blob: bytes, dtype: str, n: int) -> NDArray[Any]:
     Raises:
         StoreError: the blob does not hold ``n`` values of ``dtype`` (a damaged store).
     """
-    dt = np.dtype(dtype)
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        dt = None
+    if dt is None or dt.kind not in "iuf" or dt.itemsize not in _BITS:
+        raise StoreError(f"a sample blob names the dtype {dtype!r}, expected a number of "
+                         f"{', '.join(map(str, _BITS))} bytes")
     try:
         raw = zlib.decompress(blob)
     except zlib.error as exc:
@@ -114,8 +106,9 @@ def decode(blob: bytes, dtype: str, n: int) -> NDArray[Any]:
     if len(raw) != n * dt.itemsize:
         raise StoreError(f"a sample blob holds {len(raw)} bytes, expected {n} values of "
                          f"{dt.str} ({n * dt.itemsize} bytes)")
-    b = np.frombuffer(raw, dtype=np.uint8).reshape(dt.itemsize, n).T
-    return np.ascontiguousarray(b).view(dt).reshape(n)
+    b = np.ascontiguousarray(np.frombuffer(raw, dtype=np.uint8).reshape(dt.itemsize, n).T)
+    bits = np.cumsum(b.view(_BITS[dt.itemsize]).reshape(n), dtype=_BITS[dt.itemsize])
+    return bits.view(dt.newbyteorder("<")).astype(dt, copy=False)
 
 
 NULL_INTEGERS: dict[str, int] = {"goal_index": -1, "in_view": -1}
@@ -167,7 +160,7 @@ def pack_columns(columns: Mapping[str, NDArray[Any]],
         v = np.asarray(columns[name])
         if order is not None:
             v = v[order]
-        s = _stored(name, v)
+        s = np.asarray(v, dtype=STORAGE_DTYPES[name])
         rows.append((name, s.dtype.newbyteorder("<").str, int(s.size), CODEC,
                      encode(s, s.dtype)))
     return rows
@@ -184,7 +177,7 @@ def unpack_columns(rows: Iterable[tuple[str, str, int, str, bytes]],
     for name, dtype, n, codec, blob in rows:
         if codec != CODEC:
             raise StoreError(f"sample column {name!r} has codec {codec!r}, expected {CODEC!r} "
-                             "(written by a newer vasim?)")
+                             "(written by a newer or an unreleased vasim?)")
         got[name] = decode(blob, dtype, int(n))
     missing = [c for c in FRAME_COLUMNS if c not in got]
     if missing:
@@ -192,8 +185,8 @@ def unpack_columns(rows: Iterable[tuple[str, str, int, str, bytes]],
     lengths = {got[c].size for c in FRAME_COLUMNS}
     if len(lengths) != 1:
         raise StoreError(f"the stored sample columns differ in length: {sorted(lengths)}")
-    return {c: got[c].astype(FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
+    return {c: got[c].astype(FRAME_DTYPES[c], copy=False) for c in FRAME_COLUMNS}
 
 
 __all__ = ["CODEC", "STORAGE_DTYPES", "ZLIB_LEVEL", "decode", "encode", "pack_columns",
-           "rows_to_columns", "storage_dtype", "unpack_columns"]
+           "rows_to_columns", "unpack_columns"]

@@ -2,9 +2,9 @@
 subjects, demographics and answers, as pandas frames (or dicts for one row).
 
 Floats round-trip exactly (SQLite REAL is an IEEE double) with two SQLite caveats: NaN is
-stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Samples are
-the exception (schema 6): most of their float columns are stored as float32, within the
-precision ``vasim.study.store.packing`` states per column (NaN and -0.0 survive there).
+stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Samples
+(schema 6) are packed losslessly, bit for bit, NaN and -0.0 included
+(``vasim.study.store.packing``).
 """
 
 from __future__ import annotations

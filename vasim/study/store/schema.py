@@ -68,9 +68,10 @@ what versions 2 to 6 added):
 ``sample_columns`` (v6) — a trial's samples, one row per column, PK (trial_id, name).
     ``trial_id`` -> trials.id; ``name`` TEXT (a ``samples.FRAME_COLUMNS`` name, the columns
     of the version-5 ``samples`` table below); ``dtype`` TEXT (numpy dtype of the stored
-    values, e.g. ``'<f4'``); ``n`` INTEGER (values: the trial's samples, in order of k);
-    ``codec`` TEXT (``'shuffle-zlib1'``); ``data`` BLOB. What each column keeps (float32
-    for most float columns, exact for k, t and the integers) is stated in
+    values: the buffer dtype, ``'<f8'``, ``'<i8'``, ``'<i4'`` or ``'<i1'``); ``n`` INTEGER
+    (values: the trial's samples, in order of k); ``codec`` TEXT
+    (``'delta-shuffle-zlib1'``); ``data`` BLOB. Every column is kept bit for bit (lossless
+    compression, no float32), as stated per column in
     ``vasim.study.store.packing``. A trial without samples has no rows.
 ``samples`` (versions 1 to 5; dropped by version 6) — one row per logged step, WITHOUT
     ROWID, PK (trial_id, k). ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL
@@ -141,7 +142,8 @@ what versions 2 to 6 added):
 
 Floats round-trip exactly (SQLite REAL is an IEEE double) with two SQLite caveats: NaN is
 stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Sample
-columns keep the precision ``vasim.study.store.packing`` states (NaN and -0.0 survive).
+columns are exact too and keep NaN and -0.0 (``vasim.study.store.packing``); samples migrated
+from version 5 keep what version 5 had stored.
 
 """
 
@@ -477,7 +479,7 @@ MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3, 4: _S
 
 def samples_to_columns(con: sqlite3.Connection) -> None:
     """Version 6's data step: every trial's ``samples`` rows packed into ``sample_columns``
-    (``packing.pack_columns``: float32 where the module's table says so), then ``samples``
+    (``packing.pack_columns``, lossless), then ``samples``
     dropped. One trial at a time (memory: one trial's rows); a progress bar for a long one.
     """
     from vasim.core.progress import progress_bar
