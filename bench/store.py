@@ -1,6 +1,6 @@
 """The study store: per-sample append cost in the 1 kHz loop, the one-transaction commit,
 and what a sample costs on disk and to read back, schema 5 (one row a sample) against
-schema 6 (packed columns, issue #27 item 5).
+schema 6 (lossless packed columns, issue #27 item 5).
 
 Prints µs per ``SampleBuffer.append`` (the only storage work inside the control loop), the
 time ``TrialStore.finish_trial`` takes to make a 100,000-sample trial durable (WAL,
@@ -11,7 +11,9 @@ size of a 46-subject ``vf_learning_curve`` cohort extrapolated from bytes per sa
 Schema 5 is written here the way vasim wrote it (the frozen DDL of versions 1-5 from
 ``vasim.study.store.schema.MIGRATIONS``, one ``executemany`` of ``SampleBuffer.rows()`` in
 one transaction) and read back through ``TrialStore`` read-only (the version-5 row reader).
-Bytes per sample = growth of the checkpointed database file / samples. ``VASIM_BENCH_SMOKE=1``
+Bytes per sample = growth of the checkpointed database file / samples. Both layouts must
+read back every sample bit for bit (schema 5: its SQLite caveats aside, none of which these
+trials meet), else the benchmark fails. ``VASIM_BENCH_SMOKE=1``
 (``python -m bench --smoke``) cuts every run to seconds; its figures then mean nothing.
 """
 
@@ -25,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from tqdm import tqdm
 
 from vasim.records.point_metrics import evaluate_trial
@@ -111,6 +114,15 @@ def _v5_store(path: Path) -> sqlite3.Connection:
     return con
 
 
+def _check_exact(trials: list[SampleBuffer], back: list[pd.DataFrame], name: str) -> None:
+    """Every sample read back bit for bit, or the benchmark fails."""
+    for buf, df in zip(trials, back, strict=True):
+        want = buf.to_frame()
+        for c in FRAME_COLUMNS:
+            if df[c].to_numpy().tobytes() != want[c].to_numpy().tobytes():
+                raise SystemExit(f"{name}: column {c} did not read back bit for bit")
+
+
 def _layouts(trials: list[SampleBuffer]) -> dict[str, dict[str, float]]:
     n = sum(len(b) for b in trials)
     out: dict[str, dict[str, float]] = {}
@@ -134,9 +146,9 @@ def _layouts(trials: list[SampleBuffer]) -> dict[str, dict[str, float]]:
         con.close()
         with TrialStore(p5, readonly=True) as ro:
             t0 = time.perf_counter()
-            for tid in range(1, len(trials) + 1):
-                ro.samples(tid)
+            back = [ro.samples(tid) for tid in range(1, len(trials) + 1)]
             read = time.perf_counter() - t0
+        _check_exact(trials, back, "schema 5")
         out["schema 5 (rows)"] = {"bytes": size / n, "write": n / write, "read": n / read}
         # schema 6: packed columns, through TrialStore
         p6 = Path(tmp) / "v6.sqlite"
@@ -152,9 +164,9 @@ def _layouts(trials: list[SampleBuffer]) -> dict[str, dict[str, float]]:
                 ids.append(tid)
             size = _file_bytes(p6, st.con) - empty
             t0 = time.perf_counter()
-            for tid in ids:
-                st.samples(tid)
+            back = [st.samples(tid) for tid in ids]
             read = time.perf_counter() - t0
+        _check_exact(trials, back, "schema 6")
         out["schema 6 (packed)"] = {"bytes": size / n, "write": n / write, "read": n / read}
     return out
 

@@ -7,9 +7,11 @@ seed's 46-subject cohort took ~2.3 GB. Version 6 stores each trial's column as o
 values in their buffer dtype (``vasim.records.samples.FRAME_DTYPES``), each value's bit
 pattern replaced by its wrapping integer difference from the previous value's (smooth
 signals and constant columns give small differences: zero or few non-zero bytes), the bytes
-shuffled (byte j of every value together) and deflated with ``zlib`` (level 1). On the
-simulated trials of ``bench/store.py`` that is ~27 bytes a sample, ~4.5x less than version 5,
-so a 46-subject cohort is ~0.5 GB.
+shuffled (byte j of every value together) and deflated with ``zlib`` (level 1). On the five
+simulated 12 s trials of ``bench/store.py`` (none, VG, FF, AG, Mag; 60,000 samples) that is
+25.1 bytes a sample against version 5's 119.9 (files measured the same way), 4.8x less, so a
+46-subject cohort is ~480 MB instead of ~2.3 GB (2026-11-28, on a loaded machine; sizes do
+not depend on the load).
 
 Precision kept per column (the **decision**): **every column bit for bit**.
 
@@ -35,9 +37,11 @@ comparisons (it was tried on branch ``lean``, 2026-11-27, at ~12 bytes a sample,
 reverted). The delta step is lossless for any bit pattern (integer subtraction modulo 2^64 is
 a bijection, undone by a wrapping cumulative sum), so no column needs a policy.
 The compressor is the standard library's ``zlib``: ``lzma`` or ``zlib`` level 9 gave ~5 %
-smaller blobs at 5-40x the packing time (``bench/store.py``'s measurement, 2026-11-28);
-the position columns, whose low mantissa bits are the operator model's noise, are most of
-what is left and no lossless coder removes that.
+smaller blobs at 4-40x the packing time; without the delta step blobs are 8 % larger
+(measured on four simulated 6 s trials, none/FF/AG/Mag, 2026-11-28: 26.4 bytes a sample
+with delta and level 1, 24.9 at level 9, 24.8 with lzma preset 6, 28.6 without delta).
+The position columns, whose low mantissa bits are the operator model's noise, are most of
+what is left (~17 of the 26 bytes) and no lossless coder removes that.
 """
 
 from __future__ import annotations
@@ -56,8 +60,8 @@ CODEC = "delta-shuffle-zlib1"
 """Name of the blob encoding: wrapping first differences of the values' bit patterns (as
 signed integers of the value's width), byte shuffle, then ``zlib.compress(level=1)``.
 
-**Decision**: level 1, not 6 or 9: ~5 % larger blobs for 2-4x faster packing
-(``bench/store.py``); the stdlib's zlib, no compression dependency."""
+**Decision**: level 1, not 6 or 9: ~6 % larger blobs for ~4x faster packing (see the module
+docstring); the stdlib's zlib, no compression dependency."""
 
 ZLIB_LEVEL = 1
 
