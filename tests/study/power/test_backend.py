@@ -75,8 +75,11 @@ def test_without_ray_auto_is_the_process_pool(monkeypatch: pytest.MonkeyPatch) -
         assert "\n" not in msg and "pip install 'vasim[cluster]'" in msg, msg
 
 
-def test_with_ray_auto_keeps_the_local_ray() -> None:
-    # Ray is installed with the test dependencies (`make test`: the cluster extra)
+def test_with_ray_auto_keeps_the_local_ray(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Ray is installed with the test dependencies (`make test`: the cluster extra);
+    # importing it (for an address) sets RAY_CLIENT_MODE: undone after the test
+    monkeypatch.setenv("RAY_CLIENT_MODE", "")
+    monkeypatch.delenv("RAY_CLIENT_MODE")
     assert choose_backend("auto") == "ray"
     assert choose_backend("auto", "auto") == "ray"
 
