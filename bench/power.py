@@ -12,7 +12,8 @@ Default run (a few minutes on 2 cores; ``nice`` it on a shared machine):
 2. *Cohorts per second on Ray and on the process pool*: ``COHORTS`` such cohorts (coarse
    step) on a local Ray (when installed) and on the local process pool, each with 1 and with
    2 workers; prints wall time, the backend's start-up, cohorts/s (with and without the
-   start-up) and the 2-vs-1 ratio.
+   start-up) and the 2-vs-1 ratio. The pool starts its processes with the first tasks, so
+   its start-up prints as ~0 s and counts in the tasks' time.
 
 ``--validate K``: the coarse step's validation (:mod:`vasim.study.power.coarse`) over the
 six VF conditions x seeds 0..K-1 (full trials at 1 ms and 2 ms; ~1 s per trial pair):
