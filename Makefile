@@ -3,20 +3,32 @@
 PYTHON ?= python3.11
 VENV := .venv
 PY := $(VENV)/bin/python
+# `make run` installs the core only; `make test` (and lint, bench) what the tests need: the
+# test runners, the developer tools and the cluster (Ray) and parquet (pyarrow) extras.
+CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
+FULL_EXTRAS := test,dev,cluster,parquet
 
-.PHONY: install run test check bench lint clean
+.PHONY: install install-core run test check bench lint clean
 
 install: $(STAMP)
 
-$(STAMP): pyproject.toml
-	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (vasim needs Python 3.11)"; exit 2; }
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
+install-core: $(CORE_STAMP)
 
-run: install
+$(PY):
+	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (vasim needs Python 3.11)"; exit 2; }
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(CORE_STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet -e .
+	touch $(CORE_STAMP)
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet -e '.[$(FULL_EXTRAS)]'
+	touch $(STAMP) $(CORE_STAMP)
+
+run: install-core
 	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080 --db study.sqlite
 
 # pytest caches the assert-rewritten test modules as bytecode; with PYTHONDONTWRITEBYTECODE

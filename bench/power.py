@@ -1,4 +1,5 @@
-"""Power planning speed: cohorts per second on 1 and 2 local Ray workers, what the store
+"""Power planning speed: cohorts per second on 1 and 2 local Ray workers and on 1 and 2
+processes of the local pool (the backend without the ``cluster`` extra), what the store
 would cost, and (``--validate K``) the coarse step's validation.
 
 Default run (a few minutes on 2 cores; ``nice`` it on a shared machine):
@@ -8,9 +9,11 @@ Default run (a few minutes on 2 cores; ``nice`` it on a shared machine):
    1 ms step (what ``vasim study power`` does), written to a study database (what
    ``--keep-cohorts`` and ``vasim study simulate`` do), and in memory at the coarse 2 ms
    step; prints wall seconds and the ratios.
-2. *Cohorts per second on Ray*: ``COHORTS`` such cohorts (coarse step) on a local Ray with
-   1 and with 2 workers; prints wall time, Ray's start-up, cohorts/s (with and without the
-   start-up) and the 2-vs-1 ratio.
+2. *Cohorts per second on Ray and on the process pool*: ``COHORTS`` such cohorts (coarse
+   step) on a local Ray (when installed) and on the local process pool, each with 1 and with
+   2 workers; prints wall time, the backend's start-up, cohorts/s (with and without the
+   start-up) and the 2-vs-1 ratio. The pool starts its processes with the first tasks, so
+   its start-up prints as ~0 s and counts in the tasks' time.
 
 ``--validate K``: the coarse step's validation (:mod:`vasim.study.power.coarse`) over the
 six VF conditions x seeds 0..K-1 (full trials at 1 ms and 2 ms; ~1 s per trial pair):
@@ -30,6 +33,7 @@ import time
 
 import pandas as pd
 
+from vasim.core.extras import installed
 from vasim.study.power.coarse import MEASURES, validate_coarse
 from vasim.study.power.cohort import cohort_tests
 from vasim.study.power.design import COARSE_DT, FULL_DT, PowerDesign
@@ -66,18 +70,18 @@ def where_time_goes() -> None:
           f"{mem / coarse:.2f}x faster than 1 ms")
 
 
-def ray_throughput() -> None:
+def ray_throughput(backend: str = "ray") -> None:
     protocol = load_protocol(PROTOCOL)
     design = PowerDesign(subjects=(SUBJECTS,), cohorts=COHORTS, dt=COARSE_DT,
                          max_trial_time=MAX_TIME)
     rates = {}
     for workers in WORKERS:
-        res = run_power(protocol, design, workers=workers, progress=False)
+        res = run_power(protocol, design, workers=workers, progress=False, backend=backend)
         n = design.n_cohorts
         steady = n / max(res.wall_seconds - res.ray_seconds, 1e-9)
         rates[workers] = (n / res.wall_seconds, steady)
         print(f"  {workers} worker(s): {n} cohorts ({res.n_trials} trials) in "
-              f"{res.wall_seconds:.1f} s wall (Ray start {res.ray_seconds:.1f} s, tasks "
+              f"{res.wall_seconds:.1f} s wall (start {res.ray_seconds:.1f} s, tasks "
               f"{res.task_seconds:.1f} s wall / {res.cpu_seconds:.1f} s CPU): "
               f"{n / res.wall_seconds:.4f} cohorts/s, "
               f"{steady:.4f} without the start, {n / res.cpu_seconds:.4f} per task CPU s",
@@ -85,7 +89,7 @@ def ray_throughput() -> None:
     if 2 not in rates:
         return
     print(f"  2 vs 1 workers: {rates[2][0] / rates[1][0]:.2f}x "
-          f"({rates[2][1] / rates[1][1]:.2f}x without Ray's start); tasks' wall >> CPU means "
+          f"({rates[2][1] / rates[1][1]:.2f}x without the start); tasks' wall >> CPU means "
           "they waited for cores other processes held")
 
 
@@ -115,9 +119,13 @@ def main(argv: list[str] | None = None) -> None:
     print(f"where time goes in one cohort ({PROTOCOL}, {SUBJECTS} subjects, trials cut at "
           f"{MAX_TIME:g} s, in this process):", flush=True)
     where_time_goes()
-    print(f"cohorts per second on a local Ray ({COHORTS} cohorts of {SUBJECTS} subjects, "
-          "coarse step):", flush=True)
-    ray_throughput()
+    for backend, where in (("ray", "a local Ray"), ("processes", "the local process pool")):
+        if backend == "ray" and not installed("ray"):
+            print("cohorts per second on a local Ray: skipped (no cluster extra)")
+            continue
+        print(f"cohorts per second on {where} ({COHORTS} cohorts of {SUBJECTS} subjects, "
+              "coarse step):", flush=True)
+        ray_throughput(backend)
     if args.validate:
         print(f"coarse step validation (six conditions x {args.validate} seeds):", flush=True)
         validate(args.validate)

@@ -18,6 +18,8 @@ MARKS: dict[str, tuple[str, ...]] = {
     "cluster": (
         "tests/study/power/test_cluster.py",   # a `ray start --head` cluster + local Ray
         "tests/study/power/test_driver.py",    # `vasim study power` on a local Ray
+        # the process pool against a local Ray, same seed
+        "tests/study/power/test_backend.py::test_process_pool_and_ray_give_the_same_cohorts",
     ),
 }
 """Marker -> the files (``path.py``), folders (``path/``) or tests (``path.py::name``) it

@@ -8,10 +8,11 @@ begins a third trial, prints ``{"trial3": id}`` and:
 
 * ``between``: appends a few samples, prints ``MARKER`` and waits to be killed (a kill
   between ``begin_trial`` and ``finish_trial``);
-* ``finish``: calls ``finish_trial`` with a buffer whose row iterator prints
-  ``MARKER wal_bytes=N`` two thirds of the way through and then waits, so the kill lands
-  *inside* the open write transaction, after SQLite has spilled uncommitted pages to the
-  (freshly truncated) WAL: the page cache is made tiny, so N > 0 proves the spill.
+* ``finish``: calls ``finish_trial`` and, through a statement trace, prints
+  ``MARKER wal_bytes=N`` when the transaction has written the samples and is about to close
+  the trial row, then waits, so the kill lands *inside* the open write transaction, after
+  SQLite has spilled uncommitted pages to the (freshly truncated) WAL: the page cache is made
+  tiny, so N > 0 proves the spill.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Iterator
-from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 import pandas as pd
@@ -66,18 +66,17 @@ def synthetic_trial(seed: int, n: int) -> SampleBuffer:
     return buf
 
 
-class MarkerBuffer(SampleBuffer):
-    """Prints ``MARKER wal_bytes=N`` after ``after`` rows have gone to executemany (N: the
-    size of the WAL file then, > 0 once uncommitted pages were spilled), then blocks."""
+def kill_point(wal: str) -> Callable[[str], None]:
+    """A statement trace that prints ``MARKER wal_bytes=N`` (N: the WAL file's size then,
+    > 0 once uncommitted pages were spilled) when ``finish_trial`` is about to close the
+    trial row (its samples written, the transaction open), then blocks."""
 
-    __slots__ = ("after", "wal")
+    def trace(sql: str) -> None:
+        if sql.lstrip().startswith("UPDATE trials SET status"):
+            print(f"MARKER wal_bytes={os.path.getsize(wal)}", flush=True)
+            time.sleep(60)  # the parent kills us here, mid-transaction
 
-    def rows(self) -> Iterator[tuple[Any, ...]]:
-        for i, row in enumerate(super().rows()):
-            if i == self.after:
-                print(f"MARKER wal_bytes={os.path.getsize(self.wal)}", flush=True)
-                time.sleep(60)  # the parent kills us here, mid-transaction
-            yield row
+    return trace
 
 
 def main(db: str, mode: str) -> None:
@@ -105,11 +104,8 @@ def main(db: str, mode: str) -> None:
         store.con.execute("PRAGMA cache_size = 20")  # force uncommitted pages into the WAL
         store.con.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # empty WAL: growth = spill
         big = synthetic_trial(3, 3 * N_SAMPLES)
-        buf = MarkerBuffer(capacity=len(big))
-        buf.after = 2 * N_SAMPLES
-        buf.wal = db + "-wal"
-        buf.extend(**big.view())
-        store.finish_trial(tid3, buf)
+        store.con.set_trace_callback(kill_point(db + "-wal"))
+        store.finish_trial(tid3, big)
     else:
         raise SystemExit(f"unknown mode {mode!r}")
     print("NOT KILLED", flush=True)

@@ -105,7 +105,8 @@ def test_v2_store_is_migrated_to_v3_with_outcomes_from_the_summaries(tmp_path: P
         assert trials["label"].isna().all()
         assert trials["subject"].tolist() == [t[1] for t in V2_TRIALS]  # codes kept as stored
         # the rebuild cascaded nothing: every sample, point and the schedule link survive
-        assert st.con.execute("SELECT count(*) FROM samples").fetchone()[0] == 3 * 6
+        assert st.con.execute("SELECT sum(n) FROM sample_columns WHERE name = 'k'"
+                              ).fetchone()[0] == 3 * 6
         assert st.con.execute("SELECT count(*) FROM point_metrics").fetchone()[0] == 2 * 6
         assert st.schedule(1)["trial_id"].tolist() == [1]
         assert st.integrity_check() == "ok"
@@ -117,7 +118,8 @@ def test_v2_store_is_migrated_to_v3_with_outcomes_from_the_summaries(tmp_path: P
         tid = st.begin_trial(TrialMeta(subject=None, task="trajectory"))
         assert st.trial(tid)["subject"] is None
         with pytest.raises(sqlite3.IntegrityError):
-            st.con.execute("INSERT INTO samples (trial_id, k, t) VALUES (999, 0, 0.0)")
+            st.con.execute("INSERT INTO sample_columns (trial_id, name, dtype, n, codec, "
+                           "data) VALUES (999, 'k', '<i8', 0, 'x', x'')")
 
 
 def test_a_read_only_open_reads_a_v2_store_without_migrating_it(tmp_path: Path):

@@ -23,8 +23,9 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
             "effect and practice effect on cumulative error, latency and path deviation) "
             "and print the power of each test (share of cohorts with p < alpha) with its "
             "Monte Carlo standard error sqrt(p(1-p)/cohorts); --out gets power.csv, "
-            "power_cohorts.csv and power.png. Runs on a local Ray (127.0.0.1) or the "
-            "cluster --address names; no study database is written unless --keep-cohorts."))
+            "power_cohorts.csv and power.png. Runs on a local Ray (127.0.0.1), the cluster "
+            "--address names (both need the cluster extra) or a local process pool; no "
+            "study database is written unless --keep-cohorts."))
     r.add_argument("--protocol", required=True,
                    help="protocol name (protocols/studies) or TOML path")
     r.add_argument("--subjects", required=True,
@@ -61,7 +62,12 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
                         "from anywhere, or auto on a node); checked first (it must answer "
                         "within a few seconds); default: a local Ray on this machine")
     r.add_argument("--workers", type=workers, default=None,
-                   help="CPUs of the local Ray (default: number of cores)")
+                   help="CPUs of the local Ray or processes of the local pool (default: "
+                        "number of cores)")
+    # the values of vasim.study.power.backend.BACKENDS (not imported: keeps `--help` quick)
+    r.add_argument("--backend", choices=("auto", "ray", "processes"), default="auto",
+                   help="where cohorts run: ray (needs the cluster extra), processes (a "
+                        "local pool) or auto (default: Ray when installed, else processes)")
     r.add_argument("--out", type=output_folder, default=None,
                    help="folder for power.csv, power_cohorts.csv and power.png")
     r.add_argument("--keep-cohorts", type=Path, default=None, metavar="DIR",
@@ -144,7 +150,8 @@ def _cmd_power(args: argparse.Namespace) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
     with _sigterm_as_interrupt():
         res = run_power(protocol, design, address=args.address, workers=args.workers,
-                        keep_dir=args.keep_cohorts, progress=not args.no_progress)
+                        keep_dir=args.keep_cohorts, progress=not args.no_progress,
+                        backend=args.backend)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
     print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator of "
           f"scenario {scenario.name} ({scenario.sha256[:12]}){sources}, effect scale "
@@ -156,7 +163,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
         print(f"warning: {COARSE_WARNING}")
     print(f"{res.n_trials} trials ({res.sim_seconds:.0f} s simulated) in "
           f"{res.wall_seconds:.1f} s wall on {res.workers} CPU(s) "
-          f"({'cluster ' + res.address if res.address else 'local Ray'}): "
+          f"({'cluster ' + res.address if res.address else _LOCAL[res.backend]}): "
           f"{res.cohorts_per_second:.3g} cohorts/s")
     if args.out is not None:
         title = (f"{protocol.name}: power of the primary tests, {args.cohorts} cohorts per N, "
@@ -166,6 +173,10 @@ def _cmd_power(args: argparse.Namespace) -> int:
         for path in write_outputs(args.out, res.power, res.cohorts, title=title):
             print(f"wrote {path}")
     return 0
+
+
+_LOCAL = {"ray": "local Ray", "processes": "local processes"}
+"""How the summary line names a local run's backend."""
 
 
 def check_effects_labels(path: Path, protocol: str, conditions: tuple[str, ...]) -> None:

@@ -420,7 +420,8 @@ class SampleBuffer:
     def rows(self) -> Iterator[tuple[Any, ...]]:
         """Yields one tuple of Python scalars per sample, in ``FRAME_COLUMNS`` order.
 
-        This is what the store hands to ``executemany``; it converts column by column
+        Rows for a tabular consumer (the store of schema version 5 and older handed them to
+        ``executemany``; version 6 packs ``columns()`` instead); it converts column by column
         (``tolist``), which is far faster than converting row by row.
         """
         cols = [v.tolist() for v in self.columns().values()]

@@ -89,6 +89,7 @@ import pandas as pd
 from vasim import __version__
 from vasim.core.atomic import atomic_folder
 from vasim.core.errors import ConfigError
+from vasim.core.extras import require
 from vasim.core.progress import progress_bar
 from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES
 from vasim.records.trial_metrics import TRIAL_METRICS
@@ -312,9 +313,8 @@ class _Writer:
                       encoding="utf-8", lineterminator="\n")
             self._csv_started = True
         if "parquet" in self.paths:
-            import pyarrow as pa
-            import pyarrow.parquet as pq
-
+            pa = require("pyarrow", "Parquet export")
+            pq = require("pyarrow.parquet", "Parquet export")
             tab = pa.Table.from_pandas(df, preserve_index=False)
             if self._pq is None:
                 self._pq = pq.ParquetWriter(self.paths["parquet"], tab.schema)
@@ -361,6 +361,8 @@ def export_study(
     if bad or not fmts:
         raise ConfigError(f"unknown export format(s) {bad or fmts} (formats: "
                           f"{', '.join(FORMATS)})", field="format")
+    if "parquet" in fmts:  # before any work: one line naming the extra (issue #27 item 1)
+        require("pyarrow.parquet", "Parquet export")
     names = list(dict.fromkeys(tables))
     if not names:   # issue #30 item 6: `--tables ''` wrote only a manifest and exited 0
         raise ConfigError(f"got no table, expected one or more of {', '.join(EXPORT_TABLES)}",
@@ -452,6 +454,7 @@ def read_export(out: str | os.PathLike[str], table: str, fmt: str = "csv") -> pd
     if not path.is_file():
         raise ConfigError(f"no exported table {table!r} in {fmt} format", file=path)
     if fmt == "parquet":
+        require("pyarrow.parquet", "reading a Parquet export")
         df = pd.read_parquet(path)
     else:
         dtypes = {c: ("str" if d == "str" else d) for c, d in spec.items()}

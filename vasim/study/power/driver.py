@@ -1,4 +1,6 @@
-"""The Ray driver of a power run (the stateful shell): one Ray task per cohort.
+"""The driver of a power run (the stateful shell): one task per cohort, on Ray or, without
+the ``cluster`` extra (or with ``backend="processes"``), on a local process pool
+(:mod:`vasim.study.power.backend`, issue #27 item 1; what follows describes Ray).
 
 :func:`run_power` starts a local Ray on this machine (``ray.init(num_cpus=workers,
 include_dashboard=False)``, its processes on 127.0.0.1) or joins the cluster ``address``
@@ -51,6 +53,7 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
+from vasim.study.power.backend import choose_backend, open_backend
 from vasim.study.power.cohort import CohortOutcome, cohort_tests
 from vasim.study.power.design import PowerDesign, check_power_protocol
 from vasim.study.power.estimate import power_table
@@ -69,7 +72,9 @@ class PowerResult:
             ``task_seconds`` when they waited for cores). sim_seconds: simulated trial
             time [s]. n_trials: trials run.
         workers: CPUs Ray offered. address: the cluster joined (None: a local Ray).
-        ray_seconds: time to start or join Ray [s] (part of ``wall_seconds``).
+        ray_seconds: time to start or join Ray, or to start the process pool [s] (part of
+            ``wall_seconds``).
+        backend: where the cohorts ran, ``"ray"`` or ``"processes"``.
     """
 
     cohorts: pd.DataFrame
@@ -82,6 +87,7 @@ class PowerResult:
     workers: int
     address: str | None
     ray_seconds: float = 0.0
+    backend: str = "ray"
 
     @property
     def cohorts_per_second(self) -> float:
@@ -318,7 +324,8 @@ def _join_hint(address: str | None) -> str:
 def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = None,
               workers: int | None = None, keep_dir: str | os.PathLike[str] | None = None,
               progress: bool = True,
-              on_cohort: Callable[[CohortOutcome], None] | None = None) -> PowerResult:
+              on_cohort: Callable[[CohortOutcome], None] | None = None,
+              backend: str = "auto") -> PowerResult:
     """Simulates and analyses every cohort of ``design`` on Ray; returns the power table.
 
     Args:
@@ -328,15 +335,16 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
         keep_dir: write each cohort's study database there (None: nothing written).
         progress: the progress bar over cohorts. on_cohort: called with each finished
             cohort (e.g. by the benchmark).
+        backend: ``"auto"``, ``"ray"`` or ``"processes"``
+            (:mod:`vasim.study.power.backend`; ``auto``: Ray when installed).
 
     Raises:
         ConfigError: a protocol that cannot run, Ray that does not start, nodes that run
             another vasim.
     """
-    import ray
-
     protocol.check_runnable()
     check_power_protocol(protocol)
+    name = choose_backend(backend, address)
     keep = None
     if keep_dir is not None:
         kd = os.fspath(keep_dir)
@@ -345,45 +353,43 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
         os.makedirs(kd, exist_ok=True)
         keep = os.path.abspath(kd)
     t0 = time.perf_counter()
-    cpus = init_ray(address, workers)
-    t_ray = time.perf_counter() - t0
-    bar = progress_bar(design.n_cohorts, f"power {protocol.name}", "cohort",
-                       enabled=progress)
-    try:
-        task = ray.remote(num_cpus=1)(_task)
-        ref_p, ref_d = ray.put(protocol), ray.put(design)
-        pending = [task.remote(ref_p, ref_d, n, k, keep)
-                   for n in design.subjects for k in range(design.cohorts)]
-        frames: list[pd.DataFrame] = []
-        waited = cpu = sim = 0.0
-        trials = 0
-        mine = _vasim_version()
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            outcome, version = ray.get(done[0])
-            if version != mine:
-                raise ConfigError(f"a Ray node runs vasim {version}, this driver {mine}: "
-                                  "install the same vasim on every node", field="--address")
-            frames.append(outcome.tests)
-            waited += outcome.wall_seconds
-            cpu += outcome.cpu_seconds
-            sim += outcome.sim_seconds
-            trials += outcome.n_trials
-            if on_cohort is not None:
-                on_cohort(outcome)
-            bar.update(1)
-            t = outcome.tests.iloc[0] if len(outcome.tests) else None
-            if t is not None:
-                bar.set_postfix_str(f"N={int(t['n_subjects'])} cohort {int(t['cohort']) + 1}")
-    finally:
-        bar.close()
-        ray.shutdown()
+    frames: list[pd.DataFrame] = []
+    waited = cpu = sim = 0.0
+    trials = 0
+    mine = _vasim_version()
+    with open_backend(name, address=address, workers=workers) as running:
+        t_ray = time.perf_counter() - t0
+        bar = progress_bar(design.n_cohorts, f"power {protocol.name}", "cohort",
+                           enabled=progress)
+        try:
+            args = [(protocol, design, n, k, keep)
+                    for n in design.subjects for k in range(design.cohorts)]
+            for outcome, version in running.results(_task, args):
+                if version != mine:
+                    raise ConfigError(f"a Ray node runs vasim {version}, this driver {mine}: "
+                                      "install the same vasim on every node",
+                                      field="--address")
+                frames.append(outcome.tests)
+                waited += outcome.wall_seconds
+                cpu += outcome.cpu_seconds
+                sim += outcome.sim_seconds
+                trials += outcome.n_trials
+                if on_cohort is not None:
+                    on_cohort(outcome)
+                bar.update(1)
+                t = outcome.tests.iloc[0] if len(outcome.tests) else None
+                if t is not None:
+                    bar.set_postfix_str(
+                        f"N={int(t['n_subjects'])} cohort {int(t['cohort']) + 1}")
+        finally:
+            bar.close()
     cohorts = pd.concat(frames, ignore_index=True).sort_values(
         ["n_subjects", "cohort", "factor", "dv"]).reset_index(drop=True)
     table = power_table(cohorts, alpha=design.alpha, p_column=design.p_column)
     return PowerResult(cohorts=cohorts, power=table, wall_seconds=time.perf_counter() - t0,
                        task_seconds=waited, cpu_seconds=cpu, sim_seconds=sim,
-                       n_trials=trials, workers=cpus, address=address, ray_seconds=t_ray)
+                       n_trials=trials, workers=running.cpus, address=address,
+                       ray_seconds=t_ray, backend=name)
 
 
 __all__ = ["ADDRESS_CHECK_S", "JOIN_TIMEOUT_S", "PowerResult", "init_ray",

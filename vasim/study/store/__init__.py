@@ -3,6 +3,7 @@
 One module per job:
 
 * ``schema``: the database layout (documented there in full), DDL, versions, migrations;
+* ``packing``: how a trial's samples are stored (compressed columns, the precision kept);
 * ``vocabulary``: the values stored fields take (statuses, outcomes, groups, levels) and
   ``Demographics``;
 * ``liveness``: whether the process that writes a 'running' trial still runs (psutil);

@@ -33,6 +33,9 @@ READ_ONLY_MIN_VERSION = 2
 """The oldest schema a read-only store reads without migrating it (version 1 has no
 sessions)."""
 
+PACKED_SAMPLES_VERSION = 6
+"""The schema version that packs samples into compressed columns (``packing``)."""
+
 
 def readonly_uri(path: Path, *, immutable: bool = False) -> str:
     """The ``file:`` URI that opens ``path`` read-only (``mode=ro``; ``immutable=1`` too for
@@ -233,6 +236,22 @@ class StoreConnection:
         finally:
             if rebuild:
                 self.con.execute("PRAGMA foreign_keys = ON")
+        if 1 <= ver < PACKED_SAMPLES_VERSION:
+            self._vacuum()
+
+    def _vacuum(self) -> None:
+        """Gives the pages of the dropped per-sample rows back to the file system.
+
+        **Decision**: after the migration to schema 6 (packed samples), which frees ~90 % of
+        a store's pages, ``VACUUM`` rewrites the file once (it needs as much free disk
+        space as the new file and, for a store of gigabytes, a minute or two); a store that
+        cannot be vacuumed now (another process reading it) stays correct, only larger.
+        """
+        try:
+            self.con.execute("VACUUM")
+        except sqlite3.OperationalError as exc:
+            log.warning("%s: migrated, but VACUUM failed (%s); the file keeps its old size "
+                        "until vacuumed", self.path, exc)
 
     @contextmanager
     def _transaction(self) -> Iterator[sqlite3.Connection]:

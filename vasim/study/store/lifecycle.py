@@ -30,10 +30,11 @@ import pandas as pd
 from vasim import __version__
 from vasim.core.errors import ConfigError, StoreError
 from vasim.records.point_metrics import POINT_COLUMNS
-from vasim.records.samples import FRAME_COLUMNS, SampleBuffer
+from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
 from vasim.study.store.connection import StoreConnection
 from vasim.study.store.liveness import is_writer, proc_token, process_alive
+from vasim.study.store.packing import pack_columns
 from vasim.study.store.rows import (
     int_or_none,
     point_metric_rows,
@@ -287,6 +288,8 @@ class TrialLifecycle(StoreConnection):
                       for t, kind, detail in events]
         if samples is not None and not isinstance(samples, SampleBuffer):
             raise ConfigError(f"samples must be a SampleBuffer, got {type(samples).__name__}")
+        # packed before the write lock is taken (schema 6: one compressed blob per column)
+        packed = _packed(samples, self.path, tid)
         try:
             with self._transaction() as con:
                 row = con.execute("SELECT status, pid, host, proc_token, session_id, "
@@ -326,12 +329,9 @@ class TrialLifecycle(StoreConnection):
                 if samples is not None:
                     n = len(samples)
                     fixtures = samples.active_fixtures
-                    # trial_id is a validated int: inline it rather than rebuild every row
                     con.executemany(
-                        f"INSERT INTO samples (trial_id, {', '.join(FRAME_COLUMNS)}) "
-                        f"VALUES ({tid}, {', '.join('?' * len(FRAME_COLUMNS))})",
-                        samples.rows(),
-                    )
+                        "INSERT INTO sample_columns (trial_id, name, dtype, n, codec, data) "
+                        f"VALUES ({tid}, ?, ?, ?, ?, ?)", packed)
                 if metric_rows:
                     con.executemany(
                         f"INSERT INTO point_metrics (trial_id, {', '.join(POINT_COLUMNS)}) "
@@ -407,6 +407,21 @@ class TrialLifecycle(StoreConnection):
                             "VALUES (?, ?, ?, ?, ?)", (tid, t, kind, detail, now()))
         except sqlite3.IntegrityError as e:
             raise StoreError(f"trial store {self.path}: no trial {tid}: {e}") from e
+
+
+def _packed(samples: SampleBuffer | None, path: object, tid: int,
+            ) -> list[tuple[str, str, int, str, bytes]]:
+    """The ``sample_columns`` rows of ``samples`` (none for no or zero samples).
+
+    Raises:
+        StoreError: two samples share a step k (naming the store and trial).
+    """
+    if samples is None or len(samples) == 0:
+        return []
+    try:
+        return pack_columns(samples.columns())
+    except StoreError as e:
+        raise StoreError(f"trial store {path}: cannot store trial {tid}: {e}") from e
 
 
 __all__ = ["RECOVERED_PREFIX", "TrialLifecycle"]

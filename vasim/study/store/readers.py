@@ -2,7 +2,9 @@
 subjects, demographics and answers, as pandas frames (or dicts for one row).
 
 Floats round-trip exactly (SQLite REAL is an IEEE double) with two SQLite caveats: NaN is
-stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0.
+stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Samples
+(schema 6) are packed losslessly, bit for bit, NaN and -0.0 included
+(``vasim.study.store.packing``).
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ import pandas as pd
 
 from vasim.core.errors import ConfigError, StoreError
 from vasim.records.point_metrics import POINT_COLUMNS
-from vasim.records.samples import FRAME_COLUMNS, FRAME_DTYPES, SampleBuffer
+from vasim.records.samples import FRAME_COLUMNS, SampleBuffer
 from vasim.study.store.connection import StoreConnection
+from vasim.study.store.packing import rows_to_columns, unpack_columns
 from vasim.study.store.rows import row_id
 from vasim.study.store.schema import (
     ANSWER_COLUMNS,
@@ -104,25 +107,36 @@ class StoreReaders(StoreConnection):
 
     def _sample_columns(self, trial_id: int) -> dict[str, np.ndarray]:
         tid = row_id(trial_id)
+        if self._packed_samples():
+            rows = self.con.execute(
+                "SELECT name, dtype, n, codec, data FROM sample_columns WHERE trial_id = ?",
+                (tid,)).fetchall()
+            if not rows:
+                return rows_to_columns([])
+            try:
+                return unpack_columns(rows)
+            except StoreError as e:
+                raise StoreError(f"trial store {self.path}: trial {tid}: {e}") from e
         rows = self.con.execute(
             f"SELECT {', '.join(self._sample_exprs())} FROM samples WHERE trial_id = ? "
             "ORDER BY k", (tid,)).fetchall()
-        if not rows:
-            return {c: np.empty(0, dtype=FRAME_DTYPES[c]) for c in FRAME_COLUMNS}
-        # one 2-D float conversion (None -> NaN) is ~3x faster than per-column arrays; the
-        # integer columns (k < 2**53, goal_index, contact) are exact in float64
-        block = np.array(rows, dtype=np.float64)
-        out: dict[str, np.ndarray] = {}
-        for j, c in enumerate(FRAME_COLUMNS):
-            dtype = FRAME_DTYPES[c]
-            col = block[:, j]
-            out[c] = col.copy() if dtype is np.float64 else col.astype(dtype)
-        return out
+        return rows_to_columns(rows)
+
+    def _packed_samples(self) -> bool:
+        """True when the samples are packed columns (schema 6); False for an older store
+        opened read-only (not migrated), whose ``samples`` rows are read as they are."""
+        packed = getattr(self, "_packed_cache", None)
+        if packed is None:
+            packed = self.con.execute(
+                "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'sample_columns'"
+            ).fetchone() is not None
+            self._packed_cache = packed
+        return bool(packed)
 
     def _sample_exprs(self) -> tuple[str, ...]:
-        """SELECT expressions of ``FRAME_COLUMNS``: a column an older store (opened
-        read-only, hence not migrated) lacks reads as its migration default (``gain``: 1.0,
-        schema version 5)."""
+        """SELECT expressions of ``FRAME_COLUMNS`` of a version-2 to -5 ``samples`` table: a
+        column an older store (opened read-only, hence not migrated) lacks reads as its
+        migration default (``gain``: 1.0, schema version 5)."""
         exprs = getattr(self, "_sample_exprs_cache", None)
         if exprs is None:
             have = {r[1] for r in self.con.execute("PRAGMA table_info(samples)")}

@@ -20,14 +20,17 @@ when each version was applied. A store from a newer vasim is refused (``StoreErr
 older one is migrated in one transaction by the steps in ``MIGRATIONS`` (version 1 -> 2
 adds tables and columns, no row is rewritten; version 2 -> 3 rebuilds ``trials`` because
 SQLite cannot drop a NOT NULL: ``subject`` becomes nullable, ``label`` and ``outcome`` are
-added and ``outcome`` is filled from the stored summaries, see ``OUTCOME_FROM_V2_SQL``).
+added and ``outcome`` is filled from the stored summaries, see ``OUTCOME_FROM_V2_SQL``;
+version 5 -> 6 packs every trial's ``samples`` rows into ``sample_columns`` and drops
+``samples``, the one step that is Python (``DATA_STEPS``), after which the store is
+VACUUMed once to give the freed pages back).
 Versions add tables and nullable or defaulted columns; they never rename a column. A store
 opened read-only is never migrated: a version-2 store is read as it is (``outcome`` computed
-by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL); a version-1 store must be opened
-writable once.
+by ``OUTCOME_FROM_V2_SQL`` on the fly, ``label`` NULL; a version-2 to -5 store's samples
+are read from its ``samples`` rows); a version-1 store must be opened writable once.
 
-Schema, version 5 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v5" mark
-what versions 2 to 5 added):
+Schema, version 6 (units in brackets; times of day are ISO 8601 UTC text; "v2" .. "v6" mark
+what versions 2 to 6 added):
 
 ``schema_version``
     ``version`` INTEGER PK, ``applied_at`` TEXT.
@@ -62,9 +65,18 @@ what versions 2 to 5 added):
     ``n_points``), ``'stopped'`` by the experimenter (Stop, Ctrl-C), ``'interrupted'`` the
     writing process died, ``'failed'`` an error or an abort by the system (e.g. repeated MRCP
     safety stops); NULL while running or when unknown).
-``samples`` — one row per logged step, WITHOUT ROWID, PK (trial_id, k).
-    ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL [s] since trial start;
-    ``x_x, x_y, x_z`` REAL [m] TCP; ``g_x, g_y, g_z`` REAL [m] goal; ``goal_index`` INTEGER;
+``sample_columns`` (v6) — a trial's samples, one row per column, PK (trial_id, name).
+    ``trial_id`` -> trials.id; ``name`` TEXT (a ``samples.FRAME_COLUMNS`` name, the columns
+    of the version-5 ``samples`` table below); ``dtype`` TEXT (numpy dtype of the stored
+    values: the buffer dtype, ``'<f8'``, ``'<i8'``, ``'<i4'`` or ``'<i1'``); ``n`` INTEGER
+    (values: the trial's samples, in order of k); ``codec`` TEXT
+    (``'delta-shuffle-zlib1'``); ``data`` BLOB. Every column is kept bit for bit (lossless
+    compression, no float32), as stated per column in
+    ``vasim.study.store.packing``. A trial without samples has no rows.
+``samples`` (versions 1 to 5; dropped by version 6) — one row per logged step, WITHOUT
+    ROWID, PK (trial_id, k). ``trial_id`` -> trials.id; ``k`` INTEGER (step); ``t`` REAL
+    [s] since trial start; ``x_x, x_y, x_z`` REAL [m] TCP; ``g_x, g_y, g_z`` REAL [m]
+    goal; ``goal_index`` INTEGER;
     ``f_x, f_y, f_z`` REAL [N] rendered force; ``ms_x, ms_y, ms_z`` REAL MS factors;
     ``zoom`` REAL Mag magnification; ``audio_pitch`` REAL, ``audio_period`` REAL [s],
     ``audio_volume`` REAL AG outputs; ``contact`` INTEGER (0/1); v2: ``fc_x, fc_y, fc_z``
@@ -129,13 +141,16 @@ what versions 2 to 5 added):
     that closes the trial; version-1 trials have none.
 
 Floats round-trip exactly (SQLite REAL is an IEEE double) with two SQLite caveats: NaN is
-stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0.
+stored as NULL (read back as NaN in float columns) and -0.0 is read back as 0.0. Sample
+columns are exact too and keep NaN and -0.0 (``vasim.study.store.packing``); samples migrated
+from version 5 keep what version 5 had stored.
 
 """
 
 from __future__ import annotations
 
 import sqlite3
+from collections.abc import Callable
 from datetime import UTC, datetime
 
 from vasim.study.store.vocabulary import (
@@ -147,7 +162,7 @@ from vasim.study.store.vocabulary import (
     TRIAL_OUTCOMES,
 )
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 """Schema version written to ``PRAGMA user_version``."""
 
 APPLICATION_ID = 0x76534D31  # b"vSM1"
@@ -439,9 +454,54 @@ ALTER TABLE samples ADD COLUMN gain REAL NOT NULL DEFAULT 1.0;
 schedules and assist-as-needed); every older row reads 1.0, the schema as written, which is
 what every trial before version 5 ran."""
 
+_SCHEMA_V6 = """
+CREATE TABLE sample_columns (
+    trial_id    INTEGER NOT NULL REFERENCES trials(id) ON DELETE CASCADE,
+    name        TEXT NOT NULL,
+    dtype       TEXT NOT NULL,
+    n           INTEGER NOT NULL CHECK (n >= 0),
+    codec       TEXT NOT NULL,
+    data        BLOB NOT NULL,
+    PRIMARY KEY (trial_id, name)
+);
+"""
+"""Version 6 (issue #27 item 5): a trial's samples as one compressed blob per column
+(``vasim.study.store.packing``) instead of one row per sample; the step
+:func:`samples_to_columns` moves every trial's rows into it and drops ``samples``.
+
+**Decision**: a rowid table (not WITHOUT ROWID, which SQLite advises against for rows
+larger than ~1/20 of a page: a blob is kilobytes)."""
+
 MIGRATIONS: dict[int, str] = {1: _SCHEMA_V1, 2: _SCHEMA_V2, 3: _SCHEMA_V3, 4: _SCHEMA_V4,
-                              5: _SCHEMA_V5}
+                              5: _SCHEMA_V5, 6: _SCHEMA_V6}
 """Script that takes a store from version v-1 to v (version 0 = empty file)."""
+
+
+def samples_to_columns(con: sqlite3.Connection) -> None:
+    """Version 6's data step: every trial's ``samples`` rows packed into ``sample_columns``
+    (``packing.pack_columns``, lossless), then ``samples``
+    dropped. One trial at a time (memory: one trial's rows); a progress bar for a long one.
+    """
+    from vasim.core.progress import progress_bar
+    from vasim.records.samples import FRAME_COLUMNS
+    from vasim.study.store.packing import pack_columns, rows_to_columns
+
+    tids = [int(r[0]) for r in con.execute("SELECT DISTINCT trial_id FROM samples")]
+    select = (f"SELECT {', '.join(FRAME_COLUMNS)} FROM samples WHERE trial_id = ? "
+              "ORDER BY k")
+    with progress_bar(len(tids), "store: packing samples (schema 6)", "trial",
+                      leave=False) as bar:
+        for tid in tids:
+            cols = rows_to_columns(con.execute(select, (tid,)).fetchall())
+            con.executemany(
+                f"INSERT INTO sample_columns (trial_id, name, dtype, n, codec, data) "
+                f"VALUES ({tid}, ?, ?, ?, ?, ?)", pack_columns(cols))
+            bar.update(1)
+    con.execute("DROP TABLE samples")
+
+
+DATA_STEPS: dict[int, Callable[[sqlite3.Connection], None]] = {6: samples_to_columns}
+"""Python steps run after version v's script, in the same transaction."""
 
 REBUILDS: frozenset[int] = frozenset({3})
 """Versions whose script rebuilds a table: run with ``PRAGMA foreign_keys = OFF`` (else
@@ -468,6 +528,8 @@ def apply_migrations(con: sqlite3.Connection, from_version: int) -> None:
     for v in range(from_version + 1, SCHEMA_VERSION + 1):
         for stmt in split_sql(MIGRATIONS[v]):
             con.execute(stmt)
+        if v in DATA_STEPS:
+            DATA_STEPS[v](con)
         if v in REBUILDS:
             broken = con.execute("PRAGMA foreign_key_check").fetchall()
             if broken:
@@ -484,6 +546,7 @@ __all__ = [
     "ANSWER_COLUMNS",
     "APPLICATION_ID",
     "BUSY_TIMEOUT_MS",
+    "DATA_STEPS",
     "DEMOGRAPHIC_COLUMNS",
     "EVENT_COLUMNS",
     "MIGRATIONS",
@@ -495,6 +558,7 @@ __all__ = [
     "TRIAL_COLUMNS",
     "apply_migrations",
     "now",
+    "samples_to_columns",
     "split_sql",
     "sql_set",
 ]
