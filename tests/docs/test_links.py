@@ -25,7 +25,6 @@ from tests.docs.doc_blocks import (
 README_MAX_LINES = 250
 
 PENDING: dict[str, str] = {
-    "docs/install.md": "lean2",
     "docs/seed-chapter5.md": "exp3",
     "docs/seed-chapter6.md": "design2",
 }
