@@ -25,6 +25,15 @@ backlogs of thousands of messages, a displayed clock 15-55 s late. Here:
   that applies no new frame for :data:`STALE_S` while its stream waits is unpaced until
   it acknowledges again (the stall is counted).
 
+* **Less per frame** (:class:`ScenePacer`): what the trainee does not steer (the organs'
+  surfaces, breathing and pushed by the tool, and the task's points riding on them: 29 of
+  the ~38 messages a frame of the default abdomen carried) is sent at :data:`SCENE_HZ`,
+  and less often still when a page of that server applies few frames per second (at most
+  one of every :data:`FRAMES_PER_SCENE` frames the slowest page applies carries them, never
+  below :data:`MIN_SCENE_HZ`); the instrument, its tip, the fixtures' arrows and the MS
+  ghost, which follow the trainee's hand, go with every frame. Measured with
+  ``bench/viewer.py`` (per-frame messages by node, before and after).
+
 The figures per page (update rate, frames in flight, queued messages, displayed-clock lag)
 feed the "running behind" notices and the trial record (``ViewerApp.flow_stats``).
 """
@@ -56,6 +65,16 @@ HEARTBEAT_S = 1.0
 RATE_WINDOW_S = 3.0
 """Window of the rates (page updates per second, realtime factor)."""
 MARK_NODE = "/vasim/frame"
+SCENE_HZ = 10.0
+"""Rate of the scene the trainee does not steer (organs, the task's points on them) [Hz].
+**Decision**: breathing (0.2-0.3 Hz) and tissue pushed at hand speed read as continuous at
+10 Hz (a film's motion-picture threshold is ~10-12 frames/s); the hand-steered nodes keep
+the view rate (40 Hz), so control-to-photon latency is not bounded by this rate."""
+MIN_SCENE_HZ = 1.0
+"""The unsteered scene is never sent less often than this, however slow the page [Hz]."""
+FRAMES_PER_SCENE = 3
+"""On a slow page at most one of this many applied frames carries the unsteered scene (the
+frames between carry only what the hand steers: a few small messages)."""
 
 ACK_JS = r"""
 (function () {
@@ -131,6 +150,8 @@ class PageFlow:
         """Acknowledgements of new frames since the page connected."""
         self.event: asyncio.Event | None = None
         self.max_ahead = 0
+        self.first_ack = 0.0
+        """When the page first acknowledged (monotonic s; 0: never)."""
 
     def ahead(self) -> int:
         """Windows sent whose frame mark the page has not applied yet."""
@@ -260,6 +281,8 @@ def acknowledge(port: int, client_id: int, text: str) -> bool:
     now = time.monotonic()
     if not flow.acking:
         flow.last_progress = now
+    if not flow.first_ack:
+        flow.first_ack = now
     flow.acking = True
     flow.last_ack = now
     if seq > flow.applied_seq:
@@ -329,6 +352,64 @@ class RateMeter:
         return (t1 - t0) / (w1 - w0) if w1 - w0 >= 1.0 else None
 
 
+class ScenePacer:
+    """When a server's frame next carries the unsteered scene (module doc, "Less per frame").
+
+    Example:
+        >>> p = ScenePacer()
+        >>> p.rate(None), p.rate(60.0), p.rate(6.0), p.rate(0.5)
+        (10.0, 10.0, 2.0, 1.0)
+        >>> p.due(0.0, None), p.due(0.05, None), p.due(0.1, None)
+        (True, False, True)
+    """
+
+    def __init__(self, base_hz: float = SCENE_HZ, min_hz: float = MIN_SCENE_HZ,
+                 frames_per_scene: int = FRAMES_PER_SCENE):
+        if not (0 < min_hz <= base_hz) or frames_per_scene < 1:
+            raise ValueError(f"need 0 < min_hz <= base_hz and frames_per_scene >= 1, got "
+                             f"{(min_hz, base_hz, frames_per_scene)!r}")
+        self.base_hz, self.min_hz = float(base_hz), float(min_hz)
+        self.frames_per_scene = int(frames_per_scene)
+        self._last = -float("inf")
+        self.sent = 0
+        """Frames that carried the unsteered scene."""
+
+    def rate(self, page_hz: float | None) -> float:
+        """The unsteered scene's rate [Hz] for a server whose slowest page applies
+        ``page_hz`` frames per second (None or NaN: no page that acknowledges)."""
+        if page_hz is None or not page_hz == page_hz:
+            return self.base_hz
+        return min(self.base_hz, max(self.min_hz, float(page_hz) / self.frames_per_scene))
+
+    def due(self, now: float, page_hz: float | None) -> bool:
+        """True (and counted) when the frame at ``now`` [s] carries the unsteered scene."""
+        # 1 ms of slack: a view thread at exactly the scene's rate is not skipped by jitter.
+        if now - self._last >= 1.0 / self.rate(page_hz) - 1e-3:
+            self._last = now
+            self.sent += 1
+            return True
+        return False
+
+    def reset(self) -> None:
+        """The next frame carries the unsteered scene (a new trial)."""
+        self._last = -float("inf")
+
+
+def slowest_page_hz(acks: PageAcks) -> float | None:
+    """Update rate of the slowest acknowledging page of ``acks``' server [1/s] (None: no
+    page acknowledges). A page acknowledging for less than :data:`RATE_WINDOW_S` is rated
+    over the time it has (not as if it had been silent before)."""
+    now = time.monotonic()
+    rates = []
+    for p in acks.pages().values():
+        if not p.acking:
+            continue
+        since = p.first_ack if p.first_ack else now
+        span = min(RATE_WINDOW_S, max(now - since, 0.5))
+        rates.append(p.update_rate(now) * RATE_WINDOW_S / span)
+    return min(rates) if rates else None
+
+
 def behind_notice(factor: float | None, speed: float, page: PageFlow | None,
                   view_hz: float, lag_s: float | None) -> str:
     """The "running behind" line for one page ('' when all keeps up).
@@ -378,18 +459,23 @@ def install() -> None:
 
 __all__ = [
     "ACK_JS",
+    "FRAMES_PER_SCENE",
     "HEARTBEAT_S",
     "MARK_NODE",
     "MAX_AHEAD",
+    "MIN_SCENE_HZ",
+    "SCENE_HZ",
     "STALE_S",
     "FrameMarks",
     "PageAcks",
     "PageFlow",
     "RateMeter",
+    "ScenePacer",
     "acknowledge",
     "behind_notice",
     "install",
     "paced_producer",
     "page_stats",
     "registry",
+    "slowest_page_hz",
 ]
