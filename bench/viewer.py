@@ -28,6 +28,12 @@ Figures per run:
 * the trial: servo rate achieved [Hz] and the physics thread's rate [Hz]
   (``RealtimeTrial.timing()``), or the viewer's sim thread's control rate.
 
+0. before any page (issue #26.2, "measure first"): the messages the trainee's server
+   queues per view frame, by node group (organs, task points, instrument, overlays, frame
+   mark, light, text/GUI), for ``ViewerApp(scene_hz=None)`` (the organs and the task's
+   points with every frame, as before) and for the default (``flow.ScenePacer``: 10 Hz,
+   slower for a slow page);
+
 4. the same Chromium page at a laptop's 1280x800 with its CPU throttled 4x (DevTools
    ``Emulation.setCPUThrottlingRate``), the trainee driving the instrument (a keyboard
    trial): the page's **backlog** (messages waiting in its queue, sampled every 50 ms:
@@ -35,8 +41,11 @@ Figures per run:
    frame the page has applied, from its acknowledgements: p50 and max [s]), windows of
    updates in flight, the page's update rate, and the **control-to-photon latency** (a key press in
    the page to the first animation frame that shows the tool tip moved, page clock,
-   median of several presses [ms]). Goals (issue #26.2): backlog < 10 messages, lag
-   < 0.5 s, latency < 150 ms.
+   median of several presses [ms]). Goals (issue #26.2): backlog < 10 updates, lag
+   < 0.5 s, latency < 150 ms. The backlog is given both in frame updates (frame marks
+   waiting in the page's queue: each window of a frame carries one) and in messages; the
+   messages the page received per frame update it applied, by node group. Run twice, on a
+   fresh app each: the organs with every frame (before) and paced (after).
 
 ``--smoke``: 2 s runs (checks that everything runs; figures are not meaningful).
 The host is shared (other jobs run), so compare the two runs within one invocation.

@@ -66,7 +66,7 @@ class _Socket:
         self.sent.append(data)
 
 
-def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> None:
+def test_a_stream_waits_for_the_page_credit_and_a_stalled_page_trickles() -> None:
     async def main() -> None:
         f = PageFlow()
         f.acking, f.last_ack = True, time.monotonic()
@@ -89,12 +89,25 @@ def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> No
         f.event.set()
         await asyncio.wait_for(third, 1.0)
         assert f.ahead() == MAX_AHEAD - 1
-        # A page silent for STALE_S is no longer paced (the stall counted).
+        # A page that applied nothing for STALE_S gets one window per TRICKLE_S (the
+        # stall counted once), never a flood; an applied frame ends the stall.
         f.in_flight.extend(range(10, 10 + MAX_AHEAD))
         f.last_ack = time.monotonic()                     # heartbeats, no progress
         f.last_progress = time.monotonic() - flow.STALE_S - 1
-        await asyncio.wait_for(sock.send(b"w"), 1.0)
-        assert f.stalls == 1 and not f.acking
+        await asyncio.wait_for(sock.send(b"w"), 1.0)      # the trickle's window
+        assert f.stalls == 1 and f.stalled and f.acking
+        t0 = time.monotonic()
+        await asyncio.wait_for(sock.send(b"w"), flow.TRICKLE_S + 5.0)
+        assert time.monotonic() - t0 >= flow.TRICKLE_S - 0.05   # the next one waited
+        assert f.stalls == 1
+        nxt = asyncio.ensure_future(sock.send(b"w"))
+        await asyncio.sleep(0.2)
+        assert not nxt.done()
+        f.last_progress, f.stalled = time.monotonic(), False  # as acknowledge() does
+        f.applied(max(f.in_flight))
+        f.event.set()
+        await asyncio.wait_for(nxt, 1.0)
+        assert f.stalls == 1 and not f.stalled
 
     asyncio.run(main())
 

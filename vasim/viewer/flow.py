@@ -22,8 +22,12 @@ backlogs of thousands of messages, a displayed clock 15-55 s late. Here:
   latest-wins per node per client, and each page's update rate adapts to what it can
   draw. A page that never acknowledges (no script: a bare websocket client) is not
   paced; the script repeats its acknowledgement every :data:`HEARTBEAT_S`, and a page
-  that applies no new frame for :data:`STALE_S` while its stream waits is unpaced until
-  it acknowledges again (the stall is counted).
+  that applies no new frame for :data:`STALE_S` while its stream waits gets one window
+  every :data:`TRICKLE_S` until it applies a frame again (the stall is counted): a broken
+  page script does not freeze its stream, and a page that is merely very slow is not
+  flooded (**decision**, issue #26.2: it used to be unpaced, and a throttled page on a
+  loaded host that stalled once was then sent 40 windows a second: 90 frames, 926
+  messages waiting in its queue).
 
 * **Less per frame** (:class:`ScenePacer`): what the trainee does not steer (the organs'
   surfaces, breathing and pushed by the tool, and the task's points riding on them: 29 of
@@ -57,9 +61,11 @@ MAX_AHEAD = 2
 """Windows of updates a page may have in flight (sent, its frame mark not yet applied)
 before its stream waits."""
 STALE_S = 30.0
-"""A page that applies no new frame this long while its stream waits is no longer paced
-(a broken page script must not freeze its stream; pacing resumes with its next
-acknowledgement)."""
+"""A page that applies no new frame this long while its stream waits gets one window per
+:data:`TRICKLE_S` (a broken page script must not freeze its stream; the credit returns
+with its next applied frame)."""
+TRICKLE_S = 2.0
+"""A stalled page's stream sends one window this often."""
 HEARTBEAT_S = 1.0
 """The page repeats its acknowledgement this often even when nothing new was applied."""
 RATE_WINDOW_S = 3.0
@@ -134,7 +140,7 @@ class PageFlow:
     """One page's stream: marks sent and applied, its acknowledgements, its stalls."""
 
     def __init__(self) -> None:
-        self.in_flight: collections.deque[int] = collections.deque()
+        self.in_flight: collections.deque[int] = collections.deque(maxlen=256)
         """The newest mark at the sending of each window not yet applied by the page."""
         self.applied_seq = -1
         self.queued = 0
@@ -150,6 +156,9 @@ class PageFlow:
         """Acknowledgements of new frames since the page connected."""
         self.event: asyncio.Event | None = None
         self.max_ahead = 0
+        self.stalled = False
+        """The page applied no new frame for :data:`STALE_S` (its stream trickles)."""
+        self.last_trickle = 0.0
         self.first_ack = 0.0
         """When the page first acknowledged (monotonic s; 0: never)."""
 
@@ -159,16 +168,22 @@ class PageFlow:
 
     async def credit(self) -> None:
         """Waits (on the server's loop) while the page has :data:`MAX_AHEAD` windows in
-        flight; a page silent for :data:`STALE_S` is unpaced (counted as a stall)."""
+        flight; a page that applied nothing for :data:`STALE_S` gets one window per
+        :data:`TRICKLE_S` (counted as a stall)."""
         if self.event is None:
             self.event = asyncio.Event()
         while self.acking and self.ahead() >= MAX_AHEAD:
-            left = self.last_progress + STALE_S - time.monotonic()
-            if left <= 0:  # the page went silent: unpaced until it speaks again
-                self.stalls += 1
-                self.acking = False
-                self.in_flight.clear()
-                break
+            now = time.monotonic()
+            if now - self.last_progress >= STALE_S:  # stalled: trickle, never flood
+                if not self.stalled:
+                    self.stalled = True
+                    self.stalls += 1
+                left = self.last_trickle + TRICKLE_S - now
+                if left <= 0:
+                    self.last_trickle = now
+                    return
+            else:
+                left = self.last_progress + STALE_S - now
             self.event.clear()
             try:
                 await asyncio.wait_for(self.event.wait(), timeout=left)
@@ -287,6 +302,7 @@ def acknowledge(port: int, client_id: int, text: str) -> bool:
     flow.last_ack = now
     if seq > flow.applied_seq:
         flow.last_progress = now
+        flow.stalled = False
         flow.applied_seq = seq
         flow.acks.append(time.monotonic())
         flow.total_acks += 1
@@ -466,6 +482,7 @@ __all__ = [
     "MIN_SCENE_HZ",
     "SCENE_HZ",
     "STALE_S",
+    "TRICKLE_S",
     "FrameMarks",
     "PageAcks",
     "PageFlow",
