@@ -231,7 +231,7 @@ def frame_messages(seconds: float, scene_hz: float | None) -> dict[str, float]:
             original(msg)
 
         time.sleep(2.0)  # kernels compiled, the first trial under way
-        ws.queue_message = counted  # type: ignore[method-assign]
+        ws.queue_message = counted  # type: ignore[method-assign,assignment]
         u0 = app._view_updates
         time.sleep(seconds)
         ws.queue_message = original  # type: ignore[method-assign]
@@ -264,10 +264,12 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
     """Run 4: a 1280x800 page, CPU throttled ``rate``x, a keyboard trial (module doc)."""
     import numpy as np
 
-    from tests.browser.conftest import wait_ready
+    from tests.browser.conftest import ACTION_TIMEOUT_MS, wait_ready
     from vasim.viewer.controller import Command
 
     page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.set_default_timeout(ACTION_TIMEOUT_MS)  # a loaded host: minutes, not 30 s
+    page.set_default_navigation_timeout(ACTION_TIMEOUT_MS)
     try:
         page.goto(app.url)
         wait_ready(page, "/organs/liver")
@@ -385,13 +387,15 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
             return rows
         from playwright.sync_api import sync_playwright
 
-        from tests.browser.conftest import LAUNCH_ARGS, VIEWPORT, wait_ready
+        from tests.browser.conftest import ACTION_TIMEOUT_MS, LAUNCH_ARGS, VIEWPORT, wait_ready
 
         with sync_playwright() as p:
             b = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True,
                                   args=LAUNCH_ARGS)
             try:
                 page = b.new_page(viewport=VIEWPORT)
+                page.set_default_timeout(ACTION_TIMEOUT_MS)
+                page.set_default_navigation_timeout(ACTION_TIMEOUT_MS)
                 page.goto(app.url)
                 wait_ready(page, "/organs/liver")
                 page.evaluate(COUNTER_JS)
@@ -404,10 +408,13 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
                         a = ViewerApp(port=0, schema="trajectory_following", scene="default",
                                       db=os.path.join(d, "bench.sqlite"),
                                       scene_hz=scene_hz).start()
+                        name = f"Chromium 1280x800, CPU 4x slower, {label}"
                         try:
                             time.sleep(2.0)
-                            rows.append((f"Chromium 1280x800, CPU 4x slower, {label}",
-                                         _throttled(a, b, seconds)))
+                            rows.append((name, _throttled(a, b, seconds)))
+                        except Exception as exc:  # a page too slow to load: say so
+                            print(f"{name}: no figures ({type(exc).__name__}: "
+                                  f"{str(exc).splitlines()[0]})")
                         finally:
                             a.stop()
             finally:

@@ -114,7 +114,7 @@ def _count(app: ViewerApp, seconds: float) -> tuple[collections.Counter[str], in
         counts[str(getattr(msg, "name", None) or type(msg).__name__)] += 1
         original(msg)
 
-    ws.queue_message = counted  # type: ignore[method-assign]
+    ws.queue_message = counted  # type: ignore[method-assign,assignment]
     u0, t0 = app._view_updates, time.monotonic()
     try:
         time.sleep(seconds)
