@@ -76,8 +76,11 @@ SCENE_HZ = 10.0
 **Decision**: breathing (0.2-0.3 Hz) and tissue pushed at hand speed read as continuous at
 10 Hz (a film's motion-picture threshold is ~10-12 frames/s); the hand-steered nodes keep
 the view rate (40 Hz), so control-to-photon latency is not bounded by this rate."""
-MIN_SCENE_HZ = 1.0
-"""The unsteered scene is never sent less often than this, however slow the page [Hz]."""
+MIN_SCENE_HZ = 0.2
+"""The unsteered scene is never sent less often than this, however slow the page [Hz]
+(**decision**: at least every 5 s; with a floor of 1 Hz, a page drawing a frame every 3-10 s
+on a loaded host got the organs with every frame it drew: 54 messages per frame applied,
+against 65 without pacing, ``bench/viewer.py``)."""
 FRAMES_PER_SCENE = 3
 """On a slow page at most one of this many applied frames carries the unsteered scene (the
 frames between carry only what the hand steers: a few small messages)."""
@@ -373,8 +376,8 @@ class ScenePacer:
 
     Example:
         >>> p = ScenePacer()
-        >>> p.rate(None), p.rate(60.0), p.rate(6.0), p.rate(0.5)
-        (10.0, 10.0, 2.0, 1.0)
+        >>> p.rate(None), p.rate(60.0), p.rate(6.0), p.rate(0.3)
+        (10.0, 10.0, 2.0, 0.2)
         >>> p.due(0.0, None), p.due(0.05, None), p.due(0.1, None)
         (True, False, True)
     """
