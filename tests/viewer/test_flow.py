@@ -251,7 +251,7 @@ class _Page:
     received at most every ``apply_every_s`` (0: every window), as a page drawing that
     slowly would."""
 
-    def __init__(self, port: int, apply_every_s: float = 0.0):
+    def __init__(self, port: int, apply_every_s: float = 0.0, acks: bool = True):
         self.ws = connect(f"ws://127.0.0.1:{port}/", subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
                           open_timeout=30, max_size=None)
         self.ws.send(msgspec.msgpack.encode({
@@ -260,6 +260,7 @@ class _Page:
             "image_height": 600, "image_width": 800, "look_at": [0.0, 0, 0],
             "up_direction": [0.0, 0, 1]}))
         self.every = apply_every_s
+        self.acks = acks
         self.uuid: str | None = None
         self.newest = -1
         self.acked = -1
@@ -276,7 +277,8 @@ class _Page:
             if m.get("name") == flow.MARK_NODE and m["type"] == "SetPositionMessage":
                 self.newest = max(self.newest, round(m["position"][0]))
         now = time.monotonic()
-        if self.uuid is not None and self.newest > self.acked and now >= self.next_ack:
+        if (self.acks and self.uuid is not None and self.newest > self.acked
+                and now >= self.next_ack):
             self.acked, self.next_ack = self.newest, now + self.every
             self.ws.send(msgspec.msgpack.encode({
                 "type": "GuiUpdateMessage", "uuid": self.uuid,
@@ -288,13 +290,22 @@ def _notices(a: ViewerApp) -> dict[tuple[int, int], str]:
         return {k: str(h.content) for k, h in a._notices.items()}
 
 
-def test_both_pages_are_told_when_the_loop_cannot_keep_up() -> None:
+def test_both_pages_are_told_when_the_loop_cannot_keep_up(tmp_path: Any) -> None:
     """Asked for 1000x real time, no loop keeps up: each connected page's notice line (the
-    trainee's and the experimenter's) says it is running behind."""
-    a = ViewerApp(port=0, schema="none", scene="none", speed=1000.0, view_hz=10.0).start()
+    trainee's and the experimenter's) says it is running behind. (The pages do not
+    acknowledge frames: only the loop's part of the notice is at stake here.) The trial is
+    a free one nobody steers, so it lasts (a scripted demo may end within a wall second,
+    before the factor is measured: the meter needs 1 s of one trial)."""
+    from vasim.viewer.controller import Command
+
+    a = ViewerApp(port=0, schema="none", scene="none", speed=1000.0, view_hz=10.0,
+                  db=str(tmp_path / "s.sqlite"), max_time=3600.0, countdown_s=0.0).start()
     try:
-        pages = [_Page(a.port), _Page(a.experimenter_port)]
-        t_end = time.monotonic() + 60
+        for cmd in (Command("mode", "free"), Command("input", "laparoscopic"),
+                    Command("start")):
+            a.submit(cmd)
+        pages = [_Page(a.port, acks=False), _Page(a.experimenter_port, acks=False)]
+        t_end = time.monotonic() + 120
         while time.monotonic() < t_end and not (
                 len(_notices(a)) == 2
                 and all("Running behind" in n for n in _notices(a).values())):
@@ -311,8 +322,8 @@ def test_both_pages_are_told_when_the_loop_cannot_keep_up() -> None:
 
 
 def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not() -> None:
-    """Two trainee pages on a loop that keeps up: one applies every frame, the other one
-    frame a second; only the slow one's notice says this page is behind (its rate, late)."""
+    """Two trainee pages: one applies every frame, the other one frame a second; only the
+    slow one's notice says this page is behind (its rate, how late)."""
     a = ViewerApp(port=0, schema="vg", scene="none", view_hz=20.0).start()
     try:
         fast, slow = _Page(a.port), _Page(a.port, apply_every_s=1.0)
@@ -333,7 +344,9 @@ def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not
         n = _notices(a)
         assert re.search(r"This page is behind\*\*: it shows \d of 20 updates/s",
                          n[(a.port, ids["slow"])]), n
-        assert "behind" not in n.get((a.port, ids["fast"]), ""), n
+        # (on a loaded host the loop may fall behind too: both then say so, the fast page
+        # only of the loop)
+        assert "This page is behind" not in n.get((a.port, ids["fast"]), ""), n
         for p in (fast, slow):
             p.ws.close()
     finally:
