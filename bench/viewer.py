@@ -28,6 +28,12 @@ Figures per run:
 * the trial: servo rate achieved [Hz] and the physics thread's rate [Hz]
   (``RealtimeTrial.timing()``), or the viewer's sim thread's control rate.
 
+0. before any page (issue #26.2, "measure first"): the messages the trainee's server
+   queues per view frame, by node group (organs, task points, instrument, overlays, frame
+   mark, light, text/GUI), for ``ViewerApp(scene_hz=None)`` (the organs and the task's
+   points with every frame, as before) and for the default (``flow.ScenePacer``: 10 Hz,
+   slower for a slow page);
+
 4. the same Chromium page at a laptop's 1280x800 with its CPU throttled 4x (DevTools
    ``Emulation.setCPUThrottlingRate``), the trainee driving the instrument (a keyboard
    trial): the page's **backlog** (messages waiting in its queue, sampled every 50 ms:
@@ -35,8 +41,11 @@ Figures per run:
    frame the page has applied, from its acknowledgements: p50 and max [s]), windows of
    updates in flight, the page's update rate, and the **control-to-photon latency** (a key press in
    the page to the first animation frame that shows the tool tip moved, page clock,
-   median of several presses [ms]). Goals (issue #26.2): backlog < 10 messages, lag
-   < 0.5 s, latency < 150 ms.
+   median of several presses [ms]). Goals (issue #26.2): backlog < 10 updates, lag
+   < 0.5 s, latency < 150 ms. The backlog is given both in frame updates (frame marks
+   waiting in the page's queue: each window of a frame carries one) and in messages; the
+   messages the page received per frame update it applied, by node group. Run twice, on a
+   fresh app each: the organs with every frame (before) and paced (after).
 
 ``--smoke``: 2 s runs (checks that everything runs; figures are not meaningful).
 The host is shared (other jobs run), so compare the two runs within one invocation.
@@ -45,10 +54,13 @@ The host is shared (other jobs run), so compare the two runs within one invocati
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
 from typing import Any
+
+from vasim.viewer.flow import MARK_NODE
 
 SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
 """``python -m bench --smoke``: every run cut to seconds (it checks the bench runs; its
@@ -162,11 +174,73 @@ def _measure(app: Any, seconds: float, page: Any = None,
 
 
 BACKLOG_JS = """() => {
-  const m = window.__viserMutable;
-  const b = window.__vasimBacklog = {samples: []};
-  setInterval(() => { b.samples.push(m.messageQueue.length); }, 50);
+  const m = window.__viserMutable, q = m.messageQueue;
+  const b = window.__vasimBacklog = {samples: [], frames: [], got: {}, n: 0};
+  const group = (msg) => {
+    const n = msg.name || "";
+    for (const [label, prefix] of %(groups)s) { if (n.startsWith(prefix)) { return label; } }
+    return msg.type.startsWith("Gui") ? "text/GUI" : msg.type;
+  };
+  const push = q.push;
+  q.push = function (...msgs) {
+    for (const msg of msgs) { const g = group(msg); b.got[g] = (b.got[g] || 0) + 1; b.n += 1; }
+    return push.apply(this, msgs);
+  };
+  setInterval(() => {
+    b.samples.push(q.length);
+    // Frame updates waiting: each window of a frame carries one frame mark.
+    b.frames.push(q.filter((msg) => msg.name === "%(mark)s").length);
+  }, 50);
   return true;
 }"""
+
+GROUPS = (("organs", "/organs/"), ("task points", "/trajectory/"), ("instrument", "/tool/"),
+          ("overlays", "/overlays/"), ("frame mark", "/vasim/"), ("light", "/endoscope/"),
+          ("gizmo", "/input/"))
+"""Scene node groups of the per-frame message counts (by node name prefix)."""
+
+
+def _group(msg: Any) -> str:
+    name = getattr(msg, "name", None)
+    if isinstance(name, str):
+        for label, prefix in GROUPS:
+            if name.startswith(prefix):
+                return label
+    kind = type(msg).__name__
+    return "text/GUI" if kind.startswith("Gui") else kind
+
+
+def frame_messages(seconds: float, scene_hz: float | None) -> dict[str, float]:
+    """Messages the trainee's server queues per view frame, by node group (the broadcast
+    stream every trainee page gets; no page attached), for a ``ViewerApp(scene_hz=...)``
+    on the default abdomen with ``trajectory_following`` (every overlay)."""
+    import collections
+
+    from vasim.viewer import ViewerApp
+
+    app = ViewerApp(port=0, schema="trajectory_following", scene="default",
+                    scene_hz=scene_hz).start()
+    try:
+        assert app.server is not None
+        ws = app.server._websock_server  # private (viser 1.1.1): where every message goes
+        counts: collections.Counter[str] = collections.Counter()
+        original = ws.queue_message
+
+        def counted(msg: Any) -> None:
+            counts[_group(msg)] += 1
+            original(msg)
+
+        time.sleep(2.0)  # kernels compiled, the first trial under way
+        ws.queue_message = counted  # type: ignore[method-assign,assignment]
+        u0 = app._view_updates
+        time.sleep(seconds)
+        ws.queue_message = original  # type: ignore[method-assign]
+        frames = max(app._view_updates - u0, 1)
+    finally:
+        app.stop()
+    out = {k: v / frames for k, v in counts.items()}
+    out["total"] = sum(counts.values()) / frames
+    return out
 
 LATENCY_JS = """(key) => { window.__vasimLatency = undefined; new Promise((resolve) => {
   const m = window.__viserMutable, tip = () => m.nodeRefFromName['/tool/tip'];
@@ -190,10 +264,12 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
     """Run 4: a 1280x800 page, CPU throttled ``rate``x, a keyboard trial (module doc)."""
     import numpy as np
 
-    from tests.browser.conftest import wait_ready
+    from tests.browser.conftest import ACTION_TIMEOUT_MS, wait_ready
     from vasim.viewer.controller import Command
 
     page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page.set_default_timeout(ACTION_TIMEOUT_MS)  # a loaded host: minutes, not 30 s
+    page.set_default_navigation_timeout(ACTION_TIMEOUT_MS)
     try:
         page.goto(app.url)
         wait_ready(page, "/organs/liver")
@@ -211,7 +287,10 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
         while app.controller.countdown_until is not None and time.monotonic() < t_end:
             time.sleep(0.05)
         time.sleep(1.0)
-        page.evaluate(BACKLOG_JS)
+        page.evaluate(BACKLOG_JS % {"groups": json.dumps([list(g) for g in GROUPS]),
+                                    "mark": MARK_NODE})
+        u0 = app._view_updates
+        a0 = sum(f.total_acks for f in app.acks.pages().values())
         lags, ahead, rates = [], [], []
         t_end = time.monotonic() + seconds
         while time.monotonic() < t_end:
@@ -236,13 +315,26 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
             if ms is not None:
                 latencies.append(float(ms))
             time.sleep(0.5)
-        backlog = np.array(page.evaluate("() => window.__vasimBacklog.samples"), dtype=float)
+        got = page.evaluate("() => window.__vasimBacklog")
+        backlog = np.array(got["samples"], dtype=float)
+        waiting = np.array(got["frames"], dtype=float)
+        frames_sent = max(app._view_updates - u0, 1)
+        applied_n = sum(f.total_acks for f in app.acks.pages().values()) - a0
         factor = app.flow_stats()["realtime_factor_recent"]
         app.submit(Command("stop"))
     finally:
         page.close()
     lag = np.array([x for x in lags if x == x])
-    return {
+    applied = np.array([x for x in rates if x == x])
+    out = {f"received {k}": float(v) for k, v in got["got"].items()}
+    out["received_per_frame"] = float(got["n"]) / frames_sent
+    out["received_per_update"] = (float(got["n"]) / applied_n if applied_n > 0
+                                  else float("nan"))
+    out["frames_waiting_max"] = float(waiting.max()) if len(waiting) else float("nan")
+    out["frames_waiting_p95"] = (float(np.percentile(waiting, 95)) if len(waiting)
+                                 else float("nan"))
+    out["page_update_hz_mean"] = float(applied.mean()) if len(applied) else float("nan")
+    return out | {
         "backlog_max": float(backlog.max()) if len(backlog) else float("nan"),
         "backlog_p95": float(np.percentile(backlog, 95)) if len(backlog) else float("nan"),
         "lag_p50": float(np.median(lag)) if len(lag) else float("nan"),
@@ -295,25 +387,48 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
             return rows
         from playwright.sync_api import sync_playwright
 
-        from tests.browser.conftest import LAUNCH_ARGS, VIEWPORT, wait_ready
+        from tests.browser.conftest import ACTION_TIMEOUT_MS, LAUNCH_ARGS, VIEWPORT, wait_ready
 
         with sync_playwright() as p:
             b = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True,
                                   args=LAUNCH_ARGS)
             try:
                 page = b.new_page(viewport=VIEWPORT)
+                page.set_default_timeout(ACTION_TIMEOUT_MS)
+                page.set_default_navigation_timeout(ACTION_TIMEOUT_MS)
                 page.goto(app.url)
                 wait_ready(page, "/organs/liver")
                 page.evaluate(COUNTER_JS)
                 rows.append(("one headless Chromium attached", _measure(app, seconds, page)))
                 page.close()
-                rows.append(("Chromium 1280x800, CPU 4x slower", _throttled(app, b, seconds)))
+                app.stop()
+                # Before/after (issue #26.2): the organs with every frame, then paced.
+                for label, scene_hz in THROTTLED_RUNS:
+                    with tempfile.TemporaryDirectory(prefix="vasim-bench-viewer-") as d:
+                        a = ViewerApp(port=0, schema="trajectory_following", scene="default",
+                                      db=os.path.join(d, "bench.sqlite"),
+                                      scene_hz=scene_hz).start()
+                        name = f"Chromium 1280x800, CPU 4x slower, {label}"
+                        try:
+                            time.sleep(2.0)
+                            rows.append((name, _throttled(a, b, seconds)))
+                        except Exception as exc:  # a page too slow to load: say so
+                            print(f"{name}: no figures ({type(exc).__name__}: "
+                                  f"{str(exc).splitlines()[0]})")
+                        finally:
+                            a.stop()
             finally:
                 b.close()
     finally:
         app.stop()
         tmp.cleanup()
     return rows
+
+
+THROTTLED_RUNS: tuple[tuple[str, float | None], ...] = (
+    ("organs with every frame (before)", None), ("unsteered scene paced (after)", 10.0))
+"""The throttled page's runs: ``ViewerApp(scene_hz=...)`` (None: the organs and the task's
+points with every frame, as before issue #26.2; 10 Hz: ``flow.SCENE_HZ``)."""
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -324,9 +439,16 @@ def main(argv: list[str] | None = None) -> None:
                              else [] if argv is None else argv)
     if args.smoke:
         args.seconds = 2.0
+    per_frame = [(label, frame_messages(args.seconds, hz)) for label, hz in THROTTLED_RUNS]
     rows = run(args.seconds)
-    throttled = [r for name, r in rows if name.startswith("Chromium 1280")]
+    throttled = [(name, r) for name, r in rows if name.startswith("Chromium 1280")]
     rows = [(name, r) for name, r in rows if not name.startswith("Chromium 1280")]
+    print("messages the trainee's server queues per view frame, by node group (no page):")
+    groups = sorted({k for _, r in per_frame for k in r if k != "total"},
+                    key=lambda k: -max(r.get(k, 0.0) for _, r in per_frame))
+    print(f"  {'group':24s}" + "".join(f" {label[:32]:>33s}" for label, _ in per_frame))
+    for k in [*groups, "total"]:
+        print(f"  {k:24s}" + "".join(f" {r.get(k, 0.0):33.2f}" for _, r in per_frame))
     print(f"default abdomen, trajectory_following (VG, FF, MS, Mag, AG), {args.seconds:g} s "
           "per run, scripted operator in real time")
     head = (f"{'run':32s} {'view ms p50':>11s} {'p95':>6s} {'view/s':>7s} {'CPU/s':>6s} "
@@ -351,14 +473,22 @@ def main(argv: list[str] | None = None) -> None:
     if len(rows) == 3:
         print(f"tool-tip updates received by the browser: "
               f"{rows[2][1].get('browser_tip_per_s', 0):.1f}/s (target >= 30/s)")
-    for t in throttled:
-        print("Chromium 1280x800, CPU throttled 4x, keyboard trial (goals: backlog < 10 "
-              "messages, lag < 0.5 s, latency < 150 ms):")
-        print(f"  backlog (messages in the page's queue): max {t['backlog_max']:.0f}, p95 "
-              f"{t['backlog_p95']:.0f}; windows of updates in flight max "
-              f"{t['windows_ahead_max']:.0f}")
+    for name, t in throttled:
+        print(f"{name}, keyboard trial (goals: backlog < 10 updates, lag < 0.5 s, latency "
+              "< 150 ms):")
+        print(f"  backlog: frame updates waiting in the page's queue max "
+              f"{t['frames_waiting_max']:.0f}, p95 {t['frames_waiting_p95']:.0f}; messages "
+              f"max {t['backlog_max']:.0f}, p95 {t['backlog_p95']:.0f}; windows of updates "
+              f"in flight max {t['windows_ahead_max']:.0f}")
+        got = sorted(((k[9:], v) for k, v in t.items() if k.startswith("received ")),
+                     key=lambda kv: -kv[1])
+        print(f"  messages received per frame update the page applied "
+              f"{t['received_per_update']:.1f} (per frame the server made "
+              f"{t['received_per_frame']:.1f}); by group over the run: "
+              + ", ".join(f"{k} {v:.0f}" for k, v in got))
         print(f"  displayed-clock lag: p50 {t['lag_p50']:.2f} s, max {t['lag_max']:.2f} s; "
-              f"page updates {t['page_update_hz']:.1f}/s; loop {t['realtime_factor']:.2f}x "
+              f"page updates {t['page_update_hz']:.1f}/s (mean "
+              f"{t['page_update_hz_mean']:.1f}/s); loop {t['realtime_factor']:.2f}x "
               "real time")
         print(f"  control-to-photon latency: p50 {t['latency_ms_p50']:.0f} ms, max "
               f"{t['latency_ms_max']:.0f} ms ({t['latency_n']:.0f} key presses)")

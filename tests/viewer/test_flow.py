@@ -66,7 +66,7 @@ class _Socket:
         self.sent.append(data)
 
 
-def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> None:
+def test_a_stream_waits_for_the_page_credit_and_a_stalled_page_trickles() -> None:
     async def main() -> None:
         f = PageFlow()
         f.acking, f.last_ack = True, time.monotonic()
@@ -89,12 +89,25 @@ def test_a_stream_waits_for_the_page_credit_and_a_silent_page_is_unpaced() -> No
         f.event.set()
         await asyncio.wait_for(third, 1.0)
         assert f.ahead() == MAX_AHEAD - 1
-        # A page silent for STALE_S is no longer paced (the stall counted).
+        # A page that applied nothing for STALE_S gets one window per TRICKLE_S (the
+        # stall counted once), never a flood; an applied frame ends the stall.
         f.in_flight.extend(range(10, 10 + MAX_AHEAD))
         f.last_ack = time.monotonic()                     # heartbeats, no progress
         f.last_progress = time.monotonic() - flow.STALE_S - 1
-        await asyncio.wait_for(sock.send(b"w"), 1.0)
-        assert f.stalls == 1 and not f.acking
+        await asyncio.wait_for(sock.send(b"w"), 1.0)      # the trickle's window
+        assert f.stalls == 1 and f.stalled and f.acking
+        t0 = time.monotonic()
+        await asyncio.wait_for(sock.send(b"w"), flow.TRICKLE_S + 5.0)
+        assert time.monotonic() - t0 >= flow.TRICKLE_S - 0.05   # the next one waited
+        assert f.stalls == 1
+        nxt = asyncio.ensure_future(sock.send(b"w"))
+        await asyncio.sleep(0.2)
+        assert not nxt.done()
+        f.last_progress, f.stalled = time.monotonic(), False  # as acknowledge() does
+        f.applied(max(f.in_flight))
+        f.event.set()
+        await asyncio.wait_for(nxt, 1.0)
+        assert f.stalls == 1 and not f.stalled
 
     asyncio.run(main())
 
@@ -228,3 +241,155 @@ def test_a_page_that_acknowledges_what_it_applied_is_never_starved(app: ViewerAp
         page = app.acks.pages()[max(app.acks.pages())]
         assert page.acking and page.stalls == 0
         assert applied - first >= 10, (first, applied)   # 20 Hz for 4 s, minus the load
+
+
+# -- running behind, end to end (issue #26.2): both pages told; the record keeps the rates ---
+
+
+class _Page:
+    """A bare websocket page: it applies (acknowledges) the newest frame mark it has
+    received at most every ``apply_every_s`` (0: every window), as a page drawing that
+    slowly would."""
+
+    def __init__(self, port: int, apply_every_s: float = 0.0, acks: bool = True):
+        self.ws = connect(f"ws://127.0.0.1:{port}/", subprotocols=[SUBPROTOCOL],  # type: ignore[list-item]
+                          open_timeout=30, max_size=None)
+        self.ws.send(msgspec.msgpack.encode({
+            "type": "ViewerCameraMessage", "wxyz": [1.0, 0, 0, 0],
+            "position": [0, -0.3, 0.1], "fov": 1.0, "near": 0.01, "far": 100.0,
+            "image_height": 600, "image_width": 800, "look_at": [0.0, 0, 0],
+            "up_direction": [0.0, 0, 1]}))
+        self.every = apply_every_s
+        self.acks = acks
+        self.uuid: str | None = None
+        self.newest = -1
+        self.acked = -1
+        self.next_ack = 0.0
+
+    def pump(self, timeout: float = 0.05) -> None:
+        try:
+            msgs = _decode(self.ws.recv(timeout=timeout))  # type: ignore[arg-type]
+        except TimeoutError:
+            msgs = []
+        for m in msgs:
+            found = re.search(r'var UUID = "([^"]+)", NODE', str(m.get("source", "")))
+            self.uuid = found.group(1) if found else self.uuid
+            if m.get("name") == flow.MARK_NODE and m["type"] == "SetPositionMessage":
+                self.newest = max(self.newest, round(m["position"][0]))
+        now = time.monotonic()
+        if (self.acks and self.uuid is not None and self.newest > self.acked
+                and now >= self.next_ack):
+            self.acked, self.next_ack = self.newest, now + self.every
+            self.ws.send(msgspec.msgpack.encode({
+                "type": "GuiUpdateMessage", "uuid": self.uuid,
+                "updates": {"value": f'{{"seq": {self.newest}, "q": 0}}'}}))
+
+
+def _notices(a: ViewerApp) -> dict[tuple[int, int], str]:
+    with a._notice_lock:
+        return {k: str(h.content) for k, h in a._notices.items()}
+
+
+def test_both_pages_are_told_when_the_loop_cannot_keep_up(tmp_path: Any) -> None:
+    """Asked for 1000x real time, no loop keeps up: each connected page's notice line (the
+    trainee's and the experimenter's) says it is running behind. (The pages do not
+    acknowledge frames: only the loop's part of the notice is at stake here.) The trial is
+    a free one nobody steers, so it lasts (a scripted demo may end within a wall second,
+    before the factor is measured: the meter needs 1 s of one trial)."""
+    from vasim.viewer.controller import Command
+
+    a = ViewerApp(port=0, schema="none", scene="none", speed=1000.0, view_hz=10.0,
+                  db=str(tmp_path / "s.sqlite"), max_time=3600.0, countdown_s=0.0).start()
+    try:
+        for cmd in (Command("mode", "free"), Command("input", "laparoscopic"),
+                    Command("start")):
+            a.submit(cmd)
+        pages = [_Page(a.port, acks=False), _Page(a.experimenter_port, acks=False)]
+        t_end = time.monotonic() + 120
+        while time.monotonic() < t_end and not (
+                len(_notices(a)) == 2
+                and all("Running behind" in n for n in _notices(a).values())):
+            for p in pages:
+                p.pump()
+        notices = _notices(a)
+        assert {port for port, _ in notices} == {a.port, a.experimenter_port}, notices
+        assert all(re.search(r"Running behind: 0\.\d× real time", n)
+                   for n in notices.values()), notices
+        for p in pages:
+            p.ws.close()
+    finally:
+        a.stop()
+
+
+def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not() -> None:
+    """Two trainee pages: one applies every frame, the other one frame a second; only the
+    slow one's notice says this page is behind (its rate, how late)."""
+    a = ViewerApp(port=0, schema="vg", scene="none", view_hz=20.0).start()
+    try:
+        fast, slow = _Page(a.port), _Page(a.port, apply_every_s=1.0)
+        ids: dict[str, int] = {}
+        t_end = time.monotonic() + 90
+        while time.monotonic() < t_end:
+            for p in (fast, slow):
+                p.pump(0.02)
+            pages = a.acks.pages()
+            if len(pages) == 2 and all(f.acking for f in pages.values()):
+                by_rate = sorted(pages, key=lambda cid: pages[cid].total_acks)
+                ids = {"slow": by_rate[0], "fast": by_rate[1]}
+                n = _notices(a)
+                if ("This page is behind" in n.get((a.port, ids["slow"]), "")
+                        and pages[ids["fast"]].total_acks > 60):
+                    break
+        assert ids, a.acks.pages()
+        n = _notices(a)
+        assert re.search(r"This page is behind\*\*: it shows \d of 20 updates/s",
+                         n[(a.port, ids["slow"])]), n
+        # (on a loaded host the loop may fall behind too: both then say so, the fast page
+        # only of the loop)
+        assert "This page is behind" not in n.get((a.port, ids["fast"]), ""), n
+        for p in (fast, slow):
+            p.ws.close()
+    finally:
+        a.stop()
+
+
+def test_a_stored_trial_keeps_the_loop_rate_and_the_pages_update_rate(tmp_path: Any) -> None:
+    """A free real-time trial with one trainee page applying every frame: its stored
+    timing has the servo loop's achieved rate and the viewer's figures (the page's update
+    rate among them)."""
+    import json
+    from contextlib import closing
+
+    from vasim.study.store import TrialStore
+    from vasim.viewer.controller import Command
+
+    db = tmp_path / "s.sqlite"
+    a = ViewerApp(port=0, schema="vg", scene="none", db=str(db), max_time=3.0,
+                  countdown_s=0.0, view_hz=20.0).start()
+    try:
+        page = _Page(a.port)
+        t_end = time.monotonic() + 60
+        while time.monotonic() < t_end and not a.acks.pages():
+            page.pump()
+        for cmd in (Command("mode", "free"), Command("task", "point"), Command("start")):
+            a.submit(cmd)
+        t_end = time.monotonic() + 120
+        tid = None
+        while time.monotonic() < t_end:
+            page.pump()
+            tid = a.snapshot.info.trial_id if tid is None else tid
+            if tid is not None and a.panel.status.startswith(f"trial {tid} stored"):
+                break
+        assert tid is not None and a.panel.status.startswith(f"trial {tid} stored"), (
+            a.panel.status, a.errors)
+        page.ws.close()
+    finally:
+        a.stop()
+    with closing(TrialStore(db)) as st:
+        timing = json.loads(st.trial(tid)["timing_json"])
+    assert timing["achieved_hz"] > 0                       # the servo loop's rate
+    viewer = timing["viewer"]
+    assert viewer["trainee_pages"] == 1.0
+    assert viewer["trainee_page_update_hz"] > 0            # the page's update rate
+    assert viewer["view_update_hz"] > 0
+    assert "realtime_factor_recent" in viewer

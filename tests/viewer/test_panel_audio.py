@@ -114,7 +114,7 @@ def test_audio_install_during_an_update_does_not_break_the_stream(
     sets: list[int] = []
     armed = [False]
 
-    def run_js(client: Any, src: str) -> None:
+    def run_js(client: Any, src: str, key: str | None = None) -> None:
         if src.startswith("window.__vasimAudioSet"):
             sets.append(client.client_id)
             if armed[0]:  # a client connects while update() is sending

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import queue
 import socket
 import threading
@@ -73,7 +74,17 @@ from vasim.viewer.controller import (
     schema_choices,
 )
 from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose, task_target
-from vasim.viewer.flow import PageAcks, RateMeter, behind_notice, page_stats, registry
+from vasim.viewer.flow import (
+    MIN_SCENE_HZ,
+    SCENE_HZ,
+    PageAcks,
+    RateMeter,
+    ScenePacer,
+    behind_notice,
+    page_stats,
+    registry,
+    slowest_page_hz,
+)
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.panel import ExperimenterPanel
@@ -151,6 +162,9 @@ class ViewerApp(ErrorReporter):
         optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
             every person-driven trial).
         countdown_s: the start cue before a person-driven trial [s] (0: none).
+        scene_hz: rate of what the trainee does not steer (organs, the task's points) on a
+            page that keeps up [Hz]; slower pages get it less often (``flow.ScenePacer``).
+            None: with every frame (as before issue #26.2; ``bench/viewer.py`` compares).
 
     Raises:
         ConfigError: for an unknown schema, task, skill or scene, a schema that does not
@@ -187,6 +201,7 @@ class ViewerApp(ErrorReporter):
         experimenter_token: str | None = None,
         optics: float = 0.0,
         countdown_s: float = 3.0,
+        scene_hz: float | None = SCENE_HZ,
     ):
         # Two pages, two tokens (issue #30.1): the trainee's token never opens the
         # experimenter's page. Given only the trainee's, the experimenter's is drawn here.
@@ -249,6 +264,17 @@ class ViewerApp(ErrorReporter):
         self._stopped = False
         self.view_hz = float(view_hz)
         self.speed = float(speed)
+        if scene_hz is not None and not (isinstance(scene_hz, int | float)
+                                         and np.isfinite(scene_hz) and scene_hz > 0):
+            raise ConfigError(f"scene_hz must be a finite number > 0 or None, got {scene_hz!r}",
+                              field="scene_hz")
+        every = float("inf")
+        self.scene_pacer = (ScenePacer(every, every) if scene_hz is None
+                            else ScenePacer(scene_hz, min(MIN_SCENE_HZ, scene_hz)))
+        self.exp_scene_pacer = (ScenePacer(every, every) if scene_hz is None
+                                else ScenePacer(scene_hz, min(MIN_SCENE_HZ, scene_hz)))
+        """When each page's frame carries the organs (flow.py, "Less per frame")."""
+        self._light_t = -math.inf
         self.rate = RateMeter()
         """The loop's recent realtime factor as the pages see it (frame.t per wall s)."""
         self._notices: dict[tuple[int, int], Any] = {}
@@ -611,8 +637,10 @@ class ViewerApp(ErrorReporter):
         out = frame.outputs
         new_trial = info is not self._shown
         self._snapshot = Snapshot(info, frame)
+        now = time.monotonic()
         with server.atomic():
-            self.views.update(info, frame, new_trial=new_trial)
+            self.views.update(info, frame, new_trial=new_trial,
+                              scene=self.scene_pacer.due(now, slowest_page_hz(self.acks)))
             self.hud.update(self._hud_info(info, frame), force=True if new_trial
                             or frame.done or ctl.outcome[1] is not None else False)
             card = score_card_markdown(ctl.panel.scorecard
@@ -624,7 +652,9 @@ class ViewerApp(ErrorReporter):
             self.acks.marks.mark(frame.t)
         assert self.exp_server is not None
         with self.exp_server.atomic():
-            self.exp_views.update(info, frame, new_trial=new_trial)
+            self.exp_views.update(info, frame, new_trial=new_trial,
+                                  scene=self.exp_scene_pacer.due(
+                                      now, slowest_page_hz(self.exp_acks)))
             self.exp_acks.marks.mark(frame.t)
             self.panel_view.show_live(info, frame, force=True if new_trial or frame.done
                                      or ctl.outcome[1] is not None else False,
@@ -633,8 +663,16 @@ class ViewerApp(ErrorReporter):
         if new_trial:
             self.camera.retarget(self._scope_view(info))
         self.camera.update(out.camera)
-        if self.light.pose is not self.camera.target:
-            self.light.follow(self.camera.target)
+        # The light moves with the scope's pose as the pages are given it (a camera write
+        # is skipped for a pose within 0.2 mm / 2 mrad of the last: so is the light's).
+        # At most at the camera's own write rate (10 Hz): the pages' cameras ease toward
+        # each pose anyway.
+        target = self.camera.target
+        if self.light.pose is None or new_trial or (
+                self.light.pose is not target and not self.light.pose.close_to(target)
+                and now - self._light_t >= self.camera.min_interval):
+            self.light.follow(target)
+            self._light_t = now
         self.audio.update(out.audio)
         if new_trial:
             self.rate.reset()
@@ -665,7 +703,9 @@ class ViewerApp(ErrorReporter):
                     self._notices.pop((port, cid), None)
                 continue
             t_shown = acks.marks.trial_time(page.applied_seq)
-            lag = None if t_shown is None else max(0.0, t_trial - t_shown)
+            # In wall seconds (**decision**: at speed 1000 a page 40 ms late showed a clock
+            # 40 trial seconds behind and was called late).
+            lag = None if t_shown is None else max(0.0, t_trial - t_shown) / self.speed
             text = behind_notice(factor, self.speed, page, self.view_hz, lag)
             try:
                 if text != handle.content:

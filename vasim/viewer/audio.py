@@ -10,7 +10,11 @@ viser 1.1.1 has no audio API (guides/viewer.md). The route taken (**decision**):
   every ``period`` seconds, at ``volume``, as the AG fixture's ``AudioCue`` says.
 * The server streams the cue as tiny snippets calling ``window.__vasimAudioSet({...})`` at
   ``rate_hz`` (20 Hz: inside the issue's 10-30 Hz) while a cue exists, and one
-  ``{on: false}`` when it goes away (a schema without AG).
+  ``{on: false}`` when it goes away (a schema without AG). Latest wins (issue #26.2): a
+  parameter update still waiting in a page's queue when the next is queued is replaced by
+  it (:func:`run_js` with a ``key``), so a slow page's stream never piles up snippets it
+  will only overwrite (viser never coalesces ``RunJavascriptMessage``: before this, a
+  page paced by :mod:`vasim.viewer.flow` received them in windows of up to 128).
 * Browsers start audio only after a user gesture. The synth stays muted until the page's
   "Enable audio" control is used; its click (a pointerdown on the page) also resumes the
   AudioContext inside the gesture, which is what browsers require.
@@ -110,10 +114,23 @@ def cue_params(cue: AudioCue | None) -> dict[str, Any]:
     return out
 
 
-def run_js(client: viser.ClientHandle, source: str) -> None:
-    """Runs ``source`` in one client's page (never a broadcast; module docstring)."""
-    client._websock_connection.queue_message(  # private API, viser 1.1.1
-        _messages.RunJavascriptMessage(source=source))
+def run_js(client: viser.ClientHandle, source: str, key: str | None = None) -> None:
+    """Runs ``source`` in one client's page (never a broadcast; module docstring).
+
+    Args:
+        key: None: every snippet runs. A key: latest wins — a snippet with the same key
+            still waiting to be sent to this client is dropped for this one (the snippet
+            must then be a state update whose newest value is all that matters).
+    """
+    msg = _messages.RunJavascriptMessage(source=source)
+    if key is not None:
+        # viser culls a waiting message whose redundancy key a newer one shares; its
+        # RunJavascriptMessage draws a fresh key per call (never culled), so the instance
+        # gets a fixed one (an instance attribute shadows the method; the wire format
+        # holds only the dataclass fields, so the page sees a plain RunJavascriptMessage).
+        fixed = f"RunJavascriptMessage_vasim_{key}"
+        object.__setattr__(msg, "redundancy_key", lambda: fixed)
+    client._websock_connection.queue_message(msg)  # private API, viser 1.1.1
 
 
 class AudioStream:
@@ -177,7 +194,7 @@ class AudioStream:
     def _send(self, client: viser.ClientHandle, params: dict[str, Any]) -> None:
         try:
             run_js(client, f"window.__vasimAudioSet && window.__vasimAudioSet("
-                           f"{json.dumps(params)});")
+                           f"{json.dumps(params)});", key="audio_params")
             self.sent += 1
         except Exception:  # a closing connection: the next update skips it
             log.debug("audio update to client %s failed", client.client_id, exc_info=True)

@@ -22,8 +22,21 @@ backlogs of thousands of messages, a displayed clock 15-55 s late. Here:
   latest-wins per node per client, and each page's update rate adapts to what it can
   draw. A page that never acknowledges (no script: a bare websocket client) is not
   paced; the script repeats its acknowledgement every :data:`HEARTBEAT_S`, and a page
-  that applies no new frame for :data:`STALE_S` while its stream waits is unpaced until
-  it acknowledges again (the stall is counted).
+  that applies no new frame for :data:`STALE_S` while its stream waits gets one window
+  every :data:`TRICKLE_S` until it applies a frame again (the stall is counted): a broken
+  page script does not freeze its stream, and a page that is merely very slow is not
+  flooded (**decision**, issue #26.2: it used to be unpaced, and a throttled page on a
+  loaded host that stalled once was then sent 40 windows a second: 90 frames, 926
+  messages waiting in its queue).
+
+* **Less per frame** (:class:`ScenePacer`): what the trainee does not steer (the organs'
+  surfaces, breathing and pushed by the tool, and the task's points riding on them: 29 of
+  the ~38 messages a frame of the default abdomen carried) is sent at :data:`SCENE_HZ`,
+  and less often still when a page of that server applies few frames per second (at most
+  one of every :data:`FRAMES_PER_SCENE` frames the slowest page applies carries them, never
+  below :data:`MIN_SCENE_HZ`); the instrument, its tip, the fixtures' arrows and the MS
+  ghost, which follow the trainee's hand, go with every frame. Measured with
+  ``bench/viewer.py`` (per-frame messages by node, before and after).
 
 The figures per page (update rate, frames in flight, queued messages, displayed-clock lag)
 feed the "running behind" notices and the trial record (``ViewerApp.flow_stats``).
@@ -48,14 +61,29 @@ MAX_AHEAD = 2
 """Windows of updates a page may have in flight (sent, its frame mark not yet applied)
 before its stream waits."""
 STALE_S = 30.0
-"""A page that applies no new frame this long while its stream waits is no longer paced
-(a broken page script must not freeze its stream; pacing resumes with its next
-acknowledgement)."""
+"""A page that applies no new frame this long while its stream waits gets one window per
+:data:`TRICKLE_S` (a broken page script must not freeze its stream; the credit returns
+with its next applied frame)."""
+TRICKLE_S = 2.0
+"""A stalled page's stream sends one window this often."""
 HEARTBEAT_S = 1.0
 """The page repeats its acknowledgement this often even when nothing new was applied."""
 RATE_WINDOW_S = 3.0
 """Window of the rates (page updates per second, realtime factor)."""
 MARK_NODE = "/vasim/frame"
+SCENE_HZ = 10.0
+"""Rate of the scene the trainee does not steer (organs, the task's points on them) [Hz].
+**Decision**: breathing (0.2-0.3 Hz) and tissue pushed at hand speed read as continuous at
+10 Hz (a film's motion-picture threshold is ~10-12 frames/s); the hand-steered nodes keep
+the view rate (40 Hz), so control-to-photon latency is not bounded by this rate."""
+MIN_SCENE_HZ = 0.2
+"""The unsteered scene is never sent less often than this, however slow the page [Hz]
+(**decision**: at least every 5 s; with a floor of 1 Hz, a page drawing a frame every 3-10 s
+on a loaded host got the organs with every frame it drew: 54 messages per frame applied,
+against 65 without pacing, ``bench/viewer.py``)."""
+FRAMES_PER_SCENE = 3
+"""On a slow page at most one of this many applied frames carries the unsteered scene (the
+frames between carry only what the hand steers: a few small messages)."""
 
 ACK_JS = r"""
 (function () {
@@ -115,7 +143,7 @@ class PageFlow:
     """One page's stream: marks sent and applied, its acknowledgements, its stalls."""
 
     def __init__(self) -> None:
-        self.in_flight: collections.deque[int] = collections.deque()
+        self.in_flight: collections.deque[int] = collections.deque(maxlen=256)
         """The newest mark at the sending of each window not yet applied by the page."""
         self.applied_seq = -1
         self.queued = 0
@@ -131,6 +159,11 @@ class PageFlow:
         """Acknowledgements of new frames since the page connected."""
         self.event: asyncio.Event | None = None
         self.max_ahead = 0
+        self.stalled = False
+        """The page applied no new frame for :data:`STALE_S` (its stream trickles)."""
+        self.last_trickle = 0.0
+        self.first_ack = 0.0
+        """When the page first acknowledged (monotonic s; 0: never)."""
 
     def ahead(self) -> int:
         """Windows sent whose frame mark the page has not applied yet."""
@@ -138,16 +171,22 @@ class PageFlow:
 
     async def credit(self) -> None:
         """Waits (on the server's loop) while the page has :data:`MAX_AHEAD` windows in
-        flight; a page silent for :data:`STALE_S` is unpaced (counted as a stall)."""
+        flight; a page that applied nothing for :data:`STALE_S` gets one window per
+        :data:`TRICKLE_S` (counted as a stall)."""
         if self.event is None:
             self.event = asyncio.Event()
         while self.acking and self.ahead() >= MAX_AHEAD:
-            left = self.last_progress + STALE_S - time.monotonic()
-            if left <= 0:  # the page went silent: unpaced until it speaks again
-                self.stalls += 1
-                self.acking = False
-                self.in_flight.clear()
-                break
+            now = time.monotonic()
+            if now - self.last_progress >= STALE_S:  # stalled: trickle, never flood
+                if not self.stalled:
+                    self.stalled = True
+                    self.stalls += 1
+                left = self.last_trickle + TRICKLE_S - now
+                if left <= 0:
+                    self.last_trickle = now
+                    return
+            else:
+                left = self.last_progress + STALE_S - now
             self.event.clear()
             try:
                 await asyncio.wait_for(self.event.wait(), timeout=left)
@@ -260,10 +299,13 @@ def acknowledge(port: int, client_id: int, text: str) -> bool:
     now = time.monotonic()
     if not flow.acking:
         flow.last_progress = now
+    if not flow.first_ack:
+        flow.first_ack = now
     flow.acking = True
     flow.last_ack = now
     if seq > flow.applied_seq:
         flow.last_progress = now
+        flow.stalled = False
         flow.applied_seq = seq
         flow.acks.append(time.monotonic())
         flow.total_acks += 1
@@ -329,6 +371,64 @@ class RateMeter:
         return (t1 - t0) / (w1 - w0) if w1 - w0 >= 1.0 else None
 
 
+class ScenePacer:
+    """When a server's frame next carries the unsteered scene (module doc, "Less per frame").
+
+    Example:
+        >>> p = ScenePacer()
+        >>> p.rate(None), p.rate(60.0), p.rate(6.0), p.rate(0.3)
+        (10.0, 10.0, 2.0, 0.2)
+        >>> p.due(0.0, None), p.due(0.05, None), p.due(0.1, None)
+        (True, False, True)
+    """
+
+    def __init__(self, base_hz: float = SCENE_HZ, min_hz: float = MIN_SCENE_HZ,
+                 frames_per_scene: int = FRAMES_PER_SCENE):
+        if not (0 < min_hz <= base_hz) or frames_per_scene < 1:
+            raise ValueError(f"need 0 < min_hz <= base_hz and frames_per_scene >= 1, got "
+                             f"{(min_hz, base_hz, frames_per_scene)!r}")
+        self.base_hz, self.min_hz = float(base_hz), float(min_hz)
+        self.frames_per_scene = int(frames_per_scene)
+        self._last = -float("inf")
+        self.sent = 0
+        """Frames that carried the unsteered scene."""
+
+    def rate(self, page_hz: float | None) -> float:
+        """The unsteered scene's rate [Hz] for a server whose slowest page applies
+        ``page_hz`` frames per second (None or NaN: no page that acknowledges)."""
+        if page_hz is None or not page_hz == page_hz:
+            return self.base_hz
+        return min(self.base_hz, max(self.min_hz, float(page_hz) / self.frames_per_scene))
+
+    def due(self, now: float, page_hz: float | None) -> bool:
+        """True (and counted) when the frame at ``now`` [s] carries the unsteered scene."""
+        # 1 ms of slack: a view thread at exactly the scene's rate is not skipped by jitter.
+        if now - self._last >= 1.0 / self.rate(page_hz) - 1e-3:
+            self._last = now
+            self.sent += 1
+            return True
+        return False
+
+    def reset(self) -> None:
+        """The next frame carries the unsteered scene (a new trial)."""
+        self._last = -float("inf")
+
+
+def slowest_page_hz(acks: PageAcks) -> float | None:
+    """Update rate of the slowest acknowledging page of ``acks``' server [1/s] (None: no
+    page acknowledges). A page acknowledging for less than :data:`RATE_WINDOW_S` is rated
+    over the time it has (not as if it had been silent before)."""
+    now = time.monotonic()
+    rates = []
+    for p in acks.pages().values():
+        if not p.acking:
+            continue
+        since = p.first_ack if p.first_ack else now
+        span = min(RATE_WINDOW_S, max(now - since, 0.5))
+        rates.append(p.update_rate(now) * RATE_WINDOW_S / span)
+    return min(rates) if rates else None
+
+
 def behind_notice(factor: float | None, speed: float, page: PageFlow | None,
                   view_hz: float, lag_s: float | None) -> str:
     """The "running behind" line for one page ('' when all keeps up).
@@ -378,18 +478,24 @@ def install() -> None:
 
 __all__ = [
     "ACK_JS",
+    "FRAMES_PER_SCENE",
     "HEARTBEAT_S",
     "MARK_NODE",
     "MAX_AHEAD",
+    "MIN_SCENE_HZ",
+    "SCENE_HZ",
     "STALE_S",
+    "TRICKLE_S",
     "FrameMarks",
     "PageAcks",
     "PageFlow",
     "RateMeter",
+    "ScenePacer",
     "acknowledge",
     "behind_notice",
     "install",
     "paced_producer",
     "page_stats",
     "registry",
+    "slowest_page_hz",
 ]

@@ -158,11 +158,19 @@ class SceneViews:
             self.trajectory.move(snap.targets, snap.target_normals
                                  if frame.n_points == 1 else None)
 
-    def update(self, info: TrialInfo, frame: TrialFrame, *, new_trial: bool) -> None:
-        """Every view from one frame (call inside the server's ``atomic()``)."""
+    def update(self, info: TrialInfo, frame: TrialFrame, *, new_trial: bool,
+               scene: bool = True) -> None:
+        """Every view from one frame (call inside the server's ``atomic()``).
+
+        Args:
+            scene: False: this frame leaves out what the trainee does not steer (the organs
+                and the points riding on them; ``flow.ScenePacer`` decides, issue #26.2);
+                a new trial always carries it.
+        """
         if new_trial:
             self.show_trial(info)
-        self.show_physics(info, frame)
+        if scene or new_trial:
+            self.show_physics(info, frame)
         out = frame.outputs
         self.tool.update(frame.tcp)
         self.trajectory.update(frame.goal_index)
