@@ -139,9 +139,9 @@ def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
 
 def _power(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
     code = main(["study", "power", *argv, "--out", str(out), "--no-progress"])
-    text = capsys.readouterr().out
-    assert code == 0, text
-    return text
+    captured = capsys.readouterr()
+    assert code == 0, (captured.out, captured.err[-2000:])
+    return captured.out
 
 
 def test_addresses_of_a_running_cluster_give_the_local_result(
