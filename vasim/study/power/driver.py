@@ -107,8 +107,11 @@ def _task(protocol: Protocol, design: PowerDesign, n: int, k: int,
     return cohort_tests(protocol, design, n, k, keep_dir), _vasim_version()
 
 
-ADDRESS_CHECK_S = 3.0
-"""Seconds the address check waits for the name lookup, the connection and the answer."""
+ADDRESS_CHECK_S = 15.0
+"""Seconds the address check waits for the name lookup, the connection and the answer. A
+refused or unresolvable address fails at once; this bounds a silent one. 3 s was too short
+for a Ray Client server on a loaded machine (a ray:// run of the cluster test failed at load
+11 while the same cluster's GCS address worked)."""
 JOIN_TIMEOUT_S = 120.0
 """Seconds ``ray.init`` may take to join a cluster (a local Ray start is not limited)."""
 _HTTP2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
