@@ -180,7 +180,7 @@ def check_effects_labels(path: Path, protocol: str, conditions: tuple[str, ...])
 
     **Decision** (issue #30 item 6): as a protocol's own ``[power.effects]`` labels are
     (``vasim.study.protocol.power``): a misspelt label (``[f]`` for ``[ff]``) was silently
-    unused, and the run then reported power for the calibration's effects as if the file's.
+    unused, and the run then reported power for the scenario's effects as if the file's.
     A file shared between protocols must therefore hold only labels of the protocol it is
     given with.
 
