@@ -23,7 +23,10 @@ MARKS: dict[str, tuple[str, ...]] = {
 """Marker -> the files (``path.py``), folders (``path/``) or tests (``path.py::name``) it
 applies to, relative to the repository root."""
 
-SLOW: tuple[str, ...] = ()
+SLOW: tuple[str, ...] = (
+    "tests/study/test_null_full_engine.py",   # 380 full-engine trials of 4 s (issue #25)
+    "tests/study/test_seed_chapter6.py",      # the outcome-engine comparison, a subprocess
+)
 """Places marked ``slow``: longer than ~10 s on an idle 2-core machine (``--durations``; the
 measured figure beside each)."""
 
