@@ -9,7 +9,12 @@ shows
 
 Size: 10 subjects (one full set of the 10 Williams sequences, so block position is
 balanced: practice cannot favour a fixture), trials cut at 4 s simulated (the knob
-`max_trial_time`; every measure is still computed over what was run). The full-size run
+`max_trial_time`; every measure is still computed over what was run) at the power
+command's coarse 2 ms control step, in memory (``vasim.study.power.cohort
+.simulate_in_memory``: the very trial configurations `vasim study simulate` runs, the
+physics and fixtures simulated, only the 1 kHz samples not stored); the answers are drawn
+as a stored simulated session's (``_record_post``: from the subject's own measured
+benefits). The full-size run
 (`vasim study simulate --protocol vf_learning_curve --subjects 10 --effect-scale 0`, full
 trials) is recorded in docs/simulation.md.
 
@@ -29,16 +34,23 @@ false-failure rate of about 1 % per check (not tuned to pass):
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from scipy import stats
 
 from vasim.operator.scenario import load_scenario
-from vasim.study.cohort import simulate_cohort
+from vasim.study.cohort import (
+    _stream,
+    cohort_subjects,
+    measured_benefits,
+    scenario_record,
+    simulated_answers,
+)
+from vasim.study.power.cohort import simulate_in_memory, study_data
+from vasim.study.power.design import COARSE_DT
 from vasim.study.protocol import load_protocol
 from vasim.study.report.analysis import analyse_vf
-from vasim.study.report.data import load_study
 from vasim.study.report.primary import probe_model_tests
 
 N = 10
@@ -59,15 +71,28 @@ def binomial_threshold(n: int, k_levels: int, alpha: float) -> int:
     return n + 1
 
 
-def test_a_null_cohort_of_the_full_engine_shows_no_fixture_effect(tmp_path: Path) -> None:
+def test_a_null_cohort_of_the_full_engine_shows_no_fixture_effect() -> None:
     protocol = load_protocol("vf_learning_curve")
-    db = tmp_path / "null.sqlite"
-    rep = simulate_cohort(db, protocol, n_subjects=N, n_surgeons=7, seed=11, workers=0,
-                          progress=False, max_trial_time=4.0,
-                          scenario=load_scenario("seed_plausible"), effect_scale=0.0)
-    assert rep.sessions_completed == N and rep.trials_run == N * 38
-    data = load_study(db, protocol.name)
-    post = data.answers[data.answers["questionnaire"] == "post"]
+    sc = load_scenario("seed_plausible")
+    subjects = cohort_subjects(N, 7, 11, latin_square=True, scenario=sc)
+    trials = simulate_in_memory(protocol, subjects, dt=COARSE_DT, max_trial_time=4.0,
+                                extra={"scenario": scenario_record(sc, 0.0)})
+    assert trials.n_trials == N * 38
+    data = study_data(protocol, trials)
+    # each subject's post-questionnaire as `vasim study simulate` draws it
+    # (vasim.study.cohort._record_post): from its own measured benefits
+    errors = trials.metrics["path_dev_mean_mm"].to_dict()
+    rows = []
+    for j, subj in enumerate(subjects, start=1):
+        sched = trials.schedule[trials.schedule["session_id"] == j]
+        b = measured_benefits(sched, errors)
+        ans = simulated_answers(protocol, "post", _stream(subj.session_seed, 8), measured=b,
+                                model=sc.questionnaire)
+        rows.append({"session_id": j, "item": "best_vf", "key": "", "value": ans["best_vf"],
+                     "value_num": math.nan})
+        rows += [{"session_id": j, "item": "rating", "key": c, "value": "",
+                  "value_num": float(v)} for c, v in ans["rating"].items()]
+    post = pd.DataFrame(rows)
 
     # 1. chosen best
     best = post[post["item"] == "best_vf"]
@@ -93,3 +118,7 @@ def test_a_null_cohort_of_the_full_engine_shows_no_fixture_effect(tmp_path: Path
     row = tests.loc["path_deviation"]
     assert row["df1"] == len(FIXTURES) - 1 and math.isfinite(row["p_unc"])
     assert row["p_unc"] >= ALPHA, row.to_dict()
+    print(f"null cohort (full engine, N={N}): best {counts.to_dict()} (fails at {k}); "
+          f"rating means {np.round(y.mean(axis=0), 2).tolist()}, range/SE "
+          f"{spread / se if se else 0:.2f} (q99 {q:.2f}); probe model "
+          f"F({row['df1']:g},{row['df2']:g}) = {row['F']:.2f}, p = {row['p_unc']:.3f}")
