@@ -15,10 +15,10 @@ Engines: ``--engine outcome`` (default; the trial-level outcome engine in memory
 complete ``--db`` is reused). ``--smoke``: 6 subjects (the bench's smoke mode).
 
 Usage: ``python -m bench.calibration [--scenario NAME|FILE] [--effect-scale X]
-[--engine outcome|scripted] [--subjects N] [--seed S] [--db PATH] [--smoke]``.
+[--engine outcome|scripted] [--subjects N] [--seed S] [--db PATH] [--smoke] [--markdown]``
+(``--markdown``: the table of docs/seed-chapter6.md).
 
-Last run (2026-11-27, outcome engine, seed_plausible, 46 subjects / 31 surgeons, seed 7):
-see docs/simulation.md ("Seed comparison").
+The page docs/seed-chapter6.md holds the last runs and says which rows are inputs.
 """
 
 from __future__ import annotations
@@ -127,14 +127,17 @@ def rows(sc: Scenario, scale: float, engine: str, trials: pd.DataFrame,
         got = ("-" if r.get("ratio") is None else
                f"{r['ratio']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]")
         note = " (INPUT: the outcome engine realises the assumed ratio)" if by_input else (
-            " (mechanism + assumption)" if sc.mechanism(scale) > 0 else "")
+            " (INPUT x mechanism: the assumed factor on the operator's noise, times the "
+            "simulated fixture's own effect)" if sc.mechanism(scale) > 0 else
+            " (INPUT: the assumed factor on the operator's noise)")
         src = sc.source(f"fixtures.{c}.accuracy")
         out.append((f"{LABEL[c]} path-deviation ratio",
                     SEED_ORDER if c == "ff" else "not reported",
                     f"{eff[c].accuracy:g} ({src[:40]}...)", got + note))
     dv = "path_dev_mean_mm"
     out.append(("fixture effect (path deviation)", SEED_F["fixture"],
-                "follows from the ratios above", rm_anova(trials, dv, "fixture")))
+                "follows from the INPUT ratios above (an output of the inputs, not evidence)",
+                rm_anova(trials, dv, "fixture")))
     g = sc.groups
     out.append(("trial (learning) effect (path deviation)", SEED_F["trial"],
                 f"rates {g['surgeon'].learning_rate_mean:g}/{g['resident'].learning_rate_mean:g}, "
@@ -143,7 +146,8 @@ def rows(sc: Scenario, scale: float, engine: str, trials: pd.DataFrame,
     if "mean_latency" in trials.columns:
         out.append(("fixture effect (latency)", "F(5,98131) = 44.099", "speed factors "
                     + ", ".join(f"{LABEL[c]} {eff[c].speed:g}" for c in FIXTURES),
-                    rm_anova(trials, "mean_latency", "fixture")))
+                    rm_anova(trials, "mean_latency", "fixture")
+                    + " (follows from the INPUT speed factors and the mechanisms)"))
     else:
         out.append(("fixture effect (latency)", "F(5,98131) = 44.099", "-",
                     "not simulated by the outcome engine"))
@@ -161,6 +165,28 @@ def rows(sc: Scenario, scale: float, engine: str, trials: pd.DataFrame,
     return out
 
 
+MARKDOWN_HEADER = ("quantity", "seed (published result)", "assumed (scenario input)",
+                   "out (synthetic cohort)")
+"""The columns of the Markdown table: a row label and the three columns of issue #25."""
+
+
+def markdown_table(table: Sequence[tuple[str, str, str, str]]) -> str:
+    """The rows as a Markdown table (``|`` in a cell escaped).
+
+    Example:
+        >>> print(markdown_table([("q", "1", "2", "3 (INPUT)")]))
+        | quantity | seed (published result) | assumed (scenario input) | out (synthetic cohort) |
+        |---|---|---|---|
+        | q | 1 | 2 | 3 (INPUT) |
+    """
+    def cell(x: str) -> str:
+        return x.replace("|", "\\|").replace("\n", " ")
+
+    lines = ["| " + " | ".join(MARKDOWN_HEADER) + " |", "|---|---|---|---|"]
+    lines += ["| " + " | ".join(cell(c) for c in row) + " |" for row in table]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="seed_plausible")
@@ -172,6 +198,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--db", type=Path, default=None,
                     help="scripted engine: the cohort database (simulated into it)")
     ap.add_argument("--smoke", action="store_true", help="6 subjects (smoke mode)")
+    ap.add_argument("--markdown", action="store_true",
+                    help="print the table as Markdown: | quantity | seed | assumed | out | "
+                         "(docs/seed-chapter6.md)")
     args = ap.parse_args(sys.argv[1:] if argv is None else argv)
     n = 6 if args.smoke else args.subjects
     sc = load_scenario(args.scenario)
@@ -188,6 +217,9 @@ def main(argv: list[str] | None = None) -> None:
           f"{args.engine} engine, {trials['subject'].nunique()} subjects, seed {args.seed}; "
           "SYNTHETIC (not evidence about people)")
     table = rows(sc, args.effect_scale, args.engine, trials, answers)
+    if args.markdown:
+        print(markdown_table(table))
+        return
     w = max(len(r[0]) for r in table)
     for q_, seed_, assumed, out in table:
         print(f"{q_:<{w}} | seed: {seed_}\n{'':<{w}} | assumed: {assumed}\n"

@@ -37,6 +37,8 @@ SLOW: tuple[str, ...] = (
     "tests/study/test_fading_schemas_e2e.py",             # 14 s + 11 s: two simulated protocols
     "tests/mrcp/test_kernel_edges.py::test_cli_json_is_strict",  # 11 s
     "tests/study/test_export_atomic.py::test_a_sigkilled_re_export_leaves_a_complete_set",  # 11 s
+    "tests/study/test_null_full_engine.py",   # 380 full-engine trials of 4 s (issue #25)
+    "tests/study/test_seed_chapter6.py",      # the outcome-engine comparison, a subprocess
 )
 """Places marked ``slow``: longer than ~10 s on an idle 2-core machine (``--durations``; the
 measured figure beside each)."""

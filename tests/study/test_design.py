@@ -6,6 +6,7 @@ schedule is built."""
 from __future__ import annotations
 
 import itertools
+import math
 import tomllib
 from collections import Counter
 
@@ -52,14 +53,19 @@ def test_five_conditions_give_ten_sequences() -> None:
 @given(seq=st.integers(0, 10**6), m=st.integers(1, 7), n_probes=st.integers(1, 12))
 def test_probe_rotation_balances_probe_number_and_variant(seq: int, m: int,
                                                           n_probes: int) -> None:
-    """Over any m consecutive sequence numbers, every probe number runs every variant once;
-    within a session, m consecutive probes run m different variants."""
+    """Over any m consecutive sequence numbers within a cycle of L = lcm(10, m) subjects,
+    every probe number runs every variant once; within a session, m consecutive probes run
+    m different variants; the next cycle's offset is one variant further."""
     d = tomllib.loads((studies_dir() / "vf_learning_curve.toml").read_text())
     d["probe"]["variants"] = list(range(m))
     p = protocol_from_dict(d)
+    cycle = math.lcm(10, m)
+    seq = seq - seq % cycle + min(seq % cycle, cycle - m)  # a window inside one cycle
     for k in range(1, n_probes + 1):
         got = Counter(probe_variant_of(p, seq + j, k) for j in range(m))
         assert got == dict.fromkeys(range(m), 1)
+        start = seq - seq % cycle
+        assert probe_variant_of(p, start + cycle, k) == (probe_variant_of(p, start, k) + 1) % m
     run = [probe_variant_of(p, seq, k) for k in range(1, n_probes + 1)]
     for w in range(max(0, n_probes - m + 1)):
         assert len(set(run[w:w + m])) == m

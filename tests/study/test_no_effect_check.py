@@ -3,13 +3,10 @@
 more than half the subjects, mean ratings within about 1 point of each other, no fixture
 effect on path deviation.
 
-Two engines: the outcome engine (fast, every run) and the scripted 1 kHz engine through
-``vasim study simulate`` + ``vasim report`` (slow). **Decision** (slow test's protocol):
-the shipped ``vf_learning_curve`` still runs every VF-free trial on variant 0 and every
-assisted trial on variants 1-6, so the variant (not the fixture) moves the path deviation
-(issue #25 item 1, the design helper's part); the slow test runs the same protocol with
-every trial on variant 0 until the counterbalanced design lands, then it should name
-``vf_learning_curve``.
+Two engines: the outcome engine here (fast, every run); the full 1 kHz engine in
+``tests/study/test_null_full_engine.py`` (slow; the shipped ``vf_learning_curve`` with its
+counterbalanced design, 10 subjects = one set of Williams sequences, 4 s trials, thresholds
+from the null distributions at that size).
 
 Rating bound: a subject's rating has sd ``rating_sd`` (1.5 points) plus the spread of
 ``rating_per_benefit x b`` (b the noise in its measured benefit); the mean of 10 subjects

@@ -63,7 +63,7 @@ def test_the_shipped_proficiency_protocol() -> None:
     g = gated.gate
     assert (g.metrics, g.k, g.consecutive, g.max_trials, g.expert_group) == (
         ("duration", "path_dev_mean_mm"), 1.0, 2, 10, "surgeon")
-    assert p.n_trials == 2 + 4 + 3
+    assert p.n_trials == 2 + 4 + 4   # practice: one trial per variant 1..4 (issue #25)
 
 
 @pytest.mark.parametrize(("name", "path", "value", "field", "shown"), [
@@ -74,9 +74,10 @@ def test_the_shipped_proficiency_protocol() -> None:
     ("vf_retention", ["blocks", 3, "probe"], False, "blocks[3].probe", "False"),
     ("vf_retention", ["blocks", 3, "counterbalance"], True, "blocks[3].counterbalance",
      "True"),
-    ("vf_retention", ["blocks", 3, "variants"], [5], "blocks[3].variants[0]", "5"),
+    # under the probe rotation (issue #25) a retention probe block lists no variants
+    ("vf_retention", ["blocks", 3, "variants"], [5], "blocks[3].variants", "rotation"),
     ("vf_retention", ["blocks", 4, "variants"], [4, 5], "blocks[4].variants[0]", "4"),
-    ("vf_retention", ["blocks", 4, "variants"], [0], "blocks[4].variants[0]", "0"),
+    ("vf_retention", ["blocks", 4, "variants"], [1], "blocks[4].variants[0]", "1"),
     ("vf_proficiency", ["blocks", 2, "gate", "k"], -1.0, "blocks[2].gate.k", "-1.0"),
     ("vf_proficiency", ["blocks", 2, "gate", "metrics"], ["speed"],
      "blocks[2].gate.metrics[0]", "'speed'"),
@@ -105,6 +106,7 @@ def test_bad_phase_and_gate_fields_are_named(name, path, value, field, shown) ->
 
 def test_a_transfer_variant_run_as_the_probe_variant_is_trained() -> None:
     d = raw("vf_retention")
+    del d["probe"]["variants"]         # no rotation: one probe variant
     d["probe"]["variant"] = 5          # the appended probes now run variant 5
     d["blocks"][0]["variants"] = [5]
     d["blocks"][3]["variants"] = [5]
@@ -131,13 +133,14 @@ def test_gate_cap_counts_against_the_session_limit() -> None:
     second = copy.deepcopy(d["blocks"][2])
     second["name"] = "practice2"
     d["blocks"].append(second)
-    # scheduled: 1000 + 7000 + 2 x 4 = 8008 trials; at the caps 8000 + 2 x 1001 = 10002
+    # scheduled: 1000 + 7000 + 2 x 5 = 8010 trials (practice: 4 variants, issue #25); at
+    # the caps 8000 + 2 x 1001 = 10002
     with pytest.raises(ConfigError, match="every gate at its cap") as e:
         protocol_from_dict(d, source="p.toml")
     assert "10002" in str(e.value) or "10,002" in str(e.value)
     d["blocks"][2]["probes_after"] = 0
     d["blocks"][3]["probes_after"] = 0
-    assert protocol_from_dict(d, source="p.toml").n_trials == 8006   # 10000 at the caps
+    assert protocol_from_dict(d, source="p.toml").n_trials == 8008   # 10000 at the caps
 
 
 @settings(max_examples=30, deadline=None)
@@ -167,7 +170,7 @@ def test_extending_a_gated_block_keeps_the_schedule_consistent(seed: int, n_ext:
 def test_extension_stops_at_the_cap_and_needs_a_gate() -> None:
     p = load_protocol("vf_proficiency")
     s = generate_schedule(p, 0)
-    for _ in range(7):
+    for _ in range(6):   # 4 scheduled practice trials (one per variant) + 6 = the cap
         s = extend_gated_block(p, s, "practice")
     assert len(s) == 2 + 4 + 10
     with pytest.raises(ConfigError, match="cap of 10"):

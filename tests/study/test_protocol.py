@@ -85,7 +85,8 @@ def test_vf_learning_curve_schedule(seed: int) -> None:
     # 1..8 in session order
     assert len(probes) == 8
     assert all(t.condition == "none" and t.schema == "none" for t in probes)
-    assert [t.variant for t in probes] == [1 + (seed + k) % 6 for k in range(8)]
+    offset = seed + seed // 30   # one variant further every lcm(10, 6) = 30 subjects
+    assert [t.variant for t in probes] == [1 + (offset + k) % 6 for k in range(8)]
     assert [t.probe_index for t in probes] == list(range(1, 9))
     assert all(t.probe_index is None for t in s if not t.probe)
     # baseline: the first three trials

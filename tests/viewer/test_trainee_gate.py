@@ -151,6 +151,6 @@ def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None
         assert rows["path_dev_mean_mm"].value == pytest.approx(
             recs[tid]["values"]["path_dev_mean_mm"])
         assert card.gate.passed == recs[tid]["passed"]
-        assert bench["duration"]["n"] == 6          # 2 surgeons x 3 practice trials
+        assert bench["duration"]["n"] == 8          # 2 surgeons x 4 practice trials (1 per variant)
     finally:
         c.close()

@@ -1,4 +1,5 @@
-"""``vasim study power``: power of the VF study's primary tests against the subject count,
+"""``vasim study power``: power of the VF study's tests against the subject count (the
+PRIMARY post-block probe model and the seed's RM-ANOVAs),
 from Monte Carlo cohorts of a declared scenario's operator on Ray (issue #18 item 5;
 :mod:`vasim.study.power`). Registered by :mod:`vasim.cli.study` under ``vasim study``."""
 
@@ -19,9 +20,12 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "power", help="power of the primary tests against N, from simulated cohorts (Ray)",
         description=(
             "Simulate --cohorts cohorts of the scripted operator of --scenario at each subject "
-            "count of --subjects, analyse each with the report's primary RM-ANOVAs (fixture "
-            "effect and practice effect on cumulative error, latency and path deviation) "
-            "and print the power of each test (share of cohorts with p < alpha) with its "
+            "count of --subjects, analyse each as the report does -- the PRIMARY analysis, "
+            "the post-block probe model (nested F test of the fixture just practised, with "
+            "block position and variant; docs/study-design.md), and the seed's RM-ANOVAs "
+            "(fixture effect and practice effect), each on path deviation, latency and eq. "
+            "6.5's e -- and print the power of each test (share of cohorts with p < alpha) "
+            "with its "
             "Monte Carlo standard error sqrt(p(1-p)/cohorts); --out gets power.csv, "
             "power_cohorts.csv and power.png. Runs on a local Ray (127.0.0.1), the cluster "
             "--address names (both need the cluster extra) or a local process pool; no "
@@ -48,8 +52,9 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     r.add_argument("--alpha", type=bounded_float(ALPHA), default=0.05,
                    help="significance level (default 0.05)")
     r.add_argument("--p", choices=["gg", "uncorrected"], default="gg",
-                   help="p-value a test rejects on: Greenhouse-Geisser (default) or "
-                        "uncorrected")
+                   help="p-value the seed's RM-ANOVAs reject on: Greenhouse-Geisser "
+                        "(default) or uncorrected (the primary probe model's F test has "
+                        "one p, used either way)")
     r.add_argument("--coarse", action="store_true",
                    help="2 ms control step instead of 1 ms, ~1.5x faster: dry runs and the "
                         "practice effect only (the per-trial means stay within 10 %%, but the "
@@ -153,7 +158,9 @@ def _cmd_power(args: argparse.Namespace) -> int:
                         keep_dir=args.keep_cohorts, progress=not args.no_progress,
                         backend=args.backend)
     step = "coarse 2 ms" if args.coarse else "full 1 ms"
-    print(f"power of {protocol.name}'s primary tests (synthetic: scripted operator of "
+    print(f"power of {protocol.name}'s tests: the PRIMARY post-block probe model (fixture "
+          "practised -> next VF-free probe) and the seed's RM-ANOVAs, secondary")
+    print(f"(synthetic: scripted operator of "
           f"scenario {scenario.name} ({scenario.sha256[:12]}){sources}, effect scale "
           f"{scale:g}, {step} step, "
           f"alpha {args.alpha:g}, {'Greenhouse-Geisser' if args.p == 'gg' else 'uncorrected'}"
@@ -184,7 +191,7 @@ def check_effects_labels(path: Path, protocol: str, conditions: tuple[str, ...])
 
     **Decision** (issue #30 item 6): as a protocol's own ``[power.effects]`` labels are
     (``vasim.study.protocol.power``): a misspelt label (``[f]`` for ``[ff]``) was silently
-    unused, and the run then reported power for the calibration's effects as if the file's.
+    unused, and the run then reported power for the scenario's effects as if the file's.
     A file shared between protocols must therefore hold only labels of the protocol it is
     given with.
 

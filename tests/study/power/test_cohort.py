@@ -55,8 +55,18 @@ def test_in_memory_cohort_equals_the_stored_one(tiny_protocol: Protocol,
     build_report(db, tmp_path / "report", progress=False)
     summary = json.loads((tmp_path / "report" / "summary.json").read_text())
     key = {"eq65": "eq65", "latency": "latency", "path_deviation": "path_deviation"}
+    assert set(mem.tests["factor"]) == {"practised", "fixture", "trial"}
     for r in mem.tests.itertuples():
-        t = summary["measures"][key[r.dv]]["fixture" if r.factor == "fixture" else "practice"]
+        m = summary["measures"][key[r.dv]]
+        if r.factor == "practised":   # the PRIMARY probe model's fixture F test
+            x = (m["mixed_model"] or {}).get("fixture_test")
+            if np.isnan(r.F):
+                assert x is None or x["F"] is None
+            else:
+                assert np.isclose(x["F"], r.F, rtol=1e-12) and np.isclose(x["p"], r.p_unc)
+                assert r.p_gg == r.p_unc
+            continue
+        t = m["fixture" if r.factor == "fixture" else "practice"]
         if np.isnan(r.F):
             assert t["F"] is None
         else:

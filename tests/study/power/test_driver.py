@@ -58,16 +58,19 @@ def test_power_end_to_end_on_a_local_ray(tiny_protocol_path: Path, tmp_path: Pat
     power = pd.read_csv(out / "power.csv")
     cohorts = pd.read_csv(out / "power_cohorts.csv")
     assert list(power.columns) == list(POWER_COLUMNS)
-    assert len(power) == 6 and set(power["n_subjects"]) == {4}
+    # 3 outcomes x (PRIMARY probe model, seed's fixture RM-ANOVA, seed's practice RM-ANOVA)
+    assert len(power) == 9 and set(power["n_subjects"]) == {4}
     assert set(power["cohorts"]) == {2}
-    assert len(cohorts) == 2 * 6 and set(cohorts["cohort"]) == {0, 1}
+    assert len(cohorts) == 2 * 9 and set(cohorts["cohort"]) == {0, 1}
     assert (out / "power.png").stat().st_size > 10_000
     for r in power.itertuples():
         got = cohorts[(cohorts["dv"] == r.dv) & (cohorts["factor"] == r.factor)]
         rej = int((got["p_gg"] < 0.05).sum())
         assert r.rejections == rej and math.isclose(r.power, rej / 2)
         assert math.isclose(r.mc_se, math.sqrt(r.power * (1 - r.power) / 2))
-    assert "fixture effect on path deviation" in text and "cohorts/s" in text
+    assert "seed RM-ANOVA: fixture effect on path deviation" in text and "cohorts/s" in text
+    assert "PRIMARY probe model: fixture practised, path deviation" in text
+    assert "the PRIMARY post-block probe model" in text
     assert "N=4" in text and "±" in text
     assert "warning: coarse 2 ms step" in text and "underestimated" in text
 

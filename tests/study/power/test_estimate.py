@@ -55,20 +55,23 @@ def test_power_table_counts_rejections_per_n() -> None:
     r4, r8 = t.iloc[0], t.iloc[1]
     assert (r4.rejections, r4.not_computed, r4.cohorts) == (2, 1, 5)   # 0.05 is not < 0.05
     assert r4.power == 0.4 and math.isclose(r4.mc_se, math.sqrt(0.4 * 0.6 / 5))
-    assert r8.power == 0.8 and r4.test == "fixture effect on latency"
+    assert r8.power == 0.8 and r4.test == "seed RM-ANOVA: fixture effect on latency"
     assert r4.ci_low < 0.4 < r4.ci_high and 0.0 <= r4.ci_low and r8.ci_high <= 1.0
     # the uncorrected p (halved here) rejects more
     u = power_table(c, alpha=0.05, p_column="p_unc")
     assert u.iloc[0].rejections == 3 and set(u["p_column"]) == {"p_unc"}
 
 
-def test_power_table_orders_fixture_tests_before_practice() -> None:
+def test_power_table_orders_primary_then_fixture_then_practice() -> None:
     c = pd.concat([_cohorts({4: [0.01]}, "latency", "trial"),
-                   _cohorts({4: [0.01]}, "cum_error", "fixture"),
+                   _cohorts({4: [0.01]}, "eq65", "fixture"),
+                   _cohorts({4: [0.01]}, "latency", "practised"),
                    _cohorts({4: [0.01]}, "path_deviation", "fixture")])
     t = power_table(c, alpha=0.05)
     assert list(zip(t["dv"], t["factor"], strict=True)) == [
-        ("cum_error", "fixture"), ("path_deviation", "fixture"), ("latency", "trial")]
+        ("latency", "practised"), ("path_deviation", "fixture"), ("eq65", "fixture"),
+        ("latency", "trial")]
+    assert t.iloc[0].test.startswith("PRIMARY probe model")
 
 
 @given(st.lists(st.one_of(st.floats(0, 1), st.just(math.nan)), min_size=1, max_size=60),

@@ -16,7 +16,7 @@ from vasim.study.protocol import load_protocol
 from vasim.study.protocol.schedule import generate_schedule
 from vasim.study.report.analysis import analyse_vf
 from vasim.study.report.html_page import TableBlock
-from vasim.study.report.primary import primary_tests
+from vasim.study.report.primary import primary_tests, probe_model_tests
 from vasim.study.report.sections.fixture import fixture_effect_section
 
 FIXTURE_MEAN = {"none": 1.0, "vg": 0.95, "ag": 0.8, "ms": 0.7, "mag": 0.9, "ff": 0.6}
@@ -106,3 +106,50 @@ def test_a_factor_with_one_level_is_not_computed_with_its_reason() -> None:
     vf = analyse_vf(study_data(proto, CohortTrials(sched, c.points, c.metrics, 0.0, 0)))
     t = primary_tests(vf)
     assert t["F"].isna().all() and t["reason"].str.contains("needs 2").all()
+
+
+def test_probe_model_tests_are_the_reports_transfer_fixture_rows() -> None:
+    """The PRIMARY test power counts is the report's ``vf_transfer_tests`` fixture row,
+    and an independent nested F test by least squares (numpy) agrees: probes closing a
+    fixture block, dv ~ subject + fixture practised + block position + variant, F for
+    the fixture term."""
+    from vasim.study.report.transfer import transfer_model
+
+    proto = load_protocol("vf_learning_curve")
+    data = study_data(proto, _synthetic_cohort(12, seed=5))
+    vf = analyse_vf(data)
+    ours = probe_model_tests(vf).set_index("dv")
+    assert set(ours["factor"]) == {"practised"} and len(ours) == len(vf.dvs)
+    for dv, _n, unit in vf.dvs:
+        _, tests = transfer_model(vf.trials, dv, unit)
+        ref = tests.set_index("test").loc["fixture"]
+        r = ours.loc[dv]
+        assert (r["F"], r["p_unc"], r["df1"], r["df2"]) == (ref["F"], ref["p"], ref["df1"],
+                                                            ref["df2"])
+        assert r["p_gg"] == r["p_unc"] and r["n_levels"] == 5
+        assert math.isclose(r["np2"], r["F"] * r["df1"] / (r["F"] * r["df1"] + r["df2"]))
+    # independent: numpy least squares on dummy-coded design matrices
+    t = vf.trials
+    d = t[t["probe"].astype(bool) & (t["practised"].astype(str) != "")]
+    y = d["latency"].to_numpy(float)
+
+    def dummies(col: pd.Series) -> np.ndarray:
+        levels = sorted(set(col.astype(str)))
+        return np.column_stack([(col.astype(str) == v).to_numpy(float) for v in levels[1:]])
+
+    base = [np.ones(len(d)), dummies(d["subject"]), d["block_position"].to_numpy(float),
+            dummies(d["variant"])]
+    red = np.column_stack(base)
+    full = np.column_stack([*base, dummies(d["practised"])])
+
+    def rss(x: np.ndarray) -> tuple[float, int]:
+        beta, *_ = np.linalg.lstsq(x, y, rcond=None)
+        return float(((y - x @ beta) ** 2).sum()), int(np.linalg.matrix_rank(x))
+
+    (r0, k0), (r1, k1) = rss(red), rss(full)
+    df1, df2 = k1 - k0, len(y) - k1
+    f = ((r0 - r1) / df1) / (r1 / df2)
+    row = ours.loc["latency"]
+    assert (row["df1"], row["df2"]) == (df1, df2) == (4, 12 * 5 - 12 - 1 - 5 - 4)
+    assert math.isclose(row["F"], f, rel_tol=1e-8)
+    assert math.isclose(row["p_unc"], stats.f.sf(f, df1, df2), rel_tol=1e-6)

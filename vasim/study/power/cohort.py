@@ -9,8 +9,9 @@ practice and operator adjustments as a stored session), runs every trial with it
 headless job (``simulate_trial``) and keeps only what the analysis reads: the per-point
 metrics and the per-trial metrics. Those become a
 :class:`~vasim.study.report.data.StudyData` like the one ``load_study`` reads from a store,
-and the report's own functions analyse it (``analyse_vf`` then
-:func:`~vasim.study.report.primary.primary_tests`).
+and the report's own functions analyse it (``analyse_vf``, then the PRIMARY probe
+model's fixture test, :func:`~vasim.study.report.primary.probe_model_tests`, and the
+seed's RM-ANOVAs, :func:`~vasim.study.report.primary.primary_tests`).
 
 **Decisions**:
 
@@ -55,7 +56,7 @@ from vasim.study.protocol import Protocol, ScheduledTrial
 from vasim.study.protocol.schedule import generate_schedule
 from vasim.study.report.analysis import analyse_vf
 from vasim.study.report.data import StudyData, load_study
-from vasim.study.report.primary import primary_tests
+from vasim.study.report.primary import primary_tests, probe_model_tests
 from vasim.study.session import Session, SessionSettings, start_session
 from vasim.study.store import SCHEDULE_COLUMNS, TrialStore
 from vasim.trials.lifecycle import stored_trial
@@ -299,7 +300,9 @@ def cohort_tests(protocol: Protocol, design: PowerDesign, n_subjects: int, k: in
                                                  "effect_scale": design.effect_scale}})
         data = load_study(db, protocol.name)
         n_trials = int(data.analysed.shape[0])
-    tests = primary_tests(analyse_vf(data))
+    vf = analyse_vf(data)
+    # the PRIMARY analysis (post-block probe model) first, then the seed's RM-ANOVAs
+    tests = pd.concat([probe_model_tests(vf), primary_tests(vf)], ignore_index=True)
     out = pd.DataFrame({"n_subjects": n_subjects, "cohort": k, "seed": seed,
                         "dv": tests["dv"], "factor": tests["factor"],
                         "n_complete": tests["n_subjects"], "F": tests["F"],

@@ -40,7 +40,7 @@ from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
 from vasim.core.config import check_int, check_number, parse_toml
 from vasim.core.errors import ConfigError
 from vasim.operator.effects import FixtureEffect, scale_effect
-from vasim.operator.learning import SEED_EFFECTS
+from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.operator.scenario import Scenario
 from vasim.study.protocol import Protocol
 from vasim.study.protocol.power import EFFECT_FIELDS, effects_from_tables
@@ -153,7 +153,7 @@ def surgeons_for(n_subjects: int) -> int:
     return round(n_subjects * SURGEON_SHARE)
 
 
-def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+def scaled_effects(scale: float, base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS
                    ) -> dict[str, FixtureEffect]:
     """The fixture effects with every departure from "no effect" times ``scale``.
 
@@ -201,7 +201,7 @@ def check_power_protocol(protocol: Protocol) -> None:
 
 
 def parse_effects(text: str, *, file: str | Path | None = None,
-                  base: Mapping[str, FixtureEffect] = SEED_EFFECTS) -> dict[str, FixtureEffect]:
+                  base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS) -> dict[str, FixtureEffect]:
     """Fixture effects from an effects file (``--effects FILE.toml``): one table per
     condition label, any of :data:`EFFECT_FIELDS`; a field left out keeps ``base``'s (the
     scenario's), a label ``base`` lacks starts from "no effect".
@@ -219,14 +219,14 @@ def parse_effects(text: str, *, file: str | Path | None = None,
 
     Example:
         >>> e = parse_effects("[ff]\\naccuracy = 0.8\\n")
-        >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed, e["mag"].speed
+        >>> e["ff"].accuracy, e["ff"].speed == DEFAULT_EFFECTS["ff"].speed, e["mag"].speed
         (0.8, True, 1.0)
     """
     return effects_from_tables(parse_toml(text, file=file, kind="effects"), file=file,
                                base=base)
 
 
-def load_effects(path: str | Path, base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+def load_effects(path: str | Path, base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS
                  ) -> dict[str, FixtureEffect]:
     """:func:`parse_effects` of a file, applied over ``base``.
 
@@ -273,7 +273,7 @@ class PowerDesign:
     dt: float = FULL_DT
     max_trial_time: float | None = None
     p_column: str = "p_gg"
-    base_effects: Mapping[str, FixtureEffect] = field(default_factory=lambda: SEED_EFFECTS)
+    base_effects: Mapping[str, FixtureEffect] = field(default_factory=lambda: DEFAULT_EFFECTS)
     scenario: Scenario | None = None
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 

@@ -24,14 +24,20 @@ POWER_COLUMNS: tuple[str, ...] = ("dv", "factor", "test", "n_subjects", "cohorts
                                   "ci_low", "ci_high", "alpha", "p_column")
 """Columns of :func:`power_table`."""
 TEST_NAMES: dict[tuple[str, str], str] = {
-    ("cum_error", "fixture"): "fixture effect on cumulative error",
-    ("latency", "fixture"): "fixture effect on latency",
-    ("path_deviation", "fixture"): "fixture effect on path deviation",
-    ("cum_error", "trial"): "practice effect on cumulative error",
-    ("latency", "trial"): "practice effect on latency",
-    ("path_deviation", "trial"): "practice effect on path deviation",
+    ("path_deviation", "practised"): "PRIMARY probe model: fixture practised, path deviation",
+    ("latency", "practised"): "PRIMARY probe model: fixture practised, latency",
+    ("eq65", "practised"): "PRIMARY probe model: fixture practised, eq. 6.5 e",
+    ("path_deviation", "fixture"): "seed RM-ANOVA: fixture effect on path deviation",
+    ("latency", "fixture"): "seed RM-ANOVA: fixture effect on latency",
+    ("eq65", "fixture"): "seed RM-ANOVA: fixture effect on eq. 6.5 e",
+    ("path_deviation", "trial"): "seed RM-ANOVA: practice effect on path deviation",
+    ("latency", "trial"): "seed RM-ANOVA: practice effect on latency",
+    ("eq65", "trial"): "seed RM-ANOVA: practice effect on eq. 6.5 e",
 }
-"""Names of the primary tests (dv, factor) in tables and figures."""
+"""Names of the tests (dv, factor) in tables and figures, in print order: the PRIMARY
+analysis (the post-block probe model's nested F test of the fixture just practised,
+``vasim.study.report.primary.probe_model_tests``) first, then the seed's RM-ANOVAs
+(secondary, named as the seed's)."""
 
 
 def mc_standard_error(power: float, cohorts: int) -> float:

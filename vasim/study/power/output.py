@@ -5,7 +5,8 @@
   test and N (power, its Monte Carlo standard error, 95 % Wilson interval).
 * ``power_cohorts.csv``: every cohort's test results (F, p, partial eta squared), so
   another alpha or p-value can be recomputed without simulating again.
-* ``power.png``: power against N, one panel per factor (fixture effect, practice effect),
+* ``power.png``: power against N, one panel per factor (the PRIMARY probe model's fixture
+  test, then the seed's RM-ANOVAs: fixture effect, practice effect),
   one line per outcome, error bars +-1 Monte Carlo standard error, the target 0.8 dashed,
   and the synthetic-data label of every report figure.
 """
@@ -24,9 +25,10 @@ from vasim.study.report.data import SYNTHETIC_LABEL
 
 TARGET_POWER = 0.8
 """The power a plan usually asks for (dashed in the figure, ``N for 0.8`` in the table)."""
-FACTOR_TITLES = {"fixture": "fixture effect (RM-ANOVA over the fixture levels)",
-                 "trial": "practice effect (RM-ANOVA over the VF-free probes)"}
-DV_STYLE = {"cum_error": ("cumulative error", "tab:blue", "o"),
+FACTOR_TITLES = {"practised": "PRIMARY: post-block probe model (fixture practised)",
+                 "fixture": "seed's RM-ANOVA: fixture effect",
+                 "trial": "seed's RM-ANOVA: practice effect (VF-free probes)"}
+DV_STYLE = {"eq65": ("eq. 6.5 e", "tab:blue", "o"),
             "latency": ("latency", "tab:orange", "s"),
             "path_deviation": ("path deviation", "tab:green", "^")}
 
@@ -60,7 +62,7 @@ def format_table(power: pd.DataFrame) -> str:
 
 def plot_power(power: pd.DataFrame, path: Path, *, title: str) -> Path:
     """Writes ``power.png``: power +- 1 MC standard error against N (module docstring)."""
-    factors = [f for f in ("fixture", "trial") if f in set(power["factor"])]
+    factors = [f for f in ("practised", "fixture", "trial") if f in set(power["factor"])]
     # a Figure without pyplot, as the report's figures: no global state, no GUI backend
     fig = Figure(figsize=(5.2 * max(1, len(factors)), 4))
     FigureCanvasAgg(fig)

@@ -97,8 +97,9 @@ Schedule rules (**decisions**):
   keeps the listed order. ``probes_after`` probe trials (``probe.condition`` on
   ``probe.variant``) follow the block's trials.
 * ``probe.variants`` (issue #25): every probe trial, the probe blocks' own included, runs a
-  variant of the rotation: probe k of sequence number i runs ``variants[(i + k - 1) mod
-  m]`` (``probe_variant_of``): the VF-free trials run on the same variants as the assisted
+  variant of the rotation: probe k of sequence number i runs ``variants[(o(i) + k - 1) mod
+  m]``, o(i) = i + floor(i / lcm(R, m)) (one variant further every cycle of lcm(R, m)
+  subjects) (``probe_variant_of``): the VF-free trials run on the same variants as the assisted
   ones, balanced across subjects (docs/study-design.md).
 * Randomness: ``numpy.random.default_rng(SeedSequence([seed, stream, block]))``, one stream
   for the block order and one per block for its variants. numpy does not promise the same

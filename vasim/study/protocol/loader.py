@@ -98,7 +98,8 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
         path = f"blocks[{i}]"
         check_keys(raw, _BLOCK + _BLOCK_GAIN, path, file=source,
                    required=("name", "condition"))
-        if "variants" in probe and raw.get("probe") is True and "variants" in raw:
+        if ("variants" in probe and raw.get("probe") is True and "variants" in raw
+                and raw.get("phase") != "transfer"):  # transfer: its own untrained variants
             raise ConfigError("a probe block takes its variants from probe.variants in "
                               "rotation: leave out its variants (repetitions = its number "
                               "of trials)", file=source, field=f"{path}.variants")

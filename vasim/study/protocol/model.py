@@ -185,9 +185,10 @@ class Protocol:
         probe_variants: the variants the probe trials rotate over (``[probe] variants``),
             or None: every probe trial runs ``probe_variant``. With a rotation the k-th
             probe trial (``probe_index`` k, baseline probes included) of the session with
-            sequence number i runs ``probe_variants[(i + k - 1) mod m]`` (issue #25: the
-            VF-free trials run on the same variants as the assisted ones, balanced across
-            subjects; :func:`vasim.study.protocol.schedule.probe_variant_of`).
+            sequence number i runs ``probe_variants[(o(i) + k - 1) mod m]``,
+            o(i) = i + i // lcm(R, m), R the number of block-order sequences (issue #25:
+            the VF-free trials run on the same variants as the assisted ones, balanced
+            across subjects; :func:`vasim.study.protocol.schedule.probe_variant_of`).
         blocks: the blocks in file order. pre, post: the questionnaires.
         power: the ``[power]`` table's planning effects (``vasim.study.protocol.power``),
             or None.
@@ -267,7 +268,10 @@ class Protocol:
                 if v >= n_var:
                     raise fail(v, f"a variant in [0, {n_var - 1}] (the {self.task} task's)",
                                field=f"blocks[{i}].variants[{j}]")
-            if b.probe and self.probe_variants is not None and b.variants != (0,):
+            if (b.probe and self.probe_variants is not None and b.variants != (0,)
+                    and b.phase != "transfer"):
+                # a transfer block keeps its own (untrained) variants: they are outside
+                # the rotation by definition (vasim.study.protocol.phases)
                 raise fail(list(b.variants), "no variants (a probe block's trials take "
                            "probe.variants in rotation; set its trial count with "
                            "repetitions)", field=f"blocks[{i}].variants")

@@ -34,7 +34,10 @@ TOML (every field checked on load, defaults in brackets)::
 * *Untrained* (transfer): a transfer block's variants appear in no other block and are not
   the probe variant of a protocol with appended probes; a retention block's variants are
   all *trained* (in an acquisition block, or the probe variant of appended probes):
-  retention is measured on what was practised, transfer on what never was.
+  retention is measured on what was practised, transfer on what never was. Under a probe
+  rotation (``[probe] variants``, issue #25) a retention block takes the rotation's
+  variants (all trained) and a transfer block keeps its own listed variants (outside the
+  rotation by definition; e.g. vf_retention.toml).
 * A retention block lies in a later sitting than the acquisition it follows: the delays
   of the blocks from the last acquisition block up to it (file order, inclusive) sum to
   more than 0. Blocks with a delay, retention and transfer blocks keep their place in the
@@ -164,7 +167,8 @@ def check_protocol_phases(protocol: Protocol) -> None:
     others: dict[str, set[int]] = {}
     for b in blocks:
         if b.phase != "transfer":
-            others[b.name] = set(b.variants)
+            others[b.name] = (set(probe_vs) if b.probe and rotation is not None
+                              else set(b.variants))
     delay_since_acq: float | None = None
     for i, b in enumerate(blocks):
         if b.phase == "acquisition":
@@ -179,7 +183,10 @@ def check_protocol_phases(protocol: Protocol) -> None:
                 raise fail(b.delay_days, "a delay: the delays since the last acquisition "
                            "block sum to 0 (a retention block is a later sitting)",
                            field=f"blocks[{i}].delay_days")
-            for j, v in enumerate(b.variants):
+            # under a probe rotation a retention probe block runs the rotation's variants
+            retained = (tuple(sorted(probe_vs)) if b.probe and rotation is not None
+                        else b.variants)
+            for j, v in enumerate(retained):
                 if v not in trained:
                     raise fail(v, f"a trained variant ({sorted(trained)}; retention is "
                                "measured on what was practised)",

@@ -19,11 +19,11 @@ These are the fields of ``vasim study power``'s ``--effect-scale`` and ``--effec
   of a protocol belong to its conditions, and a misspelt label (``[power.effects.f]``)
   would otherwise be silently unused. The labels of an ``--effects`` file are held to the
   same rule (issue #30; ``vasim.cli.power.check_effects_labels``).
-* Precedence (:func:`resolve_effects`): the calibration
-  (``vasim.operator.learning.SEED_EFFECTS``), then the protocol's ``[power.effects]``
+* Precedence (:func:`resolve_effects`): the declared scenario's effects (assumptions)
+  (``vasim.operator.learning.DEFAULT_EFFECTS``), then the protocol's ``[power.effects]``
   field by field, then an ``--effects`` file field by field; the scale is
   ``--effect-scale`` if given, else the protocol's ``effect_scale``, else 1. The command
-  line always wins, and a field neither names keeps the calibration.
+  line always wins, and a field neither names keeps the scenario's value.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from typing import Any
 from vasim.core.bounds import EFFECT_SCALE
 from vasim.core.config import check_keys, check_number, check_table, fail, join
 from vasim.core.errors import ConfigError
-from vasim.operator.learning import SEED_EFFECTS, FixtureEffect
+from vasim.operator.learning import DEFAULT_EFFECTS, FixtureEffect
 
 EFFECT_FIELDS: tuple[str, ...] = ("accuracy", "speed", "practice_weight", "carryover",
                                   "dependence")
@@ -47,7 +47,7 @@ POWER_KEYS: tuple[str, ...] = ("effect_scale", "effects")
 
 def effects_from_tables(data: Mapping[str, Any], *, file: str | Path | None = None,
                         prefix: str = "",
-                        base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+                        base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS
                         ) -> dict[str, FixtureEffect]:
     """``base`` with the effect tables of ``data`` (label -> {field: value}) applied field
     by field; a label ``base`` lacks starts from "no effect" (``FixtureEffect()``).
@@ -58,7 +58,7 @@ def effects_from_tables(data: Mapping[str, Any], *, file: str | Path | None = No
 
     Example:
         >>> e = effects_from_tables({"ff": {"accuracy": 0.8}})
-        >>> e["ff"].accuracy, e["ff"].speed == SEED_EFFECTS["ff"].speed
+        >>> e["ff"].accuracy, e["ff"].speed == DEFAULT_EFFECTS["ff"].speed
         (0.8, True)
     """
     out = dict(base)
@@ -82,7 +82,7 @@ class PowerPlan:
     Attributes:
         effect_scale: the scale s (None: not set, 1 unless the command line sets it).
         effects: label -> {field: value}, the planning effects as written (applied over
-            the calibration by :meth:`base_effects`).
+            the scenario's effects by :meth:`base_effects`).
 
     Raises:
         ConfigError: naming the field (``power.effect_scale``, ``power.effects.ff.accuracy``)
@@ -100,7 +100,7 @@ class PowerPlan:
             v, f"power.effects.{k}")) for k, v in tables.items()})
         self.base_effects()  # every field checked, and the effect it makes
 
-    def base_effects(self, base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+    def base_effects(self, base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS
                      ) -> dict[str, FixtureEffect]:
         """``base`` with this plan's effect tables applied (before any scale)."""
         return effects_from_tables(self.effects, prefix="power.effects", base=base)
@@ -127,20 +127,20 @@ def power_plan_from_table(raw: object) -> PowerPlan:
 def resolve_effects(plan: PowerPlan | None, *, cli_scale: float | None,
                     cli_tables: Mapping[str, Any] | None = None,
                     cli_file: str | Path | None = None,
-                    base: Mapping[str, FixtureEffect] = SEED_EFFECTS
+                    base: Mapping[str, FixtureEffect] = DEFAULT_EFFECTS
                     ) -> tuple[float, dict[str, FixtureEffect]]:
     """The effect scale and the unscaled effects of a power run (module decision's
-    precedence: calibration < protocol < command line).
+    precedence: scenario < protocol < command line).
 
     Args:
         plan: the protocol's ``[power]`` (None: none). cli_scale: ``--effect-scale`` (None:
             not given). cli_tables: the parsed ``--effects`` file (None: none), named
-            ``cli_file`` in errors. base: the calibration.
+            ``cli_file`` in errors. base: the scenario's effects (declared assumptions).
 
     Example:
         >>> plan = PowerPlan(effect_scale=0.5, effects={"ff": {"accuracy": 0.8}})
         >>> s, e = resolve_effects(plan, cli_scale=None, cli_tables={"ff": {"speed": 1.0}})
-        >>> s, e["ff"].accuracy, e["ff"].speed, e["mag"] == SEED_EFFECTS["mag"]
+        >>> s, e["ff"].accuracy, e["ff"].speed, e["mag"] == DEFAULT_EFFECTS["mag"]
         (0.5, 0.8, 1.0, True)
         >>> resolve_effects(plan, cli_scale=2.0)[0], resolve_effects(None, cli_scale=None)[0]
         (2.0, 1.0)

@@ -6,6 +6,7 @@ The rules are described in :mod:`vasim.study.protocol`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -123,20 +124,38 @@ def block_order(protocol: Protocol, seed: int, sequence: int | None = None) -> l
     return order
 
 
+def n_sequences(protocol: Protocol) -> int:
+    """R, the number of block-order sequences: the Williams square's rows under
+    ``latin_square`` with at least two counterbalanced blocks (n for even n, 2n for odd n),
+    otherwise 1 (one order, or an order drawn per subject)."""
+    n_cb = sum(b.counterbalance for b in protocol.blocks)
+    if protocol.block_order == "latin_square" and n_cb >= 2:
+        return len(williams_square(n_cb))
+    return 1
+
+
 def probe_variant_of(protocol: Protocol, sequence: int, probe_index: int) -> int:
     """The trajectory variant of the probe trial ``probe_index`` (1-based) of the session
     with sequence number ``sequence``.
 
-    With ``probe.variants`` (v_0..v_{m-1}) the probes rotate: probe k runs
-    ``v[(sequence + k - 1) mod m]``. Over any m consecutive sequence numbers every probe
-    number runs every variant once (probe number and variant are balanced across subjects),
-    and within a session m consecutive probes run m different variants. **Decision**
-    (issue #25): the balance is across subjects, because a session has 8 VF-free trials
-    and 6 variants (8 is not a multiple of 6), while each assisted block uses every
-    variant once within the session. With ``block_order = "latin_square"`` and the same
-    sequence number for the Williams row, the probe after each fixture is balanced against
-    the variant over lcm(R, m) consecutive subjects when R is even (the vf_learning_curve
-    protocol: 10 rows, 6 variants, 30 subjects; ``tests/study/test_design.py`` counts it).
+    With ``probe.variants`` (v_0..v_{m-1}) the probes rotate: probe k of sequence number i
+    runs ``v[(o(i) + k - 1) mod m]`` with the offset ``o(i) = i + floor(i / L)``,
+    ``L = lcm(R, m)`` (R: ``n_sequences``). Within each cycle of L subjects (i from a
+    multiple of L) the offset is i plus a constant: over any m consecutive sequence numbers
+    of a cycle every probe number runs every variant once, and within a session m
+    consecutive probes run m different variants. The shift by one variant per cycle
+    balances the probe after each counterbalanced block against the variant over m * L
+    subjects for every R and m (in cycle c a subject on Williams row r meets variant
+    ``(r + c + position + const) mod m``, and c runs over all m residues); the plain
+    rotation ``o(i) = i`` does not when R and m share a factor and the Williams rows fall
+    unevenly on it (vf_retention: AB/BA with 4 variants would put the probe after FF on
+    variants 2 and 4 only, for ever). **Decisions** (issue #25): the VF-free trials are
+    balanced across subjects, because a session's number of VF-free trials is not a
+    multiple of m; each assisted block uses every variant equally often within the
+    session. vf_learning_curve (R = 10, m = 6, L = 30): the first 30 subjects are already
+    balanced (the probe after each fixture on each variant 5 times; the rotation's shift
+    starts at subject 31); ``tests/study/test_design.py`` and
+    ``tests/study/test_design_protocols.py`` count every protocol's balance.
     Without ``probe.variants`` every probe runs ``probe.variant``.
 
     Example:
@@ -146,11 +165,16 @@ def probe_variant_of(protocol: Protocol, sequence: int, probe_index: int) -> int
         [1, 2, 3, 4, 5, 6, 1, 2]
         >>> [probe_variant_of(p, 4, k) for k in range(1, 9)]
         [5, 6, 1, 2, 3, 4, 5, 6]
+        >>> [probe_variant_of(p, 30, k) for k in range(1, 3)]  # cycle 2: shifted by one
+        [2, 3]
     """
     vs = protocol.probe_variants
     if vs is None:
         return protocol.probe_variant
-    return vs[(int(sequence) + int(probe_index) - 1) % len(vs)]
+    m = len(vs)
+    i = int(sequence)
+    offset = i + i // math.lcm(n_sequences(protocol), m)
+    return vs[(offset + int(probe_index) - 1) % m]
 
 
 def generate_schedule(protocol: Protocol, seed: int, *, sequence: int | None = None,
@@ -201,7 +225,9 @@ def generate_schedule(protocol: Protocol, seed: int, *, sequence: int | None = N
             for v in variants:
                 if b.probe:
                     n_probe += 1
-                    if protocol.probe_variants is not None:  # the rotation (issue #25)
+                    if protocol.probe_variants is not None and b.phase != "transfer":
+                        # the rotation (issue #25); transfer probes keep their untrained
+                        # variants
                         v = probe_variant_of(protocol, seq, n_probe)
                 out.append(ScheduledTrial(
                     index=len(out), block=b.name, block_index=pos, trial_in_block=k,

@@ -1,5 +1,7 @@
-"""The VF study's RM-ANOVAs of the seed's design as one pure function, shared by the report
-and power planning.
+"""The VF study's tests as pure functions shared by the report and power planning: the
+PRIMARY probe model's fixture test (:func:`probe_model_tests`, issue #25) and the
+RM-ANOVAs of the seed's design (:func:`primary_tests`, secondary since issue #25; the name
+is kept for its callers).
 
 These tests (spec §3 decision, ``summary.json`` keys ``fixture`` and ``practice``; since
 issue #25 a secondary analysis beside the probe model of
@@ -111,4 +113,48 @@ def primary_tests(vf: VfAnalysis) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=list(PRIMARY_COLUMNS))
 
 
-__all__ = ["PRIMARY_COLUMNS", "PRIMARY_FACTORS", "factor_anova_data", "primary_tests"]
+PROBE_MODEL_FACTOR = "practised"
+"""The factor label of the primary probe model's fixture test in power tables (the fixture
+practised in the block before each VF-free probe)."""
+
+
+def probe_model_tests(vf: VfAnalysis) -> pd.DataFrame:
+    """The PRIMARY analysis' fixture test of every outcome, as :func:`primary_tests` rows.
+
+    The test is the report's ``vf_transfer_tests`` row ``fixture``
+    (:func:`vasim.study.report.transfer.transfer_model`): the nested F test of the fixture
+    just practised in the post-block probe model (block position and variant in the
+    model, the subject as a fixed effect). Rows carry ``factor`` =
+    :data:`PROBE_MODEL_FACTOR`, ``p_unc`` = ``p_gg`` = the F test's p (no sphericity
+    correction applies to it), ``np2`` = F df1 / (F df1 + df2) (partial eta squared of
+    the term), ``n_levels`` the practised fixtures; a model that cannot be fitted gives
+    NaN statistics and its ``reason``.
+    """
+    from vasim.study.report.transfer import transfer_model
+
+    rows: list[dict[str, Any]] = []
+    n_sub = int(vf.trials["subject"].nunique()) if not vf.trials.empty else 0
+    for dv, _name, unit in vf.dvs:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est, tests = transfer_model(vf.trials, dv, unit)
+        except ConfigError as exc:
+            rows.append(_not_computed(dv, PROBE_MODEL_FACTOR, n_sub, 0, exc.reason))
+            continue
+        k = len(est.attrs.get("fixtures", ()))
+        t = tests.set_index("test").loc["fixture"]
+        f, df1, df2 = float(t["F"]), float(t["df1"]), float(t["df2"])
+        if not math.isfinite(f):
+            rows.append(_not_computed(dv, PROBE_MODEL_FACTOR, int(t["n_subjects"]), k,
+                                      str(t["note"]) or "fixture test not computed"))
+            continue
+        rows.append({"dv": dv, "factor": PROBE_MODEL_FACTOR,
+                     "n_subjects": int(t["n_subjects"]), "n_levels": k, "df1": df1,
+                     "df2": df2, "F": f, "p_unc": float(t["p"]), "p_gg": float(t["p"]),
+                     "np2": f * df1 / (f * df1 + df2), "reason": ""})
+    return pd.DataFrame(rows, columns=list(PRIMARY_COLUMNS))
+
+
+__all__ = ["PRIMARY_COLUMNS", "PRIMARY_FACTORS", "PROBE_MODEL_FACTOR", "factor_anova_data",
+           "primary_tests", "probe_model_tests"]
