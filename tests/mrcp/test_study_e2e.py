@@ -55,8 +55,8 @@ def test_report_mrcp_section_is_filled_from_the_stored_trials(study) -> None:
     assert sorted(trials["trial_id"]) == sorted(data["trial_id"])
     merged = trials.merge(data, on="trial_id")
     for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
-                        ("Q_contact_time", "contact_time"), ("Q_force", "accumulated_force"),
-                        ("Q_torque", "accumulated_torque")):
+                        ("contact_time", "contact_time"), ("force", "accumulated_force"),
+                        ("torque", "accumulated_torque")):
         pd.testing.assert_series_equal(merged[key], merged[metric], check_names=False,
                                        rtol=1e-12)
     gains = pd.read_csv(out / "tables" / "mrcp_gains.csv")

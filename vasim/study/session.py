@@ -280,6 +280,8 @@ class Session:
             gain=gain,
             mode_practice=None if mode is None else sum(
                 t.condition == mode for t in self.schedule[:scheduled.index]),
+            mode_effects=None if mode is None or scenario is None
+            or scenario.teleop is None else scenario.teleop_effects(scale),
         )
 
     @property
