@@ -29,7 +29,10 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (declared scenario, synthetic)"); its trials keep ``operator = "scripted"``.
   A teleoperation trial also gets ``mode_practice``, the number of earlier trials of its
-  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``).
+  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``),
+  and ``mode_effects``, the stored teleoperation scenario's mode penalties at the effect
+  scale (``Scenario.teleop_effects``; None without a ``[teleop]`` scenario: the mechanism
+  alone).
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
   the operator profile resolved (not just the preset name), so a resumed session runs with
   the same person even if the presets change.
