@@ -88,11 +88,13 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
         "the Euclidean length of the needle path (path_l2) [m]; Q = quality as the seed "
         "measures it: the rings' displacement by contacts, integrated over time and summed "
         "over the rings (target_deformation) [mm s]; and, as experiment 3, the largest "
-        "target displacement [m], accumulated contact time [s], force [N s] and "
-        "torque [N m s] on tissue (when stored). Per subject and mode the cell is the "
-        "mean over the mode's trials; mean and sd per mode, paired Student t-tests per "
-        "pair of modes (with observed power and the minimum n for power 0.9) and the seed's gain "
-        "mean(StdT)/mean(mode) use the subjects with every mode. Learning curves: mean and "
+        "target displacement [m], accumulated contact time (contact_time) [s], force "
+        "(force) [N s] and torque (torque) [N m s] on tissue (when stored). Per subject and "
+        "mode the cell is the mean over the mode's trials; mean and sd per mode (Table "
+        "5.4's layout), paired Student t-tests per pair of modes (with observed power and "
+        "the minimum n for power 0.9: Table 5.5's layout) and the seed's gain "
+        "mean(StdT)/mean(mode) use the subjects with every mode; the per-subject table "
+        "shows who benefits from each mode and who does not. Learning curves: mean and "
         "interquartile range per trial number within the mode (1..6). Likert items: see "
         "the Questionnaires section.")]
     done = data.analysed
