@@ -194,14 +194,16 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
                                     "mean_mode": float(cmp_.mean()),
                                     "sd_mode": float(sd_of.get(cond, math.nan)), "gain": g})
                     for subj, r_v in ref.items():
-                        c_v = float(cmp_.loc[subj])
-                        sg = float(r_v) / c_v if c_v > 0 else math.nan
+                        c_v, s_v = float(cmp_.loc[subj]), float(r_v)
+                        # gain inf: the mode's mean is 0 (e.g. no contact at all) and
+                        # StdT's is not; NaN: both 0 (a tie)
+                        sg = s_v / c_v if c_v > 0 else math.inf if s_v > 0 else math.nan
                         per_subject.append({
                             "subject": subj, "metric": m.key, "unit": m.unit,
-                            "mode": fixture_label(cond), "mean_StdT": float(r_v),
+                            "mode": fixture_label(cond), "mean_StdT": s_v,
                             "mean_mode": c_v, "gain": sg,
-                            "benefits": ("yes" if sg > 1 else "no") if math.isfinite(sg)
-                            else ("tie" if float(r_v) == c_v else "n/a")})
+                            "benefits": "yes" if c_v < s_v else "no" if c_v > s_v
+                            else "tie"})
         elif n < 2:
             out.notes.append(f"{m.key}: {n} subject(s) with every mode; paired tests and "
                              "gains need at least 2")
@@ -289,7 +291,8 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
             "mrcp_per_subject", "Per subject: mean per mode and gain StdT / mode", ps,
             "One row per subject, measure and mode: the subject's mean over the mode's "
             "trials beside its StdT mean; benefits = yes when the mode's mean is smaller "
-            "(gain > 1).", display="details"))
+            "(gain > 1; inf when the mode's mean is 0), tie when equal.",
+            display="details"))
     if paired:
         out.blocks.append(TableBlock(
             "mrcp_paired", "Paired t-tests per pair of modes", pd.concat(paired,
