@@ -1,34 +1,30 @@
-"""Chapter 5 reproduced: a simulated StdT / MRCP / MRCP+Cam cohort beside the seed's Table 5.1.
+"""Chapter 5 beside the seed: a simulated StdT / MRCP (/ MRCP+Cam) cohort under a declared
+teleoperation scenario, printed beside the seed's Table 5.1 (experiments 1-2,
+``mrcp_vs_stdt``) or Table 5.4 (experiment 3, ``mrcp_suture_dynamic``).
 
-Runs the protocol ``mrcp_vs_stdt`` (6 trials per mode, mode order randomised per subject by
-the protocol's own schedule) for a simulated cohort, the trials exactly as a session runs
-them (``Session.trial_config``: session practice, the mode's practice, trial seeds), and
-prints per measure (ET [s], EM = needle path [m], Q = target deformation [mm s]):
+Runs the protocol (6 trials per mode, mode order randomised per subject by the protocol's
+own schedule) for a simulated cohort, the trials exactly as a session runs them
+(``Session.trial_config``: session practice, the mode's practice, trial seeds, the
+scenario's mode penalties), and prints per measure:
 
-* mean, sd (of the subject means, as Table 5.1) and interquartile range (of every trial, as
-  Fig. 5.12) per mode, beside the seed's mean and sd;
-* the %-differences between modes (MRCP and MRCP+Cam vs StdT, MRCP+Cam vs MRCP), simulated
+* mean, sd (of the subject means) and interquartile range (of every trial) per mode,
+  beside the seed's mean and sd;
+* the %-differences (Table 5.1) or gains StdT/mode (Table 5.4) between modes, simulated
   and seed;
 * paired t-tests per pair of modes on the subject means (``vasim.study.stats
-  .pairwise_paired``, the report's), beside the seed's Table 5.2 (t and p as printed there);
-* the hand-over counts (StdT re-grasps and misaligned transfers, MRCP transfers) and the
-  needle path split by what moved it (``em_to_ring``, ``em_to_via``, ``em_transfer``).
+  .pairwise_paired``, the report's), beside the seed's Table 5.2 where it has them;
+* per subject, the modes' means (who benefits, who does not);
+* the hand-over counts and the needle path split by what moved it.
 
-``--fit`` first runs the calibration of ``vasim.operator.teleop_profile`` (method of
-simulated moments, secant rule between two pilot cohorts with the same subjects and seeds:
-``NEUTRAL`` and ``PILOT``) and prints the fitted ``TeleopEffects``; the cohort then runs
-with them. Without ``--fit`` it runs with ``SEED_TELEOP`` (the committed calibration).
+The operator is a **declared scenario** (``--scenario``, default ``teleop_mechanism_only``:
+no penalty of the person, the station's mechanism alone; ``teleop_assumed``: assumed
+penalties with sources; ``--effect-scale`` scales the penalties). Nothing is fitted to the
+seed: an earlier ``--fit`` calibrated the penalties to Table 5.1 and was removed (issue #25
+item 6). The seed's numbers below are only printed beside the simulation's.
 
-The numbers are synthetic: the model is calibrated to the seed, so what it was fitted to
-it reproduces by construction (ET of MRCP, EM StdT/MRCP, ET MRCP+Cam/MRCP); the rest are
-its predictions. The same cohort through the study store: ``python -m vasim study simulate
---protocol mrcp_vs_stdt --subjects 20 ...`` and ``vasim study report`` (its
-``tables/mrcp_descriptives.csv``).
-
-Usage: ``python -m bench.chapter5 [--subjects N] [--seed S] [--workers W] [--fit]
-[--fit-subjects N] [--effects K,THETA,C] [--csv PATH]``; the default, 4 subjects (72
-trials, about 7900 s simulated), takes 9 min on one core at 15x real time (26 min on a
-loaded machine); the seed's 20 subjects (``--subjects 20``, 360 trials) about 45 min.
+Usage: ``python -m bench.chapter5 [--protocol mrcp_vs_stdt|mrcp_suture_dynamic]
+[--scenario NAME|FILE] [--effect-scale X] [--subjects N] [--seed S] [--workers W]
+[--csv PATH]``; 4 subjects of ``mrcp_vs_stdt`` (72 trials) take 9-26 min.
 """
 
 from __future__ import annotations
@@ -39,17 +35,24 @@ import multiprocessing
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from vasim.core.progress import progress_bar
-from vasim.operator.teleop_profile import NEUTRAL, SEED_TELEOP, TeleopEffects, secant_fit
+from vasim.operator.scenario import load_scenario
+from vasim.operator.teleop_profile import TeleopEffects
 
 MODES = ("stdt", "mrcp", "mrcp_cam")
 LABEL = {"stdt": "StdT", "mrcp": "MRCP", "mrcp_cam": "MRCP+Cam"}
 MEASURES = (("ET", "completion_time", "s"), ("EM", "path_l2", "m"),
-            ("Q", "target_deformation", "mm s"))
+            ("Q", "target_deformation", "mm s"), ("contact_time", "contact_time", "s"),
+            ("force", "accumulated_force", "N s"), ("torque", "accumulated_torque", "N m s"))
+"""Every measure a row holds; each protocol prints those its seed table has."""
+
+TABLE_MEASURES = {"mrcp_vs_stdt": ("ET", "EM", "Q"),
+                  "mrcp_suture_dynamic": ("ET", "EM", "contact_time", "force", "torque")}
 
 SEED_TABLE_5_1: dict[str, dict[str, tuple[float, float]]] = {
     "ET": {"stdt": (142.51, 46.97), "mrcp": (101.13, 42.31), "mrcp_cam": (105.29, 41.16)},
@@ -72,8 +75,18 @@ SEED_TABLE_5_2: dict[str, dict[tuple[str, str], tuple[float, str]]] = {
 """Table 5.2 (seed l. 4055-4170): paired t and p as printed (the seed's text: StdT differs
 significantly from both MRCP modes, MRCP and MRCP+Cam do not differ)."""
 
-PILOT = TeleopEffects(thread_time=2.0, stdt_noise=1.0, camera_cost=0.5)
-"""The second pilot of the fit (the first is ``NEUTRAL``)."""
+SEED_TABLE_5_4: dict[str, dict[str, tuple[float, float]]] = {
+    "ET": {"stdt": (181.51, math.nan), "mrcp": (113.20, math.nan)},
+    "EM": {"stdt": (2293.26, math.nan), "mrcp": (1891.62, math.nan)},
+    "contact_time": {"stdt": (2012.61, math.nan), "mrcp": (750.37, math.nan)},
+    "force": {"stdt": (10740.27, math.nan), "mrcp": (4314.74, math.nan)},
+    "torque": {"stdt": (1.19e6, math.nan), "mrcp": (6.12e5, math.nan)},
+}
+"""Table 5.4 (seed sec. 5.4, experiment 3; as quoted in issue #28): means of StdT and MRCP
+(gains 1.60, 1.21, 2.68, 2.48, 1.95); sds not quoted; units of EM, contact, force and
+torque not stated by the seed."""
+
+SEED_TABLES = {"mrcp_vs_stdt": SEED_TABLE_5_1, "mrcp_suture_dynamic": SEED_TABLE_5_4}
 
 
 def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
@@ -91,7 +104,7 @@ def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
     row.update({name: float(tm[metric]) for name, metric, _ in MEASURES})
     row.update({k: float(tm[k]) for k in ("transfers", "regrasps", "misaligned_transfers",
                                           "em_to_ring", "em_to_via", "em_transfer",
-                                          "contact_time", "safety_stops")})
+                                          "safety_stops")})
     row["completed"] = bool(res.summary["finished"])
     row["sim_time"] = float(res.summary["sim_time"])
     return row
@@ -99,14 +112,15 @@ def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
 
 def cohort_jobs(n_subjects: int, seed: int, effects: TeleopEffects, *,
                 trials_per_mode: int | None = None, n_rings: int | None = None,
-                max_time: float | None = None) -> list[dict[str, Any]]:
+                max_time: float | None = None, protocol_name: str = "mrcp_vs_stdt",
+                ) -> list[dict[str, Any]]:
     """Every trial of the cohort, configured as ``Session.trial_config`` configures it
     (``trials_per_mode``, ``n_rings``, ``max_time``: smaller cohorts for tests)."""
     from vasim.study.cohort import cohort_subjects
     from vasim.study.protocol import generate_schedule, load_protocol
     from vasim.study.session import trial_seed
 
-    protocol = load_protocol("mrcp_vs_stdt")
+    protocol = load_protocol(protocol_name)
     jobs = []
     for subj in cohort_subjects(n_subjects, n_subjects // 2, seed):
         schedule = generate_schedule(protocol, subj.session_seed)
@@ -150,70 +164,46 @@ def simulate(n_subjects: int, seed: int, effects: TeleopEffects, workers: int,
     return df
 
 
-def moments(df: pd.DataFrame) -> dict[str, float]:
-    """The fitted moments: ET of MRCP, EM StdT/MRCP, ET MRCP+Cam/MRCP (of the mode means)."""
-    m = df.groupby("mode")[["ET", "EM"]].mean()
-    return {"et_mrcp": float(m.loc["mrcp", "ET"]),
-            "em_stdt_mrcp": float(m.loc["stdt", "EM"] / m.loc["mrcp", "EM"]),
-            "et_cam_mrcp": float(m.loc["mrcp_cam", "ET"] / m.loc["mrcp", "ET"])}
-
-
-def seed_moments() -> dict[str, float]:
-    t = SEED_TABLE_5_1
-    return {"et_mrcp": t["ET"]["mrcp"][0],
-            "em_stdt_mrcp": t["EM"]["stdt"][0] / t["EM"]["mrcp"][0],
-            "et_cam_mrcp": t["ET"]["mrcp_cam"][0] / t["ET"]["mrcp"][0]}
-
-
-def fit(n_subjects: int, seed: int, workers: int) -> TeleopEffects:
-    """The calibration (``vasim.operator.teleop_profile``): two pilots, one secant step per
-    parameter on its moment."""
-    target = seed_moments()
-    print(f"fit: pilot 1 ({NEUTRAL})", flush=True)
-    a = moments(simulate(n_subjects, seed, NEUTRAL, workers))
-    print(f"fit: pilot 2 ({PILOT})", flush=True)
-    b = moments(simulate(n_subjects, seed, PILOT, workers))
-    for k in target:
-        print(f"  {k:13s} pilot 1 {a[k]:8.3f}  pilot 2 {b[k]:8.3f}  seed {target[k]:8.3f}")
-    fitted = TeleopEffects(
-        thread_time=round(secant_fit(NEUTRAL.thread_time, a["et_mrcp"], PILOT.thread_time,
-                                     b["et_mrcp"], target["et_mrcp"], lo=0.1, hi=10.0), 2),
-        stdt_noise=round(secant_fit(NEUTRAL.stdt_noise, a["em_stdt_mrcp"], PILOT.stdt_noise,
-                                    b["em_stdt_mrcp"], target["em_stdt_mrcp"], lo=0.0,
-                                    hi=5.0), 2),
-        camera_cost=round(secant_fit(NEUTRAL.camera_cost, a["et_cam_mrcp"],
-                                     PILOT.camera_cost, b["et_cam_mrcp"],
-                                     target["et_cam_mrcp"], lo=0.0, hi=5.0), 2))
-    print(f"fitted: {fitted}", flush=True)
-    return fitted
-
-
 def _pct(a: float, b: float) -> str:
     """``(a - b) / b`` in %, or ``n/a`` when b is 0 (e.g. no contact at all)."""
     return f"{100.0 * (a - b) / b:+.1f} %" if b != 0 else "n/a (reference 0)"
 
 
-def side_by_side(df: pd.DataFrame) -> list[str]:
+def side_by_side(df: pd.DataFrame, protocol_name: str = "mrcp_vs_stdt") -> list[str]:
     """The printed table (module docstring)."""
     from vasim.study import stats
 
+    seed_table = SEED_TABLES[protocol_name]
+    modes = [m for m in MODES if m in set(df["mode"])]
+    names = TABLE_MEASURES[protocol_name]
     lines = []
-    cells = df.groupby(["subject", "mode"])[[m for m, _, _ in MEASURES]].mean().reset_index()
-    for name, _, unit in MEASURES:
-        seed = SEED_TABLE_5_1[name]
+    cells = df.groupby(["subject", "mode"])[list(names)].mean().reset_index()
+    for name in names:
+        unit = next(u for n, _, u in MEASURES if n == name)
+        seed = seed_table[name]
         lines.append(f"\n{name} [{unit}]   simulated mean (sd) IQR  |  seed mean (sd)")
-        for mode in MODES:
+        for mode in modes:
             v = cells.loc[cells["mode"] == mode, name]
             q = df.loc[df["mode"] == mode, name].quantile([0.25, 0.75])
             lines.append(f"  {LABEL[mode]:9s} {v.mean():10.3f} ({v.std(ddof=1):8.3f}) "
                          f"IQR {q.iloc[1] - q.iloc[0]:8.3f}  |  {seed[mode][0]:9.2f} "
                          f"({seed[mode][1]:.2f})")
-        mean = {mode: float(cells.loc[cells["mode"] == mode, name].mean()) for mode in MODES}
+        mean = {mode: float(cells.loc[cells["mode"] == mode, name].mean()) for mode in modes}
         for x, ref in (("mrcp", "stdt"), ("mrcp_cam", "stdt"), ("mrcp_cam", "mrcp")):
-            lines.append(f"  {LABEL[x]} vs {LABEL[ref]}: simulated {_pct(mean[x], mean[ref])}, "
-                         f"seed {_pct(seed[x][0], seed[ref][0])}")
+            if x in mean and ref in mean:
+                lines.append(f"  {LABEL[x]} vs {LABEL[ref]}: simulated "
+                             f"{_pct(mean[x], mean[ref])}, seed "
+                             f"{_pct(seed[x][0], seed[ref][0])}")
+        if "mrcp" in mean and "stdt" in mean:
+            g = mean["stdt"] / mean["mrcp"] if mean["mrcp"] > 0 else math.nan
+            lines.append(f"  gain StdT/MRCP: simulated {g:.2f}, seed "
+                         f"{seed['stdt'][0] / seed['mrcp'][0]:.2f}")
+            wide = cells.pivot(index="subject", columns="mode", values=name)
+            better = wide.index[wide["mrcp"] < wide["stdt"]].tolist()
+            lines.append(f"  per subject: MRCP smaller for {len(better)} of {len(wide)} "
+                         f"({', '.join(better) or 'none'})")
         c = cells.copy()
-        c["mode"] = pd.Categorical(c["mode"].map(LABEL), categories=[LABEL[m] for m in MODES])
+        c["mode"] = pd.Categorical(c["mode"].map(LABEL), categories=[LABEL[m] for m in modes])
         c = c.rename(columns={name: "value"})
         try:
             pp = stats.pairwise_paired(c[["subject", "mode", "value"]], dv="value",
@@ -224,9 +214,11 @@ def side_by_side(df: pd.DataFrame) -> list[str]:
         inv = {v: k for k, v in LABEL.items()}
         for r in pp.itertuples(index=False):
             key = (inv[str(r.group1)], inv[str(r.group2)])
-            st, sp = SEED_TABLE_5_2[name].get(key, (math.nan, "?"))
+            seed_t = SEED_TABLE_5_2.get(name, {}) if protocol_name == "mrcp_vs_stdt" else {}
+            st, sp = seed_t.get(key, (math.nan, "?"))
             lines.append(f"  paired t {r.group1} vs {r.group2}: simulated t = {r.t:6.2f}, "
-                         f"p = {r.p:.3g}  |  seed t = {st}, p = {sp}")
+                         f"p = {r.p:.3g}, power {r.power_observed:.2f}, n for 0.9 "
+                         f"{r.n_power90_ceil}  |  seed t = {st}, p = {sp}")
     extra = df.groupby("mode")[["transfers", "regrasps", "misaligned_transfers", "em_to_ring",
                                 "em_to_via", "em_transfer", "contact_time"]].mean()
     lines.append("\nper trial (means): " + extra.rename(index=LABEL).round(3).to_string())
@@ -238,29 +230,33 @@ def side_by_side(df: pd.DataFrame) -> list[str]:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--protocol", choices=sorted(SEED_TABLES), default="mrcp_vs_stdt")
+    ap.add_argument("--scenario", default="teleop_mechanism_only", metavar="NAME|FILE",
+                    help="a declared teleoperation scenario (protocols/scenarios)")
+    ap.add_argument("--effect-scale", type=float, default=1.0, metavar="X",
+                    help="x the scenario's mode penalties (0: the mechanism alone)")
     ap.add_argument("--subjects", type=int, default=4)
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--workers", type=int, default=1)
-    ap.add_argument("--fit", action="store_true", help="fit the calibration first")
-    ap.add_argument("--fit-subjects", type=int, default=3)
     ap.add_argument("--csv", default=None, help="also write the trials to this CSV")
-    ap.add_argument("--effects", default=None, metavar="K,THETA,C",
-                    help="run with these thread_time, stdt_noise, camera_cost instead")
     args = ap.parse_args(argv)
-    effects = fit(args.fit_subjects, args.seed, args.workers) if args.fit else SEED_TELEOP
-    if args.effects:
-        try:
-            k, theta, c = (float(v) for v in args.effects.split(","))
-            effects = TeleopEffects(thread_time=k, stdt_noise=theta, camera_cost=c)
-        except ValueError as exc:
-            ap.error(f"--effects: expected three numbers K,THETA,C, got {args.effects!r} "
-                     f"({exc})")
-    print(f"cohort: {args.subjects} subjects, seed {args.seed}, {effects}", flush=True)
-    df = simulate(args.subjects, args.seed, effects, args.workers)
+    from vasim.core.errors import ConfigError
+
+    try:
+        sc = load_scenario(Path(args.scenario) if Path(args.scenario).is_file()
+                           else args.scenario)
+        effects = sc.teleop_effects(args.effect_scale)
+    except (ConfigError, ValueError) as exc:
+        ap.error(f"--scenario {args.scenario}: {exc}")
+    print(f"cohort: {args.protocol}, {args.subjects} subjects, seed {args.seed}, scenario "
+          f"{sc.name} ({sc.sha256[:12]}) x {args.effect_scale:g}: {effects}", flush=True)
+    df = simulate(args.subjects, args.seed, effects, args.workers,
+                  protocol_name=args.protocol)
     if args.csv:
         df.to_csv(args.csv, index=False)
-    print("\n".join(side_by_side(df)))
-    print("\nsynthetic data: scripted operator calibrated to the seed (not evidence)")
+    print("\n".join(side_by_side(df, args.protocol)))
+    print(f"\nsynthetic data: scripted operator under the declared scenario {sc.name} "
+          "(assumptions, not fitted to the seed; not evidence about people)")
 
 
 if __name__ == "__main__":

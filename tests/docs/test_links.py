@@ -25,7 +25,6 @@ from tests.docs.doc_blocks import (
 README_MAX_LINES = 250
 
 PENDING: dict[str, str] = {
-    "docs/seed-chapter5.md": "exp3",
 }
 """Pages other branches add in parallel (file -> branch). A link to one of them that is
 missing here is an expected failure naming the branch, until the merge brings it; once the

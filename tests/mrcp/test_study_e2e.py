@@ -53,11 +53,13 @@ def test_report_mrcp_section_is_filled_from_the_stored_trials(study) -> None:
     assert "MRCP vs standard teleoperation" in html
     trials = pd.read_csv(out / "tables" / "mrcp_trials.csv")
     assert sorted(trials["trial_id"]) == sorted(data["trial_id"])
-    merged = trials.merge(data, on="trial_id")
+    # the stored metrics prefixed: the report's keys contact_time etc. are metric names too
+    merged = trials.merge(data.rename(columns=lambda c: c if c == "trial_id" else f"s_{c}"),
+                          on="trial_id")
     for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
-                        ("Q_contact_time", "contact_time"), ("Q_force", "accumulated_force"),
-                        ("Q_torque", "accumulated_torque")):
-        pd.testing.assert_series_equal(merged[key], merged[metric], check_names=False,
+                        ("contact_time", "contact_time"), ("force", "accumulated_force"),
+                        ("torque", "accumulated_torque")):
+        pd.testing.assert_series_equal(merged[key], merged[f"s_{metric}"], check_names=False,
                                        rtol=1e-12)
     gains = pd.read_csv(out / "tables" / "mrcp_gains.csv")
     means = data.groupby(["subject", "mode"])["completion_time"].mean().unstack()

@@ -10,9 +10,8 @@ from vasim.operator.needle import grasp_sigma
 from vasim.operator.profile import OperatorProfile
 from vasim.operator.teleop_profile import (
     NEUTRAL,
-    SEED_TELEOP,
     TeleopEffects,
-    secant_fit,
+    scale_teleop,
     teleop_adjustment,
 )
 
@@ -63,23 +62,26 @@ def test_bad_inputs_name_what_was_expected() -> None:
         TeleopEffects(stdt_noise=-0.1)
     with pytest.raises(ValueError, match="thread_time"):
         TeleopEffects(thread_time=float("nan"))
-    with pytest.raises(ValueError, match="did not move"):
-        secant_fit(0.0, 1.0, 1.0, 1.0, 1.2, lo=0.0, hi=5.0)
+    with pytest.raises(ValueError, match="effect scale"):
+        scale_teleop(NEUTRAL, -1.0)
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.floats(-3, 3), st.floats(0.2, 4), st.floats(0.0, 2.0), st.floats(2.5, 4.0),
-       st.floats(0.0, 4.0))
-def test_the_secant_step_recovers_the_root_of_a_linear_moment(a: float, b: float, x0: float,
-                                                            x1: float, x_true: float) -> None:
-    def y(x: float) -> float:
-        return a + b * x
+@given(st.floats(0.1, 10.0), st.floats(0.0, 5.0), st.floats(0.0, 5.0), st.floats(0.0, 1.0))
+def test_the_effect_scale_moves_every_penalty_linearly_from_neutral(
+        k: float, theta: float, c: float, s: float) -> None:
+    e = TeleopEffects(thread_time=k, stdt_noise=theta, camera_cost=c)
+    assert scale_teleop(e, 0.0) == NEUTRAL
+    one = scale_teleop(e, 1.0)
+    assert (one.thread_time, one.stdt_noise, one.camera_cost) == pytest.approx((k, theta, c))
+    got = scale_teleop(e, s)
+    assert got.stdt_noise == pytest.approx(s * theta)
+    assert got.camera_cost == pytest.approx(s * c)
+    assert got.thread_time == pytest.approx(max(0.1, 1.0 + s * (k - 1.0)))
 
-    got = secant_fit(x0, y(x0), x1, y(x1), y(x_true), lo=-10.0, hi=10.0)
-    assert got == pytest.approx(x_true, abs=1e-9)
-    assert secant_fit(x0, y(x0), x1, y(x1), y(20.0), lo=-10.0, hi=10.0) == 10.0  # clipped
 
-
-def test_the_seed_calibration_is_a_valid_model_that_does_something() -> None:
-    assert SEED_TELEOP.thread_time > 1.0 and SEED_TELEOP.stdt_noise > 0.0
-    assert SEED_TELEOP.camera_cost > 0.0
+def test_the_default_is_the_mechanism_alone() -> None:
+    # no penalty unless a declared scenario gives one (issue #25 item 6)
+    for mode in ("stdt", "mrcp", "mrcp_cam"):
+        adj = teleop_adjustment(mode, 0, P)
+        assert adj.carry == P and adj.handover == P

@@ -98,7 +98,7 @@ def test_gains_equal_hand_computed_ratios(mrcp_study) -> None:
     complete = data[data["subject"] != "M9"]
     gains = _csv(out, "mrcp_gains")
     for key, metric in (("ET", "completion_time"), ("EM", "path_l2"),
-                        ("Q_force", "accumulated_force"), ("Q", "target_deformation"),
+                        ("force", "accumulated_force"), ("Q", "target_deformation"),
                         ("Q_target_displacement", "target_displacement_max")):
         for mode, label in (("mrcp", "MRCP"), ("mrcp_cam", "MRCP+Cam")):
             # balanced design (6 trials per subject and mode): the ratio of the means of all

@@ -234,7 +234,7 @@ def test_every_mode_follows_the_same_needle_route() -> None:
     visited = {}
     for mode in ("stdt", "mrcp"):
         # the route is the station's and the task's: the person as the scripted operator is,
-        # without the seed-calibrated mode effects (whose threading is ten times slower)
+        # without mode penalties (NEUTRAL, the default: the mechanism alone)
         tr = TeleopTrial(TrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
                          n_rings=3, effects=NEUTRAL)
         res = tr.run()

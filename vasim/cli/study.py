@@ -437,14 +437,18 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         "most 4 x the cores)")
     r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
                    help="trial time limit [s] (default: the protocol's)")
-    r.add_argument("--scenario", default="seed_plausible", metavar="NAME|FILE.toml",
+    r.add_argument("--scenario", default=None, metavar="NAME|FILE.toml",
                    help="the declared scenario of the simulated operator: a name in "
-                        "protocols/scenarios (seed_plausible, null) or a TOML file "
-                        "(docs/simulation.md); stored with each session with its sha256")
+                        "protocols/scenarios or a TOML file (docs/simulation.md); a VF "
+                        "protocol takes a VF scenario (default seed_plausible; null), a "
+                        "teleoperation protocol a teleoperation one (default "
+                        "teleop_mechanism_only; teleop_assumed, docs/seed-chapter5.md); "
+                        "stored with each session with its sha256")
     r.add_argument("--effect-scale", type=bounded_float(EFFECT_SCALE), default=1.0,
                    metavar="X",
-                   help="x the scenario's fixture effects and mechanism gain (default 1; "
-                        "0: no fixture effect at all)")
+                   help="x the scenario's fixture effects and mechanism gain, or its mode "
+                        "penalties (default 1; 0: no fixture effect at all, or the "
+                        "teleoperation mechanism alone)")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
 
@@ -698,13 +702,17 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from vasim.operator.scenario import load_scenario
-    from vasim.study.cohort import simulate_cohort
+    from vasim.operator.scenario import load_scenario, scenario_path
+    from vasim.study.cohort import check_scenario_kind, default_scenario_for, simulate_cohort
     from vasim.study.protocol import load_protocol
 
-    scenario = load_scenario(args.scenario)
     protocol = load_protocol(args.protocol)
     protocol.check_runnable()
+    if args.scenario is None:
+        scenario = default_scenario_for(protocol)
+    else:
+        scenario = load_scenario(args.scenario)
+        check_scenario_kind(protocol, scenario, scenario_path(args.scenario))
     surgeons = args.surgeons
     if surgeons is None:
         surgeons = round(args.subjects * 31 / 46)  # the VF study: 31 surgeons of 46

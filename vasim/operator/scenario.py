@@ -15,7 +15,15 @@ A scenario file (``protocols/scenarios/NAME.toml``; format and sources in
   first and the skill from it (``skill ~ Beta`` with that mean), so demographics and skill
   are drawn together;
 * ``[questionnaire]``: the answer model (``vasim.operator.questionnaire``);
-* ``[outcome]``: the trial-level outcome engine (``vasim.operator.outcome``).
+* ``[outcome]``: the trial-level outcome engine (``vasim.operator.outcome``);
+* ``[teleop]`` (a *teleoperation* scenario, for the MRCP study's protocols): the person's
+  mode penalties ``thread_time``, ``stdt_noise``, ``camera_cost``
+  (``vasim.operator.teleop_profile.TeleopEffects``); all three neutral (1, 0, 0) is the
+  mechanism alone. A teleoperation scenario has no ``[fixtures]`` (or an empty table) and
+  needs no ``[options]`` or ``[outcome]`` (the fixture and outcome engines do not run its
+  trials); a scenario without ``[teleop]`` is a VF scenario. ``vasim study simulate``
+  refuses a scenario of the other kind than the protocol's (``vasim.study.cohort
+  .check_scenario_kind``).
 
 Every parameter is written ``name = { value = X, source = "..." }``; a missing or empty
 source is refused. Nothing of the seed's *results* belongs in a scenario (shares, ratings,
@@ -61,6 +69,7 @@ from vasim.operator.combined import label_effects
 from vasim.operator.effects import EFFECT_FIELDS, FixtureEffect, scale_effects
 from vasim.operator.profile import OperatorProfile
 from vasim.operator.scripted import SKILL_NOISE, SKILL_TIME
+from vasim.operator.teleop_profile import TeleopEffects, scale_teleop
 
 DEFAULT_SCENARIO = "seed_plausible"
 """The scenario ``vasim study simulate`` uses without ``--scenario``."""
@@ -69,6 +78,7 @@ GROUP_FIELDS = ("learning_rate_mean", "learning_rate_sd", "asymptote", "skill_co
 QUESTIONNAIRE_FIELDS = ("choice_noise", "rating_centre", "rating_per_benefit", "rating_sd")
 OUTCOME_FIELDS = ("path_deviation_mm", "subject_sd_log", "trial_sd_log")
 OPTION_FIELDS = ("mechanism_gain", "derive_unlisted")
+TELEOP_FIELDS = ("thread_time", "stdt_noise", "camera_cost")
 
 _RANGES: dict[str, tuple[float, float]] = {
     "accuracy": (1e-3, 10.0), "speed": (1e-3, 10.0), "practice_weight": (0.0, 10.0),
@@ -79,6 +89,7 @@ _RANGES: dict[str, tuple[float, float]] = {
     "rating_per_benefit": (-1000.0, 1000.0), "rating_sd": (0.0, 100.0),
     "path_deviation_mm": (1e-3, 1e3), "subject_sd_log": (0.0, 5.0), "trial_sd_log": (0.0, 5.0),
     "mechanism_gain": (0.0, 1.0),
+    "thread_time": (0.1, 10.0), "stdt_noise": (0.0, 5.0), "camera_cost": (0.0, 5.0),
 }
 
 
@@ -148,7 +159,9 @@ class Scenario:
         name, description: from the file. text: the file's text (stored with a session).
         sha256: hex digest of ``text`` (UTF-8). fixtures: label -> effect (as declared,
         scale 1). mechanism_gain, derive_unlisted: ``[options]``. groups: name -> model.
-        questionnaire, outcome: the models. sources: dotted parameter path -> its source.
+        questionnaire, outcome: the models (outcome None in a teleoperation scenario).
+        sources: dotted parameter path -> its source. teleop: the mode penalties of a
+        teleoperation scenario (None: a VF scenario).
     """
 
     name: str
@@ -160,9 +173,26 @@ class Scenario:
     derive_unlisted: bool
     groups: Mapping[str, GroupModel]
     questionnaire: QuestionnaireModel
-    outcome: OutcomeModel
+    outcome: OutcomeModel | None
     sources: Mapping[str, str] = field(repr=False)
     crossover_reason: str | None = None
+    teleop: TeleopEffects | None = None
+
+    @property
+    def kind(self) -> str:
+        """``"teleop"`` (it has ``[teleop]``) or ``"vf"``."""
+        return "vf" if self.teleop is None else "teleop"
+
+    def teleop_effects(self, scale: float = 1.0) -> TeleopEffects:
+        """The mode penalties at effect scale ``scale`` (``scale_teleop``).
+
+        Raises:
+            ConfigError: a VF scenario (no ``[teleop]``).
+        """
+        if self.teleop is None:
+            raise ConfigError(f"scenario {self.name!r} is a VF scenario (no [teleop] "
+                              "table)", field="teleop")
+        return scale_teleop(self.teleop, scale)
 
     def effects(self, scale: float = 1.0) -> dict[str, FixtureEffect]:
         """The fixture effects at effect scale ``scale`` (``scale_effect``: 0 none)."""
@@ -281,19 +311,35 @@ def parse_scenario(text: str, *, file: str | Path | None = None) -> Scenario:
     """
     f = None if file is None else str(file)
     raw = parse_toml(text, file=f, kind="scenario")
+    teleop_raw = raw.get("teleop") if isinstance(raw, Mapping) else None
+    is_teleop = teleop_raw is not None
     top = check_keys(raw, ("name", "description", "options", "fixtures", "groups",
-                           "questionnaire", "outcome"), file=f,
-                     required=("name", "options", "fixtures", "groups", "questionnaire",
-                               "outcome"))
+                           "questionnaire", "outcome", "teleop"), file=f,
+                     required=("name", "groups", "questionnaire") if is_teleop else
+                     ("name", "options", "fixtures", "groups", "questionnaire", "outcome"))
     sources: dict[str, str] = {}
     name = check_str(top["name"], "name", file=f)
     desc = check_str(top.get("description", ""), "description", empty=True, file=f)
-    opts = check_keys(top["options"], OPTION_FIELDS, "options", file=f, required=OPTION_FIELDS)
-    mech = _num(opts, "mechanism_gain", "options", f, sources)
-    derive = check_bool(_param(opts, "derive_unlisted", "options", f, sources),
-                        "options.derive_unlisted.value", file=f)
+    teleop = None
+    if is_teleop:
+        tt = check_keys(top["teleop"], TELEOP_FIELDS, "teleop", file=f,
+                        required=TELEOP_FIELDS)
+        teleop = TeleopEffects(**{k: _num(tt, k, "teleop", f, sources)
+                                  for k in TELEOP_FIELDS})
+        if check_table(top.get("fixtures", {}), "fixtures", file=f):
+            raise ConfigError("got fixture effects in a teleoperation scenario (it has "
+                              "[teleop]), expected none (a VF scenario has no [teleop])",
+                              file=f, field="fixtures")
+    if "options" in top or not is_teleop:
+        opts = check_keys(top["options"], OPTION_FIELDS, "options", file=f,
+                          required=OPTION_FIELDS)
+        mech = _num(opts, "mechanism_gain", "options", f, sources)
+        derive = check_bool(_param(opts, "derive_unlisted", "options", f, sources),
+                            "options.derive_unlisted.value", file=f)
+    else:
+        mech, derive = 1.0, False
     fixtures: dict[str, FixtureEffect] = {}
-    for label, ft in check_table(top["fixtures"], "fixtures", file=f).items():
+    for label, ft in check_table(top.get("fixtures", {}), "fixtures", file=f).items():
         path = f"fixtures.{label}"
         ft = check_keys(ft, EFFECT_FIELDS, path, file=f, required=EFFECT_FIELDS)
         vals = {k: _num(ft, k, path, f, sources) for k in EFFECT_FIELDS}
@@ -312,15 +358,19 @@ def parse_scenario(text: str, *, file: str | Path | None = None) -> Scenario:
                               file=f, field=f"groups.{needed}")
     q = check_keys(top["questionnaire"], QUESTIONNAIRE_FIELDS, "questionnaire", file=f,
                    required=QUESTIONNAIRE_FIELDS)
-    o = check_keys(top["outcome"], OUTCOME_FIELDS, "outcome", file=f, required=OUTCOME_FIELDS)
+    outcome = None
+    if "outcome" in top:
+        o = check_keys(top["outcome"], OUTCOME_FIELDS, "outcome", file=f,
+                       required=OUTCOME_FIELDS)
+        outcome = OutcomeModel(**{k: _num(o, k, "outcome", f, sources)
+                                  for k in OUTCOME_FIELDS})
     sc = Scenario(
         name=name, description=desc, text=text,
         sha256=hashlib.sha256(text.encode("utf-8")).hexdigest(),
         fixtures=fixtures, mechanism_gain=mech, derive_unlisted=derive, groups=groups,
         questionnaire=QuestionnaireModel(**{k: _num(q, k, "questionnaire", f, sources)
                                             for k in QUESTIONNAIRE_FIELDS}),
-        outcome=OutcomeModel(**{k: _num(o, k, "outcome", f, sources) for k in OUTCOME_FIELDS}),
-        sources=sources, crossover_reason=reason)
+        outcome=outcome, sources=sources, crossover_reason=reason, teleop=teleop)
     if reason is None:
         check_no_crossover(sc, file=f)
     return sc

@@ -78,7 +78,12 @@ from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.operator.questionnaire import Perception, perceive
-from vasim.operator.scenario import QuestionnaireModel, Scenario, default_scenario
+from vasim.operator.scenario import (
+    QuestionnaireModel,
+    Scenario,
+    default_scenario,
+    load_scenario,
+)
 from vasim.operator.scripted import OperatorProfile
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
@@ -95,6 +100,7 @@ from vasim.study.session import (
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
+from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.lifecycle import (
     StoredTrial,
     begin_stored_trial,
@@ -439,6 +445,43 @@ def scenario_record(scenario: Scenario, effect_scale: float) -> dict[str, Any]:
             "text": scenario.text}
 
 
+TELEOP_DEFAULT_SCENARIO = "teleop_mechanism_only"
+"""The scenario of a protocol of teleoperation modes without ``--scenario``: the mechanism
+alone (issue #25 item 6: a comparison of the modes is first reported without penalties)."""
+
+
+def is_teleop_protocol(protocol: Protocol) -> bool:
+    """Whether the protocol's conditions are teleoperation modes (the MRCP study)."""
+    return any(b.condition in TELEOPERATION_MODES for b in protocol.blocks)
+
+
+def default_scenario_for(protocol: Protocol) -> Scenario:
+    """``teleop_mechanism_only`` for a protocol of teleoperation modes, else the default
+    VF scenario (``seed_plausible``)."""
+    if is_teleop_protocol(protocol):
+        return load_scenario(TELEOP_DEFAULT_SCENARIO)
+    return default_scenario()
+
+
+def check_scenario_kind(protocol: Protocol, scenario: Scenario,
+                        file: str | os.PathLike[str] | None = None) -> None:
+    """Refuses a VF scenario for a protocol of teleoperation modes and vice versa.
+
+    Raises:
+        ConfigError: (field ``--scenario``) naming the file (or the scenario), its kind and
+            the protocol's.
+    """
+    want = "teleop" if is_teleop_protocol(protocol) else "vf"
+    if scenario.kind == want:
+        return
+    what = {"teleop": "a teleoperation scenario (with [teleop]: teleop_mechanism_only, "
+                      "teleop_assumed)",
+            "vf": "a VF scenario (no [teleop]: seed_plausible, null)"}
+    raise ConfigError(f"got {what[scenario.kind].split(' (')[0]} {scenario.name!r} for "
+                      f"protocol {protocol.name!r}, expected {what[want]}",
+                      file=None if file is None else str(file), field="--scenario")
+
+
 def prepare_sessions(store: TrialStore, protocol: Protocol,
                      subjects: Sequence[SimulatedSubject], *, cohort_seed: int,
                      max_trial_time: float | None = None,
@@ -561,9 +604,12 @@ def simulate_cohort(
         max_trial_time: trial time limit [s] (None: the protocol's).
         max_trials_per_subject: run at most this many (the first pending) trials of each
             subject (None: all); for tests and benchmarks.
-        scenario: the declared scenario (None: ``seed_plausible``).
+        scenario: the declared scenario (None: ``default_scenario_for(protocol)``); its
+            kind must be the protocol's (``check_scenario_kind``).
         effect_scale: x the scenario's fixture effects and mechanism gain (0: no fixture
-            effect at all; ``Scenario.effects``, ``Scenario.mechanism``).
+            effect at all; ``Scenario.effects``, ``Scenario.mechanism``); in a
+            teleoperation scenario x its mode penalties (``Scenario.teleop_effects``; 0: the
+            mechanism alone).
 
     Returns:
         A ``CohortReport``.
@@ -573,7 +619,8 @@ def simulate_cohort(
         KeyboardInterrupt: after marking the trials in flight 'interrupted'.
     """
     protocol.check_runnable()
-    sc = scenario or default_scenario()
+    sc = scenario or default_scenario_for(protocol)
+    check_scenario_kind(protocol, sc)
     if not math.isfinite(effect_scale) or effect_scale < 0:
         raise ConfigError(f"got {effect_scale!r}, expected a number >= 0",
                           field="effect_scale")
@@ -714,10 +761,14 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
 
 __all__ = [
     "DEMOGRAPHIC_MODEL",
+    "TELEOP_DEFAULT_SCENARIO",
     "CohortReport",
     "SimulatedSubject",
+    "check_scenario_kind",
     "cohort_subjects",
+    "default_scenario_for",
     "draw_demographics",
+    "is_teleop_protocol",
     "measured_benefits",
     "prepare_sessions",
     "scenario_record",

@@ -29,7 +29,10 @@ text as run, the seed, the schedule and the run settings -- and never the protoc
   scripted operator stores its operator as ``learning.OPERATOR_LABEL`` ("scripted
   (declared scenario, synthetic)"); its trials keep ``operator = "scripted"``.
   A teleoperation trial also gets ``mode_practice``, the number of earlier trials of its
-  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``).
+  mode in the schedule (the mode-specific learning of ``vasim.operator.teleop_profile``),
+  and ``mode_effects``, the stored teleoperation scenario's mode penalties at the effect
+  scale (``Scenario.teleop_effects``; None without a ``[teleop]`` scenario: the mechanism
+  alone).
 * Run settings (``SessionSettings``) are stored with the session (``sessions.config_json``),
   the operator profile resolved (not just the preset name), so a resumed session runs with
   the same person even if the presets change.
@@ -280,6 +283,8 @@ class Session:
             gain=gain,
             mode_practice=None if mode is None else sum(
                 t.condition == mode for t in self.schedule[:scheduled.index]),
+            mode_effects=None if mode is None or scenario is None
+            or scenario.teleop is None else scenario.teleop_effects(scale),
         )
 
     @property

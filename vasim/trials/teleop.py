@@ -72,14 +72,16 @@ moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
   With one path per waypoint MRCP's path is StdT's within ±7 % (seeds 1-3: 1.06 / 1.01,
   0.95 / 0.96, 1.02 / 0.95 m): the station and the kernel do not lengthen it, and the
   threading task is done as the seed's subjects did it, one target at a time. What
-  remains of the seed's EM difference is the person (``vasim.operator.teleop_profile``).
+  remains of the seed's EM difference is not the station's (a person's penalty, if any,
+  is a declared assumption: ``vasim.operator.teleop_profile``).
 * The person in the modes (issue #21 §2): every hand's profile is the trial's
   ``vasim.operator.teleop_profile.teleop_adjustment`` of the mode and its practice
   (``config.mode_practice``, else ``config.practice``): carries to a ring use its
   ``carry`` profile (the threading time), every other movement its ``handover`` one, and
-  StdT's jaw placement error follows the handover profile's perception. The default is
-  the seed calibration ``SEED_TELEOP``; ``effects=NEUTRAL`` is the scripted operator as
-  it is (the station's mechanics tests).
+  StdT's jaw placement error follows the handover profile's perception. The penalties
+  are a declared teleoperation scenario's (``config.mode_effects``, from the session's
+  ``[teleop]`` scenario); without one they are ``NEUTRAL``: the scripted operator as it
+  is, the mechanism alone (issue #25 item 6).
 * Every instrument in the abdomen is in the contact model (issue #7 §4): each physics
   step gets the two tools (trocar to tool tip, ``"right"`` and ``"left"``) and the
   endoscope (camera trocar to lens, the same 2.5 mm capsule as the tools: the abdomen has
@@ -166,7 +168,7 @@ from vasim.operator.needle import (
     pregrasp_offset,
 )
 from vasim.operator.scripted import OperatorProfile
-from vasim.operator.teleop_profile import SEED_TELEOP, TeleopEffects, teleop_adjustment
+from vasim.operator.teleop_profile import NEUTRAL, TeleopEffects, teleop_adjustment
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
@@ -255,8 +257,9 @@ class TeleopTrial:
             quality metrics); default: a new one (``config.scene == "none"``: no tissue,
             static rings).
         holder: the tool holder of the station (``build_station``).
-        effects: the operator's mode effects (``vasim.operator.teleop_profile``; default:
-            the calibration to the seed's Table 5.1).
+        effects: the operator's mode penalties (``vasim.operator.teleop_profile``);
+            None: ``config.mode_effects`` (a session's declared teleoperation scenario),
+            else ``NEUTRAL`` (the mechanism alone).
 
     Raises:
         ConfigError: no mode in ``config``.
@@ -264,7 +267,7 @@ class TeleopTrial:
 
     def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
                  abdomen: Abdomen | None = None, holder: str = "positioner",
-                 effects: TeleopEffects = SEED_TELEOP) -> None:
+                 effects: TeleopEffects | None = None) -> None:
         if config.mode is None:
             raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
                               "'mrcp_cam')", field="mode")
@@ -274,6 +277,8 @@ class TeleopTrial:
         self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
                                 ring_radius=radius)
         self.profile = config.profile if config.profile is not None else _preset(config.skill)
+        if effects is None:
+            effects = config.mode_effects if config.mode_effects is not None else NEUTRAL
         self.effects = effects
         self.adjustment = teleop_adjustment(
             self.mode, config.practice if config.mode_practice is None

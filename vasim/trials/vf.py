@@ -48,7 +48,7 @@ tremor-laden hand would make the damping force buzz.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal
 
@@ -64,6 +64,7 @@ from vasim.fixtures.schema import Schema, load_schema
 from vasim.fixtures.types import TaskState, Vec3
 from vasim.haptics.observation import OperatorObservation
 from vasim.operator.scripted import OperatorProfile, ScriptedOperator
+from vasim.operator.teleop_profile import TeleopEffects
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
@@ -115,6 +116,10 @@ class TrialConfig:
             schema as written) or an ``AdaptiveRule``; logged per sample (``gain``).
         mode_practice: earlier trials of this teleoperation mode in the session (the
             mode-specific learning of ``vasim.operator.teleop_profile``); None: ``practice``.
+        mode_effects: the scripted person's mode penalties in a teleoperation trial
+            (``vasim.operator.teleop_profile.TeleopEffects``, from the session's declared
+            teleoperation scenario); None: none (``NEUTRAL``, the mechanism alone). A
+            stored record's dict becomes the dataclass.
     """
 
     task: TaskName = "trajectory"
@@ -136,6 +141,7 @@ class TrialConfig:
     label: str | None = None
     gain: GainRule = 1.0
     mode_practice: int | None = None
+    mode_effects: TeleopEffects | None = None
 
     def __post_init__(self) -> None:
         # the fixture gain (vasim.fixtures.gain): a constant, or the adaptive rule (a stored
@@ -189,6 +195,15 @@ class TrialConfig:
         if mp is not None and (isinstance(mp, bool) or not isinstance(mp, int) or mp < 0):
             raise ConfigError(f"mode_practice must be an integer >= 0 or None, got {mp!r}",
                               field="mode_practice")
+        me = self.mode_effects
+        if isinstance(me, Mapping):
+            try:
+                object.__setattr__(self, "mode_effects", TeleopEffects(**me))
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"mode_effects: {exc}", field="mode_effects") from None
+        elif me is not None and not isinstance(me, TeleopEffects):
+            raise ConfigError(f"mode_effects must be TeleopEffects or None, got {me!r}",
+                              field="mode_effects")
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import socket
 import time
-from dataclasses import fields
+from dataclasses import asdict, fields
 from typing import Any
 
 import numpy as np
@@ -26,8 +26,10 @@ def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, ob
     """The trial configuration as plain JSON-able data (stored with the trial)."""
     # mode and label only when set: the records of other trials stay as they were
     rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name in ("mode", "label", "poi_spacing", "mode_practice")
-                    and getattr(config, f.name) is None)}
+           and not (f.name in ("mode", "label", "poi_spacing", "mode_practice",
+                               "mode_effects") and getattr(config, f.name) is None)}
+    if config.mode_effects is not None:  # the teleoperation scenario's penalties
+        rec["mode_effects"] = asdict(config.mode_effects)
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
     if config.gain == 1.0:  # the schema as written: the record stays as it was
         rec.pop("gain", None)

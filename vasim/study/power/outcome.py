@@ -23,6 +23,7 @@ from typing import Any
 
 import pandas as pd
 
+from vasim.core.errors import ConfigError
 from vasim.operator.outcome import draw_path_deviation
 from vasim.operator.scenario import Scenario
 from vasim.study.cohort import (
@@ -64,6 +65,11 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
         n_surgeons: surgeons among them (None: the VF study's share, ``surgeons_for``).
         answers: also draw the post-questionnaires.
     """
+    model = scenario.outcome
+    if model is None:   # a teleoperation scenario: its trials run on the MRCP station only
+        raise ConfigError(f"scenario {scenario.name!r} has no [outcome] (a teleoperation "
+                          "scenario); the outcome engine runs VF protocols with a VF "
+                          "scenario", field="--scenario")
     subjects = cohort_subjects(n_subjects,
                                surgeons_for(n_subjects) if n_surgeons is None else n_surgeons,
                                seed, latin_square=protocol.block_order == "latin_square",
@@ -75,7 +81,7 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
     for subj in subjects:
         session = subject_session(protocol, subj, dt=1e-3, max_trial_time=None, extra=extra)
         rng = _stream(seed, 9, subj.number)
-        u = float(rng.normal(0.0, scenario.outcome.subject_sd_log))
+        u = float(rng.normal(0.0, model.subject_sd_log))
         first = tid
         for st in session.schedule:
             cfg = session.trial_config(st)
@@ -85,7 +91,7 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
                          "trial_index": st.index, "condition": st.condition,
                          "probe": st.probe, "probe_index": st.probe_index,
                          "variant": st.variant, "trial_id": tid,
-                         PATH_DEV: draw_path_deviation(scenario.outcome, subj.profile,
+                         PATH_DEV: draw_path_deviation(model, subj.profile,
                                                        cfg.profile, cfg.practice, u, rng)})
         if answers and not protocol.post.empty:
             mine = pd.DataFrame(rows[first:])

@@ -1,4 +1,15 @@
-"""The MRCP vs standard-teleoperation section (spec §4)."""
+"""The MRCP vs standard-teleoperation section (spec §4; seed chapter 5, experiments 1-3).
+
+Besides means, paired tests, gains and learning curves it gives the seed's Table 5.4
+layout (``mrcp_table54``: mean and sd of StdT and of each other mode, and the gain
+mean(StdT)/mean(mode) per measure), Table 5.5's (``mrcp_table55``: the paired t-tests
+against StdT with observed power and the subjects needed for power 0.9, statsmodels'
+``TTestPower`` via ``vasim.study.stats.paired``), and the per-subject comparison
+(``mrcp_per_subject``: each subject's mean per mode and gain, who benefits and who does
+not; issue #25 item 6). ``tables/mrcp_descriptives.csv`` keeps the columns ``metric, mode,
+mean``; the metrics of experiment 3 are named ``ET``, ``EM``, ``contact_time``, ``force``,
+``torque`` (issue #28 item 2).
+"""
 
 from __future__ import annotations
 
@@ -60,9 +71,9 @@ MRCP_METRICS: tuple[MrcpMetric, ...] = (
     MrcpMetric("Q", "target_deformation", "Q", "target deformation by contacts", "mm s"),
     MrcpMetric("Q_target_displacement", "target_displacement_max", "Q",
                "largest target displacement", "m"),
-    MrcpMetric("Q_contact_time", "contact_time", "Q", "accumulated contact time", "s"),
-    MrcpMetric("Q_force", "accumulated_force", "Q", "accumulated force on tissue", "N s"),
-    MrcpMetric("Q_torque", "accumulated_torque", "Q", "accumulated torque on tissue", "N m s"),
+    MrcpMetric("contact_time", "contact_time", "Q", "accumulated contact time", "s"),
+    MrcpMetric("force", "accumulated_force", "Q", "accumulated force on tissue", "N s"),
+    MrcpMetric("torque", "accumulated_torque", "Q", "accumulated torque on tissue", "N m s"),
 )
 """The MRCP metrics, in report order (those with no stored value are left out)."""
 
@@ -77,11 +88,13 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
         "the Euclidean length of the needle path (path_l2) [m]; Q = quality as the seed "
         "measures it: the rings' displacement by contacts, integrated over time and summed "
         "over the rings (target_deformation) [mm s]; and, as experiment 3, the largest "
-        "target displacement [m], accumulated contact time [s], force [N s] and "
-        "torque [N m s] on tissue (when stored). Per subject and mode the cell is the "
-        "mean over the mode's trials; mean and sd per mode, paired Student t-tests per "
-        "pair of modes (with observed power and the minimum n for power 0.9) and the seed's gain "
-        "mean(StdT)/mean(mode) use the subjects with every mode. Learning curves: mean and "
+        "target displacement [m], accumulated contact time (contact_time) [s], force "
+        "(force) [N s] and torque (torque) [N m s] on tissue (when stored). Per subject and "
+        "mode the cell is the mean over the mode's trials; mean and sd per mode (Table "
+        "5.4's layout), paired Student t-tests per pair of modes (with observed power and "
+        "the minimum n for power 0.9: Table 5.5's layout) and the seed's gain "
+        "mean(StdT)/mean(mode) use the subjects with every mode; the per-subject table "
+        "shows who benefits from each mode and who does not. Learning curves: mean and "
         "interquartile range per trial number within the mode (1..6). Likert items: see "
         "the Questionnaires section.")]
     done = data.analysed
@@ -111,6 +124,8 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
     trials_tab = wide[["trial_id", "subject", "session_id", "trial_index", "condition", "mode",
                        "trial_number", *[m.key for m in metrics]]]
     desc, paired, gains, curves, fits = [], [], [], [], []
+    table54: list[dict[str, object]] = []
+    per_subject: list[dict[str, object]] = []
     excl: dict[str, list[str]] = {}  # exclusion note -> the metrics it applies to
     curve_figs: list[FigureBlock] = []
     for m in metrics:
@@ -172,6 +187,23 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
                                   "reference": "StdT", "mode": fixture_label(cond),
                                   "n_subjects": n, "mean_reference": float(ref.mean()),
                                   "mean_mode": float(cmp_.mean()), "gain": g})
+                    sd_of = kept.groupby("condition")["value"].std(ddof=1)
+                    table54.append({"metric": m.key, "unit": m.unit, "mode": fixture_label(cond),
+                                    "n_subjects": n, "mean_StdT": float(ref.mean()),
+                                    "sd_StdT": float(sd_of.get("stdt", math.nan)),
+                                    "mean_mode": float(cmp_.mean()),
+                                    "sd_mode": float(sd_of.get(cond, math.nan)), "gain": g})
+                    for subj, r_v in ref.items():
+                        c_v, s_v = float(cmp_.loc[subj]), float(r_v)
+                        # gain inf: the mode's mean is 0 (e.g. no contact at all) and
+                        # StdT's is not; NaN: both 0 (a tie)
+                        sg = s_v / c_v if c_v > 0 else math.inf if s_v > 0 else math.nan
+                        per_subject.append({
+                            "subject": subj, "metric": m.key, "unit": m.unit,
+                            "mode": fixture_label(cond), "mean_StdT": s_v,
+                            "mean_mode": c_v, "gain": sg,
+                            "benefits": "yes" if c_v < s_v else "no" if c_v > s_v
+                            else "tie"})
         elif n < 2:
             out.notes.append(f"{m.key}: {n} subject(s) with every mode; paired tests and "
                              "gains need at least 2")
@@ -226,6 +258,41 @@ def mrcp_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
             "mrcp_gains", "Gains mean(StdT) / mean(mode)", pd.DataFrame(gains),
             "gain > 1: the mode has the smaller mean (shorter, more economical, fewer "
             "contacts). provenance.csv lists the trials of every subject x mode cell."))
+    if table54:
+        out.blocks.append(TableBlock(
+            "mrcp_table54", "Table 5.4 layout: mean, sd and gain StdT / mode",
+            pd.DataFrame(table54), "Over the subject means (subjects with every mode); "
+            "gain = mean(StdT) / mean(mode), > 1: the mode has the smaller mean.",
+            columns=("metric", "unit", "mode", "n_subjects", "mean_StdT", "sd_StdT",
+                     "mean_mode", "sd_mode", "gain")))
+    if paired:
+        allp = pd.concat(paired, ignore_index=True)
+        t55 = allp[allp["group1"] == "StdT"]
+        if not t55.empty:
+            out.blocks.append(TableBlock(
+                "mrcp_table55", "Table 5.5 layout: paired t-tests against StdT and power",
+                t55.reset_index(drop=True), "Paired Student t-test on the subject means "
+                "(two-sided); power_observed: power at this n and the observed effect "
+                "cohen_dz; n_power90_ceil: subjects needed for power 0.9 at that effect "
+                "(statsmodels TTestPower, alpha .05).",
+                columns=("metric", "unit", "group1", "group2", "n", "mean_diff", "t", "p",
+                         "cohen_dz", "power_observed", "n_power90_ceil")))
+    if per_subject:
+        ps = pd.DataFrame(per_subject)
+        lines = []
+        for (metric, mode), part in ps.groupby(["metric", "mode"], sort=False):
+            yes = part.loc[part["benefits"] == "yes", "subject"].astype(str).tolist()
+            no = part.loc[part["benefits"] != "yes", "subject"].astype(str).tolist()
+            lines.append(f"{metric}, {mode} vs StdT: smaller for {len(yes)} of {len(part)} "
+                         f"subjects" + (f" (not for {', '.join(no)})" if no else ""))
+        out.blocks.append(Paragraph("Per subject (who benefits, who does not): "
+                                    + "; ".join(lines) + "."))
+        out.blocks.append(TableBlock(
+            "mrcp_per_subject", "Per subject: mean per mode and gain StdT / mode", ps,
+            "One row per subject, measure and mode: the subject's mean over the mode's "
+            "trials beside its StdT mean; benefits = yes when the mode's mean is smaller "
+            "(gain > 1; inf when the mode's mean is 0), tie when equal.",
+            display="details"))
     if paired:
         out.blocks.append(TableBlock(
             "mrcp_paired", "Paired t-tests per pair of modes", pd.concat(paired,
