@@ -25,48 +25,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tests.study.tiny_protocols import RETENTION, TINY
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import parse_protocol
-
-TINY = """
-name = "tiny"
-description = "two short trials"
-task = "trajectory"
-reach_radius_m = 0.005
-max_trial_time_s = 0.05
-
-[[blocks]]
-name = "b"
-condition = "none"
-variants = [0]
-repetitions = 2
-probe = true
-counterbalance = false
-"""
-
-RETENTION = """
-name = "tret"
-description = "one trial, then a retention probe a day later"
-task = "trajectory"
-reach_radius_m = 0.005
-max_trial_time_s = 0.05
-
-[[blocks]]
-name = "a"
-condition = "ff"
-variants = [0]
-counterbalance = false
-
-[[blocks]]
-name = "r"
-condition = "none"
-phase = "retention"
-delay_days = 1.0
-variants = [0]
-probe = true
-counterbalance = false
-"""
 
 
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:

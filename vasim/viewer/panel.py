@@ -42,6 +42,7 @@ from vasim.viewer.f5pl_view import (
     operating_distance,
     parameter_lines,
 )
+from vasim.viewer.history import AGAIN_FIELD
 from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 from vasim.viewer.views import set_gui_value
 
@@ -229,6 +230,7 @@ class ExperimenterPanel:
         self._lat_trial: int | None = None
         self._lat_goal = 0
         self._shown_subject: str | None = None
+        self._shown_again: str | None = None
         self._schemas: dict[str, Any] = {}      # schema name -> loaded Schema (cache)
         self._mode = panel.mode
         self._free_schema = panel.schema
@@ -263,6 +265,10 @@ class ExperimenterPanel:
         self.set_label = gui.add_button("Set label")
         self.protocol = gui.add_dropdown("Protocol", (NO_PROTOCOL, *protocols),
                                          initial_value=panel.protocol or NO_PROTOCOL)
+        self.again = gui.add_text(AGAIN_FIELD, panel.again or "",
+                                  hint="only to run a protocol the subject completed again: "
+                                       "why (one line, stored with the new session)")
+        self.set_again = gui.add_button("Set reason")
         self.start = gui.add_button("Start trial", color="green")
         self.stop = gui.add_button("Stop trial", color="red")
         self.advance = gui.add_button("Next trial",
@@ -305,6 +311,8 @@ class ExperimenterPanel:
             lambda e: submit(Command("subject", self.subject.value.strip()))))
         self.set_label.on_click(guard(
             lambda e: submit(Command("label", self.label.value.strip()))))
+        self.set_again.on_click(guard(
+            lambda e: submit(Command("again", self.again.value))))
 
         def pick_protocol(e: Any) -> None:
             if e.target.value != NO_PROTOCOL:
@@ -429,6 +437,11 @@ class ExperimenterPanel:
                 self._shown_subject = p.subject
                 if self.subject.value != (p.subject or ""):
                     set_gui_value(self.subject, p.subject or "")
+            if p.again != self._shown_again:      # e.g. cleared once a session stored it
+                self._shown_again = p.again
+                if self.again.value != (p.again or ""):
+                    set_gui_value(self.again, p.again or "")
+            self.again.visible = self.set_again.visible = p.mode == "protocol"
             free = p.mode != "protocol"
             for h in (self.schema, self.task, self.fixture, self.apply,
                       *self.numbers.values()):
