@@ -59,10 +59,16 @@ _MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+\-.!|~>])")
 def md_escape(text: object) -> str:
     """``text`` safe inside viser markdown: HTML-escaped, markdown punctuation backslashed.
 
+    **Decision**: an apostrophe is left as it is (viser's markdown shows an entity as
+    typed: every quoted name in a status line read ``&#x27;D9&#x27;``); in text, outside
+    any tag (``<`` is escaped), it cannot start markup. ``"`` stays escaped.
+
     >>> md_escape("<img src=x onerror=alert(1)>*S01*")
     '&lt;img src=x onerror=alert\\\\(1\\\\)&gt;\\\\*S01\\\\*'
+    >>> md_escape("subject 'D9'")
+    "subject 'D9'"
     """
-    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=True))
+    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=False).replace('"', "&quot;"))
 
 
 def f5pl_curve(p: Logistic5, n: int = 80) -> tuple[FloatArray, FloatArray]:
