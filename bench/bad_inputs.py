@@ -448,10 +448,40 @@ def _server(reply: bytes | None) -> tuple[int, list[Any]]:
     return int(srv.getsockname()[1]), conns
 
 
+def _page_start(protocol: Path, db: Path, subject: str, again: str | None) -> None:
+    """The experimenter page's Start of a protocol session (its controller, as the page's
+    buttons drive it; run in the case's own process): ``protocol`` is offered as a shipped
+    protocol, ``again`` is typed in "Again, because" first (None: left empty). A refusal
+    raises ConfigError (the case's one line)."""
+    import shutil
+
+    import vasim.study.protocol.loader as loader
+    from vasim.core.resources import studies_dir
+    from vasim.viewer.controller import Command, TrainingController
+
+    folder = protocol.parent / "studies"
+    if not folder.exists():
+        shutil.copytree(studies_dir(), folder)
+        shutil.copy(protocol, folder / protocol.name)
+    loader.studies_dir = lambda: folder            # type: ignore[assignment]  # this process
+    ctl = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05)
+    try:
+        for cmd in (Command("mode", "protocol"), Command("subject", subject),
+                    Command("protocol", protocol.stem)):
+            ctl.handle(cmd)
+        if again is not None:
+            ctl.handle(Command("again", again))
+        ctl.handle(Command("start"))
+        print(f"session {ctl.panel.session_id} started for {subject}")
+    finally:
+        ctl.close()
+
+
 def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
     """The cases of issue #30 items 3-8 (``smoke``: one or two per item, no Ray, no
     session runs beyond the setup)."""
     import os
+    import shutil
     import signal
     import sqlite3
     import stat
@@ -472,6 +502,8 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
     assert quiet(["study", "run", "--protocol", str(ret), "--db", str(rdb), "--subject", "R1",
                   "--no-progress"]) == 0
     run = ["study", "run", "--protocol", str(tiny), "--db", str(db), "--no-progress"]
+    vdb = tmp / "v.sqlite"          # the page's cases: D9's one completed session
+    shutil.copy(db, vdb)
 
     def notes_of(path: Path) -> list[Any]:
         con = sqlite3.connect(path)
@@ -490,6 +522,24 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
         yield RoundCase("3", "study run --again REASON", [*run, "--subject", "D9", "--again",
                                                          "device failed"], expect="handled",
                         check=lambda: notes_of(db)[-1].endswith("device failed"))
+
+    # item 3 on the experimenter's page (the controller the page's Start button drives)
+    yield RoundCase("3", "page: Start for D9 (completed)",
+                    call=lambda: _page_start(tiny, vdb, "D9", None),
+                    words=("already completed protocol 'tiny'", "Again, because"))
+    if not smoke:
+        yield RoundCase("3", "page: Start with 'Again, because' for D9",
+                        call=lambda: _page_start(tiny, vdb, "D9", "device failed"),
+                        expect="handled",
+                        check=lambda: notes_of(vdb)[-1] == "again after completed session 1:"
+                                                           " device failed")
+        yield RoundCase("3", "page: a reason while D9's session is open",
+                        call=lambda: _page_start(tiny, vdb, "D9", "once more"),
+                        words=("open session 2", "Start resumes it"),
+                        check=lambda: len(notes_of(vdb)) == 2)
+        yield RoundCase("3", "page: a reason for D8 (no completed session)",
+                        call=lambda: _page_start(tiny, vdb, "D8", "x"),
+                        words=("no completed session",), check=lambda: len(notes_of(vdb)) == 2)
 
     # item 4: study power --address
     power = ["study", "power", "--protocol", "vf_learning_curve", "--subjects", "4",

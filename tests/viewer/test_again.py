@@ -58,7 +58,7 @@ def test_the_rule_refuses_a_completed_subject_without_a_reason(done_db: Path) ->
         with pytest.raises(ConfigError) as info:
             session_rule(st, "D9", "tiny", None)
         msg = str(info.value)
-        assert "field 'again'" in msg and "'D9' already completed protocol 'tiny'" in msg
+        assert "field 'Again, because'" in msg and "'D9' already completed protocol 'tiny'" in msg
         assert "session 1" in msg and f"'{AGAIN_FIELD}'" in msg and "\n" not in msg
         # with a reason: a new session, with the note --again stores
         assert session_rule(st, "D9", "tiny", "device failed") == (
@@ -116,7 +116,7 @@ def test_the_reason_field_accepts_one_line(text: str, expected: str | None) -> N
 
 @pytest.mark.parametrize("text", ["two\nlines", "a\rb", "x" * (MAX_REASON_CHARS + 1)])
 def test_the_reason_field_refuses_more_than_one_line(text: str) -> None:
-    with pytest.raises(ConfigError, match=r"field 'again'.*one-line reason"):
+    with pytest.raises(ConfigError, match=r"field 'Again, because'.*one-line reason"):
         check_again_reason(text)
 
 

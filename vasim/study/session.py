@@ -363,8 +363,8 @@ def check_again(store: TrialStore, protocol: str, subject: str, again: str | Non
                           f"{MAX_REASON_CHARS} characters", field=option)
     if done.empty:
         raise ConfigError(f"subject {subject!r} has no completed session of protocol "
-                          f"{protocol!r} in {store.path}; {option} is only for running a "
-                          "completed protocol again (leave it out)", field=option)
+                          f"{protocol!r} in {store.path}; a reason ({option}) is only for "
+                          "running a completed protocol again (leave it out)", field=option)
     return (f"again after completed session{'s' if len(done) > 1 else ''} {ids}: "
             f"{again.strip()}")
 

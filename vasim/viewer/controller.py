@@ -73,6 +73,7 @@ from vasim.trials.vf_run import trial_meta
 from vasim.viewer.condition import viewer_condition
 from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
 from vasim.viewer.history import (
+    AGAIN_FIELD,
     CURVE_METRICS,
     check_again_reason,
     completed_note,
@@ -561,7 +562,7 @@ class TrainingController(ConditionCommands):
             reason = check_again_reason("" if value is None else str(value))
             if self._running_stored():
                 raise ConfigError("stop the running trial before giving a reason for a new "
-                                  "session", field="again")
+                                  "session", field=AGAIN_FIELD)
             self._publish(again=reason, status=(
                 f"reason for a new session: {reason}" if reason else "no reason: Start "
                 "resumes an open session or starts a first one"))

@@ -157,8 +157,9 @@ AGAIN_FIELD = "Again, because"
 """The experimenter page's field for the reason to run a completed protocol again (the
 page's ``vasim study run --again REASON``)."""
 
-AGAIN_OPTION = "again"
-"""The ``field`` of the page's refusals about that reason (``ConfigError.field``)."""
+AGAIN_OPTION = AGAIN_FIELD
+"""The ``field`` of the page's refusals about that reason (``ConfigError.field``): the
+page's field, by its label."""
 
 AGAIN_ASK = f"enter the reason in '{AGAIN_FIELD}', press Set reason, then Start"
 """How the page asks for the reason (``check_again``'s ``ask``)."""
@@ -198,7 +199,7 @@ def session_rule(st: Any, subject: str, protocol: str, again: str | None,
     frees the subject. The same words as the command line, naming the page's field.
 
     Raises:
-        ConfigError: (field ``again``) the subject completed the protocol and no reason
+        ConfigError: (field :data:`AGAIN_FIELD`) the subject completed the protocol and no reason
             was given; a reason for a subject with an open session or without a completed
             one; a bad reason.
     """
