@@ -4,7 +4,6 @@ typed in "Again, because" is stored with the new session it then starts."""
 
 from __future__ import annotations
 
-import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -13,18 +12,10 @@ import pytest
 
 from tests.browser.conftest import VIEWPORT, wait_for, wait_ready
 from tests.study.tiny_protocols import TINY, install
+from tests.study.tiny_protocols import session_rows as sessions
 from vasim.cli import main
 from vasim.viewer import ViewerApp
 from vasim.viewer.history import AGAIN_FIELD
-
-
-def sessions(db: Path) -> list[tuple[int, str, str, str | None]]:
-    con = sqlite3.connect(db)
-    try:
-        return con.execute("SELECT id, subject, status, notes FROM sessions ORDER BY id"
-                           ).fetchall()
-    finally:
-        con.close()
 
 
 @pytest.fixture

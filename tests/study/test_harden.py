@@ -25,6 +25,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bench.bad_inputs import tcp_listener
 from tests.study.tiny_protocols import RETENTION, TINY
 from vasim.cli import main
 from vasim.core.errors import ConfigError
@@ -468,33 +469,6 @@ def test_parse_ray_address_forms() -> None:
             parse_ray_address(bad)
 
 
-def _listener(reply: bytes | None) -> tuple[socket.socket, threading.Thread, list[socket.socket]]:
-    """A local TCP server on a free port: ``reply`` is sent after the client's first bytes
-    (None: nothing, the connection stays open)."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(16)
-    conns: list[socket.socket] = []
-
-    def serve() -> None:
-        while True:
-            try:
-                c, _ = srv.accept()
-            except OSError:
-                return
-            conns.append(c)
-            if reply is not None:
-                try:
-                    c.recv(64)
-                    c.sendall(reply)
-                except OSError:
-                    pass
-
-    t = threading.Thread(target=serve, daemon=True)
-    t.start()
-    return srv, t, conns
-
-
 def _stop(srv: socket.socket, t: threading.Thread, conns: list[socket.socket]) -> None:
     """Ends a listener: shutdown wakes its blocked accept() (close alone does not)."""
     try:
@@ -509,14 +483,14 @@ def _stop(srv: socket.socket, t: threading.Thread, conns: list[socket.socket]) -
 
 @pytest.fixture
 def silent_server() -> Iterator[int]:
-    srv, t, conns = _listener(None)
+    srv, t, conns = tcp_listener(None)
     yield srv.getsockname()[1]
     _stop(srv, t, conns)
 
 
 @pytest.fixture
 def http_server() -> Iterator[int]:
-    srv, t, conns = _listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+    srv, t, conns = tcp_listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
     yield srv.getsockname()[1]
     _stop(srv, t, conns)
 
@@ -572,7 +546,7 @@ def test_a_join_that_hangs_stops_on_sigterm_and_ctrl_c(sig: str) -> None:
     for minutes; SIGTERM / SIGINT end the command within seconds (exit 130)."""
     import signal
 
-    srv, t, conns = _listener(_SETTINGS_FRAME)
+    srv, t, conns = tcp_listener(_SETTINGS_FRAME)
     port = srv.getsockname()[1]
     try:
         proc = subprocess.Popen(

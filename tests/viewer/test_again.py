@@ -6,15 +6,15 @@ stores it; a reason while the subject's session is open is refused."""
 
 from __future__ import annotations
 
-import sqlite3
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import closing
 from pathlib import Path
 
 import pytest
 
 from tests.study.tiny_protocols import TINY, install
+from tests.study.tiny_protocols import session_rows as sessions
+from tests.viewer.driving import drive
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import parse_protocol
@@ -28,15 +28,6 @@ from vasim.viewer.history import (
     open_session,
     session_rule,
 )
-
-
-def sessions(db: Path) -> list[tuple[int, str, str, str | None]]:
-    con = sqlite3.connect(db)
-    try:
-        return con.execute("SELECT id, subject, status, notes FROM sessions ORDER BY id"
-                           ).fetchall()
-    finally:
-        con.close()
 
 
 @pytest.fixture
@@ -131,20 +122,11 @@ def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingCon
         c.close()
 
 
-def drive(ctl: TrainingController, cond: Callable[[], bool], timeout: float = 60.0) -> bool:
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        ctl.poll()
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
-
-
 def run_trial(ctl: TrainingController) -> None:
     n = ctl.info.number
     ctl.handle(Command("start"))
-    assert drive(ctl, lambda: ctl.info.number > n and not ctl.panel.running), ctl.panel.status
+    assert drive(ctl, lambda: ctl.info.number > n and not ctl.panel.running, 60.0), \
+        ctl.panel.status
 
 
 def test_the_page_refuses_a_second_session_until_a_reason_is_given(
