@@ -3,7 +3,9 @@
 180`` makes) without a safety stop or a broken invariant, handing the turning cube on
 whenever a holder runs out of useful time -- and the invariant line says so. (Before the
 hold rule for a robot in RSel's way, the 18 ms run stopped at 35.9 s: R7, new RSel, met its
-waiting neighbour R0.)"""
+waiting neighbour R0.) Measured here (02:00 UTC, a loaded 2-core machine): 180 s coarse
+in 880 s of wall time, 19 transfers to 5 robots, 7 holds "blocked by" a waiting robot; the
+18 ms run for 200 s: 39 transfers, 8 such holds, no stop."""
 
 from __future__ import annotations
 
