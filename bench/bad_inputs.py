@@ -383,7 +383,7 @@ def run_round_case(case: RoundCase) -> tuple[str, str]:
     return "wrong", f"exit {code}: {(err.strip().splitlines() or ['check failed'])[-1][:300]}"
 
 
-_TINY = """name = "tiny"
+TINY = """name = "tiny"
 description = "two short trials"
 task = "trajectory"
 reach_radius_m = 0.005
@@ -397,7 +397,7 @@ repetitions = 2
 probe = true
 counterbalance = false
 """
-_RETENTION = """name = "tret"
+RETENTION = """name = "tret"
 description = "one trial, then a retention probe a day later"
 task = "trajectory"
 reach_radius_m = 0.005
@@ -420,9 +420,31 @@ counterbalance = false
 """
 
 
-def _server(reply: bytes | None) -> tuple[int, list[Any]]:
-    """A local TCP server on a free port (``reply`` after the client's first bytes; None:
-    silence); returns the port and the list its connections are appended to."""
+"""``TINY``: two VF-free trials in one block; ``RETENTION``: one FF trial, then a VF-free
+retention probe a day later; both with a 0.05 s trial time limit, so whole sessions run in
+seconds (this round's cases and the tests': ``tests/study/tiny_protocols.py``)."""
+
+
+def protocols_folder(folder: Path, **texts: str) -> Path:
+    """``folder`` holding the shipped protocols and ``texts`` (file stem -> TOML text): what
+    ``vasim.study.protocol.loader.studies_dir`` returns where a test or a case offers extra
+    protocols as shipped ones (the viewer offers only shipped protocols). Returns it."""
+    import shutil
+
+    from vasim.core.resources import studies_dir
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for f in studies_dir().glob("*.toml"):
+        shutil.copy(f, folder / f.name)
+    for stem, text in texts.items():
+        (folder / f"{stem}.toml").write_text(text, encoding="utf-8")
+    return folder
+
+
+def tcp_listener(reply: bytes | None) -> tuple[Any, Any, list[Any]]:
+    """A local TCP server on a free port (this round's and ``tests/study/test_harden.py``'s):
+    ``reply`` is sent after the client's first bytes (None: nothing, the connection stays
+    open). Returns the listening socket, its accept thread and the accepted connections."""
     import socket
     import threading
 
@@ -443,15 +465,46 @@ def _server(reply: bytes | None) -> tuple[int, list[Any]]:
                     c.recv(64)
                     c.sendall(reply)
 
-    threading.Thread(target=serve, daemon=True).start()
-    conns.append(srv)
+    t = threading.Thread(target=serve, daemon=True)
+    t.start()
+    return srv, t, conns
+
+
+def _server(reply: bytes | None) -> tuple[int, list[Any]]:
+    """:func:`tcp_listener`'s port and connections (it runs until the round's process ends)."""
+    srv, _, conns = tcp_listener(reply)
     return int(srv.getsockname()[1]), conns
+
+
+def _page_start(protocol: Path, db: Path, subject: str, again: str | None) -> None:
+    """The experimenter page's Start of a protocol session (its controller, as the page's
+    buttons drive it; run in the case's own process): ``protocol`` is offered as a shipped
+    protocol, ``again`` is typed in "Again, because" first (None: left empty). A refusal
+    raises ConfigError (the case's one line)."""
+    import vasim.study.protocol.loader as loader
+    from vasim.viewer.controller import Command, TrainingController
+
+    folder = protocols_folder(protocol.parent / "studies",
+                              **{protocol.stem: protocol.read_text(encoding="utf-8")})
+    loader.studies_dir = lambda: folder            # type: ignore[assignment]  # this process
+    ctl = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05)
+    try:
+        for cmd in (Command("mode", "protocol"), Command("subject", subject),
+                    Command("protocol", protocol.stem)):
+            ctl.handle(cmd)
+        if again is not None:
+            ctl.handle(Command("again", again))
+        ctl.handle(Command("start"))
+        print(f"session {ctl.panel.session_id} started for {subject}")
+    finally:
+        ctl.close()
 
 
 def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
     """The cases of issue #30 items 3-8 (``smoke``: one or two per item, no Ray, no
     session runs beyond the setup)."""
     import os
+    import shutil
     import signal
     import sqlite3
     import stat
@@ -464,14 +517,16 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
             return vasim_main(argv)
 
     tiny, ret = tmp / "tiny.toml", tmp / "tret.toml"
-    tiny.write_text(_TINY, encoding="utf-8")
-    ret.write_text(_RETENTION, encoding="utf-8")
+    tiny.write_text(TINY, encoding="utf-8")
+    ret.write_text(RETENTION, encoding="utf-8")
     db, rdb = tmp / "x.sqlite", tmp / "r.sqlite"
     assert quiet(["study", "run", "--protocol", str(tiny), "--db", str(db), "--subject", "D9",
                   "--no-progress"]) == 0
     assert quiet(["study", "run", "--protocol", str(ret), "--db", str(rdb), "--subject", "R1",
                   "--no-progress"]) == 0
     run = ["study", "run", "--protocol", str(tiny), "--db", str(db), "--no-progress"]
+    vdb = tmp / "v.sqlite"          # the page's cases: D9's one completed session
+    shutil.copy(db, vdb)
 
     def notes_of(path: Path) -> list[Any]:
         con = sqlite3.connect(path)
@@ -490,6 +545,24 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
         yield RoundCase("3", "study run --again REASON", [*run, "--subject", "D9", "--again",
                                                          "device failed"], expect="handled",
                         check=lambda: notes_of(db)[-1].endswith("device failed"))
+
+    # item 3 on the experimenter's page (the controller the page's Start button drives)
+    yield RoundCase("3", "page: Start for D9 (completed)",
+                    call=lambda: _page_start(tiny, vdb, "D9", None),
+                    words=("already completed protocol 'tiny'", "Again, because"))
+    if not smoke:
+        yield RoundCase("3", "page: Start with 'Again, because' for D9",
+                        call=lambda: _page_start(tiny, vdb, "D9", "device failed"),
+                        expect="handled",
+                        check=lambda: notes_of(vdb)[-1] == "again after completed session 1:"
+                                                           " device failed")
+        yield RoundCase("3", "page: a reason while D9's session is open",
+                        call=lambda: _page_start(tiny, vdb, "D9", "once more"),
+                        words=("open session 2", "Start resumes it"),
+                        check=lambda: len(notes_of(vdb)) == 2)
+        yield RoundCase("3", "page: a reason for D8 (no completed session)",
+                        call=lambda: _page_start(tiny, vdb, "D8", "x"),
+                        words=("no completed session",), check=lambda: len(notes_of(vdb)) == 2)
 
     # item 4: study power --address
     power = ["study", "power", "--protocol", "vf_learning_curve", "--subjects", "4",
@@ -512,7 +585,7 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
             port, conns = _server(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
             yield RoundCase("4", f"a gRPC server that is no Ray head, then {sig.name}",
                             [*power, f"127.0.0.1:{port}"], expect="handled", signal=sig,
-                            ready=lambda conns=conns: len(conns) > 1, timeout=240)
+                            ready=lambda conns=conns: len(conns) > 0, timeout=240)
 
     # item 5: tracebacks
     from vasim.study.power.design import parse_effects
@@ -656,7 +729,7 @@ def round_cases(tmp: Path, smoke: bool = False) -> Iterator[RoundCase]:
         changed = tmp / "changed.sqlite"
         changed.write_bytes(rdb.read_bytes())
         edited = tmp / "tret_edited.toml"
-        edited.write_text(_RETENTION.replace("0.05", "0.06").replace('"tret"', '"tret"'),
+        edited.write_text(RETENTION.replace("0.05", "0.06").replace('"tret"', '"tret"'),
                           encoding="utf-8")
         yield RoundCase("8", "resume after the protocol file changed",
                         [*resume, "--db", str(changed), "--protocol", str(edited),

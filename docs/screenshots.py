@@ -14,8 +14,8 @@ abdomen keeps software WebGL responsive) with a temporary study store; free trai
 the subject code ``DOC01`` with the scripted operator (no person behind it); one trial
 run at 3x speed and stored, so the trainee's page shows its score card; then the
 experimenter's page (its "Fixture schema" folder is open by default) during a second,
-slow trial, and the same page scrolled to the f5PL editor with FF's curve chosen (the
-operating point is that trial's tool tip).
+slow trial, and the same page, 1,100 px tall, scrolled to put the f5PL editor with FF's
+curve chosen at the top of the panel (the operating point is that trial's tool tip).
 """
 
 from __future__ import annotations
@@ -60,6 +60,25 @@ def settle(page: Any, seconds: float = 1.5) -> None:
     page.wait_for_timeout(int(seconds * 1000))
     page.evaluate("() => new Promise(r => requestAnimationFrame(() => "
                   "requestAnimationFrame(() => r(true))))")
+
+
+EDITOR_VIEWPORT = {"width": 1280, "height": 1100}
+"""The editor's shot: the menu, the five fields, Apply, the curve and the parameter lines
+are about 1,000 px of the panel."""
+
+
+def editor_to_top(page: Any) -> None:
+    """Scrolls the experimenter's panel so that the f5PL editor (its "f5PL of" menu's
+    label) is at the top of the panel's view; RuntimeError when the editor is missing."""
+    found = page.evaluate("""() => {
+        const x = document.evaluate("//label[normalize-space()='f5PL of']", document, null,
+            XPathResult.FIRST_ORDERED_NODE_TYPE, null).singleNodeValue;
+        if (!x) { return false; }
+        x.scrollIntoView({block: "start"});
+        return true;
+    }""")
+    if not found:
+        raise RuntimeError("the f5PL editor ('f5PL of') is not on the experimenter's page")
 
 
 def shoot(out: Path) -> list[Path]:
@@ -115,10 +134,15 @@ def shoot(out: Path) -> list[Path]:
                     settle(exp, 4.0)
                     written.append(out / "experimenter.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    exp.mouse.move(1070, 600)             # over the control panel
-                    exp.mouse.wheel(0, 760)               # down to the f5PL editor
-                    exp.mouse.move(600, 790)              # away: no hint tooltip
+                    # The whole editor in frame (issue #26 §5: a fixed mouse-wheel distance
+                    # scrolled past the curve once the panel grew): a taller page, and the
+                    # panel scrolled to put the editor's "f5PL of" menu at its top.
+                    exp.set_viewport_size(EDITOR_VIEWPORT)
+                    exp.mouse.move(600, EDITOR_VIEWPORT["height"] - 10)  # no hint tooltip
+                    editor_to_top(exp)
                     settle(exp, 3.0)
+                    editor_to_top(exp)      # again, after the resized page's layout settled
+                    settle(exp, 1.0)
                     written.append(out / "f5pl_editor.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
                     exp.close()

@@ -25,48 +25,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from bench.bad_inputs import tcp_listener
+from tests.study.tiny_protocols import RETENTION, TINY
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import parse_protocol
-
-TINY = """
-name = "tiny"
-description = "two short trials"
-task = "trajectory"
-reach_radius_m = 0.005
-max_trial_time_s = 0.05
-
-[[blocks]]
-name = "b"
-condition = "none"
-variants = [0]
-repetitions = 2
-probe = true
-counterbalance = false
-"""
-
-RETENTION = """
-name = "tret"
-description = "one trial, then a retention probe a day later"
-task = "trajectory"
-reach_radius_m = 0.005
-max_trial_time_s = 0.05
-
-[[blocks]]
-name = "a"
-condition = "ff"
-variants = [0]
-counterbalance = false
-
-[[blocks]]
-name = "r"
-condition = "none"
-phase = "retention"
-delay_days = 1.0
-variants = [0]
-probe = true
-counterbalance = false
-"""
 
 
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -506,33 +469,6 @@ def test_parse_ray_address_forms() -> None:
             parse_ray_address(bad)
 
 
-def _listener(reply: bytes | None) -> tuple[socket.socket, threading.Thread, list[socket.socket]]:
-    """A local TCP server on a free port: ``reply`` is sent after the client's first bytes
-    (None: nothing, the connection stays open)."""
-    srv = socket.socket()
-    srv.bind(("127.0.0.1", 0))
-    srv.listen(16)
-    conns: list[socket.socket] = []
-
-    def serve() -> None:
-        while True:
-            try:
-                c, _ = srv.accept()
-            except OSError:
-                return
-            conns.append(c)
-            if reply is not None:
-                try:
-                    c.recv(64)
-                    c.sendall(reply)
-                except OSError:
-                    pass
-
-    t = threading.Thread(target=serve, daemon=True)
-    t.start()
-    return srv, t, conns
-
-
 def _stop(srv: socket.socket, t: threading.Thread, conns: list[socket.socket]) -> None:
     """Ends a listener: shutdown wakes its blocked accept() (close alone does not)."""
     try:
@@ -547,14 +483,14 @@ def _stop(srv: socket.socket, t: threading.Thread, conns: list[socket.socket]) -
 
 @pytest.fixture
 def silent_server() -> Iterator[int]:
-    srv, t, conns = _listener(None)
+    srv, t, conns = tcp_listener(None)
     yield srv.getsockname()[1]
     _stop(srv, t, conns)
 
 
 @pytest.fixture
 def http_server() -> Iterator[int]:
-    srv, t, conns = _listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
+    srv, t, conns = tcp_listener(b"HTTP/1.1 400 Bad Request\r\n\r\n")
     yield srv.getsockname()[1]
     _stop(srv, t, conns)
 
@@ -610,7 +546,7 @@ def test_a_join_that_hangs_stops_on_sigterm_and_ctrl_c(sig: str) -> None:
     for minutes; SIGTERM / SIGINT end the command within seconds (exit 130)."""
     import signal
 
-    srv, t, conns = _listener(_SETTINGS_FRAME)
+    srv, t, conns = tcp_listener(_SETTINGS_FRAME)
     port = srv.getsockname()[1]
     try:
         proc = subprocess.Popen(

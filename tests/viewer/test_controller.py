@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import closing
 from pathlib import Path
 from typing import Any
@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 import vasim.viewer.controller as controller_mod
+from tests.viewer.driving import drive
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.fixtures.logistic import Logistic5
@@ -33,17 +34,6 @@ from vasim.viewer.controller import (
 )
 
 SPEED = 25.0
-
-
-def drive(ctl: TrainingController, cond: Callable[[], bool], timeout: float = 30.0) -> bool:
-    """Polls like the controller thread until ``cond`` holds."""
-    t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end:
-        ctl.poll()
-        if cond():
-            return True
-        time.sleep(0.01)
-    return cond()
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from tests.viewer.driving import drive
 from vasim.core.errors import StoreError
 from vasim.study.session import SITTING_EVENT
 from vasim.study.store import TrialStore
@@ -25,14 +26,6 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
     db = tmp_path / "s.sqlite"
     c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.3)
 
-    def drive(cond, timeout: float = 30.0) -> bool:
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end:
-            c.poll()
-            if cond():
-                return True
-            time.sleep(0.01)
-        return cond()
 
     try:
         for cmd in (Command("mode", "protocol"), Command("subject", "B01"),
@@ -40,7 +33,7 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
             c.handle(cmd)
         for _ in range(13):               # sitting 1 (13 trials)
             c.handle(Command("start"))
-            assert drive(lambda: c.info.trial_id is not None and not c.panel.running)
+            assert drive(c, lambda: c.info.trial_id is not None and not c.panel.running)
         sid = c.panel.session_id
         assert sid is not None
         last = c.info.trial_id
@@ -61,7 +54,7 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         with sqlite3.connect(db) as con:
             con.execute("UPDATE trials SET ended_at = ? WHERE id = ?", (aged, last))
         c.handle(Command("start"))
-        assert drive(lambda: c.info.trial_id not in (None, last) and not c.panel.running)
+        assert drive(c, lambda: c.info.trial_id not in (None, last) and not c.panel.running)
     finally:
         c.close()
     with TrialStore(db, readonly=True) as st:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.viewer.driving import drive
 from vasim.study.gates import GATE_EVENT, MetricBenchmark, decide, gate_record, judge
 from vasim.study.protocol import parse_protocol
 from vasim.study.session import SessionSettings, run_session, start_session
@@ -109,7 +110,6 @@ def test_the_viewer_reads_the_stored_decision_of_a_trial(tmp_path: Path) -> None
 def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None:
     """The viewer's protocol session: after a gated trial the controller stores the gate's
     decision and the trainee's score card carries it (surgeons simulated beforehand)."""
-    import time
 
     from vasim.study.cohort import simulate_cohort
     from vasim.study.gates import gate_records
@@ -121,14 +121,6 @@ def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None
                     workers=0, progress=False, max_trial_time=0.5)
     c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.5)
 
-    def drive(cond, timeout: float = 30.0) -> bool:
-        t_end = time.monotonic() + timeout
-        while time.monotonic() < t_end:
-            c.poll()
-            if cond():
-                return True
-            time.sleep(0.01)
-        return cond()
 
     try:
         for cmd in (Command("mode", "protocol"), Command("subject", "T01"),
@@ -136,7 +128,7 @@ def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None
             c.handle(cmd)
         for _ in range(7):        # 2 baseline + 4 FF + the first gated practice trial
             c.handle(Command("start"))
-            assert drive(lambda: c.info.trial_id is not None and not c.panel.running)
+            assert drive(c, lambda: c.info.trial_id is not None and not c.panel.running)
         sid = c.panel.session_id
         tid = c.info.trial_id
         assert sid is not None and tid is not None

@@ -31,7 +31,12 @@ a robot driver sends :attr:`CycleRecord.commands` to the controllers.
   prediction with the measurement it predicted.
 * RSel does not follow a task increment it cannot perform (IK fails, joint speed above its
   limit, or a collision): the task is held where it is (the achieved task pose, not the
-  commanded one, feeds the predictor); a collision also raises the safety stop.
+  commanded one, feeds the predictor). A collision with an obstacle, a robot holding the
+  task or itself also raises the safety stop; a step blocked only by robots that do not
+  hold the task (candidates, which move themselves and never into RSel) is a hold
+  (``rsel_hold ... blocked by``), so the hold rule hands the task over (issue #26 §4:
+  ``eight_robots`` stopped at 36 s when the new RSel, R7, turning the cube, met its
+  waiting neighbour R0 -- nothing was in collision, the step was refused).
 * A transfer that has not completed within ``tt_timeout`` is aborted (back to TOp, roles
   unchanged) and that (robot, point) sits out ``abort_cooldown``; RCnt's final approach to
   the grasp ignores repulsion (collision checks stay) and, once within
@@ -85,7 +90,6 @@ Example:
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -613,29 +617,44 @@ class MRCPKernel:
             if self._held_since is None:
                 self._held_since = self._t_now
             return False
-        self._held_since = None
         self.world.set_configuration(self.rsel, sol)
         if self.world.in_collision(self.rsel):
-            partner = self._nearest_body(self.rsel)
+            near = self._near_bodies(self.rsel)
             self.world.set_configuration(self.rsel, q)
+            touching = [b for b, d in near if d <= 0.0]
+            if touching and all(b in self.arms and b not in self.holders for b in touching):
+                # a robot that does not hold the task is in the way: hold (KernelConfig.
+                # hold_transfer_s), not a safety stop (module docstring, issue #26 §4)
+                events.append(f"rsel_hold {self.rsel}: blocked by {near[0][0]} "
+                              f"({near[0][1] * 1e3:.1f} mm)")
+                if self._held_since is None:
+                    self._held_since = self._t_now
+                return False
             self.state = next_state(self.state, KernelEvent.RSEL_COLLISION)
-            events.append(f"rsel_collision {self.rsel}: safety stop ({partner})")
+            events.append(f"rsel_collision {self.rsel}: safety stop "
+                          f"({self._nearest_text(near)})")
             return False
+        self._held_since = None
         return True
 
-    def _nearest_body(self, robot: str) -> str:
-        """What ``robot`` would hit, for the safety stop's event (issue #26 §4: the cause
-        is named, not only the stop): the nearest other body and its signed distance at
-        the refused pose (negative: penetration), or a self-collision when no other body
-        is within 5 cm."""
-        best, dist = "", math.inf
+    def _near_bodies(self, robot: str) -> list[tuple[str, float]]:
+        """The other bodies within 5 cm of ``robot`` as posed, nearest first, with their
+        signed distances [m] (negative: penetration)."""
+        near = []
         for b in self._bodies(robot):
             d = float(self.world.min_distance(robot, b, max_distance=0.05).distance)
-            if d < dist:
-                best, dist = b, d
-        if not best or not dist < 0.05:
+            if d < 0.05:
+                near.append((b, d))
+        return sorted(near, key=lambda bd: bd[1])
+
+    @staticmethod
+    def _nearest_text(near: list[tuple[str, float]]) -> str:
+        """What ``robot`` would hit, for the safety stop's event (issue #26 §4: the cause
+        is named, not only the stop): the nearest other body and its signed distance at
+        the refused pose, or a self-collision when no other body is within 5 cm."""
+        if not near:
             return "a self-collision: no other body within 5 cm"
-        return f"nearest body {best} at {dist * 1e3:.1f} mm"
+        return f"nearest body {near[0][0]} at {near[0][1] * 1e3:.1f} mm"
 
     def _bodies(self, robot: str) -> list[str]:
         return [b for b in (*self.world.robot_names(), *self.world.obstacle_names())

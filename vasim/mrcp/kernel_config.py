@@ -68,7 +68,8 @@ class KernelConfig:
             would restart at once and keep the operator's input held).
         seed: seed of the planner's random force.
         hold_transfer_s: RSel that could not follow the operator (``rsel_hold``: the task
-            pose unreachable or beyond its joint speed) for this long has no time left
+            pose unreachable, beyond its joint speed, or blocked by a robot that does not
+            hold the task) for this long has no time left
             (``texec`` 0, cause ``hold``), so a candidate that can take the task over does
             [s] (**decision**, issue #26 §4: the predictor extrapolates the *achieved* task
             pose, which a held task does not change, so RSel's indices alone kept it

@@ -330,6 +330,7 @@ MAX_REASON_CHARS = 500
 
 
 def check_again(store: TrialStore, protocol: str, subject: str, again: str | None,
+                *, option: str = "--again", ask: str = "give the reason with --again 'REASON'",
                 ) -> str | None:
     """The rule of a second session (issue #30 item 3): a subject who *completed* a session
     of ``protocol`` gets another only with a reason (``again``, ``vasim study run --again
@@ -339,14 +340,15 @@ def check_again(store: TrialStore, protocol: str, subject: str, again: str | Non
     **Decision**: only a *completed* session of the same protocol (by name) counts: an
     aborted one frees the subject (as before), a running one is refused by the store
     ("resume it"), and another protocol is another study. The rule is the command line's;
-    library callers (the cohort simulator, which resumes its own subjects, and the viewer)
-    decide for themselves.
+    library callers (the cohort simulator, which resumes its own subjects) decide for
+    themselves; the viewer's experimenter page applies it with its own field's words
+    (``option``: the field named in the errors; ``ask``: how to give the reason).
 
     Returns:
         The note to store with the new session (None: no ``again``).
 
     Raises:
-        ConfigError: (field ``--again``) naming the subject, the protocol, the completed
+        ConfigError: (field ``option``) naming the subject, the protocol, the completed
             session(s) and what to do; or an empty, multi-line or over-long reason.
     """
     done = store.sessions(subject=subject, protocol=protocol, status="completed")
@@ -358,17 +360,16 @@ def check_again(store: TrialStore, protocol: str, subject: str, again: str | Non
         raise ConfigError(
             f"subject {subject!r} already completed protocol {protocol!r} in {store.path} "
             f"(session{'s' if len(done) > 1 else ''} {ids}{', ended ' + ended if ended else ''}"
-            "); to run it again give the "
-            "reason with --again 'REASON' (stored with the new session), or use another "
-            "subject code", field="--again")
+            f"); to run it again {ask} (stored with the new session), or use another "
+            "subject code", field=option)
     if not isinstance(again, str) or not again.strip() or "\n" in again \
             or len(again) > MAX_REASON_CHARS:
         raise ConfigError(f"got {again!r:.80}, expected a one-line reason of 1-"
-                          f"{MAX_REASON_CHARS} characters", field="--again")
+                          f"{MAX_REASON_CHARS} characters", field=option)
     if done.empty:
         raise ConfigError(f"subject {subject!r} has no completed session of protocol "
-                          f"{protocol!r} in {store.path}; --again is only for running a "
-                          "completed protocol again (leave it out)", field="--again")
+                          f"{protocol!r} in {store.path}; a reason ({option}) is only for "
+                          "running a completed protocol again (leave it out)", field=option)
     return (f"again after completed session{'s' if len(done) > 1 else ''} {ids}: "
             f"{again.strip()}")
 

@@ -25,6 +25,13 @@ Modes (**decisions**):
   on Start (before any countdown) and on auto-advance alike: the status line and the
   notification name the sitting and when it is due (``history.refuse_early_sitting``, the
   rule of ``vasim study resume``; no simulated delay in the browser).
+  A subject who *completed* the protocol gets no second session silently (issue #30
+  item 3): Start is refused, on the status line and in a notification, until the
+  experimenter gives the reason ("Again, because", the ``again`` command), which is stored
+  with the new session as ``vasim study run --again`` stores it; a reason while the
+  subject's session is open is refused (Start resumes that session). The rule is
+  ``history.session_rule``. A session is marked completed as soon as its last scheduled
+  trial is stored.
 
 Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
 on completion the samples, per-point metrics, summary, events and trial metrics are
@@ -66,7 +73,10 @@ from vasim.trials.vf_run import trial_meta
 from vasim.viewer.condition import viewer_condition
 from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
 from vasim.viewer.history import (
+    AGAIN_FIELD,
     CURVE_METRICS,
+    check_again_reason,
+    completed_note,
     learning_curve,
     open_session,
     record_browser_sitting,
@@ -373,7 +383,24 @@ class TrainingController(ConditionCommands):
                                  f" points, {summary.get('duration', 0.0):.1f} s)")
         if info.schedule_index is not None:
             changes.update(self._progress())
+            if changes.get("position") is None and self.panel.session_id is not None:
+                self._complete_session(self.panel.session_id, changes)
         self._publish(**changes)
+
+    def _complete_session(self, session_id: int, changes: dict[str, Any]) -> None:
+        """Marks a session whose scheduled trials are all completed as 'completed' (as
+        ``run_session`` does at its end), so that the subject's next Start meets the rule of
+        a second session at once, not one trial later."""
+        st = self.store()
+        if st.session(session_id)["status"] != "running":
+            return
+        try:
+            st.set_session_status(session_id, "completed")
+        except StoreError as exc:   # trials left after all (a gate): the next Start decides
+            log.warning("session %s not completed: %s", session_id, exc)
+            return
+        changes["status"] = (f"{changes.get('status', '')}; session {session_id} is complete"
+                             ).lstrip("; ")
 
     def _timing(self, trial_id: int) -> dict[str, Any] | None:
         """The live trial's timing for ``timing_json``; a real-time trial's recording (the
@@ -413,10 +440,17 @@ class TrainingController(ConditionCommands):
         input and the instrument's mapping in force now: every trial of it keeps them)."""
         p = self.panel
         m = self.input_mapping
-        return open_session(self.store(), p.subject, p.protocol, {
-            "ui": "vasim serve", "input": p.input, "scene": self.scene,
-            "input_mapping": {"fulcrum_effect": m.fulcrum_effect,
-                              "sensitivity": m.sensitivity}})
+        try:
+            session = open_session(self.store(), p.subject, p.protocol, {
+                "ui": "vasim serve", "input": p.input, "scene": self.scene,
+                "input_mapping": {"fulcrum_effect": m.fulcrum_effect,
+                                  "sensitivity": m.sensitivity}}, again=p.again)
+        except ConfigError as exc:   # the refusal on the page's status line too
+            self._publish(running=False, status=str(exc))
+            raise
+        if p.again is not None:      # the reason is stored with this session: used up
+            self._publish(again=None)
+        return session
 
     def _progress(self) -> dict[str, Any]:
         """Progress fields of the panel for the chosen subject and protocol."""
@@ -524,6 +558,14 @@ class TrainingController(ConditionCommands):
             self._publish(input=value)
         elif kind == "label":
             self._set_label(value)
+        elif kind == "again":
+            reason = check_again_reason("" if value is None else str(value))
+            if self._running_stored():
+                raise ConfigError("stop the running trial before giving a reason for a new "
+                                  "session", field=AGAIN_FIELD)
+            self._publish(again=reason, status=(
+                f"reason for a new session: {reason}" if reason else "no reason: Start "
+                "resumes an open session or starts a first one"))
         elif kind == "subject":
             from vasim.records.trial_meta import validate_subject_code
 
@@ -532,7 +574,7 @@ class TrainingController(ConditionCommands):
                 raise ConfigError("stop the running trial before changing the subject",
                                   field="subject")
             self._publish(subject=code, label=None, session_id=None, position=None,
-                          total=None, completed=None, condition=None, curve=())
+                          total=None, completed=None, condition=None, curve=(), again=None)
             if p.mode == "protocol" and p.protocol:
                 self._publish(**self._select_session())
         elif kind == "protocol":
@@ -545,7 +587,7 @@ class TrainingController(ConditionCommands):
                 raise ConfigError("stop the running trial before changing the protocol",
                                   field="protocol")
             self._publish(protocol=value, session_id=None, position=None, total=None,
-                          completed=None, condition=None, curve=())
+                          completed=None, condition=None, curve=(), again=None)
             if p.subject:
                 self._publish(**self._select_session())
         elif kind == "start":
@@ -590,8 +632,9 @@ class TrainingController(ConditionCommands):
             from vasim.study.protocol import load_protocol
 
             n = load_protocol(str(p.protocol)).n_trials
+            note = completed_note(st, str(p.subject), str(p.protocol))
             return {"session_id": None, "position": 1, "total": n, "completed": 0,
-                    "condition": None, "status": f"new session of {p.protocol} for "
+                    "condition": None, "status": note or f"new session of {p.protocol} for "
                     f"{p.subject}: Start runs trial 1 of {n}"}
         self.panel = replace(p, session_id=int(running["id"].iloc[-1]))
         prog = self._progress()

@@ -1,7 +1,8 @@
 """The trainee's history in the study store, as the viewer shows it: the learning curve, the
 score card's comparisons (earlier trials, the benchmark) and the protocol session's
 progress. Called on the controller thread, which owns the store; only
-:func:`open_session` writes (it starts a session when the subject has none running)."""
+:func:`open_session` writes (it starts a session when the subject has none running, and
+only with a reason when the subject completed the protocol: :func:`session_rule`)."""
 
 from __future__ import annotations
 
@@ -152,13 +153,84 @@ def learning_curve(st: Any, session_id: int | None, subject: str | None,
     return tuple(out)  # type: ignore[arg-type]  # (n, *metrics) rows
 
 
-def open_session(st: Any, subject: str | None, protocol: str | None,
-                 extra: dict[str, Any]) -> Any:
-    """The subject's running session of ``protocol``, started (with ``extra`` stored in its
-    settings) if there is none.
+AGAIN_FIELD = "Again, because"
+"""The experimenter page's field for the reason to run a completed protocol again (the
+page's ``vasim study run --again REASON``)."""
+
+AGAIN_OPTION = AGAIN_FIELD
+"""The ``field`` of the page's refusals about that reason (``ConfigError.field``): the
+page's field, by its label."""
+
+AGAIN_ASK = f"enter the reason in '{AGAIN_FIELD}', press Set reason, then Start"
+"""How the page asks for the reason (``check_again``'s ``ask``)."""
+
+
+def check_again_reason(text: str) -> str | None:
+    """The reason typed in the page's :data:`AGAIN_FIELD`, stripped (None: empty, no reason).
 
     Raises:
-        ConfigError: no subject or no protocol chosen yet.
+        ConfigError: a multi-line or over-long reason (``check_again``'s limits).
+    """
+    from vasim.core.errors import ConfigError
+    from vasim.study.session import MAX_REASON_CHARS
+
+    reason = str(text).strip()
+    if not reason:
+        return None
+    if "\n" in reason or "\r" in reason or len(reason) > MAX_REASON_CHARS:
+        raise ConfigError(f"got {reason!r:.80}, expected a one-line reason of 1-"
+                          f"{MAX_REASON_CHARS} characters", field=AGAIN_OPTION)
+    return reason
+
+
+def session_rule(st: Any, subject: str, protocol: str, again: str | None,
+                 ) -> tuple[int | None, str | None]:
+    """Which session a protocol Start of ``subject`` runs in (issue #30 item 3, the rule of
+    ``vasim study run`` on the page): ``(running session id, None)`` to resume the
+    subject's open session, or ``(None, notes)`` for a new one (``notes``: what
+    ``check_again`` stores with it, None without a reason).
+
+    **Decisions**: an open (running) session is resumed, as it always was on the page (a
+    reload, the next trial, another day's sitting) -- never a second one: a reason given
+    while a session is open is refused (the reason would be false, and the store keeps one
+    running session per subject and protocol). A subject who *completed* the protocol gets
+    a new session only with a reason, stored with it exactly as ``--again`` stores it
+    (``sessions.notes``: "again after completed session N: REASON"); an aborted session
+    frees the subject. The same words as the command line, naming the page's field.
+
+    Raises:
+        ConfigError: (field :data:`AGAIN_FIELD`) the subject completed the protocol and no reason
+            was given; a reason for a subject with an open session or without a completed
+            one; a bad reason.
+    """
+    from vasim.core.errors import ConfigError
+    from vasim.study.session import check_again
+
+    df = st.sessions(subject=subject, protocol=protocol)
+    running = df[df["status"] == "running"]
+    if len(running):
+        row = running.iloc[-1]
+        sid = int(row["id"])
+        if again is not None:
+            raise ConfigError(
+                f"subject {subject!r} has an open session {sid} of protocol {protocol!r} "
+                f"({int(row['n_completed'])} of {int(row['n_trials'])} trials done): Start "
+                f"resumes it; a reason in '{AGAIN_FIELD}' is only for a new session after a "
+                "completed one (clear it, or abort the open session first: vasim study "
+                "abort)", field=AGAIN_OPTION)
+        return sid, None
+    return None, check_again(st, protocol, subject, again, option=AGAIN_OPTION,
+                             ask=AGAIN_ASK)
+
+
+def open_session(st: Any, subject: str | None, protocol: str | None,
+                 extra: dict[str, Any], again: str | None = None) -> Any:
+    """The subject's running session of ``protocol``, or a new one (with ``extra`` stored
+    in its settings) when :func:`session_rule` allows it: a subject who completed the
+    protocol needs ``again`` (the reason, stored with the new session).
+
+    Raises:
+        ConfigError: no subject or no protocol chosen yet; the rule's refusals.
     """
     from vasim.core.errors import ConfigError
     from vasim.study.protocol import load_protocol
@@ -168,14 +240,25 @@ def open_session(st: Any, subject: str | None, protocol: str | None,
         raise ConfigError("enter a subject code first", field="subject")
     if protocol is None:
         raise ConfigError("pick a protocol first", field="protocol")
-    df = st.sessions(subject=subject, protocol=protocol)
-    running = df[df["status"] == "running"]
-    if len(running):
-        sid = int(running["id"].iloc[-1])
-    else:
+    sid, notes = session_rule(st, subject, protocol, again)
+    if sid is None:
         sid = start_session(st, load_protocol(protocol), subject,
-                            settings=SessionSettings(extra=extra))
+                            settings=SessionSettings(extra=extra), notes=notes)
     return load_session(st, sid)
+
+
+def completed_note(st: Any, subject: str, protocol: str) -> str | None:
+    """One line for the panel when ``subject`` completed ``protocol`` (no session open):
+    Start is refused until a reason is given; None otherwise."""
+    df = st.sessions(subject=subject, protocol=protocol)
+    if (df["status"] == "running").any():
+        return None
+    done = df[df["status"] == "completed"]
+    if done.empty:
+        return None
+    ids = ", ".join(str(int(i)) for i in done["id"])
+    return (f"{subject} already completed {protocol} (session{'s' if len(done) > 1 else ''} "
+            f"{ids}): Start is refused; to run it again {AGAIN_ASK}")
 
 
 def session_progress(st: Any, session_id: int, running_index: int | None) -> dict[str, Any]:
@@ -192,6 +275,7 @@ def session_progress(st: Any, session_id: int, running_index: int | None) -> dic
             "condition": None if cur is None else s.schedule[cur].condition}
 
 
-__all__ = ["BENCHMARK_LEVEL", "CURVE_METRICS", "learning_curve", "open_session",
-           "record_browser_sitting", "refuse_early_sitting", "session_progress", "trial_gate_card",
-           "trial_score_card"]
+__all__ = ["AGAIN_ASK", "AGAIN_FIELD", "AGAIN_OPTION", "BENCHMARK_LEVEL", "CURVE_METRICS",
+           "check_again_reason", "completed_note", "learning_curve", "open_session",
+           "record_browser_sitting", "refuse_early_sitting", "session_progress",
+           "session_rule", "trial_gate_card", "trial_score_card"]

@@ -42,6 +42,7 @@ from vasim.viewer.f5pl_view import (
     operating_distance,
     parameter_lines,
 )
+from vasim.viewer.history import AGAIN_FIELD
 from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 from vasim.viewer.views import set_gui_value
 
@@ -58,10 +59,16 @@ _MD_SPECIAL = re.compile(r"([\\`*_{}\[\]()#+\-.!|~>])")
 def md_escape(text: object) -> str:
     """``text`` safe inside viser markdown: HTML-escaped, markdown punctuation backslashed.
 
+    **Decision**: an apostrophe is left as it is (viser's markdown shows an entity as
+    typed: every quoted name in a status line read ``&#x27;D9&#x27;``); in text, outside
+    any tag (``<`` is escaped), it cannot start markup. ``"`` stays escaped.
+
     >>> md_escape("<img src=x onerror=alert(1)>*S01*")
     '&lt;img src=x onerror=alert\\\\(1\\\\)&gt;\\\\*S01\\\\*'
+    >>> md_escape("subject 'D9'")
+    "subject 'D9'"
     """
-    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=True))
+    return _MD_SPECIAL.sub(r"\\\1", html.escape(str(text), quote=False).replace('"', "&quot;"))
 
 
 def f5pl_curve(p: Logistic5, n: int = 80) -> tuple[FloatArray, FloatArray]:
@@ -88,6 +95,38 @@ operating point, all in the fixture's output unit over the distance in mm."""
 
 def _curve_axes(x_label: str, y_label: str) -> tuple[viser.uplot.Axis, ...]:
     return (viser.uplot.Axis(label=x_label), viser.uplot.Axis(label=y_label, size=60))
+
+
+def plot_data(data: Sequence[FloatArray]) -> tuple[tuple[FloatArray, ...], dict[str, Any]]:
+    """``data`` for a viser uPlot chart without NaN, and the chart's scales.
+
+    **Decision**: viser's uPlot draws nothing at all -- no curve, no y ticks -- when any
+    series holds a NaN (seen in headless Chromium: the f5PL editor's curve never showed,
+    its "now" series is NaN but at one distance). So the y scale is fixed to the finite
+    values' range (5 % margin; 0-1 without any) and each NaN is put far above it, where
+    uPlot clips it away: a missing value stays invisible. The x values are kept as given.
+
+    >>> d, scales = plot_data((np.array([0.0, 1.0]), np.array([1.0, math.nan])))
+    >>> scales["y"]["range"], bool(d[1][1] > 1e3)
+    ((0.95, 1.05), True)
+    """
+    ys = [np.asarray(v, dtype=np.float64) for v in data[1:]]
+    finite = np.concatenate([v[np.isfinite(v)] for v in ys]) if ys else np.zeros(0)
+    lo, hi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    pad = 0.05 * (hi - lo) if hi > lo else max(0.05 * abs(hi), 0.05)
+    lo, hi = lo - pad, hi + pad
+    away = hi + 1e4 * (hi - lo)
+    out = (np.asarray(data[0], dtype=np.float64),
+           *(np.where(np.isfinite(v), v, away) for v in ys))
+    return out, {"x": {"time": False}, "y": {"auto": False, "range": (lo, hi)}}
+
+
+def _set_plot(handle: Any, data: Sequence[FloatArray]) -> None:
+    """Sets a uPlot chart's data through :func:`plot_data` (its y scale with it)."""
+    values, scales = plot_data(data)
+    if handle.scales != scales:
+        handle.scales = scales
+    handle.data = values
 
 
 DEFAULT_TASK_SCALE = 0.03
@@ -229,6 +268,7 @@ class ExperimenterPanel:
         self._lat_trial: int | None = None
         self._lat_goal = 0
         self._shown_subject: str | None = None
+        self._shown_again: str | None = None
         self._schemas: dict[str, Any] = {}      # schema name -> loaded Schema (cache)
         self._mode = panel.mode
         self._free_schema = panel.schema
@@ -263,6 +303,10 @@ class ExperimenterPanel:
         self.set_label = gui.add_button("Set label")
         self.protocol = gui.add_dropdown("Protocol", (NO_PROTOCOL, *protocols),
                                          initial_value=panel.protocol or NO_PROTOCOL)
+        self.again = gui.add_text(AGAIN_FIELD, panel.again or "",
+                                  hint="only to run a protocol the subject completed again: "
+                                       "why (one line, stored with the new session)")
+        self.set_again = gui.add_button("Set reason")
         self.start = gui.add_button("Start trial", color="green")
         self.stop = gui.add_button("Stop trial", color="red")
         self.advance = gui.add_button("Next trial",
@@ -282,9 +326,10 @@ class ExperimenterPanel:
             self.apply = gui.add_button("Apply f5PL", hint="restarts the trial with the edit")
             x, y = np.array([0.0, 1.0]), np.array([0.0, 0.0])
             nan = np.full(2, math.nan)
+            data, scales = plot_data((x, y, nan, nan))
             self.curve = gui.add_uplot(
-                (x, y, nan, nan), CURVE_SERIES, title="modulation curve (f5PL)",
-                scales={"x": {"time": False}}, axes=_curve_axes("distance [mm]", "output"),
+                data, CURVE_SERIES, title="modulation curve (f5PL)",
+                scales=scales, axes=_curve_axes("distance [mm]", "output"),
                 aspect=1.4)
             self.f5pl_text = gui.add_markdown("")
         with gui.add_folder("Live metrics"):
@@ -292,12 +337,14 @@ class ExperimenterPanel:
         with gui.add_folder("Last trial and learning curve"):
             self.card = gui.add_markdown("")
             self.summary = gui.add_markdown(summary_text(None))
+            data, scales = plot_data((np.array([1.0]), np.array([math.nan]),
+                                      np.array([math.nan])))
             self.learning = gui.add_uplot(
-                (np.array([1.0]), np.array([math.nan]), np.array([math.nan])),
+                data,
                 (viser.uplot.Series(label="trial"),
                  viser.uplot.Series(label="completion time [s]", stroke="#1971c2", width=2),
                  viser.uplot.Series(label="mean latency [s]", stroke="#2f9e44", width=2)),
-                title="learning curve", scales={"x": {"time": False}}, aspect=1.6)
+                title="learning curve", scales=scales, aspect=1.6)
 
         on(self.mode, lambda e: submit(Command("mode", e.target.value)))
         on(self.input, lambda e: submit(Command("input", e.target.value)))
@@ -305,6 +352,8 @@ class ExperimenterPanel:
             lambda e: submit(Command("subject", self.subject.value.strip()))))
         self.set_label.on_click(guard(
             lambda e: submit(Command("label", self.label.value.strip()))))
+        self.set_again.on_click(guard(
+            lambda e: submit(Command("again", self.again.value))))
 
         def pick_protocol(e: Any) -> None:
             if e.target.value != NO_PROTOCOL:
@@ -376,10 +425,10 @@ class ExperimenterPanel:
         if view is None:
             x, y = f5pl_curve(p)
             nan = np.full(x.shape, math.nan)
-            self.curve.data = (x, y, nan, nan)
+            _set_plot(self.curve, (x, y, nan, nan))
             return
         axes, ref = view
-        self.curve.data = editor_data(p, ref, axes, self._operating)
+        _set_plot(self.curve, editor_data(p, ref, axes, self._operating))
         labels = _curve_axes(axes.x_label, axes.y_label)
         if self.curve.axes != labels:
             self.curve.axes = labels
@@ -429,6 +478,11 @@ class ExperimenterPanel:
                 self._shown_subject = p.subject
                 if self.subject.value != (p.subject or ""):
                     set_gui_value(self.subject, p.subject or "")
+            if p.again != self._shown_again:      # e.g. cleared once a session stored it
+                self._shown_again = p.again
+                if self.again.value != (p.again or ""):
+                    set_gui_value(self.again, p.again or "")
+            self.again.visible = self.set_again.visible = p.mode == "protocol"
             free = p.mode != "protocol"
             for h in (self.schema, self.task, self.fixture, self.apply,
                       *self.numbers.values()):
@@ -451,7 +505,7 @@ class ExperimenterPanel:
                 set_gui_value(self.label, p.label)
             if p.curve:
                 c = np.array(p.curve, dtype=np.float64)
-                self.learning.data = (c[:, 0], c[:, 1], c[:, 2])
+                _set_plot(self.learning, (c[:, 0], c[:, 1], c[:, 2]))
         finally:
             self._local.syncing = False
         self._show_f5pl(self.fixture.value)

@@ -113,6 +113,8 @@ class PanelState:
         trials). auto_advance: start the next scheduled trial by itself.
         f5pl: editable f5PL curves of the current schema: fixture instance -> params.
         scorecard: the score card of the last stored trial (or None).
+        again: the reason to run a completed protocol again for the subject, stored with
+        the next new session (``history.session_rule``), or None.
         version: increments with every change.
     """
 
@@ -135,6 +137,7 @@ class PanelState:
     auto_advance: bool = False
     f5pl: tuple[tuple[str, Logistic5], ...] = ()
     scorecard: ScoreCard | None = None
+    again: str | None = None
     version: int = 0
 
 
