@@ -1,13 +1,13 @@
-"""The eight-robot demo runs for minutes (issue #26 §4): here one minute of simulated time,
-past the 35.9 s where it used to stop (the 36 ms ``--coarse`` cycle, the run ``vasim mrcp run
-eight_robots --coarse --duration 60`` makes; three minutes took 880 s of wall time on the
-loaded machine, too long for ``make test``, and are recorded below) without a safety stop or a broken invariant, handing the turning cube on
-whenever a holder runs out of useful time -- and the invariant line says so. (Before the
-hold rule for a robot in RSel's way, the 18 ms run stopped at 35.9 s: R7, new RSel, met its
-waiting neighbour R0.) Measured here (02:00 UTC, a loaded 2-core machine): 180 s coarse
-in 880 s of wall time, 19 transfers to 5 robots, 7 holds "blocked by" a waiting robot; the
-18 ms run for 200 s: 39 transfers, 8 such holds, no stop. 60 s coarse (02:25 UTC, load 5):
-6 transfers to 4 robots, no stop."""
+"""The eight-robot demo runs for minutes (issue #26 §4): here one minute of simulated
+time, past the 35.9 s where it used to stop (the 36 ms ``--coarse`` cycle, the run ``vasim
+mrcp run eight_robots --coarse --duration 60`` makes; three minutes took 880 s of wall time
+on the loaded machine, too long for ``make test``: figures below), without a safety stop or
+a broken invariant, handing the turning cube on whenever a holder runs out of useful time --
+and the invariant line says so. (Before the hold rule for a robot in RSel's way, the 18 ms
+run stopped at 35.9 s: R7, new RSel, met its waiting neighbour R0.) Measured here (02:00
+UTC, a loaded 2-core machine): 180 s coarse in 880 s of wall time, 19 transfers to 5
+robots, 7 holds "blocked by" a waiting robot; the 18 ms run for 200 s: 39 transfers, 8 such
+holds, no stop. 60 s coarse (02:25 UTC, load 5): 6 transfers to 4 robots, no stop."""
 
 from __future__ import annotations
 
