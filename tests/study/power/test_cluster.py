@@ -108,6 +108,10 @@ def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
     env = dict(os.environ)
     root = str(Path(vasim.__file__).resolve().parents[1])   # the workers import this vasim
     env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    # The head's Ray Client server starts a server process per client and waits 30 s (Ray's
+    # default) for it: on this loaded 2-core machine that start took longer and the ray://
+    # run failed with "Initialization failure from server" (2 of 4 stress runs at load 4-11).
+    env["RAY_CLIENT_SERVER_CHECK_CHANNEL_TIMEOUT_S"] = "180"
     temp = Path("/tmp") / f"vasim_ray_{os.getpid()}_{port}"   # short: unix socket paths
     with log.open("wb") as out:
         proc = subprocess.Popen(
