@@ -10,7 +10,8 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import VIEWPORT, wait_for, wait_ready
+from tests.browser.conftest import VIEWPORT, wait_ready
+from tests.polling import wait_for
 from tests.study.tiny_protocols import TINY, install
 from tests.study.tiny_protocols import session_rows as sessions
 from vasim.cli import main
