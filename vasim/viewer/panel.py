@@ -352,8 +352,15 @@ class ExperimenterPanel:
             lambda e: submit(Command("subject", self.subject.value.strip()))))
         self.set_label.on_click(guard(
             lambda e: submit(Command("label", self.label.value.strip()))))
-        self.set_again.on_click(guard(
-            lambda e: submit(Command("again", self.again.value))))
+
+        def submit_again(e: Any) -> None:
+            # The page shows what was submitted: once the controller takes the reason and a
+            # session uses it up (again -> None), show() clears the field. Without this the
+            # view could miss the short-lived state and keep the used reason on the page.
+            self._shown_again = self.again.value
+            submit(Command("again", self.again.value))
+
+        self.set_again.on_click(guard(submit_again))
 
         def pick_protocol(e: Any) -> None:
             if e.target.value != NO_PROTOCOL:
