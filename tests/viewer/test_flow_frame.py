@@ -103,24 +103,35 @@ def test_keyed_page_scripts_keep_only_the_newest_waiting_one() -> None:
 
 
 def _count(app: ViewerApp, seconds: float) -> tuple[collections.Counter[str], int, float]:
-    """Messages the trainee's server queues per node name over ``seconds``, the view
-    frames made meanwhile and the wall time."""
+    """Messages the trainee's server queues per node name over ``seconds``, in whole view
+    frames only, the number of those frames and the wall time.
+
+    Each message is tagged with the frame that queued it (``_view_updates`` counts frames
+    when one ends); the first and last frames seen may be cut by the window's edges, so
+    they are dropped: a frame's messages are counted all or not at all."""
     assert app.server is not None
     ws = app.server._websock_server
-    counts: collections.Counter[str] = collections.Counter()
+    tagged: list[tuple[int, str]] = []
     original = ws.queue_message
 
     def counted(msg: Any) -> None:
-        counts[str(getattr(msg, "name", None) or type(msg).__name__)] += 1
+        tagged.append((app._view_updates,
+                       str(getattr(msg, "name", None) or type(msg).__name__)))
         original(msg)
 
     ws.queue_message = counted  # type: ignore[method-assign,assignment]
-    u0, t0 = app._view_updates, time.monotonic()
+    t0 = time.monotonic()
     try:
         time.sleep(seconds)
     finally:
         ws.queue_message = original  # type: ignore[method-assign]
-    return counts, app._view_updates - u0, time.monotonic() - t0
+    wall = time.monotonic() - t0
+    seen = [f for f, _ in tagged]
+    if not seen:
+        return collections.Counter(), 0, wall
+    first, last = min(seen), max(seen)
+    counts = collections.Counter(name for f, name in tagged if first < f < last)
+    return counts, max(0, last - first - 1), wall
 
 
 def test_frames_carry_the_organs_at_the_scene_rate_and_the_tool_with_every_frame() -> None:
