@@ -32,7 +32,7 @@ BENCHES += ["bench.mrcp"]  # the MRCP control cycle vs the 18 ms budget
 BENCHES += ["bench.mrcp_profile"]  # where the 8-robot MRCP cycle's time goes, by part
 BENCHES += ["bench.power"]  # power planning: cohorts/s on 1 and 2 local Ray workers
 
-SMOKE_EXTRA = ["bench.bad_inputs"]
+SMOKE_EXTRA = ["bench.bad_inputs", "bench.house"]
 """Benchmarks ``make bench`` leaves out (run on their own) that the smoke run checks too."""
 
 NOT_SMOKED = {
