@@ -13,7 +13,8 @@ Prints, for ``vasim/``:
 Usage::
 
     python -m bench.house            # the figures, one line each, then the lists
-    python -m bench.house --smoke    # the same (it takes a second); for make test
+    python -m bench.house --smoke    # the same (it takes a second; VASIM_BENCH_SMOKE=1, which
+                                     # make test's smoke run sets, changes nothing either)
     python -m bench.house --json     # machine-readable
 """
 
