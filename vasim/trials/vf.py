@@ -631,7 +631,7 @@ class TrialRunner:
         same numbers ``outputs().camera`` wraps in arrays, without building them per step
         (that would double the cost of a Mag step). Same rule as ``in_view_cone``.
         """
-        cam = self.runtime._cam  # [p0, p1, p2, l0, l1, l2, fov, zoom] after render_xyz
+        cam = self.runtime.camera_floats  # [p0, p1, p2, l0, l1, l2, fov, zoom]
         if cam is None:
             return 0
         f0, f1, f2 = cam[3] - cam[0], cam[4] - cam[1], cam[5] - cam[2]
