@@ -31,6 +31,7 @@ BENCHES = ["bench.fixtures_pipeline", "bench.store", "bench.study_simulate", "be
 BENCHES += ["bench.mrcp"]  # the MRCP control cycle vs the 18 ms budget
 BENCHES += ["bench.mrcp_profile"]  # where the 8-robot MRCP cycle's time goes, by part
 BENCHES += ["bench.power"]  # power planning: cohorts/s on 1 and 2 local Ray workers
+BENCHES += ["bench.viewer_pixels"]  # the software renderer's cost per frame, per render scale
 
 SMOKE_EXTRA = ["bench.bad_inputs", "bench.house"]
 """Benchmarks ``make bench`` leaves out (run on their own) that the smoke run checks too."""

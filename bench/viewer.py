@@ -345,6 +345,7 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
         "latency_ms_max": float(max(latencies)) if latencies else float("nan"),
         "latency_n": float(len(latencies)),
         "realtime_factor": factor,
+        "render_scale_min": app.notices.scales.coarsest.get(app.acks.port, 1.0),
     }
 
 
@@ -491,7 +492,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"  displayed-clock lag: p50 {t['lag_p50']:.2f} s, max {t['lag_max']:.2f} s; "
               f"page updates {t['page_update_hz']:.1f}/s (mean "
               f"{t['page_update_hz_mean']:.1f}/s); loop {t['realtime_factor']:.2f}x "
-              "real time")
+              f"real time; the page drew at {t['render_scale_min']:.2f} of its resolution "
+              "at the coarsest (render_scale.py)")
         print(f"  control-to-photon latency: p50 {t['latency_ms_p50']:.0f} ms, max "
               f"{t['latency_ms_max']:.0f} ms ({t['latency_n']:.0f} key presses)")
 

@@ -80,13 +80,13 @@ from vasim.viewer.flow import (
     PageAcks,
     RateMeter,
     ScenePacer,
-    behind_notice,
     page_stats,
     registry,
     slowest_page_hz,
 )
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
 from vasim.viewer.notify import ErrorReporter
+from vasim.viewer.page_notices import PageNotices
 from vasim.viewer.panel import ExperimenterPanel
 from vasim.viewer.scene_views import DragInput, SceneViews, endoscope_pose, third_person_pose
 from vasim.viewer.trainee import (
@@ -277,9 +277,6 @@ class ViewerApp(ErrorReporter):
         self._light_t = -math.inf
         self.rate = RateMeter()
         """The loop's recent realtime factor as the pages see it (frame.t per wall s)."""
-        self._notices: dict[tuple[int, int], Any] = {}
-        self._notice_lock = threading.Lock()
-        self._next_notice = 0.0
         self._trial_flow: tuple[float, int, dict[tuple[int, int], int]] = (0.0, 0, {})
         self.controller.viewer_timing = self.viewer_timing
 
@@ -299,6 +296,7 @@ class ViewerApp(ErrorReporter):
             experimenter_chrome(self.exp_server)
             self.acks = PageAcks(self.server)
             self.exp_acks = PageAcks(self.exp_server)
+            self.notices = PageNotices(self.acks, self.exp_acks)
             self._build_scene()
             self._build_gui()
             self.mrcp_panel = self._build_mrcp_panel()
@@ -557,11 +555,8 @@ class ViewerApp(ErrorReporter):
         self._install_flow(client, self.exp_acks)
 
     def _install_flow(self, client: viser.ClientHandle, acks: PageAcks) -> None:
-        """The page's acknowledgement script and its "running behind" line (flow.py)."""
-        notice = client.gui.add_markdown("", visible=False)
-        with self._notice_lock:
-            self._notices[(acks.port, client.client_id)] = notice
-        acks.install(client)
+        """The page's acknowledgement script and its notice line (page_notices.py)."""
+        self.notices.install(client, acks)
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
         self._install_flow(client, self.acks)
@@ -676,43 +671,17 @@ class ViewerApp(ErrorReporter):
         self.audio.update(out.audio)
         if new_trial:
             self.rate.reset()
+            self.notices.scales.restart(self.acks.port)
             self._trial_flow = (time.monotonic(), self._view_updates, {
                 k: f.total_acks for k, f in registry.pages.copy().items()})
         if frame is not self._shown_frame and not frame.done and ctl.countdown_until is None:
             self.rate.add(frame.t)
         self._shown, self._shown_frame = info, frame
-        self._show_notices(frame.t)
+        self.notices.show(frame.t, self.rate.factor(), self.speed, self.view_hz,
+                          self._view_updates)
         self._view_costs.append(time.thread_time() - t0)
         self._view_updates += 1
         return True
-
-    def _show_notices(self, t_trial: float, now: float | None = None) -> None:
-        """Each page's "running behind" line (flow.py), at most twice a second."""
-        now = time.monotonic() if now is None else now
-        if now < self._next_notice:
-            return
-        self._next_notice = now + 0.5
-        factor = self.rate.factor()
-        with self._notice_lock:
-            notices = list(self._notices.items())
-        for (port, cid), handle in notices:
-            acks = self.acks if port == self.acks.port else self.exp_acks
-            page = acks.pages().get(cid)
-            if page is None:  # gone: forget its line
-                with self._notice_lock:
-                    self._notices.pop((port, cid), None)
-                continue
-            t_shown = acks.marks.trial_time(page.applied_seq)
-            # In wall seconds (**decision**: at speed 1000 a page 40 ms late showed a clock
-            # 40 trial seconds behind and was called late).
-            lag = None if t_shown is None else max(0.0, t_trial - t_shown) / self.speed
-            text = behind_notice(factor, self.speed, page, self.view_hz, lag)
-            try:
-                if text != handle.content:
-                    handle.content = text
-                    handle.visible = bool(text)
-            except Exception:  # a page closing meanwhile: the next round forgets it
-                log.debug("notice for client %s not updated", cid, exc_info=True)
 
     def flow_stats(self) -> dict[str, float]:
         """The pages' stream figures (flow.py): per page kind, the slowest page's update
@@ -737,6 +706,8 @@ class ViewerApp(ErrorReporter):
         return {"view_update_hz": (self._view_updates - n0) / wall if wall > 0 else 0.0,
                 "trainee_page_update_hz": min(rates) if rates else float("nan"),
                 "trainee_pages": float(len(rates)),
+                "trainee_render_scale_min": self.notices.scales.coarsest.get(
+                    self.acks.port, 1.0),
                 "realtime_factor_recent": float("nan") if factor is None else factor}
 
     def _hud_info(self, info: TrialInfo, frame: TrialFrame) -> HudInfo:
