@@ -206,7 +206,8 @@ def test_a_page_that_stops_acknowledging_gets_the_present_not_a_queue(app: Viewe
 def test_a_stored_trial_records_the_pages_update_rate(app: ViewerApp) -> None:
     t = app.viewer_timing()
     assert set(t) == {"view_update_hz", "trainee_page_update_hz", "trainee_pages",
-                      "realtime_factor_recent"}
+                      "realtime_factor_recent", "trainee_render_scale_min"}
+    assert 0 < t["trainee_render_scale_min"] <= 1.0
     # the view's rate is measured once it has drawn (run alone, this test comes right after
     # the app starts: wait for the rate rather than depend on the tests before it)
     wait_until(lambda: app.viewer_timing()["view_update_hz"] > 0, what="a measured view rate")
@@ -289,8 +290,8 @@ class _Page:
 
 
 def _notices(a: ViewerApp) -> dict[tuple[int, int], str]:
-    with a._notice_lock:
-        return {k: str(h.content) for k, h in a._notices.items()}
+    with a.notices.lock:
+        return {k: str(h.content) for k, h in a.notices.handles.items()}
 
 
 def test_both_pages_are_told_when_the_loop_cannot_keep_up(tmp_path: Any) -> None:
