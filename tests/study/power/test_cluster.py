@@ -112,6 +112,9 @@ def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
     # default) for it: on this loaded 2-core machine that start took longer and the ray://
     # run failed with "Initialization failure from server" (2 of 4 stress runs at load 4-11).
     env["RAY_CLIENT_SERVER_CHECK_CHANNEL_TIMEOUT_S"] = "180"
+    # ... and a specific server (one per client) that sees no client for 30 s (Ray's
+    # default) ends itself: under load its start and the client's arrival drift apart.
+    env["TIMEOUT_FOR_SPECIFIC_SERVER_S"] = "180"
     temp = Path("/tmp") / f"vasim_ray_{os.getpid()}_{port}"   # short: unix socket paths
     with log.open("wb") as out:
         proc = subprocess.Popen(
@@ -141,10 +144,24 @@ def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
         assert not alive, f"Ray processes outlived their head: {alive}"
 
 
+def _head_logs() -> str:
+    """The tails of the running test heads' Ray Client server logs (why a ray:// join
+    failed: the proxier's and each specific server's)."""
+    out = []
+    for path in sorted(Path("/tmp").glob(f"vasim_ray_{os.getpid()}_*/session_latest/logs/"
+                                         "ray_client_server*")):
+        text = path.read_text(errors="replace").strip()
+        if text:
+            out.append(f"--- {path.name}:\n{text[-3000:]}")
+    return "\n".join(out)
+
+
 def _power(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
     code = main(["study", "power", *argv, "--out", str(out), "--no-progress"])
     captured = capsys.readouterr()
-    assert code == 0, (captured.out, captured.err[-2000:])
+    if code != 0:   # the whole message, and the head's side of a failed join
+        pytest.fail(f"vasim study power exited {code}:\n{captured.err[-4000:]}\n"
+                    f"{_head_logs()}", pytrace=False)
     return captured.out
 
 
