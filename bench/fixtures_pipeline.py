@@ -7,7 +7,8 @@ Figures printed (one run, same process, so ratios are comparable on a noisy 2-co
 * the same pipeline on floats, ``scale_motion_xyz + render_xyz``, which is what the trial
   loop runs per step (it builds the ``FixtureOutputs`` only when it publishes a frame; the
   cost of one ``outputs()`` is printed too);
-* per fixture: one call of the pure public function, and of its float-level core;
+* per fixture: one call of the pure public function (``TaskState`` in, effect out), and of
+  its registered ``evaluate`` on a prepared ``Step`` (the one implementation both run);
 * per-step cost of the whole control step (operator + fixtures + task + sample buffer), and
   its ratio to the fixture pipeline;
 * trial throughput: simulated seconds per wall second for complete scripted trials;
@@ -19,7 +20,6 @@ run rather than across runs.
 
 from __future__ import annotations
 
-import math
 import os
 import statistics
 import time
@@ -29,7 +29,7 @@ from functools import partial
 import numpy as np
 from tqdm import tqdm
 
-from vasim.fixtures import ag, ff, mag, ms, vg
+from vasim.fixtures import FIXTURES, Step, ag, ff, mag, ms, vg
 from vasim.fixtures.runtime import SchemaRuntime
 from vasim.fixtures.schema import load_schema
 from vasim.fixtures.types import TaskState
@@ -103,29 +103,18 @@ def _per_fixture_costs(n: int = 50 if SMOKE else 2000) -> list[tuple[str, float,
     states = _states(n)
     params = {f.kind: f.params for f in load_schema("trajectory_following").fixtures}
     scale, kind = states[0].scale, states[0].kind
-    rows = []
-    for s in states:
-        x, g = tuple(s.tcp.tolist()), tuple(s.goal.tolist())
-        e0, e1, e2 = x[0] - g[0], x[1] - g[1], x[2] - g[2]
-        rows.append((x, g, e0, e1, e2, math.sqrt(e0 * e0 + e1 * e1 + e2 * e2),
-                     s.dx_master.tolist(), s.tcp_velocity.tolist(), tuple(s.lookahead.tolist())))
-
-    # one row: x, g, e0, e1, e2, |e|, dX_M, velocity, look-ahead
-    cores: dict[str, Callable[[tuple], object]] = {
-        "ms": lambda r: ms.scale_xyz(r[2], r[3], r[4], *r[6], scale, params["ms"]),
-        "ff": lambda r: ff.force_xyz(r[2], r[3], r[4], *r[7], scale, params["ff"]),
-        "ag": lambda r: ag.cue_values(r[5], scale, params["ag"]),
-        "vg": lambda r: vg.guidance_opacity(r[5], scale, params["vg"]),
-        "mag": lambda r: mag.camera_xyz(r[0], r[1], r[2], r[3], r[4], r[5], kind, r[8], scale,
-                                        params["mag"]),
-    }
+    # the float-level evaluate of each fixture (its one implementation) on a prepared Step,
+    # as the trial loop calls it
+    steps = [Step(tuple(s.tcp.tolist()), tuple(s.goal.tolist()), dx=tuple(s.dx_master.tolist()),
+                  v=tuple(s.tcp_velocity.tolist()), lookahead=tuple(s.lookahead.tolist()),
+                  kind=kind, scale=scale, t=s.t) for s in states]
     publics = {"ms": ms.motion_scaling, "ff": ff.force_feedback, "ag": ag.audio_guidance,
                "vg": vg.visual_guidance, "mag": mag.magnification}
 
     def run_core(name: str) -> None:
-        f = cores[name]
-        for r in rows:
-            f(r)
+        evaluate, p = FIXTURES[name].evaluate, params[name]
+        for st in steps:
+            evaluate(st, p)
 
     def run_public(name: str) -> None:
         fn, p = publics[name], params[name]

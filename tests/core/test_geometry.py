@@ -15,16 +15,22 @@ from vasim.core.geometry import (
     QUAT_ORDER,
     euler_xyz_from_matrix,
     from_xyzw,
+    homogeneous,
+    matrix_from_axis_angle,
+    matrix_from_euler,
     matrix_from_quat,
     matrix_from_rotvec,
     matrix_z_to,
+    quat_from_frame_euler,
     quat_from_matrix,
     quat_z_to,
     rot_x,
     rot_y,
     rot_z,
+    rotate_by_rotvec,
     rotation,
     rotation_angle,
+    rotvec_between,
     rotvec_from_matrix,
     slerp_matrix,
     to_xyzw,
@@ -168,3 +174,93 @@ def test_elementary_rotations_are_scipys(a: float) -> None:
     np.testing.assert_allclose(rot_z(math.pi / 2) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
     np.testing.assert_allclose(rot_x(math.pi / 2) @ [0, 1, 0], [0, 0, 1], atol=1e-15)
     np.testing.assert_allclose(rot_y(math.pi / 2) @ [0, 0, 1], [1, 0, 0], atol=1e-15)
+
+
+# -- the functions the former rotation sources now call (issue #29 item 6): axis-angle,
+# Euler, frame-then-Euler quaternions, rotating by a rotation vector, the log map between two
+# rotations, homogeneous transforms
+
+axes = st.tuples(finite, finite, finite).map(np.array).filter(
+    lambda a: np.linalg.norm(a) > 1e-3)
+angles = st.floats(min_value=-2 * math.pi, max_value=2 * math.pi, allow_nan=False)
+rotations = st.tuples(axes, angles).map(lambda p: matrix_from_axis_angle(*p))
+
+
+def rodrigues(axis: np.ndarray, angle: float) -> np.ndarray:
+    """R = I + sin(a) K + (1 - cos(a)) K^2 for the unit axis' cross-product matrix K."""
+    x, y, z = axis / np.linalg.norm(axis)
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+@settings(max_examples=100, deadline=None)
+@given(axes, angles)
+def test_axis_angle_is_rodrigues(axis: np.ndarray, angle: float) -> None:
+    np.testing.assert_allclose(matrix_from_axis_angle(axis, angle), rodrigues(axis, angle),
+                               atol=1e-12)
+
+
+def test_axis_angle_refuses_a_zero_axis() -> None:
+    with pytest.raises(ValueError, match="non-zero"):
+        matrix_from_axis_angle([0.0, 0.0, 0.0], 1.0)
+    with pytest.raises(ValueError, match="finite"):
+        matrix_from_axis_angle([math.nan, 0.0, 1.0], 1.0)
+
+
+@settings(max_examples=100, deadline=None)
+@given(angles, angles, angles)
+def test_euler_sequences_are_products_of_elementary_rotations(a: float, b: float,
+                                                              c: float) -> None:
+    # intrinsic Y-X'-Z'': R = Ry(a) Rx(b) Rz(c); extrinsic x-y-z: R = Rz(c) Ry(b) Rx(a)
+    np.testing.assert_allclose(matrix_from_euler("YXZ", [a, b, c]),
+                               rot_y(a) @ rot_x(b) @ rot_z(c), atol=1e-12)
+    np.testing.assert_allclose(matrix_from_euler("xyz", [a, b, c]),
+                               rot_z(c) @ rot_y(b) @ rot_x(a), atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(rotations, angles, angles, angles)
+def test_frame_then_euler_quaternion_is_the_matrix_product(frame: np.ndarray, a: float,
+                                                           b: float, c: float) -> None:
+    q = quat_from_frame_euler(frame, "YXZ", [a, b, c])
+    assert q[0] >= 0.0 and math.isclose(float(np.linalg.norm(q)), 1.0, rel_tol=1e-12)
+    np.testing.assert_allclose(closed_form_matrix(q), frame @ rot_y(a) @ rot_x(b) @ rot_z(c),
+                               atol=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(axes, angles, st.tuples(finite, finite, finite).map(np.array))
+def test_rotate_by_rotvec_is_the_matrix_and_keeps_length(axis: np.ndarray, angle: float,
+                                                         v: np.ndarray) -> None:
+    rv = axis / np.linalg.norm(axis) * angle
+    out = rotate_by_rotvec(rv, v)
+    np.testing.assert_allclose(out, rodrigues(axis, angle) @ v, atol=1e-12)
+    assert math.isclose(float(np.linalg.norm(out)), float(np.linalg.norm(v)), abs_tol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(rotations, axes, st.floats(min_value=0.0, max_value=math.pi, allow_nan=False))
+def test_rotvec_between_is_the_log_map_on_both_routes(r0: np.ndarray, axis: np.ndarray,
+                                                      angle: float) -> None:
+    """``rotvec_between(r0, r1)`` turns r0 into r1: the closed form away from a half turn,
+    scipy's route within it (cos angle <= -0.99, i.e. angle >= 3.0004 rad)."""
+    r1 = rodrigues(axis, angle) @ r0
+    rv = rotvec_between(r0, r1)
+    np.testing.assert_allclose(matrix_from_rotvec(rv) @ r0, r1, atol=1e-9)
+    assert math.isclose(float(np.linalg.norm(rv)), angle, abs_tol=1e-9)
+    if angle < 3.0:  # unique there: exactly scipy's log map
+        np.testing.assert_allclose(rv, Rotation.from_matrix(r1 @ r0.T).as_rotvec(),
+                                   atol=1e-9)
+
+
+def test_rotvec_between_identical_rotations_is_zero() -> None:
+    r = rot_x(0.3) @ rot_z(1.1)
+    np.testing.assert_allclose(rotvec_between(r, r), np.zeros(3), atol=1e-15)
+
+
+def test_homogeneous_applies_the_rotation_then_the_translation() -> None:
+    r, t, p = rot_z(0.7), np.array([0.1, -0.2, 0.3]), np.array([1.0, 2.0, 3.0])
+    m = homogeneous(r, t)
+    np.testing.assert_allclose((m @ [*p, 1.0])[:3], r @ p + t, atol=1e-15)
+    np.testing.assert_array_equal(homogeneous(), np.eye(4))
+    np.testing.assert_array_equal(homogeneous(translation=t)[:3, :3], np.eye(3))

@@ -27,6 +27,8 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
+from vasim.core import geometry
+
 FloatArray = NDArray[np.float64]
 
 OrganKind = Literal["parenchyma", "hollow", "vessel", "wall"]
@@ -156,11 +158,6 @@ def _tube(length: float, radius: float, n_around: int, n_along: int) -> trimesh.
     return _revolve(profile, n_around, lambda phi: np.ones_like(phi))
 
 
-def _rotation(axis: FloatArray, angle: float) -> FloatArray:
-    """(3, 3) rotation matrix about ``axis`` by ``angle`` [rad]."""
-    return trimesh.transformations.rotation_matrix(angle, axis)[:3, :3]
-
-
 def _finish(vertices: FloatArray, faces: NDArray[np.int64]) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64), faces, process=False)
     if mesh.volume < 0:
@@ -270,7 +267,7 @@ def intestine_loop(
     ring = np.column_stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)]) * major_radius
     off = v - ring
     v = ring + off * (1.0 + wobble * np.sin(3.0 * ang))[:, None]
-    v = v @ _rotation(np.array([1.0, 0.0, 0.0]), tilt).T + np.asarray(centre)
+    v = v @ geometry.rot_x(tilt).T + np.asarray(centre)
     return _finish(v, tor.faces)
 
 

@@ -10,6 +10,18 @@ stream) and what viser, the viewer, takes (``handle.wxyz``). scipy (``as_quat()`
 pybullet speak **xyzw** (scalar last): code converts at those edges only, with
 :func:`to_xyzw` / :func:`from_xyzw` (the pybullet backend, the viewer's pybullet reads).
 
+**Decision** (issue #29, one rotation source): the former direct sources call these
+functions: the laparoscopic instrument's orientation (:func:`quat_from_frame_euler`, now
+canonical like every quaternion here) and its shaft turn (:func:`rotate_by_rotvec`) in
+``vasim.haptics.laparoscopic``; the bowel tilt of ``vasim.abdomen.anatomy`` (:func:`rot_x`,
+bit-identical to trimesh's ``rotation_matrix`` about x there); the MRCP viewer's prop meshes
+(:func:`homogeneous` of :func:`rot_y`/:func:`rot_z`); the IK's log map
+(:func:`rotvec_between`, moved from ``vasim.mrcp.arm``). Compiled kernels (``*_kernels.py``)
+keep their inlined arithmetic. What remains outside: ``trimesh.geometry.align_vectors`` for
+the vessel mesh of ``vasim.abdomen.anatomy``: it picks a different roll about the vessel's
+axis than :func:`matrix_z_to`, so replacing it would move the vessel's vertices and change
+every stored trial (issue #29 requires them identical).
+
 Rotation matrices are ``(3, 3)`` (or ``(..., 3, 3)``) and act on column vectors:
 ``v_world = R @ v_local`` for a world-from-local ``R``. Quaternions returned here are unit
 and canonical (**decision**: w >= 0, so a rotation has one quaternion and recorded files
@@ -107,6 +119,71 @@ def matrix_from_rotvec(v: ArrayLike) -> FloatArray:
                       ).reshape(*a.shape[:-1], 3, 3)
 
 
+def matrix_from_axis_angle(axis: ArrayLike, angle: float) -> FloatArray:
+    """``(3, 3)`` rotation about ``axis`` (any length > 0, normalised here) by ``angle``
+    [rad], right-handed."""
+    a = np.asarray(axis, dtype=np.float64).reshape(3)
+    n = float(np.linalg.norm(a))
+    if not (math.isfinite(n) and n > 0.0):
+        raise ValueError(f"a rotation axis must be finite and non-zero, got {a.tolist()}")
+    return matrix_from_rotvec(a * (float(angle) / n))
+
+
+def matrix_from_euler(seq: str, angles: ArrayLike) -> FloatArray:
+    """``(3, 3)`` rotation of Euler ``angles`` [rad] in scipy's ``seq`` convention (upper
+    case intrinsic, e.g. ``"YXZ"``; lower case extrinsic, e.g. ``"xyz"``, URDF's rpy)."""
+    return np.asarray(Rotation.from_euler(seq, np.asarray(angles, dtype=np.float64)
+                                          ).as_matrix())
+
+
+def quat_from_frame_euler(frame: ArrayLike, seq: str, angles: ArrayLike) -> FloatArray:
+    """``(4,)`` canonical wxyz of ``frame`` (a ``(3, 3)`` world-from-parent rotation) then
+    the Euler rotation ``seq``/``angles`` [rad] in that frame: ``frame @ euler``, composed
+    as quaternions (no matrix round trip)."""
+    r = Rotation.from_matrix(np.asarray(frame, dtype=np.float64)) * Rotation.from_euler(
+        seq, np.asarray(angles, dtype=np.float64))
+    return quat_of(r)
+
+
+def rotate_by_rotvec(rotvec: ArrayLike, v: ArrayLike) -> FloatArray:
+    """``v`` (``(3,)`` or ``(n, 3)``) turned by the rotation vector ``rotvec`` (axis * angle
+    [rad])."""
+    return np.asarray(Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).apply(
+        np.asarray(v, dtype=np.float64)))
+
+
+def rotvec_between(current: ArrayLike, target: ArrayLike) -> FloatArray:
+    """``(3,)`` rotation vector [rad] (world frame) turning matrix ``current`` into
+    ``target``: the log map of ``target @ current.T``.
+
+    **Decision** (moved here from ``vasim.mrcp.arm``, whose IK calls it per iteration): away
+    from a half turn (cos angle > -0.99) it is the closed form from the skew part ``w``
+    (``|w| = 2 sin angle``) and the trace (``2 cos angle + 1``), ``atan2`` for the angle,
+    a few microseconds; near a half turn, where the skew part vanishes, it takes scipy's
+    robust ``as_rotvec``. The tests check both routes against scipy.
+    """
+    r = np.asarray(target, dtype=np.float64) @ np.asarray(current, dtype=np.float64).T
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    s = 0.5 * float(np.linalg.norm(w))
+    c = 0.5 * (float(np.trace(r)) - 1.0)
+    if c > -0.99:
+        angle = math.atan2(s, c)
+        return w * (0.5 if s < 1e-12 else angle / (2.0 * s))
+    return rotvec_from_matrix(r)   # near pi: the robust (slower) route
+
+
+def homogeneous(rotation: ArrayLike | None = None,
+                translation: ArrayLike | None = None) -> FloatArray:
+    """``(4, 4)`` transform of a ``(3, 3)`` rotation and a ``(3,)`` translation (identity
+    for the one not given)."""
+    t = np.eye(4)
+    if rotation is not None:
+        t[:3, :3] = np.asarray(rotation, dtype=np.float64)
+    if translation is not None:
+        t[:3, 3] = np.asarray(translation, dtype=np.float64)
+    return t
+
+
 def rot_x(angle: float) -> FloatArray:
     """``(3, 3)`` right-handed rotation about x by ``angle`` [rad].
 
@@ -179,17 +256,23 @@ __all__ = [
     "QUAT_ORDER",
     "euler_xyz_from_matrix",
     "from_xyzw",
+    "homogeneous",
+    "matrix_from_axis_angle",
+    "matrix_from_euler",
     "matrix_from_quat",
     "matrix_from_rotvec",
     "matrix_z_to",
+    "quat_from_frame_euler",
     "quat_from_matrix",
     "quat_of",
     "quat_z_to",
     "rot_x",
     "rot_y",
     "rot_z",
+    "rotate_by_rotvec",
     "rotation",
     "rotation_angle",
+    "rotvec_between",
     "rotvec_from_matrix",
     "slerp_matrix",
     "to_xyzw",

@@ -40,8 +40,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
+from vasim.core import geometry
 from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -130,10 +130,9 @@ def tip_position(port: Port, pose: InstrumentPose) -> FloatArray:
 
 def orientation(port: Port, pose: InstrumentPose) -> FloatArray:
     """(4,) unit quaternion (w, x, y, z) of the instrument: its z axis along the shaft, turned
-    by ``roll`` about it."""
-    local = Rotation.from_euler("YXZ", [pose.yaw, pose.pitch, pose.roll])
-    q = (Rotation.from_matrix(port.frame) * local).as_quat()  # scipy order: x, y, z, w
-    return np.array([q[3], q[0], q[1], q[2]])
+    by ``roll`` about it (canonical, w >= 0: ``vasim.core.geometry``'s decision)."""
+    return geometry.quat_from_frame_euler(port.frame, "YXZ",
+                                          [pose.yaw, pose.pitch, pose.roll])
 
 
 def _local_direction(yaw: float, pitch: float) -> FloatArray:
@@ -256,7 +255,7 @@ class InputMapping:
         angle = float(np.linalg.norm(perp))
         if angle > 0.0 and math.isfinite(angle):
             axis = np.cross(d, perp) / angle
-            new_d = Rotation.from_rotvec(axis * angle).apply(d)
+            new_d = geometry.rotate_by_rotvec(axis * angle, d)
             yaw, pitch = _angles(port.frame.T @ new_d)
         d_ins = float(np.clip(k * (self.m_per_line * inc.wheel
                                    + self.insert_m_per_s * inc.insert_s), -0.1, 0.1))

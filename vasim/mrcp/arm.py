@@ -91,12 +91,7 @@ class _Client:
 def pose_matrix(position: FloatArray | None = None, rotation: FloatArray | None = None
                 ) -> FloatArray:
     """``(4, 4)`` homogeneous transform from a position ``(3,)`` and rotation ``(3, 3)``."""
-    t = np.eye(4)
-    if rotation is not None:
-        t[:3, :3] = np.asarray(rotation, dtype=float)
-    if position is not None:
-        t[:3, 3] = np.asarray(position, dtype=float)
-    return t
+    return geometry.homogeneous(rotation, position)
 
 
 def _quat(rotation: FloatArray) -> list[float]:
@@ -118,16 +113,9 @@ def _load_robot(client: int, robot: RobotModel, base: FloatArray) -> int:
     return body
 
 
-def rotation_error(current: FloatArray, target: FloatArray) -> FloatArray:
-    """Axis-angle vector ``(3,)`` [rad], world frame, turning ``current`` into ``target``."""
-    r = target @ current.T
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    s = 0.5 * float(np.linalg.norm(w))
-    c = 0.5 * (float(np.trace(r)) - 1.0)
-    if c > -0.99:
-        angle = math.atan2(s, c)
-        return w * (0.5 if s < 1e-12 else angle / (2.0 * s))
-    return geometry.rotvec_from_matrix(r)   # near pi: the robust (slower) route
+rotation_error = geometry.rotvec_between
+"""Axis-angle vector ``(3,)`` [rad], world frame, turning ``current`` into ``target``
+(``rotation_error(current, target)``; the log map lives in ``vasim.core.geometry``)."""
 
 
 class PybulletArm:

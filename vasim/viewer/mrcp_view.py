@@ -31,7 +31,14 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
-from vasim.core.geometry import from_xyzw, matrix_from_quat, quat_from_matrix
+from vasim.core.geometry import (
+    from_xyzw,
+    homogeneous,
+    matrix_from_quat,
+    quat_from_matrix,
+    rot_y,
+    rot_z,
+)
 
 FloatArray = NDArray[np.float64]
 Rgb = tuple[int, int, int]
@@ -216,7 +223,7 @@ def task_shape(scenario: str, points: FloatArray) -> trimesh.Trimesh:
         return trimesh.creation.box(extents=[0.02, 2 * obstacle_hole.HALF_BAR, 0.02])
     if scenario == "laparoscopic_rings":
         rod = trimesh.creation.cylinder(radius=0.004, height=2 * laparoscopic_rings.HALF_ROD)
-        rod.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
+        rod.apply_transform(homogeneous(rot_y(math.pi / 2)))
         return rod
     if scenario == "suture_combined":
         return needle_mesh()
@@ -225,10 +232,9 @@ def task_shape(scenario: str, points: FloatArray) -> trimesh.Trimesh:
         for k in range(3):
             a = 2 * math.pi * k / 3
             spoke = trimesh.creation.cylinder(radius=0.008, height=faucet.RADIUS)
-            spoke.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2,
-                                                                          [0, 1, 0]))
+            spoke.apply_transform(homogeneous(rot_y(math.pi / 2)))
             spoke.apply_translation([faucet.RADIUS / 2, 0.0, 0.0])
-            spoke.apply_transform(trimesh.transformations.rotation_matrix(a, [0, 0, 1]))
+            spoke.apply_transform(homogeneous(rot_z(a)))
             parts.append(spoke)
         wheel = trimesh.util.concatenate(parts)
         assert isinstance(wheel, trimesh.Trimesh)  # Trimesh parts concatenate to one Trimesh
