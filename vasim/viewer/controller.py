@@ -68,6 +68,7 @@ from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.tasks import TRAJECTORY_VARIANTS
 from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
+from vasim.trials.teleop_run import teleop_meta
 from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
 from vasim.trials.vf_run import trial_meta
 from vasim.viewer.condition import viewer_condition
@@ -96,6 +97,12 @@ from vasim.viewer.state import (
     plain_dict,
     schema_choices,
     with_f5pl,
+)
+from vasim.viewer.teleop_live import (
+    is_teleop,
+    make_live_teleop_trial,
+    person_config,
+    teleop_task,
 )
 from vasim.viewer.trainee import ScoreCard, frame_outcome
 
@@ -160,6 +167,8 @@ class TrainingController(ConditionCommands):
         self.speed = float(speed)
         self.max_time = float(max_time)
         self._factory = trial_factory or make_live_trial
+        self.teleop_factory: Callable[..., LiveTrial] = make_live_teleop_trial
+        """Builds the live trial of a teleoperation mode (``teleop_live``)."""
         self._store: Any = None
         self._number = 0
         self._trial: LiveTrial | None = None
@@ -240,24 +249,30 @@ class TrainingController(ConditionCommands):
         raised (the caller reports it).
         """
         device: Device | None = None
+        # A teleoperation mode (a protocol's stdt / mrcp / mrcp_cam trial) runs the station's
+        # needle task: vasim.viewer.teleop_live (issue #28).
+        teleop = is_teleop(config)
+        if teleop and input_kind != "scripted":
+            config = person_config(config)
+        task = teleop_task(config) if teleop else make_task(config)
         if input_kind == "browser":
             device = BrowserDevice()
         elif input_kind == "laparoscopic":
-            task0 = make_task(config)
-            screen = (self.view_axes(np.asarray(task0.points), np.asarray(task0.start))
+            screen = (self.view_axes(np.asarray(task.points), np.asarray(task.start))
                       if self.view_axes is not None else self.screen)
-            device = instrument_device(tool_trocar(config.task, np.asarray(task0.start)),
-                                       np.asarray(task0.start), self.input_mapping, screen)
+            device = instrument_device(tool_trocar(config.task, np.asarray(task.start)),
+                                       np.asarray(task.start), self.input_mapping, screen)
             self.screen = screen
-        trial = self._factory(config, device, schema=schema, speed=self.speed)
+        trial = (self.teleop_factory if teleop else self._factory)(
+            config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
-        task = make_task(config)
         self._stored = StoredTrial(None, None)  # a demo is not stored
         if mode != "demo":
-            meta = trial_meta(config, sch, make_profile(config),
-                              session_id=None if session is None else session.id,
-                              schedule_index=None if scheduled is None else scheduled.index,
-                              protocol=None if session is None else session.protocol.name)
+            where = {"session_id": None if session is None else session.id,
+                     "schedule_index": None if scheduled is None else scheduled.index,
+                     "protocol": None if session is None else session.protocol.name}
+            meta = (teleop_meta(config, **where) if teleop
+                    else trial_meta(config, sch, make_profile(config), **where))
             if input_kind != "scripted":
                 cfg = dict(meta.config or {})
                 # What was in force, stored with the trial (condition.viewer_condition).
@@ -269,7 +284,10 @@ class TrainingController(ConditionCommands):
                     optics_deg=self.optics_deg,
                     mag_camera=any(f.channel == "camera" for f in sch.fixtures))
                 cfg["operator"] = input_kind
-                cfg.pop("profile", None)  # no simulated person behind a device
+                if not teleop:  # no simulated person behind a device ...
+                    cfg.pop("profile", None)
+                # ... but a teleoperation trial keeps it: its reaction delay times the
+                # gripper and the safety-stop acknowledgement (teleop_live, decisions).
                 if input_kind == "laparoscopic":
                     cfg["input_mapping"] = cfg["viewer"]["input_mapping"]
                 meta = replace(meta, operator=input_kind, config=cfg)
