@@ -634,8 +634,43 @@ class TrainingController(ConditionCommands):
             self._apply_f5pl(str(instance), params)
         elif kind == "auto_advance":
             self._publish(auto_advance=bool(value))
+        elif kind == "answers":
+            self._record_answers(value)
         else:
             raise ConfigError(f"unknown command {kind!r}")
+
+    def _record_answers(self, value: Any) -> None:
+        """Stores one questionnaire's answers with the subject's session of the chosen
+        protocol (``questionnaire_form``; value: ``(which, TOML text)``), checked as
+        ``vasim study answer`` checks them (``record_answers``)."""
+        from vasim.study.session import record_answers
+        from vasim.viewer.questionnaire_form import (
+            QUESTIONNAIRES,
+            answers_status,
+            parse_answers,
+        )
+
+        which, text = value if isinstance(value, tuple) and len(value) == 2 else (None, None)
+        if which not in QUESTIONNAIRES or not isinstance(text, str):
+            raise ConfigError(f"answers must be (pre|post, TOML text), got {value!r}",
+                              field="answers")
+        if self.panel.mode != "protocol":
+            raise ConfigError("questionnaires belong to a protocol session: switch to "
+                              "protocol mode", field="answers")
+        sid = self.panel.session_id
+        if sid is None:   # the subject's latest session of the protocol, else a new one
+            p = self.panel
+            known = self.store().sessions(subject=p.subject, protocol=p.protocol) \
+                if p.subject and p.protocol else None
+            sid = (int(known["id"].iloc[-1]) if known is not None and len(known)
+                   else self._session().id)
+        try:
+            n = record_answers(self.store(), sid, which, parse_answers(text, which),
+                               source="the experimenter's questionnaire")
+        except (ConfigError, StoreError) as exc:
+            self._publish(status=f"{which} questionnaire not recorded: {exc}")
+            raise
+        self._publish(status=answers_status(which, sid, n))
 
     def _running_stored(self) -> bool:
         return self.active() and self.info.trial_id is not None
