@@ -657,6 +657,11 @@ class TrainingController(ConditionCommands):
         if self.panel.mode != "protocol":
             raise ConfigError("questionnaires belong to a protocol session: switch to "
                               "protocol mode", field="answers")
+        try:
+            answers = parse_answers(text, which)
+        except ConfigError as exc:
+            self._publish(status=f"{which} questionnaire not recorded: {exc}")
+            raise
         sid = self.panel.session_id
         if sid is None:   # the subject's latest session of the protocol, else a new one
             p = self.panel
@@ -665,7 +670,7 @@ class TrainingController(ConditionCommands):
             sid = (int(known["id"].iloc[-1]) if known is not None and len(known)
                    else self._session().id)
         try:
-            n = record_answers(self.store(), sid, which, parse_answers(text, which),
+            n = record_answers(self.store(), sid, which, answers,
                                source="the experimenter's questionnaire")
         except (ConfigError, StoreError) as exc:
             self._publish(status=f"{which} questionnaire not recorded: {exc}")
