@@ -21,24 +21,11 @@ import pytest
 from tests.browser.conftest import WAIT_MS, wait_ready
 from tests.polling import wait_for
 from tests.study.tiny_protocols import install
+from tests.viewer.test_teleop_session import teleop_protocol
 from vasim.study.store import TrialStore
 from vasim.viewer.app import ViewerApp
 
-TELEOP_BROWSER = """
-name = "teleop_browser"
-description = "one MRCP trial run by a person in the browser"
-task = "point"
-max_trial_time_s = 300.0
-
-[randomisation]
-block_order = "fixed"
-variant_order = "fixed"
-
-[[blocks]]
-name = "mrcp"
-condition = "mrcp"
-repetitions = 1
-"""
+TELEOP_BROWSER = teleop_protocol("teleop_browser", 300.0, ("mrcp",), question=False)
 
 TRAINEE_VIEW = {"width": 420, "height": 300}
 EXPERIMENTER_VIEW = {"width": 560, "height": 620}
@@ -47,32 +34,22 @@ EXPERIMENTER_VIEW = {"width": 560, "height": 620}
 @pytest.fixture
 def app(browser: Any, tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerApp]:
     install(monkeypatch, tmp_path / "protocols", teleop_browser=TELEOP_BROWSER)
-    a = ViewerApp(port=0, db=str(tmp_path / "study.sqlite"), scene="none", view_hz=10.0,
-                  countdown_s=1.0).start()
-    try:
+    with ViewerApp(port=0, db=str(tmp_path / "study.sqlite"), scene="none", view_hz=10.0,
+                   countdown_s=1.0) as a:
         yield a
-    finally:
-        a.stop()
-
-
-def _choose(page: Any, label: str, option: str) -> None:
-    page.get_by_role("combobox", name=label).click(force=True)
-    page.get_by_role("option", name=option, exact=True).click(force=True)
 
 
 def test_a_person_moves_the_needle_of_an_mrcp_trial_and_it_is_stored(
         app: ViewerApp, browser: Any) -> None:
     exp = browser.new_page(viewport=EXPERIMENTER_VIEW)
-    trainee = browser.new_page(viewport=TRAINEE_VIEW)
+    trainee = None
     try:
-        trainee.goto(app.url)
-        wait_ready(trainee)
-        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=WAIT_MS)
         exp.goto(app.experimenter_url)
         wait_ready(exp)
         app.request("mode", "protocol")
         assert wait_for(lambda: app.panel.mode == "protocol"), app.errors[-3:]
-        _choose(exp, "Input", "laparoscopic")
+        exp.get_by_role("combobox", name="Input").click(force=True)
+        exp.get_by_role("option", name="laparoscopic", exact=True).click(force=True)
         assert wait_for(lambda: app.panel.input == "laparoscopic"), app.errors[-3:]
         exp.locator("xpath=//label[normalize-space()='Subject code']"
                     "/ancestor::div[.//input][1]//input").fill("T01", force=True)
@@ -83,6 +60,10 @@ def test_a_person_moves_the_needle_of_an_mrcp_trial_and_it_is_stored(
         # the status line has its final length: the buttons below it stay where they are
         exp.wait_for_function("(t) => document.body.innerText.includes(t)",
                               arg="new session of teleop_browser for T01", timeout=WAIT_MS)
+        trainee = browser.new_page(viewport=TRAINEE_VIEW)   # the trainee's page, keys ready
+        trainee.goto(app.url)
+        wait_ready(trainee)
+        trainee.wait_for_function("() => window.__vasimInput !== undefined", timeout=WAIT_MS)
         exp.get_by_role("button", name="Start trial").click(force=True)
         assert wait_for(lambda: app.snapshot.info.trial_id is not None
                         and app.controller.instrument is not None
@@ -126,5 +107,6 @@ def test_a_person_moves_the_needle_of_an_mrcp_trial_and_it_is_stored(
         print(f"needle moved {1e3 * moved:.1f} mm by the page's keys; "
               f"path {1e3 * metrics['path_l2']:.1f} mm stored")
     finally:
-        trainee.close()
+        if trainee is not None:
+            trainee.close()
         exp.close()

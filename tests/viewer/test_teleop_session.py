@@ -37,32 +37,22 @@ from vasim.viewer.controller import Command, TrainingController
 from vasim.viewer.questionnaire_form import answers_template
 from vasim.viewer.teleop_live import LiveTeleopTrial, person_config
 
-TELEOP_TINY = """
-name = "teleop_tiny"
-description = "one MRCP and one StdT trial of half a second, then the post questionnaire"
-task = "point"
-max_trial_time_s = 0.5
 
-[randomisation]
-block_order = "fixed"
-variant_order = "fixed"
+def teleop_protocol(name: str, max_time: float, modes: tuple[str, ...],
+                    question: bool = True) -> str:
+    """A tiny teleoperation protocol: one trial per mode in this order, ``max_time`` [s]
+    each, and (``question``) a post questionnaire of one item."""
+    blocks = "".join(f'\n[[blocks]]\nname = "{m}"\ncondition = "{m}"\nrepetitions = 1\n'
+                     for m in modes)
+    post = ('\n[[questionnaires.post.items]]\nid = "best_mode"\ntype = "condition_choice"'
+            '\nselect = "best"\nprompt = "Which mode did you prefer?"\n') if question else ""
+    return (f'name = "{name}"\ndescription = "tiny teleoperation protocol"\n'
+            f'task = "point"\nmax_trial_time_s = {max_time}\n\n[randomisation]\n'
+            'block_order = "fixed"\nvariant_order = "fixed"\n' + blocks + post)
 
-[[blocks]]
-name = "mrcp"
-condition = "mrcp"
-repetitions = 1
 
-[[blocks]]
-name = "stdt"
-condition = "stdt"
-repetitions = 1
-
-[[questionnaires.post.items]]
-id = "best_mode"
-type = "condition_choice"
-select = "best"
-prompt = "Which mode did you prefer?"
-"""
+TELEOP_TINY = teleop_protocol("teleop_tiny", 0.5, ("mrcp", "stdt"))
+"""One MRCP and one StdT trial of half a second, then the post questionnaire."""
 
 STEP = 0.02 * CYCLE_DT   # the device's displacement per cycle [m]
 
@@ -143,11 +133,9 @@ def test_a_person_s_trial_has_no_simulated_jaw_misjudgement() -> None:
 @pytest.fixture
 def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingController]:
     install(monkeypatch, tmp_path / "protocols", teleop_tiny=TELEOP_TINY)
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=4.0, pause_s=0.05)
-    try:
+    with closing(TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=4.0,
+                                    pause_s=0.05)) as c:
         yield c
-    finally:
-        c.close()
 
 
 def test_a_teleop_session_runs_stores_its_trials_and_its_questionnaire(

@@ -46,17 +46,15 @@ that mixes simulated and person-run sessions. What changes is who moves the mast
   safety stop (``FAULT_ACK_TIME`` after it), which the trial does automatically.
 * Pacing: the thread runs as many 18 ms cycles as the wall time elapsed allows (times
   ``speed``), at most ``max_catch_up_s`` per iteration, so a slow cycle slows the trial
-  down rather than fast-forwarding it (as ``live.SimThreadTrial`` does).
+  down rather than fast-forwarding it (``live.PacedThread``, shared with the VF trials'
+  ``SimThreadTrial``).
 """
 
 from __future__ import annotations
 
 import logging
-import math
-import threading
-import time
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -71,7 +69,7 @@ from vasim.tasks import Task
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.teleop import CYCLE_DT, TeleopTrial
 from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, make_profile
-from vasim.viewer.live import DeviceOperator
+from vasim.viewer.live import DeviceOperator, PacedThread
 
 log = logging.getLogger(__name__)
 
@@ -178,31 +176,9 @@ class PersonTeleopTrial(TeleopTrial):
         return DeviceHand(self.device_operator, points, reach)
 
 
-@dataclass(frozen=True)
-class TeleopLoopStats:
-    """Timing of a :class:`LiveTeleopTrial` (``timing_json`` of its stored trial).
-
-    Attributes:
-        iterations: loop iterations. wall_s: wall time the trial ran [s]. sim_s: simulated
-        time [s]. cycle_hz: control cycles per wall second (the station's rate is 55.6 Hz).
-        realtime_factor: sim_s / wall_s. load: CPU seconds of the loop per wall second.
-    """
-
-    iterations: int
-    wall_s: float
-    sim_s: float
-    cycle_hz: float
-    realtime_factor: float
-    load: float
-
-    def to_dict(self) -> dict[str, float | int | str]:
-        d: dict[str, float | int | str] = {k: getattr(self, k) for k in self.__annotations__}
-        d["mode"] = "viewer-teleop-thread"
-        return d
-
-
-class LiveTeleopTrial:
-    """A teleoperation trial in real time on its own thread (module docstring).
+class LiveTeleopTrial(PacedThread):
+    """A teleoperation trial in real time on its own thread (module docstring; the pacing
+    is ``live.PacedThread``'s, one step = one 18 ms control cycle).
 
     Args:
         config: the trial (``config.mode`` a teleoperation mode).
@@ -224,73 +200,40 @@ class LiveTeleopTrial:
         if not is_teleop(config):
             raise ConfigError(f"not a teleoperation mode: {config.mode!r} (one of "
                               f"{', '.join(TELEOPERATION_MODES)})", field="mode")
-        if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
-            raise ConfigError(f"speed must be > 0, got {speed!r}", field="speed")
+        super().__init__(device, dt=CYCLE_DT, speed=speed, loop_hz=loop_hz,
+                         max_catch_up_s=max_catch_up_s)
         self.config = config
-        self.device = device
         self.trial: TeleopTrial = (TeleopTrial(config, **kw) if device is None
                                    else PersonTeleopTrial(config, device, **kw))
-        self.speed = float(speed)
-        self.period = 1.0 / float(loop_hz)
-        self.max_catch_up_s = float(max_catch_up_s)
         self._cycles: Iterator[int] = self.trial.cycles()
         self._exhausted = False
-        self._frame = self._make_frame()
-        self._stop = threading.Event()
-        self._lock = threading.Lock()  # result() vs the loop
-        self._thread: threading.Thread | None = None
-        self._iterations = 0
-        self._wall = 0.0
-        self._cpu = 0.0
         self._closed = False
-        self.error: BaseException | None = None
-        """An exception that stopped the loop (the trial is then done)."""
+        self._frame = self._make_frame()
 
-    # -- LiveTrial -----------------------------------------------------------------------
-    @property
-    def done(self) -> bool:
-        return bool(self.trial.done) or self._exhausted or self.error is not None
+    # -- PacedThread ---------------------------------------------------------------------
+    def _finished(self) -> bool:
+        return bool(self.trial.done) or self._exhausted
 
-    def start(self) -> LiveTeleopTrial:
-        if self._thread is not None:
-            raise RuntimeError("LiveTeleopTrial.start() was already called")
-        if self.device is not None:
-            self.device.start()
-        self._thread = threading.Thread(target=self._loop, name="vasim-viewer-teleop",
-                                        daemon=True)
-        self._thread.start()
-        return self
+    def _clock(self) -> tuple[float, int]:
+        return max(0.0, self.trial.t), self.trial.k + 1
+
+    def _advance(self, n: int) -> None:
+        self.advance(n)
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Stops the loop (joined); the trial keeps what it recorded. Idempotent."""
-        self._stop.set()
-        t = self._thread
-        if t is not None and t is not threading.current_thread():
-            t.join(timeout)
-        if self._closed:
+        """Stops the loop and the device; closes the station once the loop is gone."""
+        super().stop(timeout)
+        if self._closed or self.running:
             return
         self._closed = True
-        if self.device is not None:
-            try:
-                self.device.stop()
-            except Exception:  # a device that fails to stop must not block the viewer
-                log.exception("device %s failed to stop", getattr(self.device, "name", "?"))
-        if t is None or not t.is_alive():  # the station's physics client (pybullet)
-            try:
-                self.trial.station.close()
-            except Exception:
-                log.exception("closing the teleoperation station failed")
+        try:   # the station's physics client (pybullet)
+            self.trial.station.close()
+        except Exception:
+            log.exception("closing the teleoperation station failed")
 
+    # -- LiveTrial -----------------------------------------------------------------------
     def frame(self) -> TrialFrame:
         return self._frame
-
-    def timing(self) -> TeleopLoopStats:
-        wall, sim = self._wall, max(0.0, self.trial.t)
-        cycles = self.trial.k + 1
-        return TeleopLoopStats(iterations=self._iterations, wall_s=wall, sim_s=sim,
-                               cycle_hz=cycles / wall if wall > 0 else 0.0,
-                               realtime_factor=sim / wall if wall > 0 else 0.0,
-                               load=self._cpu / wall if wall > 0 else 0.0)
 
     def result(self, **kw: Any) -> TrialResult:
         """The trial's result so far (call after ``stop()`` or once ``done``);
@@ -312,7 +255,7 @@ class LiveTeleopTrial:
                     self._exhausted = True
                     break
                 ran += 1
-            if ran:
+            if ran or self.done:
                 self._frame = self._make_frame()
         return ran
 
@@ -324,32 +267,7 @@ class LiveTeleopTrial:
         return TrialFrame(k=tr.k, t=max(0.0, tr.t), tcp=needle, master=needle.copy(),
                           goal=np.array(tr.rings[min(tr.i, n - 1)], dtype=np.float64),
                           goal_index=int(tr.i), n_points=n,
-                          done=bool(tr.done) or self._exhausted, outputs=NO_FIXTURES,
-                          abdomen=snap)
-
-    def _loop(self) -> None:
-        last = time.perf_counter()
-        debt = 0.0
-        while not self._stop.is_set() and not self.done:
-            tick = time.perf_counter()
-            elapsed = min(tick - last, self.max_catch_up_s)
-            last = tick
-            cpu0 = time.thread_time()
-            debt += elapsed * self.speed
-            n = int(debt / CYCLE_DT + 1e-9)
-            try:
-                if n > 0:
-                    debt -= n * CYCLE_DT
-                    self.advance(n)
-            except Exception as exc:
-                log.exception("live teleoperation trial failed")
-                self.error = exc
-                self._frame = replace(self._frame, done=True)
-                return
-            self._cpu += time.thread_time() - cpu0
-            self._wall += elapsed
-            self._iterations += 1
-            self._stop.wait(max(0.0, self.period - (time.perf_counter() - tick)))
+                          done=self.done, outputs=NO_FIXTURES, abdomen=snap)
 
 
 def make_live_teleop_trial(config: TrialConfig, device: Device | None = None, *,
@@ -363,7 +281,6 @@ __all__ = [
     "DeviceHand",
     "LiveTeleopTrial",
     "PersonTeleopTrial",
-    "TeleopLoopStats",
     "check_hand_seam",
     "is_teleop",
     "make_live_teleop_trial",
