@@ -252,8 +252,6 @@ class SimThreadTrial(PacedThread):
                  schema: Schema | None = None, physics: str = "thread",
                  rate_hz: float = 1000.0, speed: float = 1.0, loop_hz: float = 120.0,
                  max_catch_up_s: float = 0.05):
-        if not (math.isfinite(speed) and speed > 0):
-            raise ConfigError(f"speed must be > 0, got {speed!r}", field="speed")
         if abs(rate_hz * config.dt - 1.0) > 1e-9:
             raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
                               f"{config.dt!r}", field="rate_hz")

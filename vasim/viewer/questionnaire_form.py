@@ -20,7 +20,7 @@ from typing import Any
 import viser
 
 from vasim.core.errors import ConfigError
-from vasim.viewer.controller import Command, PanelState
+from vasim.viewer.state import Command, PanelState
 from vasim.viewer.views import set_gui_value
 
 QUESTIONNAIRES: tuple[str, ...] = ("pre", "post")
