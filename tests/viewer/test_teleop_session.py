@@ -31,7 +31,7 @@ from vasim.study.protocol import load_protocol
 from vasim.study.report import build_report
 from vasim.study.session import run_session, start_session
 from vasim.study.store import TrialStore
-from vasim.trials.teleop import CYCLE_DT, TeleopTrial
+from vasim.trials.teleop import CAMERA_ZOOM, CYCLE_DT, TeleopTrial
 from vasim.trials.vf import TrialConfig
 from vasim.viewer.controller import Command, TrainingController
 from vasim.viewer.questionnaire_form import answers_template
@@ -85,6 +85,12 @@ def test_the_person_s_device_moves_the_needle(mode: str) -> None:
         moved = np.array(lt.trial.needle) - x0
         np.testing.assert_allclose(moved, u * STEP * 55, atol=1e-6)
         assert np.array_equal(lt.frame().tcp, lt.trial.needle) and lt.frame().k == 55
+        camera = lt.frame().outputs.camera   # mrcp_cam: the camera robot's aim, for the scope
+        if mode == "mrcp_cam":
+            assert camera is not None and camera.zoom == pytest.approx(CAMERA_ZOOM)
+            np.testing.assert_array_equal(camera.look_at, lt.trial.camera.aim)
+        else:
+            assert camera is None
         before = np.array(lt.trial.needle)
         for k in range(56, 112):     # the samples stop: at most one step of extrapolation
             now[0] = k * CYCLE_DT

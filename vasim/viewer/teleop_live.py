@@ -53,6 +53,7 @@ that mixes simulated and person-run sessions. What changes is who moves the mast
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
@@ -62,6 +63,7 @@ from numpy.typing import NDArray
 
 from vasim.core.errors import ConfigError
 from vasim.fixtures.runtime import FixtureOutputs
+from vasim.fixtures.types import CameraView
 from vasim.haptics.device import Device
 from vasim.haptics.observation import OperatorObservation
 from vasim.operator.needle import RING_RADIUS, RING_SITES, needle_task
@@ -98,6 +100,28 @@ def person_config(config: TrialConfig) -> TrialConfig:
     """The config of a trial a person drives: its profile without simulated perception
     noise (module docstring, decisions)."""
     return replace(config, profile=replace(make_profile(config), perception_noise=0.0))
+
+
+def camera_outputs(trial: TeleopTrial) -> FixtureOutputs:
+    """The frame's outputs: none, but in ``mrcp_cam`` the camera robot's view as the
+    viewer's endoscope can give it (``CameraView``, which the app maps to its scope as it
+    maps Mag's: ``endoscope.scope_from_mag``).
+
+    **Decision**: the trainee's scope aims at the camera robot's aim point (which follows
+    the needle with the trial's dead zone and time constant, ``teleop_hands.Camera``) from
+    the viewer's camera port, at the robot's lens distance, with the scope's own field of
+    view (``fov`` = Mag's, which ``scope_from_mag`` maps to the scope's): the robot's
+    narrower 70 deg optics (``CAMERA_ZOOM``, shown as the zoom) is not reproduced.
+    """
+    if not trial.camera.follows:
+        return NO_FIXTURES
+    from vasim.fixtures.mag import MagParams
+
+    aim = np.array(trial.camera.aim, dtype=np.float64)
+    view = CameraView(position=np.array(trial.camera.robot.lens(aim), dtype=np.float64),
+                      look_at=aim, up=np.array([0.0, 0.0, 1.0]),
+                      fov=math.radians(MagParams().fov_deg), zoom=trial.camera.zoom)
+    return replace(NO_FIXTURES, camera=view)
 
 
 class DeviceHand:
@@ -267,7 +291,7 @@ class LiveTeleopTrial(PacedThread):
         return TrialFrame(k=tr.k, t=max(0.0, tr.t), tcp=needle, master=needle.copy(),
                           goal=np.array(tr.rings[min(tr.i, n - 1)], dtype=np.float64),
                           goal_index=int(tr.i), n_points=n,
-                          done=self.done, outputs=NO_FIXTURES, abdomen=snap)
+                          done=self.done, outputs=camera_outputs(tr), abdomen=snap)
 
 
 def make_live_teleop_trial(config: TrialConfig, device: Device | None = None, *,
@@ -281,6 +305,7 @@ __all__ = [
     "DeviceHand",
     "LiveTeleopTrial",
     "PersonTeleopTrial",
+    "camera_outputs",
     "check_hand_seam",
     "is_teleop",
     "make_live_teleop_trial",
