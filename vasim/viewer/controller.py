@@ -31,7 +31,11 @@ Modes (**decisions**):
   with the new session as ``vasim study run --again`` stores it; a reason while the
   subject's session is open is refused (Start resumes that session). The rule is
   ``history.session_rule``. A session is marked completed as soon as its last scheduled
-  trial is stored.
+  trial is stored. A scheduled trial of a teleoperation mode (``stdt``, ``mrcp``,
+  ``mrcp_cam``: ``mrcp_suture_dynamic``, ``mrcp_vs_stdt``) runs the station's needle task
+  with the session's input as the master (``teleop_live``, issue #28) and is stored with
+  ``teleop_meta`` as ``vasim study simulate`` stores it. The experimenter records the
+  protocol's questionnaires on the page (the ``answers`` command, ``questionnaire_form``).
 
 Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
 on completion the samples, per-point metrics, summary, events and trial metrics are
