@@ -211,3 +211,25 @@ def test_bad_answers_commands_are_refused_with_the_field(ctl: TrainingController
     assert ctl.panel.status.startswith("post questionnaire not recorded: ")
     with closing(TrialStore(ctl.db, readonly=True)) as st:  # type: ignore[arg-type]
         assert st.sessions().empty    # a refused answer opens no session
+
+
+def test_the_pre_template_filled_in_records_the_demographics(ctl: TrainingController) -> None:
+    from vasim.study.store import DEMOGRAPHIC_FIELDS
+
+    for cmd in (Command("mode", "protocol"), Command("subject", "S04"),
+                Command("protocol", "mrcp_suture_dynamic")):
+        ctl.handle(cmd)
+    text = answers_template(load_protocol("mrcp_suture_dynamic"), "pre")
+    for name, allowed in DEMOGRAPHIC_FIELDS.items():   # the first allowed value of each
+        text = text.replace(f'{name} = ""', f'{name} = "{allowed[0]}"')
+    ctl.handle(Command("answers", ("pre", text)))
+    with closing(TrialStore(ctl.db, readonly=True)) as st:  # type: ignore[arg-type]
+        sessions = st.sessions()
+        demo = st.demographics()
+    # No session was open: answering the pre questionnaire opened the subject's first one.
+    assert sessions[["subject", "protocol", "status"]].values.tolist() == [
+        ["S04", "mrcp_suture_dynamic", "running"]]
+    row = demo.set_index("subject").loc["S04"]
+    column = {"group": "subject_group"}   # the store's column of the "group" field
+    assert {k: row[column.get(k, k)] for k in DEMOGRAPHIC_FIELDS} == {
+        k: v[0] for k, v in DEMOGRAPHIC_FIELDS.items()}
