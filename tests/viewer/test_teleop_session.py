@@ -39,11 +39,11 @@ from vasim.viewer.teleop_live import LiveTeleopTrial, person_config
 
 
 def teleop_protocol(name: str, max_time: float, modes: tuple[str, ...],
-                    question: bool = True) -> str:
-    """A tiny teleoperation protocol: one trial per mode in this order, ``max_time`` [s]
-    each, and (``question``) a post questionnaire of one item."""
-    blocks = "".join(f'\n[[blocks]]\nname = "{m}"\ncondition = "{m}"\nrepetitions = 1\n'
-                     for m in modes)
+                    question: bool = True, repetitions: int = 1) -> str:
+    """A tiny teleoperation protocol: ``repetitions`` trials per mode, the modes in this
+    order, ``max_time`` [s] each, and (``question``) a post questionnaire of one item."""
+    blocks = "".join(f'\n[[blocks]]\nname = "{m}"\ncondition = "{m}"\n'
+                     f'repetitions = {repetitions}\n' for m in modes)
     post = ('\n[[questionnaires.post.items]]\nid = "best_mode"\ntype = "condition_choice"'
             '\nselect = "best"\nprompt = "Which mode did you prefer?"\n') if question else ""
     return (f'name = "{name}"\ndescription = "tiny teleoperation protocol"\n'
@@ -138,7 +138,9 @@ def test_a_person_s_trial_has_no_simulated_jaw_misjudgement() -> None:
 # -- a session through the controller -----------------------------------------------------
 @pytest.fixture
 def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingController]:
-    install(monkeypatch, tmp_path / "protocols", teleop_tiny=TELEOP_TINY)
+    install(monkeypatch, tmp_path / "protocols", teleop_tiny=TELEOP_TINY,
+            teleop_twice=teleop_protocol("teleop_twice", 0.3, ("mrcp", "stdt"),
+                                         question=False, repetitions=2))
     with closing(TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=4.0,
                                     pause_s=0.05)) as c:
         yield c
@@ -233,3 +235,21 @@ def test_the_pre_template_filled_in_records_the_demographics(ctl: TrainingContro
     column = {"group": "subject_group"}   # the store's column of the "group" field
     assert {k: row[column.get(k, k)] for k in DEMOGRAPHIC_FIELDS} == {
         k: v[0] for k, v in DEMOGRAPHIC_FIELDS.items()}
+
+
+def test_the_score_card_compares_earlier_trials_of_the_same_mode(
+        ctl: TrainingController) -> None:
+    for cmd in (Command("mode", "protocol"), Command("input", "browser"),
+                Command("subject", "S05"), Command("protocol", "teleop_twice"),
+                Command("auto_advance", True), Command("start")):
+        ctl.handle(cmd)
+    seen: dict[int, int] = {}    # schedule index -> earlier trials on its score card
+
+    def collect() -> bool:
+        card, i = ctl.panel.scorecard, ctl.info.schedule_index
+        if card is not None and not ctl.panel.running and i is not None:
+            seen[i] = card.n_earlier
+        return len(seen) == 4
+    assert drive(ctl, collect, timeout=180), (seen, ctl.panel.status)
+    # mrcp, mrcp, stdt, stdt: the second of each mode has the first as its earlier trial
+    assert seen == {0: 0, 1: 1, 2: 0, 3: 1}
