@@ -59,6 +59,11 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--db", default=None, metavar="FILE",
                    help="study database (SQLite) that trials run from the viewer are stored "
                         "in, like headless ones (default: none: demo mode only)")
+    p.add_argument("--protocol", default=None, metavar="NAME",
+                   help="open the experimenter's page in protocol mode with this study "
+                        "protocol chosen (a name in protocols/studies, e.g. "
+                        "mrcp_suture_dynamic; needs --db); the experimenter enters the "
+                        "subject code and starts the session")
     p.add_argument("--schema", default=None,
                    help="fixture schema of the demo trials, a name in protocols/schemas "
                         "(default: trajectory_following, or point_targeting with --task point)")
@@ -137,6 +142,7 @@ def serve(args: argparse.Namespace) -> int:
                 f"{'36' if getattr(args, 'mrcp_coarse', False) else '18'} ms cycle, looping")
     else:
         schema = args.schema or DEFAULT_SCHEMA_FOR_TASK[args.task]
+        protocol = check_protocol(getattr(args, "protocol", None), getattr(args, "db", None))
         if getattr(args, "db", None):
             check_db(Path(args.db))
         app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
@@ -146,6 +152,12 @@ def serve(args: argparse.Namespace) -> int:
         db = getattr(args, "db", None)
         stored = f"trials stored in {db}" if db else "demo only: no --db"
         what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"
+        if protocol is not None:   # queued: the controller thread applies them at start
+            from vasim.viewer.controller import Command
+
+            app.submit(Command("mode", "protocol"))
+            app.submit(Command("protocol", protocol))
+            what = f"protocol {protocol}, scene {scene}, {stored}"
     app.start()
     previous = _stop_on_sigterm()
     try:
@@ -168,6 +180,26 @@ def serve(args: argparse.Namespace) -> int:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def check_protocol(name: str | None, db: str | None) -> str | None:
+    """``--protocol``: a shipped study protocol, with a ``--db`` to store its trials.
+
+    Raises:
+        ConfigError: an unknown protocol (the known ones listed) or no ``--db``.
+    """
+    if name is None:
+        return None
+    from vasim.study.protocol import available_protocols
+
+    known = available_protocols()
+    if name not in known:
+        raise ConfigError(f"unknown protocol {name!r} (available: {', '.join(known)})",
+                          field="--protocol")
+    if not db:
+        raise ConfigError("--protocol needs --db FILE (a session's trials are stored there)",
+                          field="--protocol")
+    return name
 
 
 def check_db(path: Path) -> None:

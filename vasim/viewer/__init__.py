@@ -2,8 +2,10 @@
 
 ``views`` holds one class per visual (each owns its viser handles and exposes ``update``);
 ``controller`` owns the training state (modes, sessions, the live trial, the store); ``live``
-runs a trial in real time; ``panel`` is the experimenter's panel, ``audio`` the page's AG
-synth; ``app`` wires them together; ``cli`` registers ``vasim serve``.
+runs a trial in real time (``teleop_live`` a teleoperation trial a person drives, issue
+#28); ``panel`` is the experimenter's panel (``questionnaire_form`` its questionnaires),
+``audio`` the page's AG synth; ``app`` wires them together; ``cli`` registers ``vasim
+serve``.
 """
 
 from __future__ import annotations

@@ -88,6 +88,7 @@ from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.page_notices import PageNotices
 from vasim.viewer.panel import ExperimenterPanel
+from vasim.viewer.questionnaire_form import QuestionnaireForm
 from vasim.viewer.scene_views import DragInput, SceneViews, endoscope_pose, third_person_pose
 from vasim.viewer.trainee import (
     HudInfo,
@@ -520,6 +521,7 @@ class ViewerApp(ErrorReporter):
         # The experimenter's page: today's controls beside a third-person view.
         self.panel_view = ExperimenterPanel(
             e, self.submit, self._guard, p, schema_choices(p.schema), available_protocols())
+        self.questionnaire = QuestionnaireForm(e, self.submit, self._guard)
         with e.gui.add_folder("Trainee's instrument (input laparoscopic)"):
             fulcrum = e.gui.add_checkbox(
                 "Fulcrum effect", initial_value=True,
@@ -619,6 +621,7 @@ class ViewerApp(ErrorReporter):
         if server is None:
             return False
         self.panel_view.show(self.controller.panel)
+        self.questionnaire.show(self.controller.panel)
         info, frame = self.controller.current()
         ctl = self.controller
         # The trial ends (Stop, time out), a countdown ticks, a score card arrives: the

@@ -31,7 +31,11 @@ Modes (**decisions**):
   with the new session as ``vasim study run --again`` stores it; a reason while the
   subject's session is open is refused (Start resumes that session). The rule is
   ``history.session_rule``. A session is marked completed as soon as its last scheduled
-  trial is stored.
+  trial is stored. A scheduled trial of a teleoperation mode (``stdt``, ``mrcp``,
+  ``mrcp_cam``: ``mrcp_suture_dynamic``, ``mrcp_vs_stdt``) runs the station's needle task
+  with the session's input as the master (``teleop_live``, issue #28) and is stored with
+  ``teleop_meta`` as ``vasim study simulate`` stores it. The experimenter records the
+  protocol's questionnaires on the page (the ``answers`` command, ``questionnaire_form``).
 
 Storage is ``run_trial``'s: the trial row is begun as 'running' before the first step, and
 on completion the samples, per-point metrics, summary, events and trial metrics are
@@ -68,6 +72,7 @@ from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.tasks import TRAJECTORY_VARIANTS
 from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
+from vasim.trials.teleop_run import teleop_meta
 from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
 from vasim.trials.vf_run import trial_meta
 from vasim.viewer.condition import viewer_condition
@@ -96,6 +101,12 @@ from vasim.viewer.state import (
     plain_dict,
     schema_choices,
     with_f5pl,
+)
+from vasim.viewer.teleop_live import (
+    is_teleop,
+    make_live_teleop_trial,
+    person_config,
+    teleop_task,
 )
 from vasim.viewer.trainee import ScoreCard, frame_outcome
 
@@ -160,6 +171,8 @@ class TrainingController(ConditionCommands):
         self.speed = float(speed)
         self.max_time = float(max_time)
         self._factory = trial_factory or make_live_trial
+        self.teleop_factory: Callable[..., LiveTrial] = make_live_teleop_trial
+        """Builds the live trial of a teleoperation mode (``teleop_live``)."""
         self._store: Any = None
         self._number = 0
         self._trial: LiveTrial | None = None
@@ -240,24 +253,30 @@ class TrainingController(ConditionCommands):
         raised (the caller reports it).
         """
         device: Device | None = None
+        # A teleoperation mode (a protocol's stdt / mrcp / mrcp_cam trial) runs the station's
+        # needle task: vasim.viewer.teleop_live (issue #28).
+        teleop = is_teleop(config)
+        if teleop and input_kind != "scripted":
+            config = person_config(config)
+        task = teleop_task(config) if teleop else make_task(config)
         if input_kind == "browser":
             device = BrowserDevice()
         elif input_kind == "laparoscopic":
-            task0 = make_task(config)
-            screen = (self.view_axes(np.asarray(task0.points), np.asarray(task0.start))
+            screen = (self.view_axes(np.asarray(task.points), np.asarray(task.start))
                       if self.view_axes is not None else self.screen)
-            device = instrument_device(tool_trocar(config.task, np.asarray(task0.start)),
-                                       np.asarray(task0.start), self.input_mapping, screen)
+            device = instrument_device(tool_trocar(config.task, np.asarray(task.start)),
+                                       np.asarray(task.start), self.input_mapping, screen)
             self.screen = screen
-        trial = self._factory(config, device, schema=schema, speed=self.speed)
+        trial = (self.teleop_factory if teleop else self._factory)(
+            config, device, schema=schema, speed=self.speed)
         sch = schema if schema is not None else load_schema(config.schema)
-        task = make_task(config)
         self._stored = StoredTrial(None, None)  # a demo is not stored
         if mode != "demo":
-            meta = trial_meta(config, sch, make_profile(config),
-                              session_id=None if session is None else session.id,
-                              schedule_index=None if scheduled is None else scheduled.index,
-                              protocol=None if session is None else session.protocol.name)
+            where = {"session_id": None if session is None else session.id,
+                     "schedule_index": None if scheduled is None else scheduled.index,
+                     "protocol": None if session is None else session.protocol.name}
+            meta = (teleop_meta(config, **where) if teleop
+                    else trial_meta(config, sch, make_profile(config), **where))
             if input_kind != "scripted":
                 cfg = dict(meta.config or {})
                 # What was in force, stored with the trial (condition.viewer_condition).
@@ -269,7 +288,10 @@ class TrainingController(ConditionCommands):
                     optics_deg=self.optics_deg,
                     mag_camera=any(f.channel == "camera" for f in sch.fixtures))
                 cfg["operator"] = input_kind
-                cfg.pop("profile", None)  # no simulated person behind a device
+                if not teleop:  # no simulated person behind a device ...
+                    cfg.pop("profile", None)
+                # ... but a teleoperation trial keeps it: its reaction delay times the
+                # gripper and the safety-stop acknowledgement (teleop_live, decisions).
                 if input_kind == "laparoscopic":
                     cfg["input_mapping"] = cfg["viewer"]["input_mapping"]
                 meta = replace(meta, operator=input_kind, config=cfg)
@@ -616,8 +638,48 @@ class TrainingController(ConditionCommands):
             self._apply_f5pl(str(instance), params)
         elif kind == "auto_advance":
             self._publish(auto_advance=bool(value))
+        elif kind == "answers":
+            self._record_answers(value)
         else:
             raise ConfigError(f"unknown command {kind!r}")
+
+    def _record_answers(self, value: Any) -> None:
+        """Stores one questionnaire's answers with the subject's session of the chosen
+        protocol (``questionnaire_form``; value: ``(which, TOML text)``), checked as
+        ``vasim study answer`` checks them (``record_answers``)."""
+        from vasim.study.session import record_answers
+        from vasim.viewer.questionnaire_form import (
+            QUESTIONNAIRES,
+            answers_status,
+            parse_answers,
+        )
+
+        which, text = value if isinstance(value, tuple) and len(value) == 2 else (None, None)
+        if which not in QUESTIONNAIRES or not isinstance(text, str):
+            raise ConfigError(f"answers must be (pre|post, TOML text), got {value!r}",
+                              field="answers")
+        if self.panel.mode != "protocol":
+            raise ConfigError("questionnaires belong to a protocol session: switch to "
+                              "protocol mode", field="answers")
+        try:
+            answers = parse_answers(text, which)
+        except ConfigError as exc:
+            self._publish(status=f"{which} questionnaire not recorded: {exc}")
+            raise
+        sid = self.panel.session_id
+        if sid is None:   # the subject's latest session of the protocol, else a new one
+            p = self.panel
+            known = self.store().sessions(subject=p.subject, protocol=p.protocol) \
+                if p.subject and p.protocol else None
+            sid = (int(known["id"].iloc[-1]) if known is not None and len(known)
+                   else self._session().id)
+        try:
+            n = record_answers(self.store(), sid, which, answers,
+                               source="the experimenter's questionnaire")
+        except (ConfigError, StoreError) as exc:
+            self._publish(status=f"{which} questionnaire not recorded: {exc}")
+            raise
+        self._publish(status=answers_status(which, sid, n))
 
     def _running_stored(self) -> bool:
         return self.active() and self.info.trial_id is not None

@@ -6,6 +6,7 @@ only with a reason when the subject completed the protocol: :func:`session_rule`
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -32,7 +33,9 @@ def trial_score_card(st: Any, info: TrialInfo, metrics: dict[str, float],
 
     **Decision**: "earlier trials" are the same trainee's earlier completed trials of the
     same schema (by stored name: an edited schema is its own condition) and task — the
-    trainee is the subject, else the free-practice label, else the anonymous free trials.
+    trainee is the subject, else the free-practice label, else the anonymous free trials;
+    for a teleoperation trial, of the needle task in the same mode (``stdt``, ``mrcp``,
+    ``mrcp_cam``: their schema is ``none`` in every mode).
     The **benchmark** is the mean of the completed trials of that schema and task by
     experienced laparoscopists (demographics ``laparoscopy_experience`` ">200", the study
     vocabulary's top level); without such trials there is no benchmark column.
@@ -42,8 +45,13 @@ def trial_score_card(st: Any, info: TrialInfo, metrics: dict[str, float],
         outcome: how it ended.
     """
     df = st.trials("completed")
-    same = ((df["schema"] == info.schema) & (df["task"] == info.config.task)
-            & (df["id"] != info.trial_id))
+    if info.config.mode is None:
+        same = (df["schema"] == info.schema) & (df["task"] == info.config.task)
+    else:   # a teleoperation trial: the needle task in the same mode (teleop_live)
+        modes = df["config_json"].map(lambda c: json.loads(c).get("mode")
+                                      if isinstance(c, str) else None)
+        same = (df["task"] == "needle") & (modes == info.config.mode)
+    same &= df["id"] != info.trial_id
     subject, label = info.config.subject, info.config.label
     if subject:
         mine = df["subject"] == subject

@@ -127,37 +127,23 @@ class LoopStats:
         return d
 
 
-class SimThreadTrial:
-    """A ``TrialRunner`` advanced in real time on its own thread (module docstring).
+class PacedThread:
+    """A trial advanced in real time on its own thread, the part :class:`SimThreadTrial`
+    and the teleoperation trial (``teleop_live.LiveTeleopTrial``) share (module
+    docstring): each iteration advances by the wall time elapsed since the previous one
+    (times ``speed``, at most ``max_catch_up_s``), in whole steps of ``dt``, the remainder
+    carried over.
 
-    Args:
-        config: the trial. device: input device (None: the scripted operator of ``config``).
-        schema: a loaded schema overriding ``config.schema`` (the f5PL editor's).
-        physics: accepted for interface compatibility; the physics runs inside the
-            runner's steps on this thread.
-        rate_hz: the control rate [Hz]; must equal 1 / ``config.dt``.
-        speed: simulated seconds per wall second (1 = real time; demos and tests go faster).
-        loop_hz: iterations per second of the thread.
-        max_catch_up_s: most simulated time one iteration may advance [s].
-
-    Raises:
-        ConfigError: a bad schema/task (from ``TrialRunner``), rate or speed.
+    Subclasses give ``_advance(n)`` (run n steps; under ``_lock``), ``_finished()``,
+    ``_clock()`` (simulated time [s], steps run) and may extend ``stop()``.
     """
 
-    def __init__(self, config: TrialConfig, device: Device | None = None, *,
-                 schema: Schema | None = None, physics: str = "thread",
-                 rate_hz: float = 1000.0, speed: float = 1.0, loop_hz: float = 120.0,
-                 max_catch_up_s: float = 0.05):
-        if not (math.isfinite(speed) and speed > 0):
+    def __init__(self, device: Device | None, *, dt: float, speed: float, loop_hz: float,
+                 max_catch_up_s: float) -> None:
+        if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
             raise ConfigError(f"speed must be > 0, got {speed!r}", field="speed")
-        if abs(rate_hz * config.dt - 1.0) > 1e-9:
-            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
-                              f"{config.dt!r}", field="rate_hz")
-        self.config = config
-        self.runner = TrialRunner(config, schema)
         self.device = device
-        if device is not None:
-            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]  # a device operator in the operator slot
+        self.dt = float(dt)
         self.speed = float(speed)
         self.period = 1.0 / float(loop_hz)
         self.max_catch_up_s = float(max_catch_up_s)
@@ -171,17 +157,27 @@ class SimThreadTrial:
         self.error: BaseException | None = None
         """An exception that stopped the loop (the trial is then done)."""
 
+    def _advance(self, n: int) -> None:
+        raise NotImplementedError
+
+    def _finished(self) -> bool:
+        raise NotImplementedError
+
+    def _clock(self) -> tuple[float, int]:
+        raise NotImplementedError
+
     @property
     def done(self) -> bool:
-        return bool(self.runner.done) or self.error is not None
+        return self._finished() or self.error is not None
 
     @property
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
-    def start(self) -> SimThreadTrial:
+    def start(self) -> Any:
+        """Starts the device and the thread; returns self."""
         if self._thread is not None:
-            raise RuntimeError("SimThreadTrial.start() was already called")
+            raise RuntimeError(f"{type(self).__name__}.start() was already called")
         if self.device is not None:
             self.device.start()
         self._t0_wall = time.perf_counter()
@@ -202,29 +198,19 @@ class SimThreadTrial:
             except Exception:  # a device that fails to stop must not block the viewer
                 log.exception("device %s failed to stop", getattr(self.device, "name", "?"))
 
-    def frame(self) -> TrialFrame:
-        return self.runner.frame
-
     def timing(self) -> LoopStats:
         wall = self._wall
-        sim = self.runner.frame.t if self.runner.frame.k >= 0 else 0.0
-        steps = self.runner.frame.k + 1
+        sim, steps = self._clock()
         return LoopStats(iterations=self._iterations, wall_s=wall, sim_s=sim,
                          control_hz=steps / wall if wall > 0 else 0.0,
                          realtime_factor=sim / wall if wall > 0 else 0.0,
                          load=self._cpu / wall if wall > 0 else 0.0)
 
-    def result(self, **kw: Any) -> TrialResult:
-        """The runner's result (call after ``stop()`` or once ``done``)."""
-        with self._lock:
-            return self.runner.result(**kw)
-
     def _loop(self) -> None:
-        runner = self.runner
-        dt = runner.config.dt
+        dt = self.dt
         last = time.perf_counter()
         debt = 0.0
-        while not self._stop.is_set() and not runner.done:
+        while not self._stop.is_set() and not self._finished():
             tick = time.perf_counter()
             elapsed = min(tick - last, self.max_catch_up_s)
             last = tick
@@ -234,8 +220,7 @@ class SimThreadTrial:
             try:
                 if n > 0:
                     debt -= n * dt
-                    with self._lock:
-                        runner.advance(n * dt)
+                    self._advance(n)
             except Exception as exc:
                 log.exception("live trial step failed")
                 self.error = exc
@@ -244,6 +229,57 @@ class SimThreadTrial:
             self._wall += elapsed
             self._iterations += 1
             self._stop.wait(max(0.0, self.period - (time.perf_counter() - tick)))
+
+
+class SimThreadTrial(PacedThread):
+    """A ``TrialRunner`` advanced in real time on its own thread (module docstring).
+
+    Args:
+        config: the trial. device: input device (None: the scripted operator of ``config``).
+        schema: a loaded schema overriding ``config.schema`` (the f5PL editor's).
+        physics: accepted for interface compatibility; the physics runs inside the
+            runner's steps on this thread.
+        rate_hz: the control rate [Hz]; must equal 1 / ``config.dt``.
+        speed: simulated seconds per wall second (1 = real time; demos and tests go faster).
+        loop_hz: iterations per second of the thread.
+        max_catch_up_s: most simulated time one iteration may advance [s].
+
+    Raises:
+        ConfigError: a bad schema/task (from ``TrialRunner``), rate or speed.
+    """
+
+    def __init__(self, config: TrialConfig, device: Device | None = None, *,
+                 schema: Schema | None = None, physics: str = "thread",
+                 rate_hz: float = 1000.0, speed: float = 1.0, loop_hz: float = 120.0,
+                 max_catch_up_s: float = 0.05):
+        if abs(rate_hz * config.dt - 1.0) > 1e-9:
+            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
+                              f"{config.dt!r}", field="rate_hz")
+        super().__init__(device, dt=config.dt, speed=speed, loop_hz=loop_hz,
+                         max_catch_up_s=max_catch_up_s)
+        self.config = config
+        self.runner = TrialRunner(config, schema)
+        if device is not None:
+            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]  # a device operator in the operator slot
+
+    def _finished(self) -> bool:
+        return bool(self.runner.done)
+
+    def _clock(self) -> tuple[float, int]:
+        f = self.runner.frame
+        return (f.t if f.k >= 0 else 0.0), f.k + 1
+
+    def _advance(self, n: int) -> None:
+        with self._lock:
+            self.runner.advance(n * self.dt)
+
+    def frame(self) -> TrialFrame:
+        return self.runner.frame
+
+    def result(self, **kw: Any) -> TrialResult:
+        """The runner's result (call after ``stop()`` or once ``done``)."""
+        with self._lock:
+            return self.runner.result(**kw)
 
 
 def realtime_available() -> bool:
@@ -263,5 +299,5 @@ def make_live_trial(config: TrialConfig, device: Device | None = None, *,
     return SimThreadTrial(config, device, schema=schema, speed=speed)
 
 
-__all__ = ["DeviceOperator", "LiveTrial", "LoopStats", "SimThreadTrial", "make_live_trial",
-           "realtime_available"]
+__all__ = ["DeviceOperator", "LiveTrial", "LoopStats", "PacedThread", "SimThreadTrial",
+           "make_live_trial", "realtime_available"]

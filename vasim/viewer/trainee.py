@@ -80,6 +80,9 @@ def instruction(task_name: str, n_points: int, input_kind: str) -> str:
     """
     if input_kind == "scripted":
         return "Watch: the scripted operator performs the task."
+    if task_name == "needle":   # a teleoperation trial (vasim.viewer.teleop_live)
+        return (f"Carry the needle through the {n_points} rings in order, touching the "
+                "tissue as little as you can.")
     if task_name.startswith("point"):
         return (f"Touch each of the {n_points} targets with the instrument tip, one after "
                 "the other, without pressing on the tissue.")
