@@ -421,7 +421,11 @@ class _Outcome:
     trial_metrics: Mapping[str, float]
 
 
-def _store_outcome(rec: StoredTrial, out: Mapping[str, Any]) -> None:
+def store_outcome(rec: StoredTrial, out: Mapping[str, Any]) -> None:
+    """Finishes the stored trial ``rec`` with a worker's dict ``out`` (``simulate_trial``'s):
+    its sample columns as a ``SampleBuffer``, its point metrics (``StoreError`` if their
+    columns are not ``POINT_COLUMNS``), summary, events and trial metrics. The one way a
+    simulated trial is stored (``simulate_cohort`` and the power study's kept cohorts)."""
     buf = SampleBuffer.from_columns(out["columns"], active_fixtures=out["active_fixtures"])
     metrics = out["metrics"]
     if list(metrics.columns) != list(POINT_COLUMNS):
@@ -717,7 +721,7 @@ def _run_in_process(store: TrialStore, jobs: Sequence[_Job],
     for job in jobs:
         with stored_trial(store, _meta(job)) as rec:
             out = simulate_trial(job.config, job.session.metric_params)
-            _store_outcome(rec, out)
+            store_outcome(rec, out)
         yield job, out
 
 
@@ -749,7 +753,7 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
                 except BaseException as exc:
                     rec.interrupt(f"worker failed: {interruption_reason(exc)}")
                     raise
-                _store_outcome(rec, out)
+                store_outcome(rec, out)
                 yield job, out
     except BaseException as exc:
         for _, rec in pending.values():
@@ -775,4 +779,5 @@ __all__ = [
     "simulate_cohort",
     "simulate_trial",
     "simulated_answers",
+    "store_outcome",
 ]
