@@ -146,7 +146,7 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
                               file=src, field=col)
     cm = cell_means(data, dv, subject, [within])
     y = cm.values
-    n, k = y.shape
+    n = y.shape[0]
     group_of = _group_of_subject(data, subject, between, cm.subjects)
     groups = levels_of(pd.Series(group_of))
     if len(groups) < 2:
@@ -159,8 +159,26 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
     gidx = np.array([groups.index(g) for g in group_of])
     n_g = np.bincount(gidx, minlength=len(groups)).astype(float)
     n_groups = len(groups)
+    rows = _effect_rows(between, within, y, _split_plot_sums(y, gidx, n_g), n_groups)
+    _warn_undefined(rows)
+    out = pd.DataFrame(rows, columns=list(MIXED_ANOVA_COLUMNS))
+    out["DF1"] = out["DF1"].astype("int64")
+    out["DF2"] = out["DF2"].astype("int64")
+    out.attrs["n_subjects"] = n
+    out.attrs["group_sizes"] = {g: int(c_) for g, c_ in zip(groups, n_g, strict=True)}
+    out.attrs["levels"] = list(cm.levels[0])
+    out.attrs["n_obs_per_cell"] = (int(cm.n_obs.min()), int(cm.n_obs.max()))
+    return out
+
+
+def _effect_rows(between: str, within: str, y: np.ndarray,
+                 sums: tuple[float, float, float, float, np.ndarray], n_groups: int,
+                 ) -> list[dict[str, Any]]:
+    """The between, within and interaction rows from the cell means ``y`` and their
+    split-plot ``sums`` (``_split_plot_sums``), with the within row's sphericity."""
+    ss_b, ss_sb, ss_w, ss_bw, sscp = sums
+    n, k = y.shape
     df_res = n - n_groups
-    ss_b, ss_sb, ss_w, ss_bw, sscp = _split_plot_sums(y, gidx, n_g)
     p = k - 1
     ss_ws = float(np.trace(sscp))
     ss_errors = ss_sb + ss_ws
@@ -176,19 +194,17 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
              eps, notes[INTERACTION]),
     ]
     rows[1]["W_spher"], rows[1]["p_spher"] = mauchly
+    return rows
+
+
+def _warn_undefined(rows: list[dict[str, Any]]) -> None:
+    """A ``StatsWarning`` per row with a value undefined for this data (the 2-level case
+    is not one: Mauchly's test is simply not defined there)."""
     for row in rows:
         undefined = [t for t in str(row["note"]).split("; ") if t and "2 levels" not in t]
         if undefined:
             warnings.warn(f"mixed_anova {row['Source']!r}: {'; '.join(undefined)}",
-                          StatsWarning, stacklevel=2)
-    out = pd.DataFrame(rows, columns=list(MIXED_ANOVA_COLUMNS))
-    out["DF1"] = out["DF1"].astype("int64")
-    out["DF2"] = out["DF2"].astype("int64")
-    out.attrs["n_subjects"] = n
-    out.attrs["group_sizes"] = {g: int(c_) for g, c_ in zip(groups, n_g, strict=True)}
-    out.attrs["levels"] = list(cm.levels[0])
-    out.attrs["n_obs_per_cell"] = (int(cm.n_obs.min()), int(cm.n_obs.max()))
-    return out
+                          StatsWarning, stacklevel=3)
 
 
 def _split_plot_sums(y: np.ndarray, gidx: np.ndarray, n_g: np.ndarray,
