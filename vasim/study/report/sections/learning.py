@@ -79,7 +79,8 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
                          f"the time limit (their L covers the reached points only): trial "
                          f"ids {ids_text(incomplete['trial_id'])}")
     note_excluded(out, vf.excluded, probe_only=True, trials=vf.trials)
-    summaries, fits = [], []
+    summaries: list[pd.DataFrame] = []
+    fits: list[pd.DataFrame] = []
     prov: list[dict[str, str]] = []
     if PATH_DEV_DV not in vf.dvs:
         out.notes.append(PATH_DEV_ABSENT)
