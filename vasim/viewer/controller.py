@@ -814,6 +814,7 @@ __all__ = [
     "Command",
     "PanelState",
     "TrainingController",
+    "TrainingSettings",
     "TrialInfo",
     "f5pl_fields",
     "plain",
