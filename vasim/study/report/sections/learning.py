@@ -93,13 +93,9 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
                     summ["practice"].map(probe_of))
         summaries.append(summ)
         band, fit_label = _probe_fit(out, tc, dv, name, fits)
-        pname = PLOT_NAMES[dv]
-        fig = learning_curve_figure(
-            summ.rename(columns={"practice": "trial"}),
-            CurveText(ylabel=f"{pname} [{unit}]",
-                      title=f"{pname[0].upper()}{pname[1:]} over the VF-free trials",
-                      xlabel=PRACTICE_XLABEL, split_after=_split(vf)),
-            band=band, fit_label=fit_label)
+        fig = learning_curve_figure(summ.rename(columns={"practice": "trial"}),
+                                    _practice_text(vf, dv, unit, " over the VF-free trials"),
+                                    band=band, fit_label=fit_label)
         out.blocks.append(FigureBlock(
             f"learning_{dv}", f"Learning curve: {name}" + SEED_FIGURE.get(dv, ""),
             figure_png(fig),
@@ -125,9 +121,14 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
     return out.section("learning", _TITLE, intro), prov
 
 
-def _split(vf: VfAnalysis) -> float | None:
-    """Where the curves split the baseline probes from the later ones (None: no baseline)."""
-    return vf.n_baseline + 0.5 if vf.n_baseline else None
+def _practice_text(vf: VfAnalysis, dv: str, unit: str, title_tail: str) -> CurveText:
+    """The axes of a curve over the practice count: the dv's plot name and unit, the
+    title, and the split after the baseline probes (none without a baseline)."""
+    pname = PLOT_NAMES[dv]
+    return CurveText(ylabel=f"{pname} [{unit}]",
+                     title=f"{pname[0].upper()}{pname[1:]}{title_tail}",
+                     xlabel=PRACTICE_XLABEL,
+                     split_after=vf.n_baseline + 0.5 if vf.n_baseline else None)
 
 
 def _probe_fit(out: SectionOut, tc: pd.DataFrame, dv: str, name: str,
@@ -205,13 +206,9 @@ def _group_curves(data: StudyData, vf: VfAnalysis, out: SectionOut) -> None:
                              condition="group")
         summ = summ.rename(columns={"trial": "practice"})
         parts.append(summ)
-        pname = PLOT_NAMES[dv]
-        fig = learning_curve_figure(
-            summ.rename(columns={"practice": "trial"}),
-            CurveText(ylabel=f"{pname} [{unit}]",
-                      title=f"{pname[0].upper()}{pname[1:]}: surgeons vs residents",
-                      xlabel=PRACTICE_XLABEL, split_after=_split(vf)),
-            groups=CurveGroups("group", order=present))
+        fig = learning_curve_figure(summ.rename(columns={"practice": "trial"}),
+                                    _practice_text(vf, dv, unit, ": surgeons vs residents"),
+                                    groups=CurveGroups("group", order=present))
         out.blocks.append(FigureBlock(
             f"learning_group_{dv}", f"Learning curve per group: {name}", figure_png(fig),
             "Mean (line) and interquartile range (shaded) over the subjects of each group "
