@@ -206,7 +206,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--ref or --capture is required")
     with tempfile.TemporaryDirectory(prefix="vasim-equiv-") as tmp:
         root = args.keep or Path(tmp)
-        worktree = Path(tmp) / "ref"
+        # not root / "ref": that is where the reference's outputs go, and removing the
+        # worktree would delete them before the comparison
+        worktree = Path(tmp) / "src"
         subprocess.run(["git", "-C", str(REPO), "worktree", "add", "--detach", str(worktree),
                         args.ref], check=True, capture_output=True)
         try:

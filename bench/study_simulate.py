@@ -15,7 +15,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from vasim.study.cohort import simulate_cohort
+from vasim.study.cohort import CohortPlan, CohortRun, simulate_cohort
 from vasim.study.protocol import load_protocol
 
 SMOKE = os.environ.get("VASIM_BENCH_SMOKE") == "1"
@@ -32,10 +32,11 @@ def _run(workers: int, trials: int = TRIALS) -> tuple[float, float, int]:
     protocol = load_protocol("vf_learning_curve")
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "bench.sqlite"
-        rep = simulate_cohort(db, protocol, n_subjects=SUBJECTS, n_surgeons=1, seed=7,
-                              workers=workers, progress=True,
-                              max_trials_per_subject=trials,
-                              max_trial_time=1.0 if SMOKE else None)
+        rep = simulate_cohort(
+            db, protocol,
+            CohortPlan(n_subjects=SUBJECTS, n_surgeons=1, seed=7,
+                       max_trial_time=1.0 if SMOKE else None),
+            CohortRun(workers=workers, progress=True, max_trials_per_subject=trials))
         sim, wall, n = rep.sim_seconds, rep.wall_seconds, rep.trials_run
     return sim, wall, n
 

@@ -15,7 +15,7 @@ import pytest
 
 from tests.browser.conftest import VIEWPORT, wait_ready
 from tests.polling import wait_for
-from vasim.viewer.mrcp_panel import MrcpViewerApp
+from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp
 
 ROBOT_NODES = [f"/mrcp/robots/{r}/link{k}" for r in ("R0", "R1") for k in range(7)]
 
@@ -23,8 +23,8 @@ ROBOT_NODES = [f"/mrcp/robots/{r}/link{k}" for r in ("R0", "R1") for k in range(
 @pytest.fixture(scope="module")
 def app(browser: Any) -> Iterator[MrcpViewerApp]:
     # The coarse 36 ms cycle in real time; 15 pose updates/s keep software WebGL responsive.
-    a = MrcpViewerApp(port=0, scenario="cube_rotation", coarse=True, view_hz=15.0,
-                      plot_hz=2.0).start()
+    a = MrcpViewerApp(port=0, scenario="cube_rotation", coarse=True,
+                      pace=MrcpPace(view_hz=15.0, plot_hz=2.0)).start()
     try:
         yield a
     finally:

@@ -11,13 +11,13 @@ import pytest
 
 from tests.browser.conftest import VIEWPORT, wait_ready
 from tests.polling import wait_for
-from vasim.viewer.mrcp_panel import MrcpViewerApp
+from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp
 
 
 @pytest.fixture(scope="module")
 def app(browser: Any) -> Iterator[MrcpViewerApp]:
-    a = MrcpViewerApp(port=0, scenario="suture_combined", coarse=True, view_hz=10.0,
-                      plot_hz=1.0).start()
+    a = MrcpViewerApp(port=0, scenario="suture_combined", coarse=True,
+                      pace=MrcpPace(view_hz=10.0, plot_hz=1.0)).start()
     try:
         yield a
     finally:

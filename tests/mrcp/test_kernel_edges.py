@@ -17,8 +17,14 @@ from vasim.cli import main
 from vasim.mrcp.indices import EvalContext
 from vasim.mrcp.indices.visibility import VisibilityIndex
 from vasim.mrcp.interfaces import Proximity
-from vasim.mrcp.kernel import KernelConfig, KernelState, MRCPKernel, TaskPoint
-from vasim.mrcp.planner import ObstacleMemory, PlannerParams, guidance, move_candidate
+from vasim.mrcp.kernel import KernelConfig, KernelParts, KernelState, MRCPKernel, TaskPoint
+from vasim.mrcp.planner import (
+    Mover,
+    ObstacleMemory,
+    PlannerParams,
+    guidance,
+    move_candidate,
+)
 
 
 class PointArm:
@@ -85,7 +91,8 @@ class Constant:
 
 def kernel(world: EmptyWorld, **cfg: object) -> MRCPKernel:
     return MRCPKernel({"a": PointArm("a"), "b": PointArm("b")}, world, POINTS, "a", 0,
-                      np.zeros(3), indices=[Constant()], config=KernelConfig(**cfg))
+                      np.zeros(3), parts=KernelParts(indices=[Constant()]),
+                      config=KernelConfig(**cfg))
 
 
 def test_linear_trajectory_steps_from_the_last_reachable_point() -> None:
@@ -120,7 +127,7 @@ def test_no_random_force_without_an_attraction() -> None:
     for goal in (None, q0.copy()):
         q = q0.copy()
         for _ in range(200):
-            q = move_candidate(world, arm, "b", q, goal, None, ["a"], mem, p, 0.018, rng)
+            q = move_candidate(Mover(world, arm, "b"), q, goal, None, ["a"], mem, p, 0.018, rng)
         np.testing.assert_array_equal(q, q0)
 
 

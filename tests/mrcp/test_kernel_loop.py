@@ -12,7 +12,14 @@ import pytest
 
 from tests.mrcp.planar import PlanarArm, PlanarWorld, Sphere
 from vasim.mrcp.indices import EvalContext
-from vasim.mrcp.kernel import CycleRecord, IndexSpec, KernelConfig, MRCPKernel, TaskPoint
+from vasim.mrcp.kernel import (
+    CycleRecord,
+    IndexSpec,
+    KernelConfig,
+    KernelParts,
+    MRCPKernel,
+    TaskPoint,
+)
 from vasim.mrcp.modes import KernelState
 
 # A cross-shaped object with four grasp points; candidates wait 5 cm further out.
@@ -97,7 +104,7 @@ def test_a_new_index_plugs_in_without_touching_the_kernel() -> None:
             return 0.0 if ctx.robot == "A" else 1.0
 
     arms, world, obj0 = two_robots()
-    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, indices=[Forbidden()])
+    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, parts=KernelParts(indices=[Forbidden()]))
     recs = run(k, world, arms, lambda t: obj0, 120)
     first = events(recs, "transfer_start")[0][1]
     assert "B@" in first and "cause=forbidden" in first
@@ -169,7 +176,8 @@ def test_an_aborted_transfer_cools_down() -> None:
     arms, world, obj0 = two_robots()
     arms["B"].vmax = np.full(3, 1e-3)                      # B can hardly move
     cfg = KernelConfig(tt_timeout=0.3, abort_cooldown=1.0)
-    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg, indices=[Forbidden()])
+    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg,
+                   parts=KernelParts(indices=[Forbidden()]))
     recs = run(k, world, arms, lambda t: obj0, 150)
     aborts = events(recs, "transfer_abort")
     assert aborts and all(r.rsel == "A" for r in recs)
@@ -198,7 +206,8 @@ def test_a_held_rsel_hands_the_task_over(hold_s: float) -> None:
     ``hold``); with the rule off A holds it to the end."""
     arms, world, obj0 = two_robots()
     cfg = KernelConfig(hold_transfer_s=hold_s)
-    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg, indices=[_Blind()])
+    k = MRCPKernel(arms, world, BAR, "A", 0, obj0, config=cfg,
+                   parts=KernelParts(indices=[_Blind()]))
     recs = run(k, world, arms, lambda t: obj0 + np.array([0.1 * t, 0.0, 0.0]), 300)
     holds = events(recs, "rsel_hold A")
     assert holds

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from tests.mrcp.planar import PlanarArm, PlanarWorld, Sphere
 from vasim.mrcp.planner import (
+    Mover,
     ObstacleMemory,
     PlannerParams,
     attraction,
@@ -89,7 +90,7 @@ def test_candidate_reaches_its_goal_and_never_collides() -> None:
     rng = np.random.default_rng(0)
     q = world.configuration("a")
     for _ in range(300):
-        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
         assert not world.in_collision("a")
         assert np.all(q >= a.lower) and np.all(q <= a.upper)
     assert np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-6
@@ -128,9 +129,9 @@ def test_candidate_at_the_margin_slides_around_the_obstacle(goal_side: float) ->
     rng = np.random.default_rng(0)
     q = q0
     for _ in range(p.stall_cycles - 1):     # a rejection may be transient: it waits first
-        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
         np.testing.assert_array_equal(q, q0)
-    q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+    q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
     assert np.linalg.norm(a.tcp_pose(q)[0] - tcp) > 0.5 * p.dr_max     # then it slid
     # ... and keeps going around the sphere without ever crossing the margin (100 cycles of
     # at most 1 cm for a ~11 cm detour).
@@ -138,7 +139,7 @@ def test_candidate_at_the_margin_slides_around_the_obstacle(goal_side: float) ->
         assert world.min_distance("a", "ball").distance >= min(d0, p.safety_margin) - 1e-12
         if np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-9:
             break
-        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
     assert np.linalg.norm(a.tcp_pose(q)[0] - goal) < 1e-9
 
 
@@ -154,10 +155,10 @@ def test_candidate_at_the_margin_retreats_from_a_goal_straight_behind() -> None:
     rng = np.random.default_rng(0)
     q = q0
     for _ in range(p.stall_cycles):
-        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
     assert world.min_distance("a", "ball").distance > prox.distance + 0.5 * p.dr_max
     for _ in range(60):
-        q = move_candidate(world, a, "a", q, goal, None, ["ball"], mem, p, 0.018, rng)
+        q = move_candidate(Mover(world, a, "a"), q, goal, None, ["ball"], mem, p, 0.018, rng)
         assert world.min_distance("a", "ball").distance >= p.safety_margin - 1e-12
         assert not world.in_collision("a")
 

@@ -16,6 +16,8 @@ from vasim.core.errors import ConfigError
 from vasim.operator.scenario import load_scenario
 from vasim.study.cohort import (
     DEMOGRAPHIC_MODEL,
+    CohortPlan,
+    CohortRun,
     cohort_subjects,
     draw_demographics,
     measured_benefits,
@@ -173,14 +175,14 @@ def _check_cohort(db: Path, n_subjects: int) -> dict[tuple[str, int], str]:
 
 def test_cohort_end_to_end_in_process_and_with_workers(tmp_path: Path, tiny: Path) -> None:
     p = load_protocol(tiny)
-    rep = simulate_cohort(tmp_path / "a.db", p, n_subjects=3, n_surgeons=2, seed=7,
-                          workers=0, progress=False)
+    rep = simulate_cohort(tmp_path / "a.db", p, CohortPlan(n_subjects=3, n_surgeons=2, seed=7),
+                          CohortRun(workers=0, progress=False))
     assert (rep.trials_run, rep.sessions_completed, rep.workers) == (21, 3, 0)
     assert rep.sim_seconds == pytest.approx(21 * 0.25)
     a = _check_cohort(tmp_path / "a.db", 3)
     # The same cohort through two worker processes (one writer, the parent): same data.
-    rep2 = simulate_cohort(tmp_path / "b.db", p, n_subjects=3, n_surgeons=2, seed=7,
-                           workers=2, progress=False)
+    rep2 = simulate_cohort(tmp_path / "b.db", p, CohortPlan(n_subjects=3, n_surgeons=2, seed=7),
+                           CohortRun(workers=2, progress=False))
     assert rep2.trials_run == 21 and rep2.workers == 2
     assert _check_cohort(tmp_path / "b.db", 3) == a
     with TrialStore(tmp_path / "a.db") as x, TrialStore(tmp_path / "b.db") as y:
@@ -193,8 +195,8 @@ def test_cohort_end_to_end_in_process_and_with_workers(tmp_path: Path, tiny: Pat
 def test_cohort_resumes_where_it_stopped(tmp_path: Path, tiny: Path) -> None:
     db = tmp_path / "c.db"
     p = load_protocol(tiny)
-    first = simulate_cohort(db, p, n_subjects=2, n_surgeons=1, seed=3, workers=0,
-                            progress=False, max_trials_per_subject=5)
+    first = simulate_cohort(db, p, CohortPlan(n_subjects=2, n_surgeons=1, seed=3),
+                            CohortRun(workers=0, progress=False, max_trials_per_subject=5))
     assert first.trials_run == 10 and first.sessions_completed == 0
     with TrialStore(db) as st:
         # a crash left one trial 'running' with a dead writer pid: it must be re-run
@@ -209,7 +211,8 @@ def test_cohort_resumes_where_it_stopped(tmp_path: Path, tiny: Path) -> None:
         assert st.schedule(2)["attempts"].tolist()[5] == 2
     # another cohort seed must not silently reuse these subjects
     with pytest.raises(ConfigError, match="another cohort"):
-        simulate_cohort(db, p, n_subjects=2, n_surgeons=1, seed=4, workers=0, progress=False)
+        simulate_cohort(db, p, CohortPlan(n_subjects=2, n_surgeons=1, seed=4),
+                        CohortRun(workers=0, progress=False))
 
 
 def test_latin_square_cohorts_are_counterbalanced() -> None:

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vasim.core.errors import ConfigError
-from vasim.study.cohort import simulate_cohort
+from vasim.study.cohort import CohortPlan, CohortRun, simulate_cohort
 from vasim.study.gates import (
     HIGHER_IS_BETTER,
     apply_gates,
@@ -148,8 +148,8 @@ def _recompute(st_: TrialStore, sid: int, protocol_name: str) -> list[tuple[int,
 def test_a_simulated_gated_cohort_stores_reproducible_decisions(tmp_path: Path) -> None:
     db = tmp_path / "g.db"
     protocol = parse_protocol(GATED, source="gated_tiny.toml")
-    rep = simulate_cohort(db, protocol, n_subjects=4, n_surgeons=2, seed=3, workers=0,
-                          progress=False)
+    rep = simulate_cohort(db, protocol, CohortPlan(n_subjects=4, n_surgeons=2, seed=3),
+                          CohortRun(workers=0, progress=False))
     assert rep.sessions_completed == 4
     with TrialStore(db) as st_:
         groups = st_.demographics().set_index("subject")["subject_group"]
@@ -178,8 +178,8 @@ def test_a_simulated_gated_cohort_stores_reproducible_decisions(tmp_path: Path) 
         # running again changes nothing: the decisions are stored, not recomputed
         before = [st_.schedule(int(s)).to_dict("records") for s in st_.sessions()["id"]]
         n_events = st_.con.execute("SELECT count(*) FROM events WHERE kind = 'gate'").fetchone()
-    again = simulate_cohort(db, protocol, n_subjects=4, n_surgeons=2, seed=3, workers=0,
-                            progress=False)
+    again = simulate_cohort(db, protocol, CohortPlan(n_subjects=4, n_surgeons=2, seed=3),
+                            CohortRun(workers=0, progress=False))
     assert again.trials_run == 0
     with TrialStore(db) as st_:
         assert [st_.schedule(int(s)).to_dict("records") for s in st_.sessions()["id"]] == before
@@ -226,9 +226,10 @@ def test_insert_scheduled_matches_the_pure_extension(tmp_path: Path) -> None:
 
 def test_a_cohort_run_in_pieces_makes_the_same_decisions(tmp_path: Path) -> None:
     protocol = parse_protocol(GATED, source="gated_tiny.toml")
-    kw = {"n_subjects": 3, "n_surgeons": 2, "seed": 3, "workers": 0, "progress": False}
-    simulate_cohort(tmp_path / "whole.db", protocol, **kw)
-    first = simulate_cohort(tmp_path / "parts.db", protocol, max_trials_per_subject=2, **kw)
+    plan = CohortPlan(n_subjects=3, n_surgeons=2, seed=3)
+    simulate_cohort(tmp_path / "whole.db", protocol, plan, CohortRun(workers=0, progress=False))
+    first = simulate_cohort(tmp_path / "parts.db", protocol, plan,
+                            CohortRun(workers=0, progress=False, max_trials_per_subject=2))
     with TrialStore(tmp_path / "parts.db") as st_:
         trainee = [int(s) for s, subj in zip(st_.sessions()["id"], st_.sessions()["subject"],
                                             strict=True)
@@ -238,8 +239,9 @@ def test_a_cohort_run_in_pieces_makes_the_same_decisions(tmp_path: Path) -> None
         assert first.trials_run == 4 and all(
             st_.sessions().set_index("id").loc[t, "n_completed"] == 0 for t in trainee)
     for _ in range(10):
-        if simulate_cohort(tmp_path / "parts.db", protocol, max_trials_per_subject=1,
-                           **kw).trials_run == 0:
+        if simulate_cohort(tmp_path / "parts.db", protocol, plan,
+                           CohortRun(workers=0, progress=False,
+                                     max_trials_per_subject=1)).trials_run == 0:
             break
 
     def decisions(db: Path) -> list[list[tuple]]:

@@ -22,6 +22,8 @@ from vasim.study.report import (
     vf_trial_outcomes,
 )
 from vasim.study.report.figures import (
+    CurveGroups,
+    CurveText,
     box_figure,
     choice_rating_figure,
     clipped_error_bars,
@@ -195,8 +197,9 @@ def _summary(conditions: tuple[str, ...] = ()) -> pd.DataFrame:
 def test_learning_curve_figure_labels_and_legend() -> None:
     band = pd.DataFrame({"trial": [1.0, 6.0], "fit": [10.0, 4.1], "lower": [9.0, 3.5],
                          "upper": [11.0, 4.7]})
-    fig = learning_curve_figure(_summary(), ylabel="latency [s]", title="t", band=band,
-                                fit_label="fit", split_after=3.5)
+    fig = learning_curve_figure(_summary(), CurveText(ylabel="latency [s]", title="t",
+                                                       split_after=3.5),
+                                band=band, fit_label="fit")
     ax = fig.axes[0]
     assert ax.get_ylabel() == "latency [s]" and ax.get_xlabel() == "VF-free trial number"
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
@@ -205,12 +208,13 @@ def test_learning_curve_figure_labels_and_legend() -> None:
     assert [t.get_text() for t in ax.get_xticklabels()] == ["1", "2", "3", "4", "5", "6"]
     w, h = _png_size(figure_png(fig))
     assert (w, h) == (700, 420)
-    multi = learning_curve_figure(_summary(("b", "a")), ylabel="y [m]", title="t",
-                                  condition="mode", order=["a", "b"],
-                                  labels={"a": "A", "b": "B"}, bands={"a": band})
+    multi = learning_curve_figure(_summary(("b", "a")), CurveText(ylabel="y [m]", title="t"),
+                                  groups=CurveGroups("mode", order=["a", "b"],
+                                                     labels={"a": "A", "b": "B"},
+                                                     bands={"a": band}))
     texts = [t.get_text() for t in multi.axes[0].get_legend().get_texts()]
     assert texts == ["A", "B", "interquartile range", "power-law fit"]
-    empty = learning_curve_figure(_summary().iloc[:0], ylabel="y", title="t")
+    empty = learning_curve_figure(_summary().iloc[:0], CurveText(ylabel="y", title="t"))
     assert "no data" in [t.get_text() for t in empty.axes[0].texts]
 
 

@@ -13,7 +13,7 @@ import pytest
 from vasim.core.errors import StoreError
 from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.operator.retention import DEFAULT_RETENTION
-from vasim.study.cohort import simulate_cohort
+from vasim.study.cohort import CohortPlan, CohortRun, simulate_cohort
 from vasim.study.protocol import load_protocol
 from vasim.study.report.data import load_study
 from vasim.study.report.sections.retention import phase_cells, retention_section
@@ -73,8 +73,9 @@ def test_a_later_sitting_waits_for_its_delay_or_records_a_simulated_one(tmp_path
 
 def test_report_puts_acquisition_retention_and_transfer_side_by_side(tmp_path: Path) -> None:
     db = tmp_path / "c.db"
-    simulate_cohort(db, load_protocol("vf_retention"), n_subjects=3, n_surgeons=1, seed=5,
-                    workers=0, progress=False, max_trial_time=0.3)
+    simulate_cohort(db, load_protocol("vf_retention"),
+                    CohortPlan(n_subjects=3, n_surgeons=1, seed=5, max_trial_time=0.3),
+                    CohortRun(workers=0, progress=False))
     data = load_study(db)
     assert data.protocol is not None
     assert len(data.sittings) == 3 and all(json.loads(r)["simulated"]

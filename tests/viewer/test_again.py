@@ -20,7 +20,7 @@ from vasim.core.errors import ConfigError
 from vasim.study.protocol import parse_protocol
 from vasim.study.session import MAX_REASON_CHARS, start_session
 from vasim.study.store import TrialStore
-from vasim.viewer.controller import Command, TrainingController
+from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 from vasim.viewer.history import (
     AGAIN_FIELD,
     check_again_reason,
@@ -115,7 +115,8 @@ def test_the_reason_field_refuses_more_than_one_line(text: str) -> None:
 @pytest.fixture
 def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingController]:
     install(monkeypatch, tmp_path / "studies", tiny=TINY)
-    c = TrainingController(scene="none", db=tmp_path / "v.sqlite", speed=25.0, pause_s=0.05)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "v.sqlite", speed=25.0,
+                                            pause_s=0.05))
     try:
         yield c
     finally:

@@ -28,6 +28,7 @@ from vasim.trials.registry import run_trial
 from vasim.viewer.controller import (
     Command,
     TrainingController,
+    TrainingSettings,
     f5pl_fields,
     schema_choices,
     with_f5pl,
@@ -38,8 +39,8 @@ SPEED = 25.0
 
 @pytest.fixture
 def ctl(tmp_path: Path) -> Iterator[TrainingController]:
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED, pause_s=0.05,
-                           max_time=20.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+                                            pause_s=0.05, max_time=20.0))
     try:
         yield c
     finally:
@@ -56,8 +57,8 @@ def store(ctl: TrainingController) -> TrialStore:
 
 
 def test_demo_loops_over_variants_and_stores_nothing(tmp_path: Path) -> None:
-    c = TrainingController(scene="none", db=tmp_path / "d.sqlite", speed=SPEED, pause_s=0.02,
-                           max_time=0.5)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "d.sqlite", speed=SPEED,
+                                            pause_s=0.02, max_time=0.5))
     try:
         assert c.panel.mode == "demo" and c.info.trial_id is None
         assert drive(c, lambda: c.info.number >= 3)
@@ -68,7 +69,7 @@ def test_demo_loops_over_variants_and_stores_nothing(tmp_path: Path) -> None:
 
 
 def test_free_and_protocol_need_a_database() -> None:
-    c = TrainingController(scene="none", db=None, speed=SPEED)
+    c = TrainingController(TrainingSettings(scene="none", db=None, speed=SPEED))
     try:
         with pytest.raises(ConfigError, match="--db"):
             c.handle(Command("mode", "free"))
@@ -207,8 +208,8 @@ def test_a_failing_trial_loop_is_stored_as_interrupted_and_reported(tmp_path: Pa
         trial.runner.advance = flaky  # type: ignore[method-assign]
         return trial
 
-    c = TrainingController(scene="none", db=tmp_path / "f.sqlite", speed=SPEED,
-                           trial_factory=factory)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "f.sqlite", speed=SPEED,
+                                            trial_factory=factory))
     try:
         run(c, Command("mode", "free"), Command("subject", "S05"), Command("start"))
         tid = c.info.trial_id
@@ -228,7 +229,7 @@ def test_a_real_time_trial_keeps_its_recording_and_replays_identically(
         tmp_path: Path) -> None:
     from vasim.trials.realtime import replay_trial
 
-    c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "r.sqlite", speed=1.0))
     try:
         run(c, Command("mode", "free"), Command("task", "point"), Command("start"))
         tid = c.info.trial_id
@@ -249,7 +250,7 @@ def test_a_stopped_real_time_trial_replays_identically(tmp_path: Path) -> None:
     """Stop mid-trial: the trial is interrupted, names its recording, and replays."""
     from vasim.trials.realtime import recorded_files, replay_trial
 
-    c = TrainingController(scene="none", db=tmp_path / "r.sqlite", speed=1.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "r.sqlite", speed=1.0))
     try:
         run(c, Command("mode", "free"), Command("task", "point"), Command("start"))
         tid = c.info.trial_id
@@ -333,8 +334,8 @@ def test_one_trial_number_and_how_the_trial_ended(ctl: TrainingController) -> No
 
 
 def test_a_timed_out_trial_says_so_and_gets_a_score_card(tmp_path: Path) -> None:
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED, pause_s=0.05,
-                           max_time=1.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+                                            pause_s=0.05, max_time=1.0))
     try:
         run(c, Command("mode", "free"), Command("subject", "S04"), Command("start"))
         tid = c.info.trial_id
@@ -385,8 +386,8 @@ def test_protocol_trials_keep_the_sessions_input_and_store_the_condition(
 def test_a_person_driven_start_counts_down_first(tmp_path: Path) -> None:
     # A countdown no stall of a loaded machine can outlast between the checks (a 0.3 s one
     # could end between start and poll); then it is run out by moving its end to now.
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
-                           countdown_s=600.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+                                            countdown_s=600.0))
     try:
         run(c, Command("mode", "free"), Command("input", "browser"), Command("start"))
         n = c.info.number
@@ -412,7 +413,8 @@ def test_a_schema_outside_the_menu_is_refused_without_reading_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     secret = tmp_path / "notaschema.toml"
     secret.write_text('secret_token = "hunter2"\n')
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=25.0, max_time=20.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=25.0,
+                                            max_time=20.0))
     try:
         c.handle(Command("mode", "free"))
         read: list[str] = []
@@ -442,8 +444,8 @@ def test_a_schema_outside_the_menu_is_refused_without_reading_it(
 def test_a_schema_file_given_at_start_up_stays_selectable(tmp_path: Path) -> None:
     own = tmp_path / "own.toml"
     shutil.copy(schema_path("trajectory_following"), own)
-    c = TrainingController(scene="none", db=tmp_path / "s.sqlite", schema=str(own),
-                           speed=25.0, max_time=20.0)
+    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", schema=str(own),
+                                            speed=25.0, max_time=20.0))
     try:
         assert str(own) in schema_choices(str(own))
         c.handle(Command("mode", "free"))
@@ -457,7 +459,7 @@ def test_a_schema_file_given_at_start_up_stays_selectable(tmp_path: Path) -> Non
 def test_a_db_directory_is_refused_at_start_up(tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(ConfigError, match="is a directory"):
-        TrainingController(scene="none", db=tmp_path)
+        TrainingController(TrainingSettings(scene="none", db=tmp_path))
     code = main(["serve", "--db", str(tmp_path), "--scene", "none", "--port", "0",
                  "--duration", "0"])
     err = capsys.readouterr().err

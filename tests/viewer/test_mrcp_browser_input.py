@@ -25,7 +25,7 @@ from tests.polling import wait_for
 from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
 from vasim.mrcp.scenarios.runner import OperatorSwitch, run
-from vasim.viewer.mrcp_panel import MrcpViewerApp
+from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp
 
 DT = 0.036  # the coarse cycle [s]
 MAX_STEP_M = 0.2 * DT
@@ -130,8 +130,8 @@ def test_gizmo_target_is_reached_within_the_rate_limit_and_forces_a_transfer() -
 # -- the app ---------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def app() -> Iterator[MrcpViewerApp]:
-    a = MrcpViewerApp(port=0, scenario="mrcp:cube_rotation", coarse=True, speed=1.0,
-                      view_hz=20.0, plot_hz=2.0).start()
+    a = MrcpViewerApp(port=0, scenario="mrcp:cube_rotation", coarse=True,
+                      pace=MrcpPace(speed=1.0, view_hz=20.0, plot_hz=2.0)).start()
     try:
         assert wait_for(lambda: a.live.latest() is not None)
         yield a

@@ -30,6 +30,7 @@ from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
 from vasim.viewer import ViewerApp
 from vasim.viewer.mrcp_panel import (
     History,
+    MrcpPace,
     MrcpViewerApp,
     event_log_text,
     plot_value,
@@ -51,8 +52,8 @@ from vasim.viewer.mrcp_view import (
 
 @pytest.fixture(scope="module")
 def app() -> Iterator[MrcpViewerApp]:
-    a = MrcpViewerApp(port=0, scenario="mrcp:cube_rotation", coarse=True, speed=1.0,
-                      view_hz=30.0, plot_hz=10.0).start()
+    a = MrcpViewerApp(port=0, scenario="mrcp:cube_rotation", coarse=True,
+                      pace=MrcpPace(speed=1.0, view_hz=30.0, plot_hz=10.0)).start()
     try:
         yield a
     finally:
@@ -137,8 +138,8 @@ def test_plots_and_event_log_receive_data(app: MrcpViewerApp) -> None:
 
 
 def test_finished_run_loops() -> None:
-    with MrcpViewerApp(port=0, scenario="cube_rotation", coarse=True, speed=50.0,
-                       duration=0.4) as a:
+    with MrcpViewerApp(port=0, scenario="cube_rotation", coarse=True, duration=0.4,
+                       pace=MrcpPace(speed=50.0)) as a:
         assert wait_for(lambda: a.live.run >= 2, 60), a.errors
         assert a.alive() and not a.errors
 
@@ -164,8 +165,8 @@ class FailingScenario:
 def test_failing_cycle_is_notified_logged_and_restarts(caplog: pytest.LogCaptureFixture
                                                        ) -> None:
     caplog.set_level(logging.ERROR, logger="vasim.viewer.mrcp_panel")
-    with MrcpViewerApp(port=0, scenario=FailingScenario(), coarse=True, speed=50.0,
-                       retry_s=0.05) as a:
+    with MrcpViewerApp(port=0, scenario=FailingScenario(), coarse=True,
+                       pace=MrcpPace(speed=50.0, retry_s=0.05)) as a:
         assert wait_for(lambda: a.live.failures >= 2, 60)
         assert a.alive()  # the app survives and the scenario restarts
         assert "scripted failure" in a.errors[0] and "restarting" in a.errors[0]
@@ -178,7 +179,7 @@ def test_unknown_scenario_is_a_clear_error_before_any_socket() -> None:
     with pytest.raises(ConfigError, match="MrcpViewerApp"):
         ViewerApp(port=0, scene="mrcp:cube_rotation")
     with pytest.raises(ConfigError, match="speed"):
-        MrcpViewerApp(port=0, speed=0.0)
+        MrcpViewerApp(port=0, pace=MrcpPace(speed=0.0))
 
 
 def test_vasim_serve_mrcp(capsys: pytest.CaptureFixture[str]) -> None:
@@ -302,8 +303,8 @@ def test_a_safety_stop_is_shown_with_its_cause_and_the_scenario_restarts() -> No
     keeps it (no "fault: no motion" flood), and the next run starts after the pause."""
     from tests.mrcp.colliding import CollidingScenario
 
-    with MrcpViewerApp(port=0, scenario=CollidingScenario(), coarse=True, speed=20.0,
-                       stop_pause_s=0.5) as a:
+    with MrcpViewerApp(port=0, scenario=CollidingScenario(), coarse=True,
+                       pace=MrcpPace(speed=20.0, stop_pause_s=0.5)) as a:
         assert wait_for(lambda: a.live.stopped is not None, 60), a.errors
         assert wait_for(lambda: "safety stop" in a.panel.status.content, 30)  # type: ignore[union-attr]
         status = a.panel.status.content  # type: ignore[union-attr]

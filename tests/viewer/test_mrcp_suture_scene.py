@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from tests.polling import wait_for
-from vasim.viewer.mrcp_panel import MrcpViewerApp, status_text
+from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp, status_text
 from vasim.viewer.mrcp_view import SubtaskView, needle_mesh, subtask_text
 
 
 @pytest.fixture(scope="module")
 def app() -> Iterator[MrcpViewerApp]:
-    a = MrcpViewerApp(port=0, scenario="mrcp:suture_combined", coarse=True, speed=4.0,
-                      view_hz=20.0, plot_hz=4.0).start()
+    a = MrcpViewerApp(port=0, scenario="mrcp:suture_combined", coarse=True,
+                      pace=MrcpPace(speed=4.0, view_hz=20.0, plot_hz=4.0)).start()
     try:
         yield a
     finally:

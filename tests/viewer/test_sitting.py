@@ -17,14 +17,15 @@ from tests.viewer.driving import drive
 from vasim.core.errors import StoreError
 from vasim.study.session import SITTING_EVENT
 from vasim.study.store import TrialStore
-from vasim.viewer.controller import Command, TrainingController
+from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 
 
 def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         tmp_path: Path) -> None:
     t_test = time.time()
     db = tmp_path / "s.sqlite"
-    c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.3)
+    c = TrainingController(TrainingSettings(scene="none", db=db, speed=25.0, pause_s=0.05,
+                                            max_time=0.3))
 
 
     try:

@@ -33,7 +33,7 @@ from vasim.study.session import run_session, start_session
 from vasim.study.store import TrialStore
 from vasim.trials.teleop import CAMERA_ZOOM, CYCLE_DT, TeleopTrial
 from vasim.trials.vf import TrialConfig
-from vasim.viewer.controller import Command, TrainingController
+from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 from vasim.viewer.questionnaire_form import answers_template
 from vasim.viewer.teleop_live import LiveTeleopTrial, person_config
 
@@ -141,8 +141,8 @@ def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingCon
     install(monkeypatch, tmp_path / "protocols", teleop_tiny=TELEOP_TINY,
             teleop_twice=teleop_protocol("teleop_twice", 0.3, ("mrcp", "stdt"),
                                          question=False, repetitions=2))
-    with closing(TrainingController(scene="none", db=tmp_path / "s.sqlite", speed=4.0,
-                                    pause_s=0.05)) as c:
+    with closing(TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite",
+                                                     speed=4.0, pause_s=0.05))) as c:
         yield c
 
 

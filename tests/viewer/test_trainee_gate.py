@@ -111,15 +111,17 @@ def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None
     """The viewer's protocol session: after a gated trial the controller stores the gate's
     decision and the trainee's score card carries it (surgeons simulated beforehand)."""
 
-    from vasim.study.cohort import simulate_cohort
+    from vasim.study.cohort import CohortPlan, CohortRun, simulate_cohort
     from vasim.study.gates import gate_records
     from vasim.study.protocol import load_protocol
-    from vasim.viewer.controller import Command, TrainingController
+    from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 
     db = tmp_path / "v.sqlite"
-    simulate_cohort(db, load_protocol("vf_proficiency"), n_subjects=2, n_surgeons=2, seed=1,
-                    workers=0, progress=False, max_trial_time=0.5)
-    c = TrainingController(scene="none", db=db, speed=25.0, pause_s=0.05, max_time=0.5)
+    simulate_cohort(db, load_protocol("vf_proficiency"),
+                    CohortPlan(n_subjects=2, n_surgeons=2, seed=1, max_trial_time=0.5),
+                    CohortRun(workers=0, progress=False))
+    c = TrainingController(TrainingSettings(scene="none", db=db, speed=25.0, pause_s=0.05,
+                                            max_time=0.5))
 
 
     try:

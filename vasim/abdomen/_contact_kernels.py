@@ -36,6 +36,9 @@ frozen into the compiled code)."""
 def _closest(p0, p1, p2, a0, a1, a2, b0, b1, b2, c0, c1, c2):  # pragma: no cover - compiled
     """Closest point of triangle abc to p and its barycentric weights (Ericson §5.1.5).
 
+    Decision (issue #29 item 6): the vertex and edge region tests are alike in shape, as in
+    Ericson's algorithm; they are written out (scalars, no arrays) for the compiled kernel.
+
     Returns:
         (q0, q1, q2, u, v, w): the point and its weights on a, b, c.
     """

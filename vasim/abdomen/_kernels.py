@@ -324,6 +324,9 @@ def _update_precondition(kind, alpha, pdir, hp, d, r, out, free, pdiag, lp, li, 
                 out[i, 1] = 0.0
                 out[i, 2] = 0.0
         return rz
+    # Decision (issue #29 item 6): the permuted LDL solve and scatter are written out as in
+    # _precondition (kind 1), fused here with the CG update of d and r (one pass over the
+    # rows instead of an update pass and a _precondition call).
     m = perm.shape[0]
     for q in range(m):
         i = perm[q]

@@ -261,28 +261,7 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
             "session resumes at its first unfinished scheduled trial."))
     ss = p.add_subparsers(dest="study_command", metavar="SUBCOMMAND", required=True)
 
-    r = ss.add_parser("run", help="run a subject's whole session headless")
-    r.add_argument("--protocol", required=True,
-                   help="protocol name (protocols/studies) or TOML path")
-    r.add_argument("--subject", type=subject_code, required=True,
-                   help="subject code (never a name)")
-    r.add_argument("--db", type=Path, required=True, help="SQLite study database")
-    r.add_argument("--operator", default="scripted",
-                   help="input device: scripted (browser sessions run from `vasim serve`)")
-    r.add_argument("--seed", type=bounded_int(SEED), default=None,
-                   help="randomisation seed (default: a fresh random one, printed and stored)")
-    r.add_argument("--skill", choices=["novice", "intermediate", "expert"],
-                   default="intermediate", help="scripted operator preset")
-    r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
-                   help="trial time limit [s] (default: the protocol's)")
-    r.add_argument("--answers", type=Path, default=None,
-                   help="TOML file with [pre] and [post] questionnaire answers")
-    r.add_argument("--again", default=None, metavar="REASON",
-                   help="run the protocol again for a subject who completed it, for this "
-                        "reason (stored with the new session); without it such a run is "
-                        "refused")
-    _no_progress_flag(r)
-    r.set_defaults(func=_cmd_run)
+    _add_run(ss)
 
     r = ss.add_parser("resume", help="continue a session at its first unfinished trial")
     r.add_argument("--db", type=Path, required=True)
@@ -314,6 +293,60 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_export)
 
+    _add_simulate(ss)
+
+    register_power(ss)   # vasim/cli/power.py
+
+    r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
+    r.add_argument("--protocol", required=True)
+    r.add_argument("--seed", type=bounded_int(SEED), required=True)
+    r.add_argument("--sequence", type=bounded_int(SEED), default=None,
+                   help="the subject's sequence number i (Williams row i mod R, probe-variant "
+                        "rotation offset; default: the seed)")
+    r.set_defaults(func=_cmd_schedule)
+
+    r = ss.add_parser("answer", help="record questionnaire answers from a TOML file")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--session", type=bounded_int(ID), required=True)
+    r.add_argument("--file", type=Path, required=True,
+                   help="TOML with a [pre] and/or [post] table of item = answer")
+    r.set_defaults(func=_cmd_answer)
+
+    r = ss.add_parser("abort", help="close a session for good (its trials are kept)")
+    r.add_argument("--db", type=Path, required=True)
+    r.add_argument("--session", type=bounded_int(ID), required=True)
+    r.add_argument("--reason", required=True)
+    r.set_defaults(func=_cmd_abort)
+
+
+def _add_run(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """``vasim study run``: a subject's whole session, headless."""
+    r = ss.add_parser("run", help="run a subject's whole session headless")
+    r.add_argument("--protocol", required=True,
+                   help="protocol name (protocols/studies) or TOML path")
+    r.add_argument("--subject", type=subject_code, required=True,
+                   help="subject code (never a name)")
+    r.add_argument("--db", type=Path, required=True, help="SQLite study database")
+    r.add_argument("--operator", default="scripted",
+                   help="input device: scripted (browser sessions run from `vasim serve`)")
+    r.add_argument("--seed", type=bounded_int(SEED), default=None,
+                   help="randomisation seed (default: a fresh random one, printed and stored)")
+    r.add_argument("--skill", choices=["novice", "intermediate", "expert"],
+                   default="intermediate", help="scripted operator preset")
+    r.add_argument("--max-time", type=bounded_float(TRIAL_TIME_S, gt=0.0), default=None,
+                   help="trial time limit [s] (default: the protocol's)")
+    r.add_argument("--answers", type=Path, default=None,
+                   help="TOML file with [pre] and [post] questionnaire answers")
+    r.add_argument("--again", default=None, metavar="REASON",
+                   help="run the protocol again for a subject who completed it, for this "
+                        "reason (stored with the new session); without it such a run is "
+                        "refused")
+    _no_progress_flag(r)
+    r.set_defaults(func=_cmd_run)
+
+
+def _add_simulate(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """``vasim study simulate``: a cohort of scripted subjects."""
     r = ss.add_parser("simulate", help="simulate a cohort of scripted subjects")
     r.add_argument("--protocol", required=True)
     r.add_argument("--subjects", type=bounded_int(SUBJECTS), default=46,
@@ -341,29 +374,6 @@ def _register_study(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         "teleoperation mechanism alone)")
     _no_progress_flag(r)
     r.set_defaults(func=_cmd_simulate)
-
-    register_power(ss)   # vasim/cli/power.py
-
-    r = ss.add_parser("schedule", help="print the schedule of a protocol and seed")
-    r.add_argument("--protocol", required=True)
-    r.add_argument("--seed", type=bounded_int(SEED), required=True)
-    r.add_argument("--sequence", type=bounded_int(SEED), default=None,
-                   help="the subject's sequence number i (Williams row i mod R, probe-variant "
-                        "rotation offset; default: the seed)")
-    r.set_defaults(func=_cmd_schedule)
-
-    r = ss.add_parser("answer", help="record questionnaire answers from a TOML file")
-    r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--session", type=bounded_int(ID), required=True)
-    r.add_argument("--file", type=Path, required=True,
-                   help="TOML with a [pre] and/or [post] table of item = answer")
-    r.set_defaults(func=_cmd_answer)
-
-    r = ss.add_parser("abort", help="close a session for good (its trials are kept)")
-    r.add_argument("--db", type=Path, required=True)
-    r.add_argument("--session", type=bounded_int(ID), required=True)
-    r.add_argument("--reason", required=True)
-    r.set_defaults(func=_cmd_abort)
 
 
 def _existing_db(path: Path) -> Path:
@@ -593,7 +603,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from vasim.operator.scenario import load_scenario, scenario_path
-    from vasim.study.cohort import check_scenario_kind, default_scenario_for, simulate_cohort
+    from vasim.study.cohort import (
+        CohortPlan,
+        CohortRun,
+        check_scenario_kind,
+        default_scenario_for,
+        simulate_cohort,
+    )
     from vasim.study.protocol import load_protocol
 
     protocol = load_protocol(args.protocol)
@@ -606,10 +622,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     surgeons = args.surgeons
     if surgeons is None:
         surgeons = round(args.subjects * 31 / 46)  # the VF study: 31 surgeons of 46
-    rep = simulate_cohort(_new_db(args.db), protocol, n_subjects=args.subjects,
-                          n_surgeons=surgeons, seed=args.seed, workers=args.workers,
-                          progress=_progress(args), max_trial_time=args.max_time,
-                          scenario=scenario, effect_scale=args.effect_scale)
+    rep = simulate_cohort(
+        _new_db(args.db), protocol,
+        CohortPlan(n_subjects=args.subjects, n_surgeons=surgeons, seed=args.seed,
+                   scenario=scenario, effect_scale=args.effect_scale,
+                   max_trial_time=args.max_time),
+        CohortRun(workers=args.workers, progress=_progress(args)))
     print(f"cohort of {_count(rep.subjects, 'subject')} ({_count(surgeons, 'surgeon')}), "
           f"seed {args.seed}, scenario {scenario.name} ({scenario.sha256[:12]}) x "
           f"{args.effect_scale:g}: "

@@ -543,6 +543,10 @@ def _nearest_of_bodies(wa: np.ndarray, sa: np.ndarray, rot_a: np.ndarray, n_a: n
                 link_j[count] = j
                 link_m[count] = margin
                 count += 1
+    # Decision (issue #29 item 6): the best-first pruned search below is written out as
+    # in _min_to_body, not shared: there a bound's index maps to the link pair arithmetically
+    # (j0 + idx % nbl, one margin); here through link_i/link_j/link_m over several bodies,
+    # and a shared compiled helper would take both mappings' arrays.
     order = np.argsort(bound[:count])
     best = cutoff
     for idx in order:

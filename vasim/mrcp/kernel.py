@@ -78,7 +78,7 @@ Example:
     ...     def evaluate(self, ctx): return 0.0 if ctx.robot == "a" else 1.0
     >>> points = [TaskPoint(np.zeros(3)), TaskPoint(np.array([0.1, 0.0, 0.0]))]
     >>> k = MRCPKernel({"a": Point("a"), "b": Point("b")}, Empty(), points, "a", 0,
-    ...                np.zeros(3), indices=[NotA()])
+    ...                np.zeros(3), parts=KernelParts(indices=[NotA()]))
     >>> events = [e for i in range(30) for e in k.step((i + 1) * 0.018, np.zeros(3)).events]
     >>> for e in events:
     ...     print(e.split(" (")[0])
@@ -110,7 +110,7 @@ from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 from vasim.mrcp.kernel_config import IndexSpec as IndexSpec
 from vasim.mrcp.kernel_config import KernelConfig as KernelConfig
 from vasim.mrcp.modes import KernelEvent, KernelState, next_state
-from vasim.mrcp.planner import ObstacleMemory, move_candidate
+from vasim.mrcp.planner import Mover, ObstacleMemory, move_candidate
 from vasim.mrcp.predict import PolynomialPredictor, Predictor, predict_rotations
 from vasim.mrcp.select import Assignment, candidate_hierarchy
 from vasim.mrcp.timefx import Continuity, continuity_robot, estimate_transfer, texec_many
@@ -194,6 +194,20 @@ def _linear_step(arm: ArmKinematics, q: FloatArray, dp: FloatArray,
     return out
 
 
+@dataclass(frozen=True)
+class KernelParts:
+    """Instances an ``MRCPKernel`` uses instead of building them from its config (tests,
+    custom indices).
+
+    Attributes:
+        predictor: trajectory predictor (None: least squares, ``config.predictor_degree``).
+        indices: index instances (None: created from ``config.indices``).
+    """
+
+    predictor: Predictor | None = None
+    indices: Sequence[Index] | None = None
+
+
 class MRCPKernel:
     """The MRCP control kernel over a set of arms and a proximity world.
 
@@ -205,8 +219,8 @@ class MRCPKernel:
         cutp: the task point it holds.
         task_position, task_rotation: the task pose at start (world frame).
         config: kernel parameters.
-        predictor: trajectory predictor (default: least squares, ``config.predictor_degree``).
-        indices: index instances (default: created from ``config.indices``).
+        parts: a predictor and index instances to use instead of those ``config`` names
+            (``KernelParts``; default: none).
 
     Raises:
         ValueError: when a name or index is inconsistent.
@@ -215,8 +229,8 @@ class MRCPKernel:
     def __init__(self, arms: Mapping[str, ArmKinematics], world: ProximityWorld,
                  task_points: Sequence[TaskPoint], rsel: str, cutp: int,
                  task_position: FloatArray, task_rotation: FloatArray | None = None,
-                 config: KernelConfig | None = None, predictor: Predictor | None = None,
-                 indices: Sequence[Index] | None = None, t0: float = 0.0) -> None:
+                 config: KernelConfig | None = None, parts: KernelParts | None = None,
+                 t0: float = 0.0) -> None:
         self.config = config or KernelConfig()
         self.arms = dict(arms)
         self.world = world
@@ -228,8 +242,9 @@ class MRCPKernel:
         if not 0 <= cutp < len(task_points):
             raise ValueError(f"cutp {cutp!r} is not a task point index (0..{len(task_points)-1})")
         self.task_points = list(task_points)
-        self.predictor = predictor or PolynomialPredictor(self.config.predictor_degree)
-        self.indices: list[Index] = (list(indices) if indices is not None else
+        parts = parts or KernelParts()
+        self.predictor = parts.predictor or PolynomialPredictor(self.config.predictor_degree)
+        self.indices: list[Index] = (list(parts.indices) if parts.indices is not None else
                                      [INDICES.create(s.name, **dict(s.params))
                                       for s in self.config.indices])
         self._groups: list[GroupIndex] = [ix for ix in self.indices
@@ -678,9 +693,9 @@ class MRCPKernel:
             goal = grot = None
             if a.point is not None:
                 goal, grot = self.pregrasp(a.point, pos, rot)
-            move_candidate(self.world, self.arms[a.robot], a.robot, q_meas[a.robot], goal,
-                           grot, self._bodies(a.robot), self._memory, cfg.planner, cfg.dt,
-                           self._rng)
+            move_candidate(Mover(self.world, self.arms[a.robot], a.robot), q_meas[a.robot],
+                           goal, grot, self._bodies(a.robot), self._memory, cfg.planner,
+                           cfg.dt, self._rng)
 
     def _act_rcnt(self, t: float, q_meas: Mapping[str, FloatArray], pos: FloatArray,
                   rot: FloatArray, events: list[str]) -> None:
@@ -708,8 +723,8 @@ class MRCPKernel:
                 self.state = next_state(self.state, KernelEvent.AT_PREGRASP)
                 events.append(f"transfer_pregrasp {r}@{q}")
             else:
-                move_candidate(self.world, arm, r, q_meas[r], pre, grot, self._bodies(r),
-                               self._memory, cfg.planner, cfg.dt, self._rng)
+                move_candidate(Mover(self.world, arm, r), q_meas[r], pre, grot,
+                               self._bodies(r), self._memory, cfg.planner, cfg.dt, self._rng)
                 return
         if self.state is KernelState.TT_GRASP:
             if np.linalg.norm(grasp - tcp) <= cfg.grasp_tolerance and self._snap(
@@ -719,7 +734,7 @@ class MRCPKernel:
                 self._grasp_count = 0
                 events.append(f"transfer_grasped {r}@{q}")
                 return
-            move_candidate(self.world, arm, r, q_meas[r], grasp, grot, self._bodies(r),
+            move_candidate(Mover(self.world, arm, r), q_meas[r], grasp, grot, self._bodies(r),
                            self._memory, cfg.planner, cfg.dt, self._rng, repel=False)
 
     def _snap(self, robot: str, arm: ArmKinematics, q: FloatArray, grasp: FloatArray,

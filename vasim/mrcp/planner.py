@@ -185,15 +185,27 @@ def step_limits(arm: ArmKinematics, q: FloatArray, q_new: FloatArray, dt: float)
     return np.clip(q + dq, arm.joint_lower, arm.joint_upper)
 
 
-def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: FloatArray,
+@dataclass(frozen=True)
+class Mover:
+    """The robot a planner step moves.
+
+    Attributes:
+        world: the station. arm: the robot's kinematics. robot: its name in ``world``.
+    """
+
+    world: ProximityWorld
+    arm: ArmKinematics
+    robot: str
+
+
+def move_candidate(mover: Mover, q: FloatArray,
                    goal: FloatArray | None, goal_rotation: FloatArray | None,
                    bodies: Sequence[str], memory: ObstacleMemory, p: PlannerParams,
                    dt: float, rng: np.random.Generator, repel: bool = True) -> FloatArray:
-    """One cycle of a candidate (Algorithm 2 inner loop); poses ``world`` at the result.
+    """One cycle of a candidate (Algorithm 2 inner loop); poses ``mover.world`` at the result.
 
     Args:
-        world: the station; ``robot`` is posed at ``q`` on entry.
-        arm: the candidate's kinematics.
+        mover: the candidate (``Mover``); its robot is posed at ``q`` in its world on entry.
         goal, goal_rotation: target TCP pose (None: no goal, only avoid obstacles).
         bodies: obstacles to repel from (RSel, better-ranked candidates at their new poses,
             obstacles).
@@ -203,6 +215,7 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
     Returns:
         The new configuration (``q`` when no safe move exists).
     """
+    world, arm, robot = mover.world, mover.arm, mover.robot
     tcp, rot = arm.tcp_pose(q)
     f_attr = attraction(goal - tcp, p.dr_max) if goal is not None else np.zeros(3)
     if goal is not None and float(np.linalg.norm(goal - tcp)) < p.dr_max:
@@ -229,7 +242,7 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
         return q
     target_rot = (_limit_rotation(rot, goal_rotation, p.rot_max)
                   if goal_rotation is not None else None)
-    q_new = _safe_step(world, arm, robot, q, tcp, f, target_rot, bodies, before, p, dt)
+    q_new = _safe_step(mover, q, tcp, f, target_rot, bodies, before, p, dt)
     if q_new is not None:
         memory.stalled[robot] = 0
         return q_new
@@ -239,8 +252,7 @@ def move_candidate(world: ProximityWorld, arm: ArmKinematics, robot: str, q: Flo
     if memory.stalled[robot] < p.stall_cycles:
         return q
     for fallback in fallback_steps(f, nearest[1]):
-        q_new = _safe_step(world, arm, robot, q, tcp, fallback, target_rot, bodies, before, p,
-                           dt)
+        q_new = _safe_step(mover, q, tcp, fallback, target_rot, bodies, before, p, dt)
         if q_new is not None:
             return q_new
     # Nothing moves it: wait another stall_cycles before trying again (a candidate boxed in
@@ -272,13 +284,13 @@ def fallback_steps(f: FloatArray, n: FloatArray) -> list[FloatArray]:
     return out
 
 
-def _safe_step(world: ProximityWorld, arm: ArmKinematics, robot: str, q: FloatArray,
-               tcp: FloatArray, f: FloatArray, target_rot: FloatArray | None,
-               bodies: Sequence[str], before: dict[str, float], p: PlannerParams,
-               dt: float) -> FloatArray | None:
+def _safe_step(mover: Mover, q: FloatArray, tcp: FloatArray, f: FloatArray,
+               target_rot: FloatArray | None, bodies: Sequence[str], before: dict[str, float],
+               p: PlannerParams, dt: float) -> FloatArray | None:
     """Move the TCP by ``f`` (IK, halved without orientation when out of reach, joint limits);
     the new configuration, or None (``world`` back at ``q``) when it collides or comes too
     close to a body."""
+    world, arm, robot = mover.world, mover.arm, mover.robot
     q_new = arm.ik(tcp + f, target_rot, q)
     if q_new is None:
         q_new = arm.ik(tcp + 0.5 * f, None, q)

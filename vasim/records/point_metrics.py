@@ -238,6 +238,23 @@ def path_lengths(x: ArrayLike) -> tuple[float, float]:
     return float(np.abs(d).sum()), float(np.sqrt((d * d).sum(axis=1)).sum())
 
 
+def _point_path_lengths(xx: NDArray[Any], gi: NDArray[Any], N: int,
+                        ) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Each point's (Manhattan, Euclidean) path length [m]: the motion of every step whose
+    goal (the goal index of the step's end sample) is that point."""
+    path_l1: NDArray[Any] = np.zeros(N)  # float64 (np.bincount with weights)
+    path_l2: NDArray[Any] = np.zeros(N)
+    if xx.shape[0] >= 2:
+        d = np.diff(xx, axis=0)  # d[j-1] = x(j) - x(j-1), the motion of step j
+        seg_goal = gi[1:]
+        seg = seg_goal < N
+        path_l1 = np.bincount(seg_goal[seg], weights=np.abs(d[seg]).sum(axis=1), minlength=N)[:N]
+        path_l2 = np.bincount(
+            seg_goal[seg], weights=np.sqrt((d[seg] * d[seg]).sum(axis=1)), minlength=N
+        )[:N]
+    return path_l1, path_l2
+
+
 def point_metrics(
     t: ArrayLike,
     x: ArrayLike,
@@ -297,16 +314,7 @@ def point_metrics(
     error_l1 = np.bincount(gi[active], weights=err[active], minlength=N)[:N]
     n_samples = np.bincount(gi[active], minlength=N)[:N].astype(np.int64)
 
-    path_l1: NDArray[Any] = np.zeros(N)  # float64 (np.bincount with weights)
-    path_l2: NDArray[Any] = np.zeros(N)
-    if n >= 2:
-        d = np.diff(xx, axis=0)  # d[j-1] = x(j) - x(j-1), the motion of step j
-        seg_goal = gi[1:]
-        seg = seg_goal < N
-        path_l1 = np.bincount(seg_goal[seg], weights=np.abs(d[seg]).sum(axis=1), minlength=N)[:N]
-        path_l2 = np.bincount(
-            seg_goal[seg], weights=np.sqrt((d[seg] * d[seg]).sum(axis=1)), minlength=N
-        )[:N]
+    path_l1, path_l2 = _point_path_lengths(xx, gi, N)
 
     prev = np.concatenate(([float(t_start)], tr[:-1])) if N else np.empty(0)
     latency = tr - prev  # NaN wherever this (hence also the next) point is unreached
@@ -316,7 +324,7 @@ def point_metrics(
     path_l1 = np.where(no_data, np.nan, path_l1)
     path_l2 = np.where(no_data, np.nan, path_l2)
 
-    if isinstance(points, (int, np.integer)):
+    if isinstance(points, (int, np.integer)):  # no planned path: only e_i [mm s]
         path = {c: np.full(N, np.nan) for c in PATH_POINT_COLUMNS}
         w = np.diff(tt, prepend=float(t_start)) if n else np.zeros(0)
         path["error_l1_mm_s"] = 1000.0 * np.bincount(

@@ -68,7 +68,7 @@ import time
 from collections import Counter
 from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -421,7 +421,11 @@ class _Outcome:
     trial_metrics: Mapping[str, float]
 
 
-def _store_outcome(rec: StoredTrial, out: Mapping[str, Any]) -> None:
+def store_outcome(rec: StoredTrial, out: Mapping[str, Any]) -> None:
+    """Finishes the stored trial ``rec`` with a worker's dict ``out`` (``simulate_trial``'s):
+    its sample columns as a ``SampleBuffer``, its point metrics (``StoreError`` if their
+    columns are not ``POINT_COLUMNS``), summary, events and trial metrics. The one way a
+    simulated trial is stored (``simulate_cohort`` and the power study's kept cohorts)."""
     buf = SampleBuffer.from_columns(out["columns"], active_fixtures=out["active_fixtures"])
     metrics = out["metrics"]
     if list(metrics.columns) != list(POINT_COLUMNS):
@@ -578,38 +582,60 @@ def _finish_sessions(store: TrialStore, sessions: Sequence[tuple[SimulatedSubjec
     return n
 
 
-def simulate_cohort(
-    db: str | os.PathLike[str],
-    protocol: Protocol,
-    *,
-    n_subjects: int = 46,
-    n_surgeons: int = 31,
-    seed: int = 7,
-    workers: int | None = None,
-    progress: bool = True,
-    max_trial_time: float | None = None,
-    max_trials_per_subject: int | None = None,
-    scenario: Scenario | None = None,
-    effect_scale: float = 1.0,
-) -> CohortReport:
-    """Simulates (or continues simulating) a cohort into the study database ``db``.
+@dataclass(frozen=True)
+class CohortPlan:
+    """What a simulated cohort is (``simulate_cohort``): the same plan and seed give the
+    same stored trials.
 
-    Args:
-        db: the SQLite study store (created if missing).
-        protocol: the protocol every subject runs (``check_runnable``).
+    Attributes:
         n_subjects, n_surgeons: cohort size and surgeons among it (the rest residents).
         seed: cohort seed (subjects, profiles, schedules, answers).
-        workers: worker processes (None: ``os.cpu_count()``; 0: run in this process).
-        progress: progress output over the cohort's trials (:mod:`vasim.core.progress`).
-        max_trial_time: trial time limit [s] (None: the protocol's).
-        max_trials_per_subject: run at most this many (the first pending) trials of each
-            subject (None: all); for tests and benchmarks.
         scenario: the declared scenario (None: ``default_scenario_for(protocol)``); its
             kind must be the protocol's (``check_scenario_kind``).
         effect_scale: x the scenario's fixture effects and mechanism gain (0: no fixture
             effect at all; ``Scenario.effects``, ``Scenario.mechanism``); in a
             teleoperation scenario x its mode penalties (``Scenario.teleop_effects``; 0: the
             mechanism alone).
+        max_trial_time: trial time limit [s] (None: the protocol's).
+    """
+
+    n_subjects: int = 46
+    n_surgeons: int = 31
+    seed: int = 7
+    scenario: Scenario | None = None
+    effect_scale: float = 1.0
+    max_trial_time: float | None = None
+
+
+@dataclass(frozen=True)
+class CohortRun:
+    """How a cohort is run (``simulate_cohort``): none of it changes a stored trial.
+
+    Attributes:
+        workers: worker processes (None: ``os.cpu_count()``; 0: run in this process).
+        progress: progress output over the cohort's trials (:mod:`vasim.core.progress`).
+        max_trials_per_subject: run at most this many (the first pending) trials of each
+            subject (None: all); for tests and benchmarks.
+    """
+
+    workers: int | None = None
+    progress: bool = True
+    max_trials_per_subject: int | None = None
+
+
+def simulate_cohort(
+    db: str | os.PathLike[str],
+    protocol: Protocol,
+    plan: CohortPlan = CohortPlan(),
+    run: CohortRun = CohortRun(),
+) -> CohortReport:
+    """Simulates (or continues simulating) a cohort into the study database ``db``.
+
+    Args:
+        db: the SQLite study store (created if missing).
+        protocol: the protocol every subject runs (``check_runnable``).
+        plan: the cohort (``CohortPlan``: size, seed, scenario, effect scale, time limit).
+        run: how it is run (``CohortRun``: workers, progress, a per-subject trial cap).
 
     Returns:
         A ``CohortReport``.
@@ -619,12 +645,13 @@ def simulate_cohort(
         KeyboardInterrupt: after marking the trials in flight 'interrupted'.
     """
     protocol.check_runnable()
-    sc = scenario or default_scenario_for(protocol)
+    sc = plan.scenario or default_scenario_for(protocol)
     check_scenario_kind(protocol, sc)
+    effect_scale, workers = plan.effect_scale, run.workers
     if not math.isfinite(effect_scale) or effect_scale < 0:
         raise ConfigError(f"got {effect_scale!r}, expected a number >= 0",
                           field="effect_scale")
-    subjects = cohort_subjects(n_subjects, n_surgeons, seed,
+    subjects = cohort_subjects(plan.n_subjects, plan.n_surgeons, plan.seed,
                                latin_square=protocol.block_order == "latin_square",
                                scenario=sc)
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
@@ -632,58 +659,80 @@ def simulate_cohort(
         raise ConfigError(f"workers must be >= 0, got {workers!r}", field="workers")
     t0 = time.perf_counter()
     with TrialStore(db) as store:
-        sessions = prepare_sessions(store, protocol, subjects, cohort_seed=seed,
-                                    max_trial_time=max_trial_time, scenario=sc,
+        sessions = prepare_sessions(store, protocol, subjects, cohort_seed=plan.seed,
+                                    max_trial_time=plan.max_trial_time, scenario=sc,
                                     effect_scale=effect_scale)
         _finish_sessions(store, sessions)
         total = sum(len(load_session(store, sid).schedule) for _, sid in sessions)
         initial = total - sum(len(load_session(store, sid).pending) for _, sid in sessions)
         bar = progress_bar(total, f"cohort {protocol.name}", "trial", initial=initial,
-                           enabled=progress)
-        trials, sim = 0, 0.0
-        taken: Counter[int] = Counter()
-        done_first: list[tuple[SimulatedSubject, int]] = []
+                           enabled=run.progress)
+        tally = _Tally(store, sessions, bar, initial)
         try:
             runner = _run_in_process if n_workers == 0 else _run_in_pool
+            done_first: list[tuple[SimulatedSubject, int]] = []
             for phase in _phases(protocol, sessions):
                 if any(load_session(store, sid).status == "running" for _, sid in done_first):
                     break   # the benchmark's experts are not done (max_trials_per_subject)
                 while True:   # rounds: a gated trial's decision comes before what follows
                     for _, sid in phase:   # decisions a killed run left undone
                         apply_gates(store, sid)
-                    jobs = _jobs(store, phase)
-                    if max_trials_per_subject is not None:
-                        left = {j.session.id: max_trials_per_subject - taken[j.session.id]
-                                for j in jobs}
-                        kept = []
-                        for j in jobs:
-                            if left[j.session.id] > 0:
-                                left[j.session.id] -= 1
-                                kept.append(j)
-                        jobs = kept
+                    jobs = _capped(_jobs(store, phase), run.max_trials_per_subject,
+                                   tally.taken)
                     if not jobs:
                         break
                     remaining = Counter(job.session.id for job in jobs)
                     for job, out in runner(store, jobs, n_workers):
-                        trials += 1
-                        taken[job.session.id] += 1
-                        sim += out["sim_time"]
-                        after_simulated_trial(store, job.session, job.scheduled)
-                        bar.total = max(bar.total, initial + trials)
-                        bar.update(1)
-                        bar.set_postfix_str(f"{job.subject.code} trial "
-                                            f"{job.scheduled.index + 1} "
-                                            f"{job.scheduled.condition}")
-                        remaining[job.session.id] -= 1
-                        if remaining[job.session.id] == 0:  # answers once it is complete
-                            _finish_sessions(store, sessions, only={job.session.id})
+                        tally.count(job, out, remaining)
                 done_first = phase
             done = _finish_sessions(store, sessions)
         finally:
             bar.close()
-    return CohortReport(subjects=len(subjects), sessions_completed=done, trials_run=trials,
-                        sim_seconds=sim, wall_seconds=time.perf_counter() - t0,
-                        workers=n_workers)
+    return CohortReport(subjects=len(subjects), sessions_completed=done,
+                        trials_run=tally.trials, sim_seconds=tally.sim,
+                        wall_seconds=time.perf_counter() - t0, workers=n_workers)
+
+
+def _capped(jobs: list[_Job], cap: int | None, taken: Counter[int]) -> list[_Job]:
+    """The first jobs of each session up to ``cap`` trials per session over the whole run
+    (``taken``: trials already run per session id); all of them when ``cap`` is None."""
+    if cap is None:
+        return jobs
+    left = {j.session.id: cap - taken[j.session.id] for j in jobs}
+    kept = []
+    for j in jobs:
+        if left[j.session.id] > 0:
+            left[j.session.id] -= 1
+            kept.append(j)
+    return kept
+
+
+@dataclass
+class _Tally:
+    """The run's counts as trials come back: progress, and each session's answers once its
+    last trial of the round is in."""
+
+    store: TrialStore
+    sessions: Sequence[tuple[SimulatedSubject, int]]
+    bar: Any
+    initial: int
+    trials: int = 0
+    sim: float = 0.0
+    taken: Counter[int] = field(default_factory=Counter)
+
+    def count(self, job: _Job, out: Mapping[str, Any], remaining: Counter[int]) -> None:
+        self.trials += 1
+        self.taken[job.session.id] += 1
+        self.sim += out["sim_time"]
+        after_simulated_trial(self.store, job.session, job.scheduled)
+        self.bar.total = max(self.bar.total, self.initial + self.trials)
+        self.bar.update(1)
+        self.bar.set_postfix_str(f"{job.subject.code} trial "
+                                 f"{job.scheduled.index + 1} "
+                                 f"{job.scheduled.condition}")
+        remaining[job.session.id] -= 1
+        if remaining[job.session.id] == 0:  # answers once it is complete
+            _finish_sessions(self.store, self.sessions, only={job.session.id})
 
 
 def _phases(protocol: Protocol, sessions: Sequence[tuple[SimulatedSubject, int]],
@@ -717,7 +766,7 @@ def _run_in_process(store: TrialStore, jobs: Sequence[_Job],
     for job in jobs:
         with stored_trial(store, _meta(job)) as rec:
             out = simulate_trial(job.config, job.session.metric_params)
-            _store_outcome(rec, out)
+            store_outcome(rec, out)
         yield job, out
 
 
@@ -749,7 +798,7 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
                 except BaseException as exc:
                     rec.interrupt(f"worker failed: {interruption_reason(exc)}")
                     raise
-                _store_outcome(rec, out)
+                store_outcome(rec, out)
                 yield job, out
     except BaseException as exc:
         for _, rec in pending.values():
@@ -762,7 +811,9 @@ def _run_in_pool(store: TrialStore, jobs: Sequence[_Job],
 __all__ = [
     "DEMOGRAPHIC_MODEL",
     "TELEOP_DEFAULT_SCENARIO",
+    "CohortPlan",
     "CohortReport",
+    "CohortRun",
     "SimulatedSubject",
     "check_scenario_kind",
     "cohort_subjects",
@@ -775,4 +826,5 @@ __all__ = [
     "simulate_cohort",
     "simulate_trial",
     "simulated_answers",
+    "store_outcome",
 ]

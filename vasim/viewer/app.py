@@ -70,6 +70,7 @@ from vasim.viewer.controller import (
     DEFAULT_SCHEMA_FOR_TASK,
     Command,
     TrainingController,
+    TrainingSettings,
     TrialInfo,
     schema_choices,
 )
@@ -234,15 +235,28 @@ class ViewerApp(ErrorReporter):
         self.view_period = 1.0 / view_hz
         self.audio_hz = float(audio_hz)
         # Built here so that a bad schema/task/scene fails before a socket is opened.
-        self.controller = TrainingController(
+        self.controller = TrainingController(TrainingSettings(
             scene=scene, db=db, schema=schema, task=task, skill=skill, seed=seed,
             variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
-            trial_factory=trial_factory, countdown_s=countdown_s, optics_deg=optics)
+            trial_factory=trial_factory, countdown_s=countdown_s, optics_deg=optics))
         self.scene_name = scene
         # The instrument's screen motion follows the scope's image of each trial's task.
         self.controller.view_axes = self._view_axes
         eye = self._scope_view(self.controller.info)
         self.controller.screen = screen_axes(eye.position, eye.look_at, eye.up)
+        self._init_loop_state()
+        self.view_hz = float(view_hz)
+        self.speed = float(speed)
+        if scene_hz is not None and not (isinstance(scene_hz, int | float)
+                                         and np.isfinite(scene_hz) and scene_hz > 0):
+            raise ConfigError(f"scene_hz must be a finite number > 0 or None, got {scene_hz!r}",
+                              field="scene_hz")
+        self._init_pacing(scene_hz)
+        self.controller.viewer_timing = self.viewer_timing
+
+    def _init_loop_state(self) -> None:
+        """The command queue, the threads' state, what the pages show and the servers
+        (None until ``start``)."""
         self.commands: queue.SimpleQueue[Command] = queue.SimpleQueue()
         self.errors: list[str] = []
         """Messages of errors caught in callbacks and threads (newest last)."""
@@ -263,12 +277,10 @@ class ViewerApp(ErrorReporter):
         self.mrcp_panel: Any = None
         """The MRCP panel (None: the scene has no slave station)."""
         self._stopped = False
-        self.view_hz = float(view_hz)
-        self.speed = float(speed)
-        if scene_hz is not None and not (isinstance(scene_hz, int | float)
-                                         and np.isfinite(scene_hz) and scene_hz > 0):
-            raise ConfigError(f"scene_hz must be a finite number > 0 or None, got {scene_hz!r}",
-                              field="scene_hz")
+
+    def _init_pacing(self, scene_hz: float | None) -> None:
+        """When the pages' frames carry the organs, the realtime meter, the notices and
+        the trial's flow."""
         every = float("inf")
         self.scene_pacer = (ScenePacer(every, every) if scene_hz is None
                             else ScenePacer(scene_hz, min(MIN_SCENE_HZ, scene_hz)))
@@ -279,7 +291,6 @@ class ViewerApp(ErrorReporter):
         self.rate = RateMeter()
         """The loop's recent realtime factor as the pages see it (frame.t per wall s)."""
         self._trial_flow: tuple[float, int, dict[tuple[int, int], int]] = (0.0, 0, {})
-        self.controller.viewer_timing = self.viewer_timing
 
     # -- lifecycle -----------------------------------------------------------------------
     def start(self) -> ViewerApp:

@@ -57,7 +57,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -123,12 +123,11 @@ page's default input for a person)."""
 
 
 
-class TrainingController(ConditionCommands):
-    """Server-side state of the viewer (module docstring). Not thread-safe by design: one
-    controller thread calls ``handle``/``poll``/``close``; other threads read the published
-    ``info``, ``frame()`` and ``panel``.
+@dataclass(frozen=True)
+class TrainingSettings:
+    """What a ``TrainingController`` runs (``ViewerApp`` builds it from its options).
 
-    Args:
+    Attributes:
         scene: the abdomen scene of every trial (``"none"``: a static task).
         db: the study store's path (opened on first use), or None (nothing is stored;
             free training and protocols are then refused).
@@ -141,18 +140,43 @@ class TrainingController(ConditionCommands):
         countdown_s: the start cue of a trial a person drives (free and protocol modes,
             input not scripted): Start counts down this long [s] before the trial begins.
         optics_deg: the endoscope's optics [deg] (0 or 30), stored with every trial.
+    """
+
+    scene: str = "default"
+    db: str | Path | None = None
+    schema: str = "trajectory_following"
+    task: str = "trajectory"
+    skill: str = "intermediate"
+    seed: int = 0
+    variant: int = 0
+    max_time: float = 180.0
+    pause_s: float = 1.5
+    speed: float = 1.0
+    trial_factory: Callable[..., LiveTrial] | None = None
+    countdown_s: float = 0.0
+    optics_deg: float = 0.0
+
+
+class TrainingController(ConditionCommands):
+    """Server-side state of the viewer (module docstring). Not thread-safe by design: one
+    controller thread calls ``handle``/``poll``/``close``; other threads read the published
+    ``info``, ``frame()`` and ``panel``.
+
+    Args:
+        settings: the scene, store, first demo trial, time limits and pace
+            (``TrainingSettings``).
 
     Raises:
         ConfigError: for a bad first trial, or a ``db`` that is a directory (before
             anything runs).
     """
 
-    def __init__(self, *, scene: str = "default", db: str | Path | None = None,
-                 schema: str = "trajectory_following", task: str = "trajectory",
-                 skill: str = "intermediate", seed: int = 0, variant: int = 0,
-                 max_time: float = 180.0, pause_s: float = 1.5, speed: float = 1.0,
-                 trial_factory: Callable[..., LiveTrial] | None = None,
-                 countdown_s: float = 0.0, optics_deg: float = 0.0):
+    def __init__(self, settings: TrainingSettings = TrainingSettings()):
+        st = settings
+        scene, db, schema, task, skill = st.scene, st.db, st.schema, st.task, st.skill
+        seed, variant, max_time, pause_s = st.seed, st.variant, st.max_time, st.pause_s
+        speed, trial_factory, countdown_s = st.speed, st.trial_factory, st.countdown_s
+        optics_deg = st.optics_deg
         self.scene = scene
         self.countdown_s = float(countdown_s)
         self.optics_deg = float(optics_deg)
@@ -528,120 +552,154 @@ class TrainingController(ConditionCommands):
     def handle(self, cmd: Command) -> None:
         """Applies one command (controller thread). Raises ``VasimError`` for a bad one
         (the caller reports it); the running trial is unaffected then."""
-        kind, value = cmd.kind, cmd.value
+        handler = {
+            "mode": self._on_mode,
+            "schema": self._on_schema,
+            "task": self._on_task,
+            "input_mapping": self._on_input_mapping,
+            "input": self._on_input,
+            "label": self._on_label,
+            "again": self._on_again,
+            "subject": self._on_subject,
+            "protocol": self._on_protocol,
+            "start": self._on_start,
+            "stop": self._on_stop,
+            "restart": self._on_restart,
+            "f5pl": self._on_f5pl,
+            "auto_advance": self._on_auto_advance,
+            "answers": self._record_answers,
+        }.get(cmd.kind)
+        if handler is None:
+            raise ConfigError(f"unknown command {cmd.kind!r}")
+        handler(cmd.value)
+
+    def _on_mode(self, value: Any) -> None:
         p = self.panel
-        if kind == "mode":
-            if value not in MODES:
-                raise ConfigError(f"unknown mode {value!r} ({', '.join(MODES)})", field="mode")
-            if value == p.mode:
-                return
-            if value != "demo":
-                self.store()  # refuse early without a database
-            self._close_trial(f"switched to {value} mode")
-            if value != "protocol":   # back from a protocol trial's f5PL (shown greyed)
-                self._publish(f5pl=f5pl_fields(self._schema_obj if self._schema_obj
-                                               is not None else load_schema(p.schema)))
-            self._publish(mode=value, summary=None, running=False,
-                          status={"demo": "demo: the scripted operator plays trials by itself",
-                                  "free": "free training: pick a schema, then Start",
-                                  "protocol": "protocol: enter the subject code and pick a "
-                                              "protocol, then Start"}[value])
-            if value == "demo":
-                self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]  # panel
-            elif value == "protocol" and p.subject and p.protocol:
-                self._publish(curve=(), **self._select_session())
-        elif kind == "schema":
-            self._set_schema(str(value))
-        elif kind == "task":
-            self._set_task(str(value))
-        elif kind == "input_mapping":
-            if not isinstance(value, InputMapping):
-                raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
-                                  field="input_mapping")
-            if p.mode == "protocol" and self._running_stored():
-                raise ConfigError("the running protocol trial keeps its instrument mapping; "
-                                  "change it between trials", field="input_mapping")
-            self.input_mapping = value
-            if self.instrument is not None:
-                self.instrument.set_mapping(value)
-        elif kind == "input":
-            if value not in INPUTS:
-                raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
-                                  field="input")
-            if value == p.input:
-                return
-            if self._running_stored() or self._pending is not None:
-                raise ConfigError("stop the running trial before changing the input",
-                                  field="input")
-            if p.mode == "protocol" and p.session_id is not None:
-                raise ConfigError(f"session {p.session_id} runs with input {p.input!r} "
-                                  "(stored with the session): every trial of it keeps that "
-                                  "input", field="input")
-            self._publish(input=value)
-        elif kind == "label":
-            self._set_label(value)
-        elif kind == "again":
-            reason = check_again_reason("" if value is None else str(value))
-            if self._running_stored():
-                raise ConfigError("stop the running trial before giving a reason for a new "
-                                  "session", field=AGAIN_FIELD)
-            self._publish(again=reason, status=(
-                f"reason for a new session: {reason}" if reason else "no reason: Start "
-                "resumes an open session or starts a first one"))
-        elif kind == "subject":
-            from vasim.records.trial_meta import validate_subject_code
+        if value not in MODES:
+            raise ConfigError(f"unknown mode {value!r} ({', '.join(MODES)})", field="mode")
+        if value == p.mode:
+            return
+        if value != "demo":
+            self.store()  # refuse early without a database
+        self._close_trial(f"switched to {value} mode")
+        if value != "protocol":   # back from a protocol trial's f5PL (shown greyed)
+            self._publish(f5pl=f5pl_fields(self._schema_obj if self._schema_obj
+                                           is not None else load_schema(p.schema)))
+        self._publish(mode=value, summary=None, running=False,
+                      status={"demo": "demo: the scripted operator plays trials by itself",
+                              "free": "free training: pick a schema, then Start",
+                              "protocol": "protocol: enter the subject code and pick a "
+                                          "protocol, then Start"}[value])
+        if value == "demo":
+            self._start_demo(replace(self._base, schema=p.schema, task=p.task))  # type: ignore[arg-type]  # panel
+        elif value == "protocol" and p.subject and p.protocol:
+            self._publish(curve=(), **self._select_session())
 
-            code = validate_subject_code(str(value).strip())
-            if self._running_stored():
-                raise ConfigError("stop the running trial before changing the subject",
-                                  field="subject")
-            self._publish(subject=code, label=None, session_id=None, position=None,
-                          total=None, completed=None, condition=None, curve=(), again=None)
-            if p.mode == "protocol" and p.protocol:
-                self._publish(**self._select_session())
-        elif kind == "protocol":
-            from vasim.study.protocol import available_protocols
+    def _on_schema(self, value: Any) -> None:
+        self._set_schema(str(value))
 
-            if value not in available_protocols():
-                raise ConfigError(f"unknown protocol {value!r} (available: "
-                                  f"{', '.join(available_protocols())})", field="protocol")
-            if self._running_stored():
-                raise ConfigError("stop the running trial before changing the protocol",
-                                  field="protocol")
-            self._publish(protocol=value, session_id=None, position=None, total=None,
-                          completed=None, condition=None, curve=(), again=None)
-            if p.subject:
-                self._publish(**self._select_session())
-        elif kind == "start":
-            self._start()
-        elif kind == "stop":
-            if self._pending is not None:
-                self._pending = self.countdown_until = None
-                self._publish(running=False, status="start cancelled")
-                return
-            if not self.active():
-                raise ConfigError("no trial is running", field="stop")
-            self._close_trial("stopped by the experimenter")
-            if self.info.trial_id is None:
-                self._publish(running=False, status=f"{self.info.title} stopped")
-            elif self.info.schedule_index is not None:
-                self._publish(**self._progress())
-        elif kind == "restart":
-            if p.mode == "demo":
-                self._close_trial("restarted")
-                self._start_demo(self.info.config)
-            else:
-                raise ConfigError("use Stop, then Start (a stored trial is not restarted)",
-                                  field="restart")
-        elif kind == "f5pl":
-            instance, params = value
-            self._apply_f5pl(str(instance), params)
-        elif kind == "auto_advance":
-            self._publish(auto_advance=bool(value))
-        elif kind == "answers":
-            self._record_answers(value)
+    def _on_task(self, value: Any) -> None:
+        self._set_task(str(value))
+
+    def _on_input_mapping(self, value: Any) -> None:
+        p = self.panel
+        if not isinstance(value, InputMapping):
+            raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
+                              field="input_mapping")
+        if p.mode == "protocol" and self._running_stored():
+            raise ConfigError("the running protocol trial keeps its instrument mapping; "
+                              "change it between trials", field="input_mapping")
+        self.input_mapping = value
+        if self.instrument is not None:
+            self.instrument.set_mapping(value)
+
+    def _on_input(self, value: Any) -> None:
+        p = self.panel
+        if value not in INPUTS:
+            raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
+                              field="input")
+        if value == p.input:
+            return
+        if self._running_stored() or self._pending is not None:
+            raise ConfigError("stop the running trial before changing the input",
+                              field="input")
+        if p.mode == "protocol" and p.session_id is not None:
+            raise ConfigError(f"session {p.session_id} runs with input {p.input!r} "
+                              "(stored with the session): every trial of it keeps that "
+                              "input", field="input")
+        self._publish(input=value)
+
+    def _on_label(self, value: Any) -> None:
+        self._set_label(value)
+
+    def _on_again(self, value: Any) -> None:
+        reason = check_again_reason("" if value is None else str(value))
+        if self._running_stored():
+            raise ConfigError("stop the running trial before giving a reason for a new "
+                              "session", field=AGAIN_FIELD)
+        self._publish(again=reason, status=(
+            f"reason for a new session: {reason}" if reason else "no reason: Start "
+            "resumes an open session or starts a first one"))
+
+    def _on_subject(self, value: Any) -> None:
+        p = self.panel
+        from vasim.records.trial_meta import validate_subject_code
+
+        code = validate_subject_code(str(value).strip())
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the subject",
+                              field="subject")
+        self._publish(subject=code, label=None, session_id=None, position=None,
+                      total=None, completed=None, condition=None, curve=(), again=None)
+        if p.mode == "protocol" and p.protocol:
+            self._publish(**self._select_session())
+
+    def _on_protocol(self, value: Any) -> None:
+        p = self.panel
+        from vasim.study.protocol import available_protocols
+
+        if value not in available_protocols():
+            raise ConfigError(f"unknown protocol {value!r} (available: "
+                              f"{', '.join(available_protocols())})", field="protocol")
+        if self._running_stored():
+            raise ConfigError("stop the running trial before changing the protocol",
+                              field="protocol")
+        self._publish(protocol=value, session_id=None, position=None, total=None,
+                      completed=None, condition=None, curve=(), again=None)
+        if p.subject:
+            self._publish(**self._select_session())
+
+    def _on_start(self, value: Any) -> None:
+        self._start()
+
+    def _on_stop(self, value: Any) -> None:
+        if self._pending is not None:
+            self._pending = self.countdown_until = None
+            self._publish(running=False, status="start cancelled")
+            return
+        if not self.active():
+            raise ConfigError("no trial is running", field="stop")
+        self._close_trial("stopped by the experimenter")
+        if self.info.trial_id is None:
+            self._publish(running=False, status=f"{self.info.title} stopped")
+        elif self.info.schedule_index is not None:
+            self._publish(**self._progress())
+
+    def _on_restart(self, value: Any) -> None:
+        p = self.panel
+        if p.mode == "demo":
+            self._close_trial("restarted")
+            self._start_demo(self.info.config)
         else:
-            raise ConfigError(f"unknown command {kind!r}")
+            raise ConfigError("use Stop, then Start (a stored trial is not restarted)",
+                              field="restart")
+
+    def _on_f5pl(self, value: Any) -> None:
+        instance, params = value
+        self._apply_f5pl(str(instance), params)
+
+    def _on_auto_advance(self, value: Any) -> None:
+        self._publish(auto_advance=bool(value))
 
     def _record_answers(self, value: Any) -> None:
         """Stores one questionnaire's answers with the subject's session of the chosen
@@ -817,6 +875,7 @@ __all__ = [
     "Command",
     "PanelState",
     "TrainingController",
+    "TrainingSettings",
     "TrialInfo",
     "f5pl_fields",
     "plain",

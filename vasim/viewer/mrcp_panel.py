@@ -498,6 +498,27 @@ def station_camera(geometry: StationGeometry) -> tuple[FloatArray, FloatArray]:
     return centre + d * np.array([0.25, -0.85, 0.5]), centre
 
 
+@dataclass(frozen=True)
+class MrcpPace:
+    """How fast an ``MrcpViewerApp`` runs its scenario and updates its page.
+
+    Attributes:
+        speed: simulated seconds per wall second (1: real time).
+        view_hz: rate of the station's pose updates [Hz].
+        plot_hz: rate of the plots and event log [Hz].
+        history_s: plotted window [s].
+        retry_s: pause before a failed run restarts [s]. stop_pause_s: pause after a run
+            ended by a safety stop [s].
+    """
+
+    speed: float = 1.0
+    view_hz: float = 30.0
+    plot_hz: float = 4.0
+    history_s: float = 20.0
+    retry_s: float = 1.0
+    stop_pause_s: float = STOP_PAUSE_S
+
+
 class MrcpViewerApp(ErrorReporter):
     """``vasim serve --scene mrcp:<scenario>``: a slave-station scenario in the browser.
 
@@ -508,13 +529,9 @@ class MrcpViewerApp(ErrorReporter):
             scenario object.
         seed: the kernel's planner seed.
         coarse: the runner's cheaper 36 ms cycle (tests; a slow machine).
-        speed: simulated seconds per wall second (1: real time).
         duration: run length before the scenario loops [s] (None: the scenario's own).
-        view_hz: rate of the station's pose updates [Hz].
-        plot_hz: rate of the plots and event log [Hz].
-        history_s: plotted window [s].
-        retry_s: pause before a failed run restarts [s]. stop_pause_s: pause after a run
-            ended by a safety stop [s].
+        pace: the run's speed, the page's update rates and the pauses (``MrcpPace``).
+        token: the page's access token (``vasim.viewer.access``).
 
     Raises:
         ConfigError: for an unknown scenario or a bad rate (before a socket is opened).
@@ -528,10 +545,13 @@ class MrcpViewerApp(ErrorReporter):
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8080,
                  scenario: Any = "cube_rotation", *, seed: int = 0, coarse: bool = False,
-                 speed: float = 1.0, duration: float | None = None, view_hz: float = 30.0,
-                 plot_hz: float = 4.0, history_s: float = 20.0, retry_s: float = 1.0,
-                 stop_pause_s: float = STOP_PAUSE_S, token: str | None = None):
+                 duration: float | None = None, pace: MrcpPace = MrcpPace(),
+                 token: str | None = None):
         from vasim.viewer.access import access_policy
+
+        speed, view_hz, plot_hz, history_s = (pace.speed, pace.view_hz, pace.plot_hz,
+                                              pace.history_s)
+        retry_s, stop_pause_s = pace.retry_s, pace.stop_pause_s
 
         self.access = access_policy(host, token)
         for name, v in (("speed", speed), ("view_hz", view_hz), ("plot_hz", plot_hz),
@@ -765,6 +785,7 @@ __all__ = [
     "History",
     "LiveScenario",
     "MrcpFrame",
+    "MrcpPace",
     "MrcpPanel",
     "MrcpViewerApp",
     "event_log_text",

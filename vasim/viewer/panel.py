@@ -279,12 +279,22 @@ class ExperimenterPanel:
         self._operating: float | None = None
         self._last_editor = -math.inf
 
-        def on(handle: Any, fn: Callable[[Any], None]) -> None:
-            def cb(event: Any) -> None:
-                if not getattr(self._local, "syncing", False):
-                    fn(event)
-            handle.on_update(guard(cb))
+        self._guard = guard
+        self._add_controls(gui, panel, protocols)
+        self._add_folders(gui, panel, schemas)
+        self._wire(submit, guard)
+        self.show(panel)
 
+    def _on(self, handle: Any, fn: Callable[[Any], None]) -> None:
+        """Calls ``fn`` on the user's updates of ``handle`` (not on ``show``'s own)."""
+        def cb(event: Any) -> None:
+            if not getattr(self._local, "syncing", False):
+                fn(event)
+        handle.on_update(self._guard(cb))
+
+    def _add_controls(self, gui: Any, panel: PanelState, protocols: Sequence[str]) -> None:
+        """The status lines and the session's controls (mode, input, subject, label,
+        protocol, start/stop)."""
         self.status = gui.add_markdown("")
         self.progress = gui.add_markdown(progress_text(panel))
         self.progress_bar = gui.add_progress_bar(0.0, visible=False)
@@ -313,6 +323,10 @@ class ExperimenterPanel:
                                       hint="start the next scheduled trial (protocol)")
         self.auto_advance = gui.add_checkbox("Auto-advance", panel.auto_advance,
                                              hint="start the next scheduled trial by itself")
+
+    def _add_folders(self, gui: Any, panel: PanelState, schemas: Sequence[str]) -> None:
+        """The free-training schema and f5PL editor, the live metrics and the last trial
+        with its learning curve."""
         with gui.add_folder("Fixture schema (free training)"):
             self.schema = gui.add_dropdown("Schema", tuple(schemas), initial_value=panel.schema)
             self.task = gui.add_dropdown("Task", ("trajectory", "point"),
@@ -346,6 +360,10 @@ class ExperimenterPanel:
                  viser.uplot.Series(label="mean latency [s]", stroke="#2f9e44", width=2)),
                 title="learning curve", scales=scales, aspect=1.6)
 
+    def _wire(self, submit: Callable[[Command], None],
+              guard: Callable[[Callable[..., Any]], Callable[..., Any]]) -> None:
+        """Each control's callback: a command to the controller, or a local f5PL view."""
+        on = self._on
         on(self.mode, lambda e: submit(Command("mode", e.target.value)))
         on(self.input, lambda e: submit(Command("input", e.target.value)))
         self.set_subject.on_click(guard(
@@ -378,7 +396,6 @@ class ExperimenterPanel:
         for h in self.numbers.values():
             on(h, lambda e: self._preview())
         self.apply.on_click(guard(lambda e: self._apply()))
-        self.show(panel)
 
     # -- f5PL editor --------------------------------------------------------------------
     def edited_params(self) -> Logistic5:

@@ -169,6 +169,46 @@ class _Stitch:
 
 
 @dataclass
+class _Run:
+    """One suture run's changing state (``run``): the subtask graph, the thread and
+    stitches, the hand and kernel of the MRCP subtasks, the StdT script's stage and what
+    has been recorded."""
+
+    graph: SutureGraph
+    thread: SutureThread
+    stitches: list[_Stitch]
+    hand: TrackingOperator
+    last: tuple[FloatArray, FloatArray]
+    achieved: tuple[FloatArray, FloatArray]
+    sub_start: tuple[FloatArray, FloatArray]
+    rsel: str = "R0"
+    cutp: int = 0
+    kernel: MRCPKernel | None = None
+    sub_t0: float = 0.0
+    sub_events: list[str] = field(default_factory=list)
+    stdt_stage: int = 0
+    stage_t0: float = 0.0
+    subtasks: list[dict[str, Any]] = field(default_factory=list)
+    samples: list[Sample] = field(default_factory=list)
+
+
+@dataclass
+class _Tick:
+    """One cycle of the run: its time, the tissue's offset, the subtask and stitch, and
+    what the cycle's mode step produced."""
+
+    t: float
+    off: FloatArray
+    sub: str
+    k: int
+    events: list[str] = field(default_factory=list)
+    rec: CycleRecord | None = None
+    ended: bool = False
+    holders: tuple[str, ...] = ()
+    state: str = ""
+
+
+@dataclass
 class SutureRun:
     """One run of the suture (see the module docstring); :meth:`run` is the loop."""
 
@@ -268,159 +308,192 @@ class SutureRun:
         self._jaws: dict[str, float] = {}
         self._knot = {}
         self._sub_off = g.tissue_offset(0.0)
-        graph = SutureGraph(self.stitches)
-        rsel, cutp = "R0", 0
-        kernel: MRCPKernel | None = None
-        hand = TrackingOperator()
-        last = achieved = (self.needle[0].copy(), self.needle[1].copy())
         offset0 = g.tissue_offset(0.0)
-        thread = SutureThread(g.ANCHOR, self.tail() - offset0, THREAD_LENGTH, THREAD_FREE)
-        stitches = [_Stitch() for _ in range(self.stitches)]
-        subtasks: list[dict[str, Any]] = []
-        sub_t0 = 0.0
-        sub_start: tuple[FloatArray, FloatArray] = (self.needle[0].copy(), self.needle[1].copy())
-        sub_events: list[str] = []
-        samples: list[Sample] = []
+        start = (self.needle[0].copy(), self.needle[1].copy())
+        run = _Run(SutureGraph(self.stitches),
+                   SutureThread(g.ANCHOR, self.tail() - offset0, THREAD_LENGTH, THREAD_FREE),
+                   [_Stitch() for _ in range(self.stitches)], TrackingOperator(),
+                   last=start, achieved=start,
+                   sub_start=(self.needle[0].copy(), self.needle[1].copy()))
         total = self.duration if duration is None else duration
-        stdt_stage = 0
-        stage_t0 = 0.0
         for i in range(math.floor(total / dt + 1e-9)):
-            t = (i + 1) * dt
-            self._t = t
-            off = g.tissue_offset(t)
-            for body, (_, centre) in g.tissue_boxes().items():
-                self.world.set_obstacle_pose(body, centre + off)
-            sub = graph.subtask
-            k = max(0, min(graph.stitch, self.stitches - 1))
-            events: list[str] = []
-            rec: CycleRecord | None = None
-            ended = False
-            if graph.mode is TeleopMode.STDT:
-                kernel = None
-                targets, stage_done = self._stdt_targets(sub, stdt_stage, t - stage_t0, rsel,
-                                                         stitches)
-                reached = True
-                for r, goal in targets.items():
-                    self._drive(r, goal, dt)
-                    reached &= bool(np.linalg.norm(self.tcp(r) - goal) < 5e-4)
-                held = self.tcp(rsel)
-                pos = held - self.needle[1] @ self.task_points[cutp].position
-                self.needle = (pos, self.needle[1])
-                if reached and stage_done:
-                    stdt_stage += 1
-                    stage_t0 = t
-                    if stdt_stage >= self._stdt_stages(sub):
-                        ended = True
-                holders: tuple[str, ...] = (rsel,)
-                state = "StdT"
-                for r, arm in self.arms.items():
-                    q = self.world.configuration(r)
-                    if np.any(q < arm.joint_lower - 1e-9) or np.any(q > arm.joint_upper + 1e-9):
-                        self._violation(f"{r} outside its joint limits")
+            tick = self._begin_cycle(run, (i + 1) * dt)
+            if run.graph.mode is TeleopMode.STDT:
+                self._stdt_cycle(run, tick, dt)
             else:
-                if kernel is None:
-                    kernel = MRCPKernel(self.arms, self.world, self.task_points, rsel, cutp,
-                                        self.needle[0], self.needle[1], config=cfg, t0=t - dt)
-                    last = achieved = (self.needle[0].copy(), self.needle[1].copy())
-                target = self._mrcp_target(sub, k, t, t - sub_t0, sub_start, off)
-                pos_cmd, rot_cmd = hand.command(target, achieved, last, dt)
-                assert rot_cmd is not None
-                rec = kernel.step(t, pos_cmd, rot_cmd)
-                if rec.state is KernelState.FAULT:
-                    # the safety stop: a violation; the operator acknowledges it and goes on
-                    self._violation(f"stitch {k + 1}: {sub}: RSel safety stop "
-                                    f"({', '.join(rec.events)})")
-                    kernel.reset_fault()
-                last = (pos_cmd, rot_cmd)
-                assert rec.task_rotation is not None
-                achieved = (rec.task_position.copy(), rec.task_rotation.copy())
-                self.needle = achieved
-                events = list(rec.events)
-                sub_events += events
-                rsel, cutp, holders, state = rec.rsel, rec.cutp, rec.holders, rec.state.value
-                view = cast(Setup, _SetupView(self.arms, self.world))
-                for v in check_invariants(kernel, view, rec):
-                    self.violations.append(v)
-                ended = self._mrcp_done(sub, k, t, t - sub_t0, target, sub_events, rsel,
-                                        kernel, stitches, thread, off)
-            self._beta = self.beta(self.needle[1])
-            self._track_stitch(sub, k, t, stitches, off)
-            state_thread = thread.update(self.tail() - off)
-            if state_thread.attach_gap > ATTACH_TOL:
-                self._violation(f"thread overstretched: its end is "
-                                f"{state_thread.attach_gap * 1e3:.1f} mm off the needle")
-            for r in self.arms:
-                if r in holders or (rec is not None and r == rec.rcnt):
-                    self._jaws[r] = t
-            inside = self.needle_in_robot(tuple(r for r, t_ in self._jaws.items()
-                                                if t - t_ <= RELEASE_S + 1e-9))
-            if inside:
-                self._violation(f"needle inside {', '.join(inside)}")
-            if ended:
-                if sub == "extraction":
-                    st = stitches[k]
-                    if st.entry is None or st.exit is None:
-                        self._violation(f"stitch {k + 1}: no entry or exit point")
-                    else:
-                        thread.pin(st.entry, st.exit, self.tail() - off)
-                if sub == "needle_transfer" and not any(e.startswith("transfer_done")
-                                                        for e in sub_events):
-                    self._violation(f"stitch {k + 1}: needle_transfer ended without a transfer")
-                kstate = kernel.state if kernel is not None else KernelState.TOP
-                if graph.index + 1 < len(graph.sequence) and kstate is not KernelState.TOP \
-                        and SUTURE_SUBTASK_MODE[graph.sequence[graph.index + 1]] is not graph.mode:
-                    ended = False          # the switch waits for a quiet kernel
-            if ended:
-                subtasks.append({"name": sub, "mode": graph.mode.value.lower(),
-                                 "stitch": k + 1 if sub in STITCH_SUBTASKS else None,
-                                 "t_start": round(sub_t0, 4), "t_end": round(t, 4)})
-                graph.advance(kernel.state if kernel is not None else KernelState.TOP)
-                events.append(f"subtask_done {sub}")
-                sub_t0, sub_start, sub_events = t, (self.needle[0].copy(),
-                                                    self.needle[1].copy()), []
-                stdt_stage, stage_t0, self._sub_off = 0, t, off
-            elif (t - sub_t0 > TIMEOUT
-                  and (kernel is None or kernel.state is KernelState.TOP)):
-                self._violation(f"{sub} (stitch {k + 1}) timed out")
-                subtasks.append({"name": sub, "mode": graph.mode.value.lower(),
-                                 "stitch": k + 1 if sub in STITCH_SUBTASKS else None,
-                                 "t_start": round(sub_t0, 4), "t_end": round(t, 4)})
-                graph.advance(kernel.state if kernel is not None else KernelState.TOP)
-                sub_t0, sub_start, sub_events = t, (self.needle[0].copy(),
-                                                    self.needle[1].copy()), []
-                stdt_stage, stage_t0, self._sub_off = 0, t, off
-            ts = thread.state()
-            scene = {"thread": (ts.nodes + off).tolist(), "pinned": (ts.pinned + off).tolist(),
-                     "slack": ts.slack, "reserve": ts.reserve, "free_length": ts.free_length,
-                     "attach_gap": ts.attach_gap, "stitch": k + 1}
-            s = Sample(t, state, rsel, cutp, holders, rec.rcnt if rec else None,
-                       rec.continuity.ntt if rec is not None and rec.continuity is not None
-                       else math.nan,
-                       _robot_samples(rec, list(self.arms)) if rec is not None else {},
-                       tuple(events), {r: self.world.configuration(r).copy() for r in self.arms},
-                       self.needle[0].copy(), self.needle[1].copy(),
-                       tuple(r for r in self.arms if self.world.in_collision(r)),
-                       subtask=sub, mode=graph.mode.value if not graph.done else "StdT",
-                       scene=scene)
-            samples.append(s)
+                self._mrcp_cycle(run, tick, dt)
+            self._after_cycle(run, tick)
+            self._close_subtask(run, tick)
+            s = self._sample(run, tick)
+            run.samples.append(s)
             if progress is not None:
                 progress(s)
-            if graph.done:
+            if run.graph.done:
                 break
-        if not graph.done and duration is None:    # its own time limit: the graph stuck
+        if not run.graph.done and duration is None:    # its own time limit: the graph stuck
             self.violations.append(f"t={self._t:.3f}: the suture did not finish "
-                                   f"(stopped in {graph.subtask})")
-        ts = thread.state()
+                                   f"(stopped in {run.graph.subtask})")
+        return self._result(name, run)
+
+    def _begin_cycle(self, run: _Run, t: float) -> _Tick:
+        """The cycle at time ``t``: the tissue moved with the breathing, the subtask and
+        stitch it works on."""
+        self._t = t
+        off = g.tissue_offset(t)
+        for body, (_, centre) in g.tissue_boxes().items():
+            self.world.set_obstacle_pose(body, centre + off)
+        k = max(0, min(run.graph.stitch, self.stitches - 1))
+        return _Tick(t, off, run.graph.subtask, k)
+
+    def _stdt_cycle(self, run: _Run, tick: _Tick, dt: float) -> None:
+        """A StdT cycle: each master drives its robot's tip along the script; the needle
+        moves with RSel's jaws."""
+        run.kernel = None
+        sub, t = tick.sub, tick.t
+        targets, stage_done = self._stdt_targets(sub, run.stdt_stage, t - run.stage_t0,
+                                                 run.rsel, run.stitches)
+        reached = True
+        for r, goal in targets.items():
+            self._drive(r, goal, dt)
+            reached &= bool(np.linalg.norm(self.tcp(r) - goal) < 5e-4)
+        held = self.tcp(run.rsel)
+        pos = held - self.needle[1] @ self.task_points[run.cutp].position
+        self.needle = (pos, self.needle[1])
+        if reached and stage_done:
+            run.stdt_stage += 1
+            run.stage_t0 = t
+            if run.stdt_stage >= self._stdt_stages(sub):
+                tick.ended = True
+        tick.holders = (run.rsel,)
+        tick.state = "StdT"
+        for r, arm in self.arms.items():
+            q = self.world.configuration(r)
+            if np.any(q < arm.joint_lower - 1e-9) or np.any(q > arm.joint_upper + 1e-9):
+                self._violation(f"{r} outside its joint limits")
+
+    def _mrcp_cycle(self, run: _Run, tick: _Tick, dt: float) -> None:
+        """An MRCP cycle: the operator's hand follows the subtask's target, the kernel
+        moves the robots; its safety stops and invariant breaks are violations."""
+        sub, k, t = tick.sub, tick.k, tick.t
+        if run.kernel is None:
+            run.kernel = MRCPKernel(self.arms, self.world, self.task_points, run.rsel,
+                                    run.cutp, self.needle[0], self.needle[1],
+                                    config=self.config, t0=t - dt)
+            run.last = run.achieved = (self.needle[0].copy(), self.needle[1].copy())
+        kernel = run.kernel
+        target = self._mrcp_target(sub, k, t, t - run.sub_t0, run.sub_start, tick.off)
+        pos_cmd, rot_cmd = run.hand.command(target, run.achieved, run.last, dt)
+        assert rot_cmd is not None
+        rec = kernel.step(t, pos_cmd, rot_cmd)
+        if rec.state is KernelState.FAULT:
+            # the safety stop: a violation; the operator acknowledges it and goes on
+            self._violation(f"stitch {k + 1}: {sub}: RSel safety stop "
+                            f"({', '.join(rec.events)})")
+            kernel.reset_fault()
+        run.last = (pos_cmd, rot_cmd)
+        assert rec.task_rotation is not None
+        run.achieved = (rec.task_position.copy(), rec.task_rotation.copy())
+        self.needle = run.achieved
+        tick.rec = rec
+        tick.events = list(rec.events)
+        run.sub_events += tick.events
+        run.rsel, run.cutp, tick.holders, tick.state = (rec.rsel, rec.cutp, rec.holders,
+                                                        rec.state.value)
+        view = cast(Setup, _SetupView(self.arms, self.world))
+        for v in check_invariants(kernel, view, rec):
+            self.violations.append(v)
+        tick.ended = self._mrcp_done(run, tick, target)
+
+    def _after_cycle(self, run: _Run, tick: _Tick) -> None:
+        """The needle's angle, the stitch's entry/exit, the thread, and the jaws that held
+        the needle lately; an overstretched thread or a needle inside a robot is a
+        violation."""
+        t, off = tick.t, tick.off
+        self._beta = self.beta(self.needle[1])
+        self._track_stitch(tick.sub, tick.k, t, run.stitches, off)
+        state_thread = run.thread.update(self.tail() - off)
+        if state_thread.attach_gap > ATTACH_TOL:
+            self._violation(f"thread overstretched: its end is "
+                            f"{state_thread.attach_gap * 1e3:.1f} mm off the needle")
+        for r in self.arms:
+            if r in tick.holders or (tick.rec is not None and r == tick.rec.rcnt):
+                self._jaws[r] = t
+        inside = self.needle_in_robot(tuple(r for r, t_ in self._jaws.items()
+                                            if t - t_ <= RELEASE_S + 1e-9))
+        if inside:
+            self._violation(f"needle inside {', '.join(inside)}")
+
+    def _close_subtask(self, run: _Run, tick: _Tick) -> None:
+        """Ends the subtask when it is done (and the kernel is quiet before a mode switch)
+        or timed out; the graph moves on."""
+        sub, k, t = tick.sub, tick.k, tick.t
+        kernel, graph = run.kernel, run.graph
+        ended = tick.ended
+        if ended:
+            if sub == "extraction":
+                st = run.stitches[k]
+                if st.entry is None or st.exit is None:
+                    self._violation(f"stitch {k + 1}: no entry or exit point")
+                else:
+                    run.thread.pin(st.entry, st.exit, self.tail() - tick.off)
+            if sub == "needle_transfer" and not any(e.startswith("transfer_done")
+                                                    for e in run.sub_events):
+                self._violation(f"stitch {k + 1}: needle_transfer ended without a transfer")
+            kstate = kernel.state if kernel is not None else KernelState.TOP
+            if graph.index + 1 < len(graph.sequence) and kstate is not KernelState.TOP \
+                    and SUTURE_SUBTASK_MODE[graph.sequence[graph.index + 1]] is not graph.mode:
+                ended = False          # the switch waits for a quiet kernel
+        timed_out = (not ended and t - run.sub_t0 > TIMEOUT
+                     and (kernel is None or kernel.state is KernelState.TOP))
+        if not (ended or timed_out):
+            return
+        if timed_out:
+            self._violation(f"{sub} (stitch {k + 1}) timed out")
+        run.subtasks.append({"name": sub, "mode": graph.mode.value.lower(),
+                             "stitch": k + 1 if sub in STITCH_SUBTASKS else None,
+                             "t_start": round(run.sub_t0, 4), "t_end": round(t, 4)})
+        graph.advance(kernel.state if kernel is not None else KernelState.TOP)
+        if ended:
+            tick.events.append(f"subtask_done {sub}")
+        run.sub_t0, run.sub_start, run.sub_events = t, (self.needle[0].copy(),
+                                                        self.needle[1].copy()), []
+        run.stdt_stage, run.stage_t0, self._sub_off = 0, t, tick.off
+
+    def _sample(self, run: _Run, tick: _Tick) -> Sample:
+        """The cycle's sample, with the thread in the scene."""
+        ts = run.thread.state()
+        off, rec = tick.off, tick.rec
+        scene = {"thread": (ts.nodes + off).tolist(), "pinned": (ts.pinned + off).tolist(),
+                 "slack": ts.slack, "reserve": ts.reserve, "free_length": ts.free_length,
+                 "attach_gap": ts.attach_gap, "stitch": tick.k + 1}
+        return Sample(tick.t, tick.state, run.rsel, run.cutp, tick.holders,
+                      rec.rcnt if rec else None,
+                      rec.continuity.ntt if rec is not None and rec.continuity is not None
+                      else math.nan,
+                      _robot_samples(rec, list(self.arms)) if rec is not None else {},
+                      tuple(tick.events),
+                      {r: self.world.configuration(r).copy() for r in self.arms},
+                      self.needle[0].copy(), self.needle[1].copy(),
+                      tuple(r for r in self.arms if self.world.in_collision(r)),
+                      subtask=tick.sub,
+                      mode=run.graph.mode.value if not run.graph.done else "StdT",
+                      scene=scene)
+
+    def _result(self, name: str, run: _Run) -> RunResult:
+        """The run's result: samples, violations, subtasks, stitches and the thread."""
+        ts = run.thread.state()
+        graph = run.graph
+
         def rounded(p: FloatArray | None) -> list[float] | None:
             return None if p is None else [round(float(v), 5) for v in p]
 
-        extra = {"subtasks": subtasks,
+        extra = {"subtasks": run.subtasks,
                  "stitches": [{"stitch": n + 1, "entry": rounded(s_.entry),
                                "exit": rounded(s_.exit), "t_entry": s_.t_entry,
-                               "t_exit": s_.t_exit} for n, s_ in enumerate(stitches)],
+                               "t_exit": s_.t_exit} for n, s_ in enumerate(run.stitches)],
                  "thread": {"length": THREAD_LENGTH, "total": round(ts.total_length, 9),
                             "slack": round(ts.slack, 6), "reserve": round(ts.reserve, 6)}}
-        return RunResult(name, list(self.arms), samples, self.violations,
+        return RunResult(name, list(self.arms), run.samples, self.violations,
                          {"stitches": self.stitches, "breathing_amplitude_m": g.BREATH_AMPLITUDE,
                           "breathing_period_s": g.BREATH_PERIOD, "finished": graph.done,
                           "stopped_in": None if graph.done else graph.subtask}, extra=extra)
@@ -469,10 +542,13 @@ class SutureRun:
             return _towards(start, goal, since, TRAVEL_SPEED)
         raise ValueError(f"not an MRCP subtask: {sub!r}")
 
-    def _mrcp_done(self, sub: str, k: int, t: float, since: float,
-                   target: tuple[FloatArray, FloatArray], events: list[str], rsel: str,
-                   kernel: MRCPKernel, stitches: list[_Stitch], thread: SutureThread,
-                   off: FloatArray) -> bool:
+    def _mrcp_done(self, run: _Run, tick: _Tick,
+                   target: tuple[FloatArray, FloatArray]) -> bool:
+        """Whether the MRCP subtask of ``tick`` is done (``target``: the operator's pose)."""
+        sub, k, t = tick.sub, tick.k, tick.t
+        kernel, stitches, thread = run.kernel, run.stitches, run.thread
+        events, rsel = run.sub_events, run.rsel
+        assert kernel is not None
         quiet = kernel.state is KernelState.TOP
         near = bool(np.linalg.norm(self.needle[0] - target[0]) < 1e-3
                     and np.linalg.norm(self.needle[1] - target[1]) < 0.03)

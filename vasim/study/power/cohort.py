@@ -43,12 +43,12 @@ import pandas as pd
 
 from vasim.operator.learning import FixtureEffect, trial_adjustment
 from vasim.operator.scenario import Scenario, default_scenario
-from vasim.records.samples import SampleBuffer
 from vasim.study.cohort import (
     SimulatedSubject,
     cohort_subjects,
     scenario_record,
     simulate_trial,
+    store_outcome,
 )
 from vasim.study.power.design import PowerDesign, cohort_seed, surgeons_for
 from vasim.study.power.estimate import COHORT_COLUMNS
@@ -188,16 +188,6 @@ def study_data(protocol: Protocol, trials: CohortTrials) -> StudyData:
                      schema_version=None)
 
 
-@dataclass(frozen=True, eq=False)
-class _Outcome:
-    """A worker's dict as the ``ResultLike`` the life cycle stores."""
-
-    samples: SampleBuffer
-    metrics: pd.DataFrame
-    summary: Mapping[str, Any]
-    events: list[Any]
-    trial_metrics: Mapping[str, float]
-
 
 def simulate_to_store(db: Path, protocol: Protocol, subjects: Sequence[SimulatedSubject], *,
                       dt: float, max_trial_time: float | None,
@@ -225,10 +215,7 @@ def simulate_to_store(db: Path, protocol: Protocol, subjects: Sequence[Simulated
                                                 protocol=protocol.name)
                 with stored_trial(store, meta) as rec:
                     out = simulate_trial(cfg, session.metric_params)
-                    buf = SampleBuffer.from_columns(out["columns"],
-                                                    active_fixtures=out["active_fixtures"])
-                    rec.finish(_Outcome(buf, out["metrics"], out["summary"], out["events"],
-                                        out["trial_metrics"]))
+                    store_outcome(rec, out)
                 sim += float(out["sim_time"])
             store.set_session_status(sid, "completed")
     return sim

@@ -247,6 +247,28 @@ class Protocol:
         if _schema_has_fixtures(self.probe_condition):
             raise fail(self.probe_condition, "a schema without fixtures (probe trials are "
                        "fixture-free)", field="probe.condition")
+        self._check_blocks(n_var)
+        check_protocol_phases(self)
+        if self.power is not None:
+            if not isinstance(self.power, PowerPlan):
+                raise fail(self.power, "a PowerPlan", field="power")
+            self.power.check_labels(self.conditions)
+        n_trials = sum(b.n_trials for b in self.blocks)
+        if n_trials > TRIALS_PER_SESSION.high:
+            raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "
+                       f"({TRIALS_PER_SESSION.reason})", field="blocks")
+        for qname in ("pre", "post"):
+            q = getattr(self, qname)
+            if not isinstance(q, Questionnaire):
+                raise fail(q, "a Questionnaire", field=f"questionnaires.{qname}")
+        if self.post.demographics:
+            raise fail(True, "false (demographics are asked before the session: pre)",
+                       field="questionnaires.post.demographics")
+        self._resolve_items()
+
+    def _check_blocks(self, n_var: int) -> None:
+        """Each block: a unique name, known conditions and schemas, variants of the task,
+        probe blocks that run the probe condition."""
         names: set[str] = set()
         for i, b in enumerate(self.blocks):
             if not isinstance(b, Block):
@@ -281,22 +303,10 @@ class Protocol:
             if b.probes_after and b.condition in TELEOPERATION_MODES:
                 raise fail(b.probes_after, "0 (teleoperation-mode blocks have no "
                            "fixture-free probes)", field=f"blocks[{i}].probes_after")
-        check_protocol_phases(self)
-        if self.power is not None:
-            if not isinstance(self.power, PowerPlan):
-                raise fail(self.power, "a PowerPlan", field="power")
-            self.power.check_labels(self.conditions)
-        n_trials = sum(b.n_trials for b in self.blocks)
-        if n_trials > TRIALS_PER_SESSION.high:
-            raise fail(n_trials, f"at most {TRIALS_PER_SESSION.high:,} trials per session "
-                       f"({TRIALS_PER_SESSION.reason})", field="blocks")
-        for qname in ("pre", "post"):
-            q = getattr(self, qname)
-            if not isinstance(q, Questionnaire):
-                raise fail(q, "a Questionnaire", field=f"questionnaires.{qname}")
-        if self.post.demographics:
-            raise fail(True, "false (demographics are asked before the session: pre)",
-                       field="questionnaires.post.demographics")
+
+    def _resolve_items(self) -> None:
+        """The questionnaires' condition_* items: default conditions filled in (the
+        assisted ones), explicit ones checked against the protocol's."""
         # condition_* items default to the assisted conditions; explicit ones must exist
         assisted = self.assisted_conditions
         for qname in ("pre", "post"):

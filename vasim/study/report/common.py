@@ -10,6 +10,7 @@ from typing import Any, TypeVar
 
 import pandas as pd
 
+from vasim.study import stats
 from vasim.study.report.figures import (
     PALETTE,
 )
@@ -168,6 +169,33 @@ def captured(fn: Callable[..., T], *args: Any, **kwargs: Any) -> tuple[T, list[s
         if text not in msgs:
             msgs.append(text)
     return out, msgs
+
+
+def curve_summary(out: SectionOut, cells: pd.DataFrame, *, dv: str, trial: str,
+                  key: tuple[str, str], unit: str, condition: str | None = None,
+                  ) -> pd.DataFrame:
+    """A learning curve's table, as every section shows one: ``learning_curve_summary`` of
+    ``cells[dv]`` over subjects per ``trial`` (and ``condition``), its warnings noted in
+    ``out``, each row's ``trial_ids`` (the trials it averages) added, and the key column
+    (``key`` = (name, value), e.g. ``("dv", "latency")``) and ``unit`` put first.
+
+    Returns:
+        Columns ``key[0], unit, [condition,] trial, n, mean, q25, q75, trial_ids``.
+    """
+    grouped = {} if condition is None else {"condition": condition}
+    summ, msgs = captured(stats.learning_curve_summary, cells, dv=dv, subject="subject",
+                          trial=trial, **grouped)
+    out.notes.extend(msgs)
+    if condition is None:
+        ids = cells.groupby(trial)["trial_id"].agg(ids_text)
+        summ["trial_ids"] = summ["trial"].map(ids)
+    else:
+        pair_ids = cells.groupby([condition, trial])["trial_id"].agg(ids_text)
+        summ["trial_ids"] = [pair_ids.get((r[condition], r["trial"]), "")
+                             for r in summ.to_dict("records")]
+    summ.insert(0, key[0], key[1])
+    summ.insert(1, "unit", unit)
+    return summ
 
 
 def prov_row(table: str, group: str, subject: str | None = None, *,

@@ -15,7 +15,7 @@ Example:
     >>> import pandas as pd
     >>> s = pd.DataFrame({"trial": [1, 2, 3], "n": [4, 4, 4], "mean": [3.0, 2.0, 1.5],
     ...                   "q25": [2.5, 1.5, 1.0], "q75": [3.5, 2.5, 2.0]})
-    >>> fig = learning_curve_figure(s, ylabel="latency [s]", title="Latency")
+    >>> fig = learning_curve_figure(s, CurveText(ylabel="latency [s]", title="Latency"))
     >>> figure_png(fig)[:8] == b"\\x89PNG\\r\\n\\x1a\\n"
     True
 """
@@ -26,6 +26,7 @@ import io
 import math
 import textwrap
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -108,42 +109,71 @@ def _curve(ax: Axes, part: pd.DataFrame, color: str, label: str, *, iqr_label: s
             markersize=5, label=label)
 
 
+@dataclass(frozen=True)
+class CurveText:
+    """The words and marks around a learning curve.
+
+    Attributes:
+        ylabel: y-axis label with unit. title: axes title. xlabel: x-axis label.
+        split_after: draw a dotted vertical line at this x (e.g. 3.5 between the baseline
+            and the later probe trials) with ``split_labels`` on either side (None: none).
+    """
+
+    ylabel: str
+    title: str
+    xlabel: str = "VF-free trial number"
+    split_after: float | None = None
+    split_labels: tuple[str, str] = ("baseline", "after fixture blocks")
+
+
+@dataclass(frozen=True)
+class CurveGroups:
+    """One curve per level of a column of the summary.
+
+    Attributes:
+        condition: the column of ``summary`` giving one curve per level.
+        order: the levels in drawing order (default: order of appearance).
+        labels: display names of the levels.
+        bands: per level, its fit band (dashed line, no shading).
+        colors: per level, its colour (default: the palette in order).
+    """
+
+    condition: str
+    order: Sequence[Any] | None = None
+    labels: Mapping[Any, str] | None = None
+    bands: Mapping[Any, pd.DataFrame] | None = None
+    colors: Mapping[Any, str] | None = None
+
+
 def learning_curve_figure(
     summary: pd.DataFrame,
+    text: CurveText,
     *,
-    ylabel: str,
-    title: str,
-    xlabel: str = "VF-free trial number",
     band: pd.DataFrame | None = None,
     fit_label: str | None = None,
-    condition: str | None = None,
-    order: Sequence[Any] | None = None,
-    labels: Mapping[Any, str] | None = None,
-    bands: Mapping[Any, pd.DataFrame] | None = None,
-    colors: Mapping[Any, str] | None = None,
-    split_after: float | None = None,
-    split_labels: tuple[str, str] = ("baseline", "after fixture blocks"),
+    groups: CurveGroups | None = None,
 ) -> Figure:
     """Mean and interquartile range per trial index, with an optional power-law fit.
 
     Args:
         summary: ``learning_curve_summary`` table: columns ``trial, n, mean, q25, q75`` (and
-            ``condition`` when given), one row per trial index (and condition).
-        ylabel: y-axis label with unit. title: axes title. xlabel: x-axis label.
+            ``groups.condition`` when given), one row per trial index (and condition).
+        text: the axes' labels, title and baseline split (``CurveText``).
         band: single curve only: the fit's confidence band (``PowerLawFit.band``: columns
             ``trial, fit, lower, upper``) drawn as a dashed line and a hatched band.
         fit_label: legend text of the fitted curve (e.g. the model and its parameters).
-        condition: column of ``summary`` giving one curve per level, or None.
-        order: the condition levels in drawing order (default: order of appearance).
-        labels: display names of the condition levels.
-        bands: per condition level, its fit band (dashed line, no shading).
-        colors: per condition level, its colour (default: the palette in order).
-        split_after: draw a dotted vertical line at this x (e.g. 3.5 between the baseline
-            and the later probe trials) with ``split_labels`` on either side.
+        groups: one curve per level of a column (``CurveGroups``), or None: one curve.
 
     Returns:
         The figure (one axes).
     """
+    condition = None if groups is None else groups.condition
+    order = None if groups is None else groups.order
+    labels = None if groups is None else groups.labels
+    bands = None if groups is None else groups.bands
+    colors = None if groups is None else groups.colors
+    xlabel, ylabel, title = text.xlabel, text.ylabel, text.title
+    split_after, split_labels = text.split_after, text.split_labels
     fig = _new_figure(7.0, 4.2)
     ax = fig.add_subplot()
     if summary.empty:
@@ -505,6 +535,8 @@ def demographics_figure(
 
 __all__ = [
     "PALETTE",
+    "CurveGroups",
+    "CurveText",
     "box_figure",
     "choice_rating_figure",
     "counts_figure",

@@ -6,6 +6,53 @@ the subject x effect interaction as error term, Mauchly's test of sphericity and
 Greenhouse-Geisser / Huynh-Feldt / lower-bound corrections, partial and generalised eta
 squared. The seed's per-sample ANOVA is only reproduced as a labelled replication
 (:mod:`vasim.study.stats.seed_replication`).
+
+Method of rm_anova
+------------------
+With ``Y`` the (n, cells) matrix of cell means and, per effect, ``C`` a (cells, p)
+orthonormal contrast matrix (A: ``C_a (x) 1_b/sqrt(b)``, B: ``1_a/sqrt(a) (x) C_b``,
+A:B: ``C_a (x) C_b``), the transformed scores ``Z = Y C`` give
+
+.. math::
+
+    SS = n\\,\\lVert \\bar z \\rVert^2, \\quad
+    SS_{error} = \\sum_i \\lVert z_i - \\bar z \\rVert^2, \\quad
+    F = \\frac{SS/p}{SS_{error}/(p(n-1))}
+
+which equals the classical sums of squares (``SS_A = n b sum_j (m_j - m)^2`` ...).
+With ``S`` the (p, p) sample covariance of ``Z`` (the interaction contrasts for A:B,
+as in R ``car::Anova`` / ``ez``):
+
+- Greenhouse-Geisser: ``eps_gg = tr(S)^2 / (p tr(S^2))``, in ``[1/p, 1]``.
+- Huynh-Feldt with the Lecoutre (1991) correction, as R ``car``/``ez``/JASP:
+  ``eps_hf = min(1, ((N - g + 1) p eps_gg - 2) / (p (N - g - p eps_gg)))`` with
+  g = 1 group (all-within design), i.e. ``(n p eps_gg - 2) / (p (n - 1 - p eps_gg))``;
+  for a single group Lecoutre's and Huynh & Feldt's (1976) formulas coincide.
+- Mauchly: ``W = det(S) / (tr(S)/p)^p``,
+  ``chi2 = -(n - 1 - (2p^2 + p + 2)/(6p)) ln W`` with ``p(p+1)/2 - 1`` df, and the
+  p-value with Anderson's (1958) second-order term, as R ``mauchly.test``:
+  ``P(X2_f > chi2) + w2 (P(X2_{f+4} > chi2) - P(X2_f > chi2))``,
+  ``w2 = (p+2)(p-1)(p-2)(2p^3+6p^2+3c+2) / (288 ((n-1) p rho)^2)``,
+  ``rho = 1 - (2p^2+p+2)/(6p(n-1))``, where R's source has ``c`` = the number of
+  within cells of the design (``mauchly_p``) and Anderson ``c = p``
+  (``mauchly_p_anderson``); they differ in the 4th decimal at most.
+
+Undefined values are NaN, never a made-up number:
+
+- 2 levels (p = 1): sphericity holds trivially, all epsilons are 1; Mauchly's test
+  is undefined (W, chi2, df, p NaN).
+- Singular covariance (``n - 1 < p``, more levels than subjects, or contrasts that
+  are linearly dependent in the data): W = 0 carries no test, so Mauchly is NaN and
+  a :class:`StatsWarning` is issued. GG is still defined (needs only ``tr(S) > 0``);
+  HF is defined when ``n - 1 - p eps_gg > 0`` and NaN otherwise.
+- Zero error variance (``SS_error`` zero within round-off, see
+  :func:`vasim.study.stats._data.error_ss_is_zero`; e.g. a constant dependent
+  variable): F, p-values, epsilons and the effect sizes ``np2`` and ``ges`` are NaN.
+  **Decision**: ``ges`` is NaN too although its denominator may be positive,
+  because an effect measured without error variance is degenerate data, and an
+  effect size of a degenerate effect would be read as a finding (issue #16).
+- Sums of squares that overflow (values near 1e154 and above): F, p and effect
+  sizes are NaN with a note.
 """
 
 from __future__ import annotations
@@ -98,50 +145,8 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
             than 2 subjects or 2 levels, unbalanced design, or more than two factors.
 
     Notes:
-        With ``Y`` the (n, cells) matrix of cell means and, per effect, ``C`` a (cells, p)
-        orthonormal contrast matrix (A: ``C_a (x) 1_b/sqrt(b)``, B: ``1_a/sqrt(a) (x) C_b``,
-        A:B: ``C_a (x) C_b``), the transformed scores ``Z = Y C`` give
-
-        .. math::
-
-            SS = n\\,\\lVert \\bar z \\rVert^2, \\quad
-            SS_{error} = \\sum_i \\lVert z_i - \\bar z \\rVert^2, \\quad
-            F = \\frac{SS/p}{SS_{error}/(p(n-1))}
-
-        which equals the classical sums of squares (``SS_A = n b sum_j (m_j - m)^2`` ...).
-        With ``S`` the (p, p) sample covariance of ``Z`` (the interaction contrasts for A:B,
-        as in R ``car::Anova`` / ``ez``):
-
-        - Greenhouse-Geisser: ``eps_gg = tr(S)^2 / (p tr(S^2))``, in ``[1/p, 1]``.
-        - Huynh-Feldt with the Lecoutre (1991) correction, as R ``car``/``ez``/JASP:
-          ``eps_hf = min(1, ((N - g + 1) p eps_gg - 2) / (p (N - g - p eps_gg)))`` with
-          g = 1 group (all-within design), i.e. ``(n p eps_gg - 2) / (p (n - 1 - p eps_gg))``;
-          for a single group Lecoutre's and Huynh & Feldt's (1976) formulas coincide.
-        - Mauchly: ``W = det(S) / (tr(S)/p)^p``,
-          ``chi2 = -(n - 1 - (2p^2 + p + 2)/(6p)) ln W`` with ``p(p+1)/2 - 1`` df, and the
-          p-value with Anderson's (1958) second-order term, as R ``mauchly.test``:
-          ``P(X2_f > chi2) + w2 (P(X2_{f+4} > chi2) - P(X2_f > chi2))``,
-          ``w2 = (p+2)(p-1)(p-2)(2p^3+6p^2+3c+2) / (288 ((n-1) p rho)^2)``,
-          ``rho = 1 - (2p^2+p+2)/(6p(n-1))``, where R's source has ``c`` = the number of
-          within cells of the design (``mauchly_p``) and Anderson ``c = p``
-          (``mauchly_p_anderson``); they differ in the 4th decimal at most.
-
-        Undefined values are NaN, never a made-up number:
-
-        - 2 levels (p = 1): sphericity holds trivially, all epsilons are 1; Mauchly's test
-          is undefined (W, chi2, df, p NaN).
-        - Singular covariance (``n - 1 < p``, more levels than subjects, or contrasts that
-          are linearly dependent in the data): W = 0 carries no test, so Mauchly is NaN and
-          a :class:`StatsWarning` is issued. GG is still defined (needs only ``tr(S) > 0``);
-          HF is defined when ``n - 1 - p eps_gg > 0`` and NaN otherwise.
-        - Zero error variance (``SS_error`` zero within round-off, see
-          :func:`vasim.study.stats._data.error_ss_is_zero`; e.g. a constant dependent
-          variable): F, p-values, epsilons and the effect sizes ``np2`` and ``ges`` are NaN.
-          **Decision**: ``ges`` is NaN too although its denominator may be positive,
-          because an effect measured without error variance is degenerate data, and an
-          effect size of a degenerate effect would be read as a finding (issue #16).
-        - Sums of squares that overflow (values near 1e154 and above): F, p and effect
-          sizes are NaN with a note.
+        The method, and which values are undefined (NaN), are in the module
+        docstring (Method of rm_anova).
 
     Examples:
         >>> df = pd.DataFrame({
@@ -165,17 +170,7 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
     grand = float(y.mean())
     ss_subjects = float(y.shape[1] * ((y.mean(axis=1) - grand) ** 2).sum())
 
-    effects: list[tuple[str, np.ndarray]] = []
-    if len(factors) == 1:
-        effects.append((factors[0], orthonormal_contrasts(sizes[0])))
-    else:
-        ca, cb = orthonormal_contrasts(sizes[0]), orthonormal_contrasts(sizes[1])
-        ua = np.ones((sizes[0], 1)) / math.sqrt(sizes[0])
-        ub = np.ones((sizes[1], 1)) / math.sqrt(sizes[1])
-        effects.append((factors[0], np.kron(ca, ub)))
-        effects.append((factors[1], np.kron(ua, cb)))
-        effects.append((f"{factors[0]}:{factors[1]}", np.kron(ca, cb)))
-
+    effects = _effect_contrasts(factors, sizes)
     parts = [_effect_sums(y @ c) for _, c in effects]
     ss_error_sum = sum(p[1] for p in parts)
     n_cells = y.shape[1]
@@ -195,6 +190,18 @@ def rm_anova(data: pd.DataFrame, dv: str, subject: str,
     out.attrs["levels"] = {f: list(lev) for f, lev in zip(factors, cm.levels, strict=True)}
     out.attrs["n_obs_per_cell"] = (int(cm.n_obs.min()), int(cm.n_obs.max()))
     return out
+
+
+def _effect_contrasts(factors: list[str], sizes: list[int]) -> list[tuple[str, np.ndarray]]:
+    """Each effect's name and (cells, p) orthonormal contrasts: A; or A, B and A:B (A:
+    ``C_a (x) 1_b/sqrt(b)``, B: ``1_a/sqrt(a) (x) C_b``, A:B: ``C_a (x) C_b``)."""
+    if len(factors) == 1:
+        return [(factors[0], orthonormal_contrasts(sizes[0]))]
+    ca, cb = orthonormal_contrasts(sizes[0]), orthonormal_contrasts(sizes[1])
+    ua = np.ones((sizes[0], 1)) / math.sqrt(sizes[0])
+    ub = np.ones((sizes[1], 1)) / math.sqrt(sizes[1])
+    return [(factors[0], np.kron(ca, ub)), (factors[1], np.kron(ua, cb)),
+            (f"{factors[0]}:{factors[1]}", np.kron(ca, cb))]
 
 
 def _effect_sums(z: np.ndarray) -> tuple[float, float, np.ndarray]:

@@ -5,6 +5,38 @@ are reduced to one cell mean per subject and within level (as :func:`rm_anova`),
 subject belongs to exactly one group, and the three effects are tested as in pingouin's
 ``mixed_anova`` / R ``afex::aov_ez`` (univariate tests with the Greenhouse-Geisser
 correction on the within terms, sphericity from the pooled within-group covariance).
+
+Method of mixed_anova
+---------------------
+With ``Y`` the (N, k) cell means, ``g(i)`` the group of subject ``i`` (``n_g``
+subjects in group ``g``, ``G`` groups), ``m_i`` the subject means and ``C`` the
+(k, p = k-1) orthonormal contrasts, ``Z = Y C``:
+
+.. math::
+
+    SS_B = k \\sum_i (\\bar m_{g(i)} - \\bar m)^2, \\quad
+    SS_{S(B)} = k \\sum_i (m_i - \\bar m_{g(i)})^2,
+
+    SS_W = N \\lVert \\bar z \\rVert^2, \\quad
+    SS_{BW} = \\sum_g n_g \\lVert \\bar z_g - \\bar z \\rVert^2, \\quad
+    E = \\sum_i (z_i - \\bar z_{g(i)})(z_i - \\bar z_{g(i)})^T,
+    SS_{WS(B)} = \\mathrm{tr}\\,E
+
+with df ``(G-1, N-G)``, ``(p, p(N-G))`` and ``(p(G-1), p(N-G))``. **Decision**: the
+within main effect uses the subject-weighted grand mean ``z̄`` (type II sums of
+squares, as pingouin and JASP's default for this design; equal to type III when the
+groups have equal size) because the study's groups are rarely equal in size and
+pingouin/JASP are the published references. The sphericity tests use the pooled
+within-group covariance ``S = E / (N - G)`` (as ``car``/``afex``): GG
+``eps = tr(S)^2 / (p tr(S^2))`` and Mauchly with ``nu = N - G``.
+
+Undefined values are NaN with a note, never a made-up number: a zero error sum of
+squares (zero within round-off of the cell means,
+:func:`vasim.study.stats._data.error_ss_is_zero`, e.g. constant data) leaves F, p,
+eps and the effect sizes of that term undefined; overflowing sums of squares
+(values near 1e154 and above) leave F, p and effect sizes undefined; a
+singular ``S`` (fewer residual df than contrasts) leaves Mauchly undefined.
+A :class:`StatsWarning` repeats each such note.
 """
 
 from __future__ import annotations
@@ -88,35 +120,8 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
             a subject lacks a within level.
 
     Notes:
-        With ``Y`` the (N, k) cell means, ``g(i)`` the group of subject ``i`` (``n_g``
-        subjects in group ``g``, ``G`` groups), ``m_i`` the subject means and ``C`` the
-        (k, p = k-1) orthonormal contrasts, ``Z = Y C``:
-
-        .. math::
-
-            SS_B = k \\sum_i (\\bar m_{g(i)} - \\bar m)^2, \\quad
-            SS_{S(B)} = k \\sum_i (m_i - \\bar m_{g(i)})^2,
-
-            SS_W = N \\lVert \\bar z \\rVert^2, \\quad
-            SS_{BW} = \\sum_g n_g \\lVert \\bar z_g - \\bar z \\rVert^2, \\quad
-            E = \\sum_i (z_i - \\bar z_{g(i)})(z_i - \\bar z_{g(i)})^T,
-            SS_{WS(B)} = \\mathrm{tr}\\,E
-
-        with df ``(G-1, N-G)``, ``(p, p(N-G))`` and ``(p(G-1), p(N-G))``. **Decision**: the
-        within main effect uses the subject-weighted grand mean ``z̄`` (type II sums of
-        squares, as pingouin and JASP's default for this design; equal to type III when the
-        groups have equal size) because the study's groups are rarely equal in size and
-        pingouin/JASP are the published references. The sphericity tests use the pooled
-        within-group covariance ``S = E / (N - G)`` (as ``car``/``afex``): GG
-        ``eps = tr(S)^2 / (p tr(S^2))`` and Mauchly with ``nu = N - G``.
-
-        Undefined values are NaN with a note, never a made-up number: a zero error sum of
-        squares (zero within round-off of the cell means,
-        :func:`vasim.study.stats._data.error_ss_is_zero`, e.g. constant data) leaves F, p,
-        eps and the effect sizes of that term undefined; overflowing sums of squares
-        (values near 1e154 and above) leave F, p and effect sizes undefined; a
-        singular ``S`` (fewer residual df than contrasts) leaves Mauchly undefined.
-        A :class:`StatsWarning` repeats each such note.
+        The method, and which values are undefined (NaN), are in the module
+        docstring (Method of mixed_anova).
 
     Examples:
         >>> df = pd.DataFrame({
@@ -141,7 +146,7 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
                               file=src, field=col)
     cm = cell_means(data, dv, subject, [within])
     y = cm.values
-    n, k = y.shape
+    n = y.shape[0]
     group_of = _group_of_subject(data, subject, between, cm.subjects)
     groups = levels_of(pd.Series(group_of))
     if len(groups) < 2:
@@ -154,23 +159,27 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
     gidx = np.array([groups.index(g) for g in group_of])
     n_g = np.bincount(gidx, minlength=len(groups)).astype(float)
     n_groups = len(groups)
-    df_res = n - n_groups
+    rows = _effect_rows(between, within, y, _split_plot_sums(y, gidx, n_g), n_groups)
+    _warn_undefined(rows)
+    out = pd.DataFrame(rows, columns=list(MIXED_ANOVA_COLUMNS))
+    out["DF1"] = out["DF1"].astype("int64")
+    out["DF2"] = out["DF2"].astype("int64")
+    out.attrs["n_subjects"] = n
+    out.attrs["group_sizes"] = {g: int(c_) for g, c_ in zip(groups, n_g, strict=True)}
+    out.attrs["levels"] = list(cm.levels[0])
+    out.attrs["n_obs_per_cell"] = (int(cm.n_obs.min()), int(cm.n_obs.max()))
+    return out
 
-    # between subjects
-    m = y.mean(axis=1)
-    m_g = np.bincount(gidx, weights=m) / n_g
-    ss_b = float(k * ((m_g[gidx] - m.mean()) ** 2).sum())
-    ss_sb = float(k * ((m - m_g[gidx]) ** 2).sum())
-    # within subjects, on orthonormal contrasts
-    c = orthonormal_contrasts(k)
-    p = c.shape[1]
-    z = y @ c
-    zbar = z.mean(axis=0)
-    z_g = np.stack([z[gidx == j].mean(axis=0) for j in range(n_groups)])
-    ss_w = float(n * zbar @ zbar)
-    ss_bw = float((n_g * ((z_g - zbar) ** 2).sum(axis=1)).sum())
-    resid = z - z_g[gidx]
-    sscp = resid.T @ resid
+
+def _effect_rows(between: str, within: str, y: np.ndarray,
+                 sums: tuple[float, float, float, float, np.ndarray], n_groups: int,
+                 ) -> list[dict[str, Any]]:
+    """The between, within and interaction rows from the cell means ``y`` and their
+    split-plot ``sums`` (``_split_plot_sums``), with the within row's sphericity."""
+    ss_b, ss_sb, ss_w, ss_bw, sscp = sums
+    n, k = y.shape
+    df_res = n - n_groups
+    p = k - 1
     ss_ws = float(np.trace(sscp))
     ss_errors = ss_sb + ss_ws
 
@@ -185,19 +194,42 @@ def mixed_anova(data: pd.DataFrame, dv: str, within: str, between: str,
              eps, notes[INTERACTION]),
     ]
     rows[1]["W_spher"], rows[1]["p_spher"] = mauchly
+    return rows
+
+
+def _warn_undefined(rows: list[dict[str, Any]]) -> None:
+    """A ``StatsWarning`` per row with a value undefined for this data (the 2-level case
+    is not one: Mauchly's test is simply not defined there)."""
     for row in rows:
         undefined = [t for t in str(row["note"]).split("; ") if t and "2 levels" not in t]
         if undefined:
             warnings.warn(f"mixed_anova {row['Source']!r}: {'; '.join(undefined)}",
-                          StatsWarning, stacklevel=2)
-    out = pd.DataFrame(rows, columns=list(MIXED_ANOVA_COLUMNS))
-    out["DF1"] = out["DF1"].astype("int64")
-    out["DF2"] = out["DF2"].astype("int64")
-    out.attrs["n_subjects"] = n
-    out.attrs["group_sizes"] = {g: int(c_) for g, c_ in zip(groups, n_g, strict=True)}
-    out.attrs["levels"] = list(cm.levels[0])
-    out.attrs["n_obs_per_cell"] = (int(cm.n_obs.min()), int(cm.n_obs.max()))
-    return out
+                          StatsWarning, stacklevel=3)
+
+
+def _split_plot_sums(y: np.ndarray, gidx: np.ndarray, n_g: np.ndarray,
+                     ) -> tuple[float, float, float, float, np.ndarray]:
+    """The split-plot sums of squares of the (N, k) cell means ``y`` with subject ``i`` in
+    group ``gidx[i]`` (``n_g`` subjects per group), as in the module docstring.
+
+    Returns:
+        ``SS_B``, ``SS_S(B)``, ``SS_W``, ``SS_BW`` and the (p, p) residual SSCP matrix ``E``
+        of the orthonormal within contrasts (``SS_WS(B) = tr E``).
+    """
+    n, k = y.shape
+    # between subjects
+    m = y.mean(axis=1)
+    m_g = np.bincount(gidx, weights=m) / n_g
+    ss_b = float(k * ((m_g[gidx] - m.mean()) ** 2).sum())
+    ss_sb = float(k * ((m - m_g[gidx]) ** 2).sum())
+    # within subjects, on orthonormal contrasts
+    z = y @ orthonormal_contrasts(k)
+    zbar = z.mean(axis=0)
+    z_g = np.stack([z[gidx == j].mean(axis=0) for j in range(len(n_g))])
+    ss_w = float(n * zbar @ zbar)
+    ss_bw = float((n_g * ((z_g - zbar) ** 2).sum(axis=1)).sum())
+    resid = z - z_g[gidx]
+    return ss_b, ss_sb, ss_w, ss_bw, resid.T @ resid
 
 
 def _group_of_subject(data: pd.DataFrame, subject: str, between: str,

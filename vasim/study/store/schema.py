@@ -217,20 +217,7 @@ def sql_set(values: tuple[str, ...]) -> str:
     return "(" + ", ".join(f"'{v}'" for v in values) + ")"
 
 
-_SCHEMA_V1 = """
-CREATE TABLE schema_version (
-    version     INTEGER PRIMARY KEY,
-    applied_at  TEXT NOT NULL
-);
-CREATE TABLE subjects (
-    code        TEXT PRIMARY KEY
-                CHECK (length(code) BETWEEN 1 AND 32 AND code NOT GLOB '*[^A-Za-z0-9_-]*'),
-    created_at  TEXT NOT NULL,
-    notes       TEXT
-);
-CREATE TABLE trials (
-    id              INTEGER PRIMARY KEY,
-    subject         TEXT NOT NULL REFERENCES subjects(code),
+_V1_TRIAL_COLUMNS_DDL = """\
     session_id      INTEGER,
     protocol        TEXT,
     task            TEXT NOT NULL,
@@ -252,7 +239,25 @@ CREATE TABLE trials (
     proc_token      TEXT,
     config_json     TEXT,
     schema_toml     TEXT,
-    vasim_version   TEXT
+    vasim_version   TEXT"""
+"""The ``trials`` columns of version 1 after ``subject`` (frozen text: version 1's table and
+version 3's rebuild both write them, the rebuild only changes ``subject`` and adds columns)."""
+
+_SCHEMA_V1 = f"""
+CREATE TABLE schema_version (
+    version     INTEGER PRIMARY KEY,
+    applied_at  TEXT NOT NULL
+);
+CREATE TABLE subjects (
+    code        TEXT PRIMARY KEY
+                CHECK (length(code) BETWEEN 1 AND 32 AND code NOT GLOB '*[^A-Za-z0-9_-]*'),
+    created_at  TEXT NOT NULL,
+    notes       TEXT
+);
+CREATE TABLE trials (
+    id              INTEGER PRIMARY KEY,
+    subject         TEXT NOT NULL REFERENCES subjects(code),
+{_V1_TRIAL_COLUMNS_DDL}
 );
 CREATE INDEX trials_subject ON trials(subject);
 CREATE INDEX trials_status ON trials(status);
@@ -396,28 +401,7 @@ _SCHEMA_V3 = f"""
 CREATE TABLE trials_v3 (
     id              INTEGER PRIMARY KEY,
     subject         TEXT REFERENCES subjects(code),
-    session_id      INTEGER,
-    protocol        TEXT,
-    task            TEXT NOT NULL,
-    variant         INTEGER,
-    schema          TEXT,
-    operator        TEXT,
-    seed            INTEGER,
-    status          TEXT NOT NULL DEFAULT 'running'
-                    CHECK (status IN ('running', 'completed', 'interrupted')),
-    started_at      TEXT NOT NULL,
-    ended_at        TEXT,
-    dt              REAL,
-    n_samples       INTEGER,
-    active_fixtures TEXT NOT NULL DEFAULT '',
-    summary_json    TEXT,
-    timing_json     TEXT,
-    pid             INTEGER,
-    host            TEXT,
-    proc_token      TEXT,
-    config_json     TEXT,
-    schema_toml     TEXT,
-    vasim_version   TEXT,
+{_V1_TRIAL_COLUMNS_DDL},
     schedule_index  INTEGER,
     attempt         INTEGER,
     label           TEXT CHECK (label IS NULL OR (length(label) BETWEEN 1 AND 64

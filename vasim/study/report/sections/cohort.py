@@ -65,18 +65,39 @@ def cohort_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
         out.notes.append(f"no demographics (pre-questionnaire) for {len(no_demo)} subject(s): "
                          f"{subjects_text(no_demo)}; they count as group 'unknown'")
     group_of = dict(zip(demo["subject"], demo["subject_group"], strict=True))
-    sched = data.schedule
-    tr = data.trials
+    reruns = data.schedule[data.schedule["attempts"] > 1]
+    out.blocks.append(TableBlock(
+        "cohort_summary", "Cohort and sessions",
+        _summary_table(data, subjects, group_of, no_demo),
+        "Counts over the sessions of this protocol; 'subjects' and 'session_ids' list whom "
+        "each count covers.", columns=("quantity", "value")))
+    _demographic_blocks(out, demo)
+    sess = s[["id", "subject", "status", "n_trials", "n_completed", "n_interrupted", "seed",
+              "created_at", "ended_at", "notes"]].rename(columns={"id": "session_id"})
+    out.blocks.append(TableBlock(
+        "cohort_sessions", "Sessions", sess,
+        "One row per session: progress, randomisation seed and notes (e.g. why a session "
+        "was aborted).", display="details"))
+    if len(reruns):
+        _reruns_block(out, reruns, data.trials)
+    return out.section("cohort", "Cohort"), []
+
+
+def _subjects_of(frame: pd.DataFrame) -> str:
+    return " ".join(sorted(set(frame["subject"])))
+
+
+def _summary_table(data: StudyData, subjects: list[str], group_of: dict[str, str],
+                   no_demo: list[str]) -> pd.DataFrame:
+    """The cohort's counts: subjects per group, sessions per status, trials run and re-run;
+    with the subjects and sessions each count covers."""
+    s, sched, tr = data.sessions, data.schedule, data.trials
     interrupted = tr[tr["status"] == "interrupted"]
     reruns = sched[sched["attempts"] > 1]
     completed_s = s[s["status"] == "completed"]
     running_s = s[s["status"] == "running"]
     aborted_s = s[s["status"] == "aborted"]
     n_done = int(sched["trial_id"].notna().sum())
-
-    def subj_of(frame: pd.DataFrame) -> str:
-        return " ".join(sorted(set(frame["subject"])))
-
     rows = [
         ("subjects", len(subjects), " ".join(subjects), ""),
         ("surgeons", sum(group_of.get(x) == "surgeon" for x in subjects),
@@ -84,26 +105,26 @@ def cohort_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
         ("residents", sum(group_of.get(x) == "resident" for x in subjects),
          " ".join(x for x in subjects if group_of.get(x) == "resident"), ""),
         ("group unknown (no demographics)", len(no_demo), " ".join(no_demo), ""),
-        ("sessions", len(s), subj_of(s), ids_text(s["id"])),
-        ("sessions completed", len(completed_s), subj_of(completed_s),
+        ("sessions", len(s), _subjects_of(s), ids_text(s["id"])),
+        ("sessions completed", len(completed_s), _subjects_of(completed_s),
          ids_text(completed_s["id"])),
-        ("sessions incomplete (running)", len(running_s), subj_of(running_s),
+        ("sessions incomplete (running)", len(running_s), _subjects_of(running_s),
          ids_text(running_s["id"])),
-        ("sessions aborted", len(aborted_s), subj_of(aborted_s), ids_text(aborted_s["id"])),
-        ("scheduled trials", len(sched), subj_of(s), ids_text(s["id"])),
-        ("scheduled trials completed (analysed)", n_done, subj_of(sched[sched["trial_id"]
+        ("sessions aborted", len(aborted_s), _subjects_of(aborted_s), ids_text(aborted_s["id"])),
+        ("scheduled trials", len(sched), _subjects_of(s), ids_text(s["id"])),
+        ("scheduled trials completed (analysed)", n_done, _subjects_of(sched[sched["trial_id"]
                                                                        .notna()]), ""),
-        ("interrupted trial rows", len(interrupted), subj_of(interrupted),
+        ("interrupted trial rows", len(interrupted), _subjects_of(interrupted),
          ids_text(interrupted["session_id"])),
-        ("scheduled trials re-run after an interruption", len(reruns), subj_of(reruns),
+        ("scheduled trials re-run after an interruption", len(reruns), _subjects_of(reruns),
          ids_text(reruns["session_id"])),
     ]
-    summary = pd.DataFrame(rows, columns=["quantity", "value", "subjects", "session_ids"])
-    out.blocks.append(TableBlock(
-        "cohort_summary", "Cohort and sessions", summary,
-        "Counts over the sessions of this protocol; 'subjects' and 'session_ids' list whom "
-        "each count covers.", columns=("quantity", "value")))
-    # demographics by group
+    return pd.DataFrame(rows, columns=["quantity", "value", "subjects", "session_ids"])
+
+
+def _demographic_blocks(out: SectionOut, demo: pd.DataFrame) -> None:
+    """Specialisation and experience per group: the table and (with demographics) the
+    seed's Fig. 6.16."""
     drows = []
     for fld, _, levels in _DEMOGRAPHIC_PANELS:
         for lev in levels:
@@ -132,27 +153,23 @@ def cohort_section(data: StudyData) -> tuple[Section, list[dict[str, str]]]:
             "demographics", "Composition of the cohort (as the seed's Fig. 6.16)", figure_png(fig),
             "Subjects per specialisation and experience level, stacked by group; numbers "
             "in tables/cohort_demographics.csv."))
-    sess = s[["id", "subject", "status", "n_trials", "n_completed", "n_interrupted", "seed",
-              "created_at", "ended_at", "notes"]].rename(columns={"id": "session_id"})
+
+
+def _reruns_block(out: SectionOut, reruns: pd.DataFrame, tr: pd.DataFrame) -> None:
+    """The scheduled trials re-run after an interruption, with their interrupted attempts."""
+    rr = []
+    for r in reruns.itertuples(index=False):
+        att = tr[(tr["session_id"] == r.session_id)
+                 & (tr["schedule_index"] == r.trial_index)]
+        rr.append({"session_id": int(r.session_id), "subject": r.subject,
+                   "trial_index": int(r.trial_index), "condition": r.condition,
+                   "attempts": int(r.attempts),
+                   "trial_id": None if pd.isna(r.trial_id) else int(r.trial_id),
+                   "interrupted_trial_ids": ids_text(
+                       att.loc[att["status"] == "interrupted", "id"])})
     out.blocks.append(TableBlock(
-        "cohort_sessions", "Sessions", sess,
-        "One row per session: progress, randomisation seed and notes (e.g. why a session "
-        "was aborted).", display="details"))
-    if len(reruns):
-        rr = []
-        for r in reruns.itertuples(index=False):
-            att = tr[(tr["session_id"] == r.session_id)
-                     & (tr["schedule_index"] == r.trial_index)]
-            rr.append({"session_id": int(r.session_id), "subject": r.subject,
-                       "trial_index": int(r.trial_index), "condition": r.condition,
-                       "attempts": int(r.attempts),
-                       "trial_id": None if pd.isna(r.trial_id) else int(r.trial_id),
-                       "interrupted_trial_ids": ids_text(
-                           att.loc[att["status"] == "interrupted", "id"])})
-        out.blocks.append(TableBlock(
-            "cohort_reruns", "Scheduled trials re-run after an interruption",
-            pd.DataFrame(rr), "The completed attempt (trial_id) is the one analysed; the "
-            "interrupted attempts are kept in the store but not analysed."))
-    return out.section("cohort", "Cohort"), []
+        "cohort_reruns", "Scheduled trials re-run after an interruption",
+        pd.DataFrame(rr), "The completed attempt (trial_id) is the one analysed; the "
+        "interrupted attempts are kept in the store but not analysed."))
 
 

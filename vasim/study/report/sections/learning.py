@@ -14,12 +14,15 @@ from vasim.study.report.common import (
     PLOT_NAMES,
     SectionOut,
     captured,
+    curve_summary,
     ids_text,
     note_excluded,
     prov_row,
 )
 from vasim.study.report.data import StudyData
 from vasim.study.report.figures import (
+    CurveGroups,
+    CurveText,
     figure_png,
     learning_curve_figure,
 )
@@ -37,11 +40,12 @@ SEED_FIGURE: dict[str, str] = {"eq65": " (the seed's Fig. 6.17 measure)",
 """The seed figure an outcome's learning curve corresponds to."""
 
 
-def learning_curve_section(data: StudyData, vf: VfAnalysis
-                           ) -> tuple[Section, list[dict[str, str]]]:
-    """Learning curves over the VF-free probe trials (seed Figs. 6.17-6.18)."""
-    out = SectionOut()
-    intro: list[Block] = [Paragraph(
+_TITLE = "Learning curves (VF-free trials)"
+
+
+def _methods(vf: VfAnalysis) -> Paragraph:
+    """The section's methods paragraph (the path deviation when it is stored)."""
+    return Paragraph(
         "Methods. VF-free (probe) trials only (on the assisted trials' variants, in "
         "rotation: docs/study-design.md), plotted "
         "against the practice count n: the trial's position in the session (1-based, every "
@@ -56,58 +60,42 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
         "time, mm·s; it grows with the time spent, so it is not an accuracy measure)"
         ". Fit: power law of practice y = a·n^(-b) by least squares on the subject-level "
         "points, with the 95 % pointwise confidence band of the fitted mean curve (delta "
-        "method).")]
+        "method).")
+
+
+def learning_curve_section(data: StudyData, vf: VfAnalysis
+                           ) -> tuple[Section, list[dict[str, str]]]:
+    """Learning curves over the VF-free probe trials (seed Figs. 6.17-6.18)."""
+    out = SectionOut()
+    intro: list[Block] = [_methods(vf)]
     tc = vf.trial_cells
     if tc.empty:
         out.notes.append("no VF-free probe trial with per-point metrics in the sessions of "
                          "this protocol: no learning curve")
-        return out.section("learning", "Learning curves (VF-free trials)", intro), []
+        return out.section("learning", _TITLE, intro), []
     incomplete = vf.trials[vf.trials["probe"].astype(bool) & ~vf.trials["completed"]]
     if len(incomplete):
         out.notes.append(f"{len(incomplete)} probe trial(s) did not reach every point within "
                          f"the time limit (their L covers the reached points only): trial "
                          f"ids {ids_text(incomplete['trial_id'])}")
     note_excluded(out, vf.excluded, probe_only=True, trials=vf.trials)
-    summaries, fits = [], []
+    summaries: list[pd.DataFrame] = []
+    fits: list[pd.DataFrame] = []
     prov: list[dict[str, str]] = []
     if PATH_DEV_DV not in vf.dvs:
         out.notes.append(PATH_DEV_ABSENT)
     for dv, name, unit in vf.dvs:
-        summ, msgs = captured(stats.learning_curve_summary, tc, dv=dv, subject="subject",
-                              trial="practice")
-        out.notes.extend(msgs)
+        summ = curve_summary(out, tc, dv=dv, trial="practice", key=("dv", dv), unit=unit)
         summ = summ.rename(columns={"trial": "practice"})
-        ids = tc.groupby("practice")["trial_id"].agg(ids_text)
         probe_of = tc.groupby("practice")["trial"].agg(
             lambda s: " ".join(str(v) for v in sorted(set(s))))
         summ.insert(summ.columns.get_loc("practice") + 1, "probe",
                     summ["practice"].map(probe_of))
-        summ["trial_ids"] = summ["practice"].map(ids)
-        summ.insert(0, "dv", dv)
-        summ.insert(1, "unit", unit)
         summaries.append(summ)
-        band, fit_label = None, None
-        try:
-            fitrow, msgs = captured(stats.fit_learning_curves, tc, dv=dv, subject="subject",
-                                    trial="practice")
-            out.notes.extend(msgs)
-            pf, _ = captured(stats.fit_power_law, tc["practice"].to_numpy(dtype=float),
-                             tc[dv].to_numpy(dtype=float))
-            grid = np.linspace(float(tc["practice"].min()), float(tc["practice"].max()), 60)
-            band = pf.band(grid)
-            r = fitrow.iloc[0]
-            fit_label = f"fit ${r['a']:.3g}\\, n^{{-{r['b']:.3g}}}$"
-            fitrow.insert(0, "dv", dv)
-            fitrow.insert(1, "model", "a*n^(-b)")
-            fits.append(fitrow)
-        except ConfigError as exc:
-            out.notes.append(f"{name}: power-law fit not computed: {exc.reason}")
-        pname = PLOT_NAMES[dv]
-        fig = learning_curve_figure(
-            summ.rename(columns={"practice": "trial"}), ylabel=f"{pname} [{unit}]",
-            title=f"{pname[0].upper()}{pname[1:]} over the VF-free trials", band=band,
-            fit_label=fit_label, xlabel=PRACTICE_XLABEL,
-            split_after=vf.n_baseline + 0.5 if vf.n_baseline else None)
+        band, fit_label = _probe_fit(out, tc, dv, name, fits)
+        fig = learning_curve_figure(summ.rename(columns={"practice": "trial"}),
+                                    _practice_text(vf, dv, unit, " over the VF-free trials"),
+                                    band=band, fit_label=fit_label)
         out.blocks.append(FigureBlock(
             f"learning_{dv}", f"Learning curve: {name}" + SEED_FIGURE.get(dv, ""),
             figure_png(fig),
@@ -115,25 +103,11 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
             f"against the practice count n (the trial's position in the session); "
             f"dashed: power-law fit with its 95 % confidence band (hatched). Numbers: "
             f"tables/vf_learning_curve.csv (dv = {dv}) and tables/vf_learning_fit.csv."))
-    table = pd.concat(summaries, ignore_index=True)
-    out.blocks.append(TableBlock(
-        "vf_learning_curve", "Learning curve per VF-free trial", table,
-        "practice: the trial's position in the session (1-based); probe: its VF-free trial "
-        "number; n subjects; mean, 25th and 75th percentiles over subjects; trial_ids: the "
-        "probe trials.", columns=("dv", "unit", "practice", "probe", "n", "mean", "q25",
-                                  "q75")))
+    _curve_tables(out, pd.concat(summaries, ignore_index=True), fits)
     if fits:
-        ftab = pd.concat(fits, ignore_index=True)
-        out.blocks.append(TableBlock(
-            "vf_learning_fit", "Power-law fits y = a·n^(-b)", ftab,
-            "n = practice count; a in the unit of the dv; b dimensionless (> 0: improvement "
-            "with practice); "
-            "standard errors from the least-squares covariance; provenance.csv lists the "
-            "probe trials fitted.", columns=("dv", "model", "n_obs", "a", "b", "se_a", "se_b",
-                                             "rss", "dof")))
         for r in tc.itertuples(index=False):
             prov.append(prov_row("vf_learning_fit", f"practice={r.practice}", r.subject,
-                              trial_ids=[r.trial_id]))
+                                 trial_ids=[r.trial_id]))
     _group_curves(data, vf, out)
     out.blocks.append(TableBlock(
         "vf_trials", "Analysed trials of the VF study", vf.trials,
@@ -144,9 +118,61 @@ def learning_curve_section(data: StudyData, vf: VfAnalysis
         "blocks; practised / previous: the fixture a probe closes / the one before; stage = "
         "probe number closing the trial's block (the seed replication's trial level).",
         display="csv"))
-    return out.section("learning", "Learning curves (VF-free trials)", intro), prov
+    return out.section("learning", _TITLE, intro), prov
 
 
+def _practice_text(vf: VfAnalysis, dv: str, unit: str, title_tail: str) -> CurveText:
+    """The axes of a curve over the practice count: the dv's plot name and unit, the
+    title, and the split after the baseline probes (none without a baseline)."""
+    pname = PLOT_NAMES[dv]
+    return CurveText(ylabel=f"{pname} [{unit}]",
+                     title=f"{pname[0].upper()}{pname[1:]}{title_tail}",
+                     xlabel=PRACTICE_XLABEL,
+                     split_after=vf.n_baseline + 0.5 if vf.n_baseline else None)
+
+
+def _probe_fit(out: SectionOut, tc: pd.DataFrame, dv: str, name: str,
+               fits: list[pd.DataFrame]) -> tuple[pd.DataFrame | None, str | None]:
+    """The power-law fit of ``dv`` over the probe cells: its row added to ``fits``.
+
+    Returns:
+        The fit's confidence band and legend label, or (None, None) when not computed.
+    """
+    try:
+        fitrow, msgs = captured(stats.fit_learning_curves, tc, dv=dv, subject="subject",
+                                trial="practice")
+        out.notes.extend(msgs)
+        pf, _ = captured(stats.fit_power_law, tc["practice"].to_numpy(dtype=float),
+                         tc[dv].to_numpy(dtype=float))
+        grid = np.linspace(float(tc["practice"].min()), float(tc["practice"].max()), 60)
+        band = pf.band(grid)
+        r = fitrow.iloc[0]
+        fit_label = f"fit ${r['a']:.3g}\\, n^{{-{r['b']:.3g}}}$"
+        fitrow.insert(0, "dv", dv)
+        fitrow.insert(1, "model", "a*n^(-b)")
+        fits.append(fitrow)
+    except ConfigError as exc:
+        out.notes.append(f"{name}: power-law fit not computed: {exc.reason}")
+        return None, None
+    return band, fit_label
+
+
+def _curve_tables(out: SectionOut, table: pd.DataFrame, fits: list[pd.DataFrame]) -> None:
+    """The learning-curve table and, when any, the power-law fits' table."""
+    out.blocks.append(TableBlock(
+        "vf_learning_curve", "Learning curve per VF-free trial", table,
+        "practice: the trial's position in the session (1-based); probe: its VF-free trial "
+        "number; n subjects; mean, 25th and 75th percentiles over subjects; trial_ids: the "
+        "probe trials.", columns=("dv", "unit", "practice", "probe", "n", "mean", "q25",
+                                  "q75")))
+    if fits:
+        out.blocks.append(TableBlock(
+            "vf_learning_fit", "Power-law fits y = a·n^(-b)", pd.concat(fits, ignore_index=True),
+            "n = practice count; a in the unit of the dv; b dimensionless (> 0: improvement "
+            "with practice); "
+            "standard errors from the least-squares covariance; provenance.csv lists the "
+            "probe trials fitted.", columns=("dv", "model", "n_obs", "a", "b", "se_a", "se_b",
+                                             "rss", "dof")))
 
 
 PRACTICE_XLABEL = "trial number in the session (practice count n)"
@@ -176,22 +202,13 @@ def _group_curves(data: StudyData, vf: VfAnalysis, out: SectionOut) -> None:
         return
     parts = []
     for dv, name, unit in vf.dvs:
-        summ, msgs = captured(stats.learning_curve_summary, tc, dv=dv, subject="subject",
-                              trial="practice", condition="group")
-        out.notes.extend(msgs)
+        summ = curve_summary(out, tc, dv=dv, trial="practice", key=("dv", dv), unit=unit,
+                             condition="group")
         summ = summ.rename(columns={"trial": "practice"})
-        ids = tc.groupby(["group", "practice"])["trial_id"].agg(ids_text)
-        summ["trial_ids"] = [ids.get((r["group"], r["practice"]), "")
-                             for r in summ.to_dict("records")]
-        summ.insert(0, "dv", dv)
-        summ.insert(1, "unit", unit)
         parts.append(summ)
-        pname = PLOT_NAMES[dv]
-        fig = learning_curve_figure(
-            summ.rename(columns={"practice": "trial"}), ylabel=f"{pname} [{unit}]",
-            title=f"{pname[0].upper()}{pname[1:]}: surgeons vs residents",
-            xlabel=PRACTICE_XLABEL, condition="group", order=present, labels=None,
-            split_after=vf.n_baseline + 0.5 if vf.n_baseline else None)
+        fig = learning_curve_figure(summ.rename(columns={"practice": "trial"}),
+                                    _practice_text(vf, dv, unit, ": surgeons vs residents"),
+                                    groups=CurveGroups("group", order=present))
         out.blocks.append(FigureBlock(
             f"learning_group_{dv}", f"Learning curve per group: {name}", figure_png(fig),
             "Mean (line) and interquartile range (shaded) over the subjects of each group "
