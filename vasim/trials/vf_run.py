@@ -89,13 +89,13 @@ def run_vf_trial(config: TrialConfig, sink: TrialSink | None = None, *,
         return runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
 
     def meta() -> TrialMeta:  # built only with a sink
-        return trial_meta(config, runner.schema, runner.operator.profile,
+        return trial_meta(config, runner.schema, runner.person.profile,
                           session_id=session_id, schedule_index=schedule_index,
                           protocol=protocol)
 
     with stored_trial(sink, meta, partial=partial, samples=runner.samples) as rec:
         t0 = time.perf_counter()
-        bar = (progress_bar(runner._n, f"trial {config.schema}", "pt", leave=False)
+        bar = (progress_bar(runner.model.n, f"trial {config.schema}", "pt", leave=False)
                if progress else None)
         chunk = 0.25
         last_i = 0
