@@ -21,7 +21,7 @@ from vasim.study.protocol import load_protocol
 from vasim.study.store import TrialStore
 from vasim.trials.registry import run_trial
 from vasim.trials.teleop import CYCLE_DT, TISSUE_METRICS, TeleopTrial
-from vasim.trials.vf import TrialConfig
+from vasim.trials.teleop_config import TeleopTrialConfig
 
 SEED = 3
 
@@ -155,19 +155,19 @@ def test_the_camera_hand_moves_only_in_mrcp_cam(session) -> None:
 
 
 def test_run_trial_dispatches_a_mode_and_same_seed_same_trial() -> None:
-    cfg = TrialConfig(mode="stdt", seed=11, max_time=3.0, scene="none")
+    cfg = TeleopTrialConfig(mode="stdt", seed=11, max_time=3.0, scene="none")
     a, tid = run_trial(cfg)
     assert tid is None and a.summary["mode"] == "stdt"
     b = TeleopTrial(cfg).run()
     np.testing.assert_array_equal(a.samples.view()["x"], b.samples.view()["x"])
     with pytest.raises(Exception, match="mode"):
-        TrialConfig(mode="bimanual")
+        TeleopTrialConfig(mode="bimanual")
 
 
 def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
     from vasim.trials.teleop import FAULT_ACK_TIME, MAX_SAFETY_STOPS
 
-    tr = TeleopTrial(TrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
+    tr = TeleopTrial(TeleopTrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
                      n_rings=2)
     cycles = tr.cycles()
     for _ in range(20):
@@ -195,7 +195,7 @@ def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
 def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
     # StdT carries the needle with the right instrument; the left one, idle, is put into
     # the tissue straight under its tip: its contact is Q's although it holds nothing
-    tr = TeleopTrial(TrialConfig(mode="stdt", seed=11, max_time=1.0))
+    tr = TeleopTrial(TeleopTrialConfig(mode="stdt", seed=11, max_time=1.0))
     st = tr.station
     assert tr.abdomen is not None and list(tr.instruments()) == ["right", "left", "camera"]
     tip = st.tip("left")
@@ -235,7 +235,7 @@ def test_every_mode_follows_the_same_needle_route() -> None:
     for mode in ("stdt", "mrcp"):
         # the route is the station's and the task's: the person as the scripted operator is,
         # without mode penalties (NEUTRAL, the default: the mechanism alone)
-        tr = TeleopTrial(TrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
+        tr = TeleopTrial(TeleopTrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
                          n_rings=3, effects=NEUTRAL)
         res = tr.run()
         assert res.summary["finished"]

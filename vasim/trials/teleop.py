@@ -133,8 +133,8 @@ moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
   constant; its path is the aim point's.
 
 Example:
-    >>> from vasim.trials.vf import TrialConfig
-    >>> res = TeleopTrial(TrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
+    >>> from vasim.trials.teleop_config import TeleopTrialConfig
+    >>> res = TeleopTrial(TeleopTrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
     ...                   n_rings=2).run()
     >>> res.summary["mode"], float(res.samples.view()["t"][0])
     ('mrcp', 0.018)
@@ -149,7 +149,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
 from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 from vasim.mrcp.modes import KernelState
 from vasim.mrcp.planner import PlannerParams
@@ -167,15 +166,16 @@ from vasim.operator.needle import (
     needs_via,
     pregrasp_offset,
 )
-from vasim.operator.scripted import OperatorProfile
 from vasim.operator.teleop_profile import NEUTRAL, TeleopEffects, teleop_adjustment
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
+from vasim.trials.config_fields import preset_profile
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
+from vasim.trials.teleop_config import TeleopTrialConfig
 from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
 from vasim.trials.teleop_quality import TargetDeformation
-from vasim.trials.vf import TrialConfig, TrialResult
+from vasim.trials.vf import TrialResult
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
@@ -250,7 +250,7 @@ class TeleopTrial:
     """One trial of a teleoperation mode (module docstring).
 
     Args:
-        config: the trial; ``config.mode`` names the mode (required).
+        config: the trial; ``config.mode`` names the mode.
         n_rings: rings of the needle task (default: all of ``RING_SITES``); their pass
             radius is ``config.reach_radius`` (the protocol's), else ``RING_RADIUS``.
         abdomen: a fresh abdomen to use (of ``config.scene``; it accumulates this trial's
@@ -260,23 +260,17 @@ class TeleopTrial:
         effects: the operator's mode penalties (``vasim.operator.teleop_profile``);
             None: ``config.mode_effects`` (a session's declared teleoperation scenario),
             else ``NEUTRAL`` (the mechanism alone).
-
-    Raises:
-        ConfigError: no mode in ``config``.
     """
 
-    def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
+    def __init__(self, config: TeleopTrialConfig, *, n_rings: int | None = None,
                  abdomen: Abdomen | None = None, holder: str = "positioner",
                  effects: TeleopEffects | None = None) -> None:
-        if config.mode is None:
-            raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
-                              "'mrcp_cam')", field="mode")
         self.config = config
         self.mode = config.mode
         radius = config.reach_radius if config.reach_radius is not None else RING_RADIUS
         self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
                                 ring_radius=radius)
-        self.profile = config.profile if config.profile is not None else _preset(config.skill)
+        self.profile = preset_profile(config.profile, config.skill)
         if effects is None:
             effects = config.mode_effects if config.mode_effects is not None else NEUTRAL
         self.effects = effects
@@ -673,11 +667,6 @@ class TeleopTrial:
                            task=self.task.operator_task(self.task.rings, self.task.start),
                            samples=self.samples, metrics=metrics, summary=summary,
                            events=list(self.events), wall_time=wall_time, trial_metrics=tm)
-
-
-def _preset(skill: str) -> OperatorProfile:
-    return {"novice": OperatorProfile.novice, "expert": OperatorProfile.expert}.get(
-        skill, OperatorProfile.intermediate)()
 
 
 __all__ = [

@@ -90,6 +90,7 @@ from vasim.records.point_metrics import evaluate_trial
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.tasks import Task
+from vasim.trials.configs import AnyTrialConfig
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.ports import tool_trocar
 from vasim.trials.vf_config import SkillName, TaskName, TrialConfig, make_profile, make_task
@@ -137,7 +138,7 @@ class TrialFrame:
 class TrialResult:
     """A finished (or stopped) trial: config, samples, per-point metrics and summary."""
 
-    config: TrialConfig
+    config: AnyTrialConfig
     schema: Schema
     task: Task
     samples: SampleBuffer

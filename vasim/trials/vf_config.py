@@ -1,23 +1,30 @@
-"""The configuration of a virtual-fixture trial (``TrialConfig``) and what it names: the
-task (``make_task``) and the simulated person's profile (``make_profile``).
+"""The configuration of a virtual-fixture trial (``VfTrialConfig``, also named
+``TrialConfig``) and what it names: the task (``make_task``) and the simulated person's
+profile (``make_profile``).
 
 Moved out of ``vasim.trials.vf`` (which re-exports them) so that the engine's model
 (``vasim.trials.vf_model``) and the engine (``vasim.trials.vf``) each stay small.
+
+**Decision** (issue #29, a config per trial kind): a teleoperation trial has its own
+``vasim.trials.teleop_config.TeleopTrialConfig``; the VF config lost ``mode``,
+``mode_practice`` and ``mode_effects`` (a VF trial never used them) and the teleoperation
+config has no ``task``, ``variant``, ``schema``, ``dt``, ``velocity_cutoff_hz``,
+``poi_spacing`` or ``gain`` (documented as unused there). A VF trial's stored config record
+is unchanged (the three teleoperation fields were left out of it when None).
+``TrialConfig`` stays the VF config's name for its many callers.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Literal
 
 from vasim.core.errors import ConfigError
 from vasim.fixtures.gain import GainRule, rule_from_record
 from vasim.operator.scripted import OperatorProfile
-from vasim.operator.teleop_profile import TeleopEffects
 from vasim.tasks import Task, point_task, trajectory_task
-from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
+from vasim.trials.config_fields import SharedFields, check_shared_fields, preset_profile
 
 TaskName = Literal["trajectory", "point"]
 
@@ -25,8 +32,9 @@ SkillName = Literal["novice", "intermediate", "expert"]
 
 
 @dataclass(frozen=True)
-class TrialConfig:
-    """Everything that defines one trial (stored with it; same config + seed = same trial).
+class VfTrialConfig:
+    """Everything that defines one virtual-fixture trial (stored with it; same config +
+    seed = same trial).
 
     Attributes:
         task: ``"trajectory"`` (trajectory following) or ``"point"`` (point targeting).
@@ -48,19 +56,8 @@ class TrialConfig:
         scene: the virtual abdomen the task lives in: a scene name
             (``protocols/scenes/NAME.toml``) or TOML path, or ``"none"`` for a static task
             with no tissue (no breathing, no contact).
-        mode: None for a trial of ``task`` under ``schema`` (this module's runner), or a
-            teleoperation mode of the MRCP study (``"stdt"``, ``"mrcp"``, ``"mrcp_cam"``):
-            the needle task on the MRCP slave station (``vasim.trials.teleop``, 18 ms
-            control cycle), where ``task``, ``variant``, ``schema``, ``dt`` and
-            ``velocity_cutoff_hz`` are not used.
         gain: the fixture gain (``vasim.fixtures.gain``): a constant in [0, 1] (1: the
             schema as written) or an ``AdaptiveRule``; logged per sample (``gain``).
-        mode_practice: earlier trials of this teleoperation mode in the session (the
-            mode-specific learning of ``vasim.operator.teleop_profile``); None: ``practice``.
-        mode_effects: the scripted person's mode penalties in a teleoperation trial
-            (``vasim.operator.teleop_profile.TeleopEffects``, from the session's declared
-            teleoperation scenario); None: none (``NEUTRAL``, the mechanism alone). A
-            stored record's dict becomes the dataclass.
     """
 
     task: TaskName = "trajectory"
@@ -78,77 +75,37 @@ class TrialConfig:
     reach_radius: float | None = None
     scene: str = "default"
     poi_spacing: float | None = None
-    mode: str | None = None
     label: str | None = None
     gain: GainRule = 1.0
-    mode_practice: int | None = None
-    mode_effects: TeleopEffects | None = None
+
+    @property
+    def kind(self) -> str:
+        """The trial kind (``vasim.trials.registry``): ``"vf"``."""
+        return "vf"
 
     def __post_init__(self) -> None:
         # the fixture gain (vasim.fixtures.gain): a constant, or the adaptive rule (a stored
         # record's table becomes the rule)
         object.__setattr__(self, "gain", rule_from_record(self.gain, "gain"))
-        if self.mode is not None and self.mode not in TELEOPERATION_MODES:
-            raise ConfigError(f"unknown teleoperation mode {self.mode!r} (expected one of "
-                              f"{', '.join(TELEOPERATION_MODES)} or None)", field="mode")
         if self.task not in ("trajectory", "point"):
             raise ConfigError(f"unknown task {self.task!r} (expected 'trajectory' or 'point')",
                               field="task")
         if self.task == "point" and self.variant != 0:
             raise ConfigError(f"the point task has no variants, got variant {self.variant!r}",
                               field="variant")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not (
-                0 <= self.seed < 2**63):
-            raise ConfigError(f"seed must be an integer in [0, 2**63), got {self.seed!r}",
-                              field="seed")
-        from vasim.records.trial_meta import validate_subject_code
-
-        if self.subject is not None:
-            validate_subject_code(self.subject)
-        if self.operator != "scripted":
-            raise ConfigError(f"unknown operator {self.operator!r} (available: 'scripted')",
-                              field="operator")
-        if self.skill not in ("novice", "intermediate", "expert"):
-            raise ConfigError(f"unknown skill {self.skill!r} (novice, intermediate, expert)",
-                              field="skill")
         if not (math.isfinite(self.dt) and 0 < self.dt <= 0.02):
             raise ConfigError(f"dt must be in (0, 0.02] s, got {self.dt!r}", field="dt")
-        try:
-            check_trial_time(self.max_time, "max_time")
-        except ConfigError as exc:
-            raise ConfigError(f"max_time {exc.reason}", field="max_time") from None
-        if self.practice < 0:
-            raise ConfigError(f"practice must be >= 0, got {self.practice!r}", field="practice")
         if not (math.isfinite(self.velocity_cutoff_hz) and self.velocity_cutoff_hz > 0):
             raise ConfigError(f"velocity_cutoff_hz must be > 0, got {self.velocity_cutoff_hz!r}",
                               field="velocity_cutoff_hz")
-        r = self.reach_radius
-        if r is not None and (isinstance(r, bool) or not isinstance(r, int | float)
-                              or not math.isfinite(r) or not r > 0):
-            raise ConfigError(f"reach_radius must be > 0 m, got {r!r}", field="reach_radius")
-        if not isinstance(self.scene, str) or not self.scene.strip():
-            raise ConfigError(f"scene must be a scene name, a TOML path or 'none', got "
-                              f"{self.scene!r}", field="scene")
-        if self.profile is not None and not isinstance(self.profile, OperatorProfile):
-            raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
-                              field="profile")
-        mp = self.mode_practice
-        if mp is not None and (isinstance(mp, bool) or not isinstance(mp, int) or mp < 0):
-            raise ConfigError(f"mode_practice must be an integer >= 0 or None, got {mp!r}",
-                              field="mode_practice")
-        me = self.mode_effects
-        if isinstance(me, Mapping):
-            try:
-                object.__setattr__(self, "mode_effects", TeleopEffects(**me))
-            except (TypeError, ValueError) as exc:
-                raise ConfigError(f"mode_effects: {exc}", field="mode_effects") from None
-        elif me is not None and not isinstance(me, TeleopEffects):
-            raise ConfigError(f"mode_effects must be TeleopEffects or None, got {me!r}",
-                              field="mode_effects")
+        check_shared_fields(self)
 
 
+TrialConfig = VfTrialConfig
+"""The VF trial's configuration under its historical name."""
 
-def make_task(config: TrialConfig) -> Task:
+
+def make_task(config: VfTrialConfig) -> Task:
     """Builds the task a config names (with its reach radius and POI spacing, if the config
     sets them)."""
     kw: dict[str, float] = {}
@@ -163,14 +120,9 @@ def make_task(config: TrialConfig) -> Task:
     return point_task()
 
 
-def make_profile(config: TrialConfig) -> OperatorProfile:
-    if config.profile is not None:
-        return config.profile
-    if config.skill == "novice":
-        return OperatorProfile.novice()
-    if config.skill == "expert":
-        return OperatorProfile.expert()
-    return OperatorProfile.intermediate()
+def make_profile(config: SharedFields) -> OperatorProfile:
+    """The config's operator profile, else its skill's preset (any trial kind)."""
+    return preset_profile(config.profile, config.skill)
 
 
-__all__ = ["SkillName", "TaskName", "TrialConfig", "make_profile", "make_task"]
+__all__ = ["SkillName", "TaskName", "TrialConfig", "VfTrialConfig", "make_profile", "make_task"]
