@@ -173,7 +173,7 @@ def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
     for _ in range(20):
         next(cycles)
     # an obstacle around the holder's tool tip: every move of RSel now collides
-    tr.station.world.add_sphere("block", tr.station.tip(tr.holder), 0.004)
+    tr.station.world.add_sphere("block", tr.station.tip(tr.state.holder), 0.004)
     for _ in cycles:
         pass
     res = tr.result()
@@ -207,8 +207,8 @@ def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
     assert q is not None
     st.world.set_configuration("left", q)
     res = tr.run()
-    assert tr.holder == "right" and tr._snap is not None
-    assert tr._snap.tool("left").in_contact and not tr._snap.tool("camera").in_contact
+    assert tr.state.holder == "right" and tr.state.snap is not None
+    assert tr.state.snap.tool("left").in_contact and not tr.state.snap.tool("camera").in_contact
     m = res.trial_metrics
     assert m["contact_time"] == pytest.approx(tr.abdomen.quality.contact_time)
     assert m["contact_time"] > 0.9 and m["accumulated_force"] > 0
@@ -239,7 +239,7 @@ def test_every_mode_follows_the_same_needle_route() -> None:
                          n_rings=3, effects=NEUTRAL)
         res = tr.run()
         assert res.summary["finished"]
-        log = tr.route_log
+        log = tr.state.route_log
         assert [k for k, *_ in log] == list(kinds)
         times = [t for _, t, _, _ in log]
         assert times == sorted(times)
