@@ -1,7 +1,14 @@
 """Trials of the MRCP vs standard-teleoperation study (spec/study.md §4, spec/mrcp.md §8).
 
 One trial carries the needle of :mod:`vasim.operator.needle` through its rings in the virtual
-abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes:
+abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes
+(below). The trial is a frozen ``TeleopTrialModel`` and a ``TeleopTrialState``
+(``vasim.trials.teleop_model``, as the VF engine's model and state); one 18 ms cycle runs the
+named phases ``before_step`` (the clock), the mode's operator and master phases (``_mrcp``:
+the hand moves the master, the kernel the robots; ``_stdt``: carry, hand-over, approach,
+close, release), then ``after_step``: ``path_phase`` (EM by what moved the needle),
+physics, ``route_phase`` (via point, ring), ``camera_phase``, the sample, and
+``should_terminate``. The modes:
 
 * ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
   masters : 2 slaves). At every change of side the scripted operator transfers the needle
