@@ -479,7 +479,12 @@ class TrainingController(ConditionCommands):
         except StoreError as exc:
             self._publish(running=False, status=str(exc), **self._progress())
             raise
-        cfg = replace(session.trial_config(nxt), scene=self.scene)
+        cfg = session.trial_config(nxt)
+        if not isinstance(cfg, TrialConfig):  # a teleoperation mode (issue #29: its own config)
+            msg = f"{nxt.condition} is a teleoperation trial: run it with vasim study run"
+            self._publish(running=False, status=msg, **self._progress())
+            raise ConfigError(msg, field="condition")
+        cfg = replace(cfg, scene=self.scene)
         # The session's input (stored with it when it was created) drives all its trials.
         kind = str(session.settings.extra.get("input", self.panel.input))
         mapping = session.settings.extra.get("input_mapping")
