@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from vasim.core.errors import ConfigError
 from vasim.records.trial_metrics import MetricParams
 from vasim.study.store import TrialStore
 from vasim.trials.kinds import TELEOPERATION_MODES
@@ -38,7 +37,7 @@ def test_a_config_finds_its_kind(mode: str | None) -> None:
 def test_a_kind_refuses_a_config_of_another_class() -> None:
     reg = TrialKinds()  # a kind named like a teleoperation mode but built for VF configs
     reg.add(TrialKind("stdt", run=run_vf_trial, meta=vf_meta, simulate=simulate_vf))
-    with pytest.raises(ConfigError, match="'stdt' runs a VfTrialConfig, got a TeleopTrialC"):
+    with pytest.raises(TypeError, match="'stdt' runs a VfTrialConfig, got a TeleopTrialCon"):
         reg.of(TeleopTrialConfig(mode="stdt"))
 
 

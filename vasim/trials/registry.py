@@ -27,7 +27,6 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import Schema
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
@@ -128,12 +127,13 @@ class TrialKinds:
         """The kind that runs ``config`` (:func:`kind_name`).
 
         Raises:
-            ConfigError: the configuration is not of the kind's ``config_type``.
+            TypeError: the configuration is not of the kind's ``config_type`` (a caller's
+                mistake, not bad user input).
         """
         kind = self[kind_name(config)]
         if not isinstance(config, kind.config_type):
-            raise ConfigError(f"trial kind {kind.name!r} runs a {kind.config_type.__name__}, "
-                              f"got a {type(config).__name__}", field="kind")
+            raise TypeError(f"trial kind {kind.name!r} runs a {kind.config_type.__name__}, "
+                            f"got a {type(config).__name__}")
         return kind
 
 
