@@ -91,9 +91,9 @@ SEED_TABLES = {"mrcp_vs_stdt": SEED_TABLE_5_1, "mrcp_suture_dynamic": SEED_TABLE
 
 def _run_trial(job: dict[str, Any]) -> dict[str, Any]:
     from vasim.trials.teleop import TeleopTrial
-    from vasim.trials.vf import TrialConfig
+    from vasim.trials.teleop_config import TeleopTrialConfig
 
-    cfg = TrialConfig(**job["config"])
+    cfg = TeleopTrialConfig(**job["config"])
     trial = TeleopTrial(cfg, effects=TeleopEffects(**job["effects"]), n_rings=job["n_rings"])
     try:
         res = trial.run()

@@ -60,6 +60,7 @@ from vasim.trials.realtime import (
     ProcessRealtimeTrial,
     RealtimeTiming,
     RealtimeTrial,
+    ServoSettings,
 )
 from vasim.trials.vf import TrialConfig
 
@@ -191,9 +192,11 @@ def _trial_run(name: str, seconds: float, *, physics: str = "thread", awake: boo
                          scene="default")
     trial: RealtimeTrial | ProcessRealtimeTrial
     if process:
-        trial = ProcessRealtimeTrial(config, physics=physics, rt_priority=rt_priority)
+        trial = ProcessRealtimeTrial(config, physics=physics,
+                                     servo=ServoSettings(rt_priority=rt_priority))
     else:
-        trial = RealtimeTrial(config, physics=physics, rt_priority=rt_priority)  # type: ignore[arg-type]
+        trial = RealtimeTrial(config, physics=physics,  # type: ignore[arg-type]
+                              servo=ServoSettings(rt_priority=rt_priority))
     abdomen = trial.runner.abdomen
     if awake and abdomen is not None:  # the worst case: the solver works on every organ
         abdomen.always_awake = True

@@ -139,20 +139,20 @@ def test_a_session_gives_its_teleop_trials_the_scenarios_penalties(tmp_path: Pat
 
 
 def test_a_stored_config_record_gives_back_the_penalties() -> None:
-    from vasim.trials.vf import TrialConfig
+    from vasim.trials.teleop_config import TeleopTrialConfig
     from vasim.trials.vf_run import config_record
 
     eff = TeleopEffects(thread_time=2.0, stdt_noise=0.5, camera_cost=0.5)
-    cfg = TrialConfig(mode="mrcp", mode_effects=eff)
+    cfg = TeleopTrialConfig(mode="mrcp", mode_effects=eff)
     from vasim.operator.profile import OperatorProfile
 
     rec = config_record(cfg, OperatorProfile.intermediate())
     assert rec["mode_effects"] == {"thread_time": 2.0, "stdt_noise": 0.5, "camera_cost": 0.5}
-    assert TrialConfig(mode="mrcp", mode_effects=rec["mode_effects"]).mode_effects == eff
-    assert "mode_effects" not in config_record(TrialConfig(mode="mrcp"),
-                                               OperatorProfile.intermediate())
+    assert TeleopTrialConfig(mode="mrcp", mode_effects=rec["mode_effects"]).mode_effects == eff
+    assert "mode_effects" not in config_record(TeleopTrialConfig(mode="mrcp"),
+                                                     OperatorProfile.intermediate())
     with pytest.raises(ConfigError, match="mode_effects"):
-        TrialConfig(mode="mrcp", mode_effects={"stdt_noise": -1.0})
+        TeleopTrialConfig(mode="mrcp", mode_effects={"stdt_noise": -1.0})
 
 
 def _files() -> list[Path]:

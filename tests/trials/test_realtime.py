@@ -30,6 +30,7 @@ from vasim.trials.realtime import (
     PhysicsLog,
     RealtimeRecording,
     RealtimeTrial,
+    ServoSettings,
     realtime_path,
     replay_trial,
     run_realtime_trial,
@@ -159,7 +160,7 @@ def _rest_force(blend_s: float) -> tuple[np.ndarray, np.ndarray]:
         return (s * s * (3.0 - 2.0 * s)) * target
 
     trial = RealtimeTrial(config, EmulatorDevice(WIDE_OMNI, hand=hand), physics="inline",
-                          blend_s=blend_s)
+                          servo=ServoSettings(blend_s=blend_s))
     assert trial.run_ticks(5000) == 5000
     trace = trial.loop.trace.array()
     rest = trace[:, 1] >= 3.0
@@ -251,11 +252,11 @@ def test_clutch_and_bad_readings_never_move_the_task() -> None:
 def test_bad_settings_are_refused_with_the_field_named() -> None:
     config = TrialConfig(schema="none", scene="none", max_time=0.1)
     with pytest.raises(ConfigError, match="rate_hz"):
-        RealtimeTrial(config, rate_hz=500.0)
+        RealtimeTrial(config, servo=ServoSettings(rate_hz=500.0))
     with pytest.raises(ConfigError, match="physics"):
         RealtimeTrial(config, physics="process")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="blend_s"):
-        RealtimeTrial(config, blend_s=-1.0)
+        RealtimeTrial(config, servo=ServoSettings(blend_s=-1.0))
     with pytest.raises(RuntimeError, match="run_ticks"):
         RealtimeTrial(config, physics="inline").start()
 

@@ -11,6 +11,7 @@ from vasim.records.trial_metrics import MetricParams
 from vasim.study.store import TrialStore
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.registry import TRIAL_KINDS, TrialKind, TrialKinds, kind_name, run_trial
+from vasim.trials.teleop_config import TeleopTrialConfig
 from vasim.trials.teleop_run import run_teleop_trial, simulate_teleop, teleop_meta
 from vasim.trials.vf import TrialConfig
 from vasim.trials.vf_run import run_vf_trial, simulate_vf, vf_meta
@@ -28,9 +29,16 @@ def test_every_kind_is_registered_once_with_its_runner() -> None:
 
 @pytest.mark.parametrize("mode", [None, *TELEOPERATION_MODES])
 def test_a_config_finds_its_kind(mode: str | None) -> None:
-    cfg = TrialConfig(mode=mode)  # type: ignore[arg-type]
+    cfg = TrialConfig() if mode is None else TeleopTrialConfig(mode=mode)
     assert kind_name(cfg) == ("vf" if mode is None else mode)
     assert TRIAL_KINDS.of(cfg).name == kind_name(cfg)
+
+
+def test_a_kind_refuses_a_config_of_another_class() -> None:
+    reg = TrialKinds()  # a kind named like a teleoperation mode but built for VF configs
+    reg.add(TrialKind("stdt", run=run_vf_trial, meta=vf_meta, simulate=simulate_vf))
+    with pytest.raises(TypeError, match="'stdt' runs a VfTrialConfig, got a TeleopTrialCon"):
+        reg.of(TeleopTrialConfig(mode="stdt"))
 
 
 def test_a_duplicate_or_bad_name_is_refused() -> None:
@@ -49,8 +57,8 @@ def test_run_trial_runs_and_stores_each_kind_through_its_runner(tmp_path: Path) 
     with TrialStore(tmp_path / "s.sqlite") as st:
         vf_res, vf_id = run_trial(TrialConfig(schema="none", scene="none", seed=1,
                                               max_time=0.3), st)
-        tele_res, tele_id = run_trial(TrialConfig(mode="stdt", scene="none", seed=1,
-                                                  max_time=0.3), st)
+        tele_res, tele_id = run_trial(TeleopTrialConfig(mode="stdt", scene="none", seed=1,
+                                                        max_time=0.3), st)
         rows = st.trials().set_index("id")
     assert vf_id is not None and tele_id is not None and vf_id != tele_id
     # the VF kind: 1 ms steps on the trajectory; the teleoperation kind: 18 ms station
@@ -67,7 +75,7 @@ def test_the_meta_builders_share_one_signature() -> None:
     cfg = TrialConfig(schema="ff", seed=3)
     m = TRIAL_KINDS.of(cfg).meta(cfg, session_id=None, schedule_index=None, protocol="p")
     assert (m.task, m.schema, m.seed, m.protocol) == ("trajectory", "ff", 3, "p")
-    t = TrialConfig(mode="mrcp", seed=3)
+    t = TeleopTrialConfig(mode="mrcp", seed=3)
     tm = TRIAL_KINDS.of(t).meta(t, protocol="q")
     assert (tm.task, tm.schema, tm.dt, tm.protocol) == ("needle", "none", 0.018, "q")
 

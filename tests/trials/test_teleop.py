@@ -21,7 +21,7 @@ from vasim.study.protocol import load_protocol
 from vasim.study.store import TrialStore
 from vasim.trials.registry import run_trial
 from vasim.trials.teleop import CYCLE_DT, TISSUE_METRICS, TeleopTrial
-from vasim.trials.vf import TrialConfig
+from vasim.trials.teleop_config import TeleopTrialConfig
 
 SEED = 3
 
@@ -155,25 +155,25 @@ def test_the_camera_hand_moves_only_in_mrcp_cam(session) -> None:
 
 
 def test_run_trial_dispatches_a_mode_and_same_seed_same_trial() -> None:
-    cfg = TrialConfig(mode="stdt", seed=11, max_time=3.0, scene="none")
+    cfg = TeleopTrialConfig(mode="stdt", seed=11, max_time=3.0, scene="none")
     a, tid = run_trial(cfg)
     assert tid is None and a.summary["mode"] == "stdt"
     b = TeleopTrial(cfg).run()
     np.testing.assert_array_equal(a.samples.view()["x"], b.samples.view()["x"])
     with pytest.raises(Exception, match="mode"):
-        TrialConfig(mode="bimanual")
+        TeleopTrialConfig(mode="bimanual")
 
 
 def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
     from vasim.trials.teleop import FAULT_ACK_TIME, MAX_SAFETY_STOPS
 
-    tr = TeleopTrial(TrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
+    tr = TeleopTrial(TeleopTrialConfig(mode="mrcp", seed=2, max_time=60.0, scene="none"),
                      n_rings=2)
     cycles = tr.cycles()
     for _ in range(20):
         next(cycles)
     # an obstacle around the holder's tool tip: every move of RSel now collides
-    tr.station.world.add_sphere("block", tr.station.tip(tr.holder), 0.004)
+    tr.station.world.add_sphere("block", tr.station.tip(tr.state.holder), 0.004)
     for _ in cycles:
         pass
     res = tr.result()
@@ -195,7 +195,7 @@ def test_safety_stops_are_acknowledged_and_too_many_end_the_trial() -> None:
 def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
     # StdT carries the needle with the right instrument; the left one, idle, is put into
     # the tissue straight under its tip: its contact is Q's although it holds nothing
-    tr = TeleopTrial(TrialConfig(mode="stdt", seed=11, max_time=1.0))
+    tr = TeleopTrial(TeleopTrialConfig(mode="stdt", seed=11, max_time=1.0))
     st = tr.station
     assert tr.abdomen is not None and list(tr.instruments()) == ["right", "left", "camera"]
     tip = st.tip("left")
@@ -207,8 +207,8 @@ def test_the_free_instrument_touching_tissue_counts_in_q() -> None:
     assert q is not None
     st.world.set_configuration("left", q)
     res = tr.run()
-    assert tr.holder == "right" and tr._snap is not None
-    assert tr._snap.tool("left").in_contact and not tr._snap.tool("camera").in_contact
+    assert tr.state.holder == "right" and tr.state.snap is not None
+    assert tr.state.snap.tool("left").in_contact and not tr.state.snap.tool("camera").in_contact
     m = res.trial_metrics
     assert m["contact_time"] == pytest.approx(tr.abdomen.quality.contact_time)
     assert m["contact_time"] > 0.9 and m["accumulated_force"] > 0
@@ -235,11 +235,11 @@ def test_every_mode_follows_the_same_needle_route() -> None:
     for mode in ("stdt", "mrcp"):
         # the route is the station's and the task's: the person as the scripted operator is,
         # without mode penalties (NEUTRAL, the default: the mechanism alone)
-        tr = TeleopTrial(TrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
+        tr = TeleopTrial(TeleopTrialConfig(mode=mode, seed=SEED, max_time=60.0, scene="none"),
                          n_rings=3, effects=NEUTRAL)
         res = tr.run()
         assert res.summary["finished"]
-        log = tr.route_log
+        log = tr.state.route_log
         assert [k for k, *_ in log] == list(kinds)
         times = [t for _, t, _, _ in log]
         assert times == sorted(times)

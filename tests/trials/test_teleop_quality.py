@@ -13,8 +13,8 @@ from vasim.abdomen.contact import ToolPose
 from vasim.abdomen.world import Abdomen
 from vasim.operator.needle import RING_CLEARANCE, needle_task
 from vasim.trials.teleop import TeleopTrial
+from vasim.trials.teleop_config import TeleopTrialConfig
 from vasim.trials.teleop_quality import TargetDeformation
-from vasim.trials.vf import TrialConfig
 
 
 def test_q_is_displacement_times_time_summed_over_targets_in_mm_s() -> None:
@@ -74,13 +74,13 @@ def test_a_tool_pressing_under_a_ring_gives_the_displacement_against_a_tool_free
 
 
 def test_a_trial_without_contact_has_q_zero_and_with_a_pressing_tool_q_above_zero() -> None:
-    free = TeleopTrial(TrialConfig(mode="mrcp", seed=3, max_time=1.0), n_rings=2)
+    free = TeleopTrial(TeleopTrialConfig(mode="mrcp", seed=3, max_time=1.0), n_rings=2)
     m = free.run().trial_metrics
     free.station.close()
     assert m["contact_time"] == 0.0 and m["target_deformation"] == 0.0
     assert m["target_deformation_peak"] == 0.0
     # StdT: the idle left instrument pushed 4 mm into the loop under ring 1
-    tr = TeleopTrial(TrialConfig(mode="stdt", seed=11, max_time=1.0))
+    tr = TeleopTrial(TeleopTrialConfig(mode="stdt", seed=11, max_time=1.0))
     st_ = tr.station
     surface = tr.task.rings[1] - np.array([0.0, 0.0, RING_CLEARANCE])
     qc = st_.arms["left"].ik(surface - np.array([0.0, 0.0, 0.004]), None,

@@ -76,9 +76,12 @@ class _NaNOperator:
     def reset(self, tcp):
         self.inner.reset(tcp)
 
-    def step(self, obs):
+    profile = None
+
+    def act(self, percept):
+        """The trial operator protocol (``vasim.operator.port.TrialOperator``)."""
         self.k += 1
-        dx = self.inner.step(obs)
+        dx = self.inner.act(percept)
         if self.k in self.bad:
             return np.array([np.nan, np.inf, 0.0])
         return dx

@@ -31,6 +31,7 @@ from vasim.study.protocol import load_protocol
 from vasim.study.report import build_report
 from vasim.study.session import run_session, start_session
 from vasim.study.store import TrialStore
+from vasim.trials.configs import TeleopTrialConfig
 from vasim.trials.teleop import CAMERA_ZOOM, CYCLE_DT, TeleopTrial
 from vasim.trials.vf import TrialConfig
 from vasim.viewer.controller import Command, TrainingController, TrainingSettings
@@ -64,11 +65,11 @@ def drag_toward_ring(mode: str, cycles: int) -> tuple[LiveTeleopTrial, np.ndarra
     unit direction and the fake clock."""
     now = [0.0]
     dev = BrowserDevice(delay_s=0.0, clock=lambda: now[0])
-    lt = LiveTeleopTrial(person_config(TrialConfig(mode=mode, seed=1, max_time=3.0,
+    lt = LiveTeleopTrial(person_config(TeleopTrialConfig(mode=mode, seed=1, max_time=3.0,
                                                    scene="none")), dev)
     dev.start()
-    x0 = np.array(lt.trial.needle)
-    u = np.array(lt.trial.rings[0]) - x0
+    x0 = np.array(lt.trial.state.needle)
+    u = np.array(lt.trial.state.rings[0]) - x0
     u /= np.linalg.norm(u)
     p0 = np.array([0.1, 0.2, 0.3])
     for k in range(cycles):
@@ -82,20 +83,20 @@ def drag_toward_ring(mode: str, cycles: int) -> tuple[LiveTeleopTrial, np.ndarra
 def test_the_person_s_device_moves_the_needle(mode: str) -> None:
     lt, x0, u, now = drag_toward_ring(mode, 56)
     try:
-        moved = np.array(lt.trial.needle) - x0
+        moved = np.array(lt.trial.state.needle) - x0
         np.testing.assert_allclose(moved, u * STEP * 55, atol=1e-6)
-        assert np.array_equal(lt.frame().tcp, lt.trial.needle) and lt.frame().k == 55
+        assert np.array_equal(lt.frame().tcp, lt.trial.state.needle) and lt.frame().k == 55
         camera = lt.frame().outputs.camera   # mrcp_cam: the camera robot's aim, for the scope
         if mode == "mrcp_cam":
             assert camera is not None and camera.zoom == pytest.approx(CAMERA_ZOOM)
             np.testing.assert_array_equal(camera.look_at, lt.trial.camera.aim)
         else:
             assert camera is None
-        before = np.array(lt.trial.needle)
+        before = np.array(lt.trial.state.needle)
         for k in range(56, 112):     # the samples stop: at most one step of extrapolation
             now[0] = k * CYCLE_DT
             lt.advance(1)
-        drift = float(np.linalg.norm(np.array(lt.trial.needle) - before))
+        drift = float(np.linalg.norm(np.array(lt.trial.state.needle) - before))
         assert drift == pytest.approx(STEP, abs=1e-6)
     finally:
         lt.stop()
@@ -105,13 +106,13 @@ def test_the_person_s_device_moves_the_needle(mode: str) -> None:
 
 
 def test_without_input_the_needle_stays_where_the_scripted_hand_would_move_it() -> None:
-    cfg = TrialConfig(mode="mrcp", seed=1, max_time=1.0, scene="none")
+    cfg = TeleopTrialConfig(mode="mrcp", seed=1, max_time=1.0, scene="none")
     scripted = TeleopTrial(cfg)
     try:
-        x0 = np.array(scripted.needle)
+        x0 = np.array(scripted.state.needle)
         for _ in scripted.cycles():
             pass
-        assert np.linalg.norm(np.array(scripted.needle) - x0) > 5e-3
+        assert np.linalg.norm(np.array(scripted.state.needle) - x0) > 5e-3
     finally:
         scripted.station.close()
     dev = BrowserDevice(delay_s=0.0, clock=lambda: 0.0)
@@ -119,14 +120,14 @@ def test_without_input_the_needle_stays_where_the_scripted_hand_would_move_it() 
     dev.start()
     try:
         assert lt.advance(1000) == 56 and lt.done   # 1 s of 18 ms cycles, then done
-        np.testing.assert_array_equal(lt.trial.needle, x0)
+        np.testing.assert_array_equal(lt.trial.state.needle, x0)
     finally:
         lt.stop()
     assert lt.result().summary["outcome"] == "timed_out"
 
 
 def test_a_person_s_trial_has_no_simulated_jaw_misjudgement() -> None:
-    cfg = person_config(TrialConfig(mode="stdt", seed=1, skill="novice"))
+    cfg = person_config(TeleopTrialConfig(mode="stdt", seed=1, skill="novice"))
     assert cfg.profile is not None and cfg.profile.perception_noise == 0.0
     from vasim.operator.needle import grasp_sigma
 

@@ -37,8 +37,9 @@ def format_timing(timing: object) -> str:
 def format_summary(result: object, trial_id: int | None, db: Path | None) -> str:
     """A fixed-width summary table of one trial."""
     from vasim.trials.vf import TrialResult
+    from vasim.trials.vf_config import VfTrialConfig
 
-    assert isinstance(result, TrialResult)
+    assert isinstance(result, TrialResult) and isinstance(result.config, VfTrialConfig)
     s = result.summary
     m = result.metrics
     reached = int(m["reached"].sum())

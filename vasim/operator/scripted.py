@@ -160,6 +160,7 @@ import numpy as np
 
 from vasim.fixtures.types import Vec3
 from vasim.haptics.observation import OperatorObservation
+from vasim.operator.port import Percept
 from vasim.operator.profile import OperatorProfile
 from vasim.tasks.base import Task
 
@@ -374,6 +375,13 @@ class ScriptedOperator:
         return np.array(self.step_floats(
             obs.dt, obs.tcp.tolist(), obs.goal.tolist(), obs.goal_index, obs.guidance,
             obs.audio_volume, obs.zoom, obs.ms_factors.tolist(), obs.force.tolist()))
+
+    def act(self, percept: Percept) -> list[float]:
+        """The trial operator protocol (``vasim.operator.port.TrialOperator``): one
+        :meth:`step_floats` on the percept's floats."""
+        p = percept
+        return self.step_floats(p.dt, p.tcp, p.goal, p.goal_index, p.guidance,
+                                p.audio_volume, p.zoom, p.ms_factors, p.force)
 
     def step_floats(
         self, dt: float, tcp: Sequence[float], goal: Sequence[float], goal_index: int,

@@ -100,6 +100,7 @@ from vasim.study.session import (
     start_session,
 )
 from vasim.study.store import Demographics, TrialStore
+from vasim.trials.configs import AnyTrialConfig, VfTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.lifecycle import (
     StoredTrial,
@@ -108,7 +109,6 @@ from vasim.trials.lifecycle import (
     stored_trial,
 )
 from vasim.trials.registry import TRIAL_KINDS
-from vasim.trials.vf import TrialConfig
 
 DEMOGRAPHIC_MODEL: dict[str, dict[str, tuple[tuple[str, ...], tuple[float, ...]]]] = {
     "surgeon": {
@@ -398,7 +398,7 @@ def _record_post(store: TrialStore, session: Session, subject: SimulatedSubject)
 
 
 # ------------------------------------------------------------------------------ workers
-def simulate_trial(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
+def simulate_trial(config: AnyTrialConfig, params: MetricParams) -> dict[str, Any]:
     """Runs one trial without a store (a worker's job; its kind's ``simulate``,
     ``vasim.trials.registry``); returns what the writer stores.
 
@@ -438,7 +438,7 @@ class _Job:
     session: Session
     subject: SimulatedSubject
     scheduled: ScheduledTrial
-    config: TrialConfig
+    config: AnyTrialConfig
 
 
 # ------------------------------------------------------------------------------ cohort
@@ -751,7 +751,7 @@ def _meta(job: _Job) -> TrialMeta:
     """The trial row of ``job``, built by its kind (schemas loaded once per process)."""
     cfg = job.config
     schema = None
-    if cfg.mode is None:
+    if isinstance(cfg, VfTrialConfig):
         schema = _SCHEMAS.get(cfg.schema)
         if schema is None:
             schema = _SCHEMAS[cfg.schema] = load_schema(cfg.schema)

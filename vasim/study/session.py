@@ -98,6 +98,7 @@ from vasim.study.protocol import (
 )
 from vasim.study.sitting_rule import early_sitting
 from vasim.study.store import SessionMeta, TrialStore
+from vasim.trials.configs import AnyTrialConfig, TeleopTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 from vasim.trials.registry import run_trial
 from vasim.trials.vf import TrialConfig, make_profile
@@ -231,7 +232,7 @@ class Session:
         """Scheduled trials without a completed trial, in schedule order."""
         return [t for t, tid in zip(self.schedule, self.completed, strict=True) if tid is None]
 
-    def trial_config(self, scheduled: ScheduledTrial, repeat: int = 0) -> TrialConfig:
+    def trial_config(self, scheduled: ScheduledTrial, repeat: int = 0) -> AnyTrialConfig:
         """The trial configuration of one scheduled trial (see the module's decisions);
         ``repeat``: how many timed-out attempts it had before."""
         if scheduled.schema is None:
@@ -267,24 +268,27 @@ class Session:
                 and scheduled.condition != VF_FREE \
                 and scheduled.condition not in TELEOPERATION_MODES:
             gain = scale_gain(gain, scenario.mechanism(scale))
-        # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
-        mode = scheduled.condition if scheduled.condition in TELEOPERATION_MODES else None
+        max_time = (s.max_trial_time if s.max_trial_time is not None
+                    else self.protocol.max_trial_time)
+        seed = trial_seed(self.seed, scheduled.index, repeat)
+        if scheduled.condition in TELEOPERATION_MODES:
+            # A teleoperation mode runs the MRCP station's needle task (vasim.trials.teleop).
+            mode = scheduled.condition
+            return TeleopTrialConfig(
+                mode=mode, operator=s.operator, skill=s.skill, seed=seed, practice=practice,
+                max_time=max_time, subject=self.subject, profile=profile,
+                reach_radius=self.protocol.reach_radius,
+                mode_practice=sum(t.condition == mode
+                                  for t in self.schedule[:scheduled.index]),
+                mode_effects=None if scenario is None or scenario.teleop is None
+                else scenario.teleop_effects(scale))
         return TrialConfig(
             task=scheduled.task,  # type: ignore[arg-type]  # protocol task names are checked
-            variant=scheduled.variant,
-            schema="none" if mode is not None else str(scheduled.schema), mode=mode,
-            operator=s.operator,
-            skill=s.skill, seed=trial_seed(self.seed, scheduled.index, repeat),
-            practice=practice, dt=s.dt,
-            max_time=s.max_trial_time if s.max_trial_time is not None
-            else self.protocol.max_trial_time,
+            variant=scheduled.variant, schema=str(scheduled.schema), operator=s.operator,
+            skill=s.skill, seed=seed, practice=practice, dt=s.dt, max_time=max_time,
             subject=self.subject, profile=profile,
             reach_radius=self.protocol.reach_radius, poi_spacing=self.protocol.poi_spacing,
             gain=gain,
-            mode_practice=None if mode is None else sum(
-                t.condition == mode for t in self.schedule[:scheduled.index]),
-            mode_effects=None if mode is None or scenario is None
-            or scenario.teleop is None else scenario.teleop_effects(scale),
         )
 
     @property

@@ -1,20 +1,23 @@
 """The trial kinds and the one entry point that runs a trial of any kind.
 
-A trial kind names how a ``TrialConfig`` is run and stored: its headless runner (with a
+A trial kind names how a configuration (``vasim.trials.configs.AnyTrialConfig``) is run
+and stored: its headless runner (with a
 ``TrialSink``), the ``TrialMeta`` of its row, and the sink-free job a cohort worker runs.
 ``run_trial`` and the study layer (``vasim.study.cohort``, ``vasim.study.session``) look
 the kind up here instead of choosing between the modules themselves.
 
-**Decision** (kind names): a configuration's kind is ``config.mode`` when it names a
-teleoperation mode (``"stdt"``, ``"mrcp"``, ``"mrcp_cam"``: spec/study.md §4), else
-``"vf"`` (a virtual-fixture trial), because ``mode`` is what the protocols already write;
-the three teleoperation kinds share one runner, which reads the mode from the config.
+**Decision** (kind names): a configuration's kind is ``config.kind``: ``"vf"`` for a
+``VfTrialConfig`` (a virtual-fixture trial), the mode (``"stdt"``, ``"mrcp"``,
+``"mrcp_cam"``: spec/study.md §4) for a ``TeleopTrialConfig``, because ``mode`` is what the
+protocols already write; the three teleoperation kinds share one runner, which reads the
+mode from the config. Each kind names its configuration class (``config_type``); a kind
+refuses a configuration of another class.
 
 Example:
-    >>> from vasim.trials.vf import TrialConfig
+    >>> from vasim.trials.teleop_config import TeleopTrialConfig
     >>> TRIAL_KINDS.names()
     ('mrcp', 'mrcp_cam', 'stdt', 'vf')
-    >>> TRIAL_KINDS.of(TrialConfig(mode="stdt")).name
+    >>> TRIAL_KINDS.of(TeleopTrialConfig(mode="stdt")).name
     'stdt'
 """
 
@@ -27,18 +30,21 @@ from typing import Any, Protocol
 from vasim.fixtures.schema import Schema
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
+from vasim.trials.configs import AnyTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.sink import TrialSink
+from vasim.trials.teleop_config import TeleopTrialConfig
 from vasim.trials.teleop_run import run_teleop_trial, simulate_teleop, teleop_meta
-from vasim.trials.vf import TrialConfig, TrialResult
+from vasim.trials.vf import TrialResult
+from vasim.trials.vf_config import VfTrialConfig
 from vasim.trials.vf_run import run_vf_trial, simulate_vf, vf_meta
 
 
 class TrialRun(Protocol):
     """``run(config, sink, *, progress, session_id, schedule_index, protocol,
-    metric_params) -> (result, trial_id)``."""
+    metric_params) -> (result, trial_id)``; ``config``: of the kind's ``config_type``."""
 
-    def __call__(self, config: TrialConfig, sink: TrialSink | None = None, *,
+    def __call__(self, config: Any, sink: TrialSink | None = None, *,
                  progress: bool = False, session_id: int | None = None,
                  schedule_index: int | None = None,
                  protocol: str | None = None, metric_params: MetricParams | None = None,
@@ -46,9 +52,10 @@ class TrialRun(Protocol):
 
 
 class TrialMetaBuilder(Protocol):
-    """``meta(config, *, schema, session_id, schedule_index, protocol) -> TrialMeta``."""
+    """``meta(config, *, schema, session_id, schedule_index, protocol) -> TrialMeta``;
+    ``config``: of the kind's ``config_type``."""
 
-    def __call__(self, config: TrialConfig, *, schema: Schema | None = None,
+    def __call__(self, config: Any, *, schema: Schema | None = None,
                  session_id: int | None = None, schedule_index: int | None = None,
                  protocol: str | None = None) -> TrialMeta: ...
 
@@ -65,13 +72,15 @@ class TrialKind:
         simulate: ``simulate(config, params) -> dict`` runs it without a sink (a cohort
             worker's job; the dict of ``vasim.study.cohort.simulate_trial``).
         summary: one line for humans.
+        config_type: the configuration class of this kind.
     """
 
     name: str
     run: TrialRun
     meta: TrialMetaBuilder
-    simulate: Callable[[TrialConfig, MetricParams], dict[str, Any]]
+    simulate: Callable[[Any, MetricParams], dict[str, Any]]
     summary: str = ""
+    config_type: type = VfTrialConfig
 
 
 class TrialKinds:
@@ -114,14 +123,24 @@ class TrialKinds:
         """Registered names, sorted."""
         return tuple(sorted(self._kinds))
 
-    def of(self, config: TrialConfig) -> TrialKind:
-        """The kind that runs ``config`` (:func:`kind_name`)."""
-        return self[kind_name(config)]
+    def of(self, config: AnyTrialConfig) -> TrialKind:
+        """The kind that runs ``config`` (:func:`kind_name`).
+
+        Raises:
+            TypeError: the configuration is not of the kind's ``config_type`` (a caller's
+                mistake, not bad user input).
+        """
+        kind = self[kind_name(config)]
+        if not isinstance(config, kind.config_type):
+            raise TypeError(f"trial kind {kind.name!r} runs a {kind.config_type.__name__}, "
+                            f"got a {type(config).__name__}")
+        return kind
 
 
-def kind_name(config: TrialConfig) -> str:
-    """``config.mode`` for a teleoperation trial, else ``"vf"`` (module docstring)."""
-    return "vf" if config.mode is None else str(config.mode)
+def kind_name(config: AnyTrialConfig) -> str:
+    """``config.kind``: the mode of a teleoperation trial, ``"vf"`` for a virtual-fixture
+    trial (module docstring)."""
+    return config.kind
 
 
 TRIAL_KINDS = TrialKinds()
@@ -131,12 +150,12 @@ TRIAL_KINDS.add(TrialKind("vf", run=run_vf_trial, meta=vf_meta, simulate=simulat
                           summary="virtual-fixture trial: a fixture schema assists one tool"))
 for _mode in TELEOPERATION_MODES:
     TRIAL_KINDS.add(TrialKind(_mode, run=run_teleop_trial, meta=teleop_meta,
-                              simulate=simulate_teleop,
+                              simulate=simulate_teleop, config_type=TeleopTrialConfig,
                               summary=f"teleoperation trial ({_mode}) on the MRCP station's "
                                       "needle task"))
 
 
-def run_trial(config: TrialConfig, sink: TrialSink | None = None, *,
+def run_trial(config: AnyTrialConfig, sink: TrialSink | None = None, *,
               progress: bool = False, session_id: int | None = None,
               schedule_index: int | None = None, protocol: str | None = None,
               metric_params: MetricParams | None = None,

@@ -1,7 +1,14 @@
 """Trials of the MRCP vs standard-teleoperation study (spec/study.md §4, spec/mrcp.md §8).
 
 One trial carries the needle of :mod:`vasim.operator.needle` through its rings in the virtual
-abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes:
+abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes
+(below). The trial is a frozen ``TeleopTrialModel`` and a ``TeleopTrialState``
+(``vasim.trials.teleop_model``, as the VF engine's model and state); one 18 ms cycle runs the
+named phases ``before_step`` (the clock), the mode's operator and master phases (``_mrcp``:
+the hand moves the master, the kernel the robots; ``_stdt``: carry, hand-over, approach,
+close, release), then ``after_step``: ``path_phase`` (EM by what moved the needle),
+physics, ``route_phase`` (via point, ring), ``camera_phase``, the sample, and
+``should_terminate``. The modes:
 
 * ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
   masters : 2 slaves). At every change of side the scripted operator transfers the needle
@@ -133,8 +140,8 @@ moved the needle (``EM_PARTS``): ``em_to_ring``, ``em_to_via``, ``em_transfer``.
   constant; its path is the aim point's.
 
 Example:
-    >>> from vasim.trials.vf import TrialConfig
-    >>> res = TeleopTrial(TrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
+    >>> from vasim.trials.teleop_config import TeleopTrialConfig
+    >>> res = TeleopTrial(TeleopTrialConfig(mode="mrcp", seed=1, max_time=0.5, scene="none"),
     ...                   n_rings=2).run()
     >>> res.summary["mode"], float(res.samples.view()["t"][0])
     ('mrcp', 0.018)
@@ -149,41 +156,36 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
 from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 from vasim.mrcp.modes import KernelState
 from vasim.mrcp.planner import PlannerParams
 from vasim.mrcp.toolstation import CameraRobot, Station, build_station
 from vasim.operator.needle import (
-    RING_RADIUS,
-    RING_SITES,
+    NeedleTask,
     Side,
     classify_grasp,
     grasp_offset,
     grasp_sigma,
     handover_point,
     lateral_error,
-    needle_task,
     needs_via,
     pregrasp_offset,
 )
-from vasim.operator.scripted import OperatorProfile
-from vasim.operator.teleop_profile import NEUTRAL, TeleopEffects, teleop_adjustment
+from vasim.operator.profile import OperatorProfile
+from vasim.operator.teleop_profile import TeleopAdjustment, TeleopEffects
 from vasim.records.point_metrics import evaluate_trial
-from vasim.records.samples import SampleBuffer
 from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
+from vasim.trials.teleop_config import TeleopTrialConfig
 from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
+from vasim.trials.teleop_model import CYCLE_DT, TeleopTrialModel, TeleopTrialState
 from vasim.trials.teleop_quality import TargetDeformation
-from vasim.trials.vf import TrialConfig, TrialResult
+from vasim.trials.vf import TrialResult
 
 if TYPE_CHECKING:
     from vasim.abdomen.contact import ToolPose
     from vasim.abdomen.snapshot import AbdomenSnapshot
     from vasim.abdomen.world import Abdomen
-
-CYCLE_DT = 0.018
-"""Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""
 
 OPERATOR_SUBSTEPS = 3
 """Steps of the scripted hands per control cycle (6 ms each)."""
@@ -213,12 +215,6 @@ NTT_THRESHOLD = 2.0
 REPULSION_INFLUENCE = 0.03
 """Influence distance of the MRCP planner's repulsion at this station [m] (module
 docstring, decisions: 3 cm since the shared needle route)."""
-
-EM_PARTS = ("to_ring", "to_via", "transfer")
-"""What moved the needle, for the split of EM (``em_<part>`` trial metrics, [m]): carrying
-it to a ring, carrying it to a via point, and changing hands (MRCP: the kernel's transfer,
-the master decoupled; StdT: approach, grasp and release, where only a misaligned grasp
-moves it)."""
 
 TISSUE_METRICS = {
     "contact_time": "contact_time", "contact_count": "contact_count",
@@ -250,7 +246,7 @@ class TeleopTrial:
     """One trial of a teleoperation mode (module docstring).
 
     Args:
-        config: the trial; ``config.mode`` names the mode (required).
+        config: the trial; ``config.mode`` names the mode.
         n_rings: rings of the needle task (default: all of ``RING_SITES``); their pass
             radius is ``config.reach_radius`` (the protocol's), else ``RING_RADIUS``.
         abdomen: a fresh abdomen to use (of ``config.scene``; it accumulates this trial's
@@ -260,80 +256,65 @@ class TeleopTrial:
         effects: the operator's mode penalties (``vasim.operator.teleop_profile``);
             None: ``config.mode_effects`` (a session's declared teleoperation scenario),
             else ``NEUTRAL`` (the mechanism alone).
-
-    Raises:
-        ConfigError: no mode in ``config``.
     """
 
-    def __init__(self, config: TrialConfig, *, n_rings: int | None = None,
+    def __init__(self, config: TeleopTrialConfig, *, n_rings: int | None = None,
                  abdomen: Abdomen | None = None, holder: str = "positioner",
                  effects: TeleopEffects | None = None) -> None:
-        if config.mode is None:
-            raise ConfigError("a teleoperation trial needs config.mode ('stdt', 'mrcp', "
-                              "'mrcp_cam')", field="mode")
-        self.config = config
-        self.mode = config.mode
-        radius = config.reach_radius if config.reach_radius is not None else RING_RADIUS
-        self.task = needle_task(len(RING_SITES) if n_rings is None else n_rings,
-                                ring_radius=radius)
-        self.profile = config.profile if config.profile is not None else _preset(config.skill)
-        if effects is None:
-            effects = config.mode_effects if config.mode_effects is not None else NEUTRAL
-        self.effects = effects
-        self.adjustment = teleop_adjustment(
-            self.mode, config.practice if config.mode_practice is None
-            else config.mode_practice, self.profile, effects)
-        """The hands' profiles of this mode and mode practice (``teleop_profile``)."""
+        self.model = model = TeleopTrialModel.build(config, n_rings, effects)
         self.rng = np.random.default_rng(_seed(config.seed, 41))
-        self.station = build_station({"right": self.task.start + grasp_offset("right")},
+        self.station = build_station({"right": model.task.start + grasp_offset("right")},
                                      holder=holder)
-        self.dt = CYCLE_DT
         self.abdomen = abdomen
         if self.abdomen is None and config.scene != "none":
             from vasim.abdomen.world import Abdomen
 
             self.abdomen = Abdomen(config.scene)
-        self._snap: AbdomenSnapshot | None = None
+        snap: AbdomenSnapshot | None = None
         if self.abdomen is not None:
             from vasim.abdomen.quality import TissueQuality
 
             self.abdomen.quality = TissueQuality()    # this trial's Q from its start
-            self.abdomen.bind_targets(self.task.rings)
-            self._snap = self.abdomen.latest
-        self.rings = (self.task.rings.copy() if self._snap is None
-                      else np.array(self._snap.targets))
-        capacity = int(config.max_time / self.dt) + 2
-        self.samples = SampleBuffer(capacity=capacity, active_fixtures="")
-        self.events: list[tuple[float, str, str]] = []
-        self.needle = self.task.start.copy()
-        self.holder: Side = "right"
-        self.i = 0
-        self.k = -1
-        self.t = 0.0
-        self.reach_times: list[float] = []
-        self.counts = {"transfers": 0, "regrasps": 0, "misaligned_transfers": 0,
-                       "transfer_aborts": 0, "tool_holds": 0, "rsel_holds": 0,
-                       "safety_stops": 0}
-        self.master_path = 0.0
-        self.tt_time = 0.0
-        self.done = False
-        follows = self.mode == "mrcp_cam"
+            self.abdomen.bind_targets(model.task.rings)
+            snap = self.abdomen.latest
+        follows = model.mode == "mrcp_cam"
         cam = CameraRobot(self.station.camera.fulcrum, fov_deg=CAMERA_FOV_DEG if follows
                           else DEFAULT_ENDOSCOPE.fov_deg)
-        self.camera = Camera(cam, self.task.start.copy() if follows
-                              else self.task.rings.mean(axis=0), follows)
-        self._clutch = 0
-        self._via = False          # the next waypoint is the via point before ring i
-        self.route_j = 0           # waypoints of the route reached so far
+        self.camera = Camera(cam, model.task.start.copy() if follows
+                             else model.task.rings.mean(axis=0), follows)
         self.deformation = TargetDeformation()
         """Q as the seed measures it (``vasim.trials.teleop_quality``)."""
-        self.em_parts = dict.fromkeys(EM_PARTS, 0.0)
-        """The needle's path [m] split by what moved it (``EM_PARTS``)."""
-        self._em_from = self.needle.copy()
-        self._transferring = False     # the needle is changing hands this cycle
-        self.route_log: list[tuple[int, float, np.ndarray, np.ndarray]] = []
-        """(ring index or -1 for a via point, time, waypoint, needle centre) per waypoint
-        reached, in order (``needle_route``)."""
+        self.state = TeleopTrialState.initial(model, snap)
+
+    # -- the model's parts, as attributes of the trial -----------------------------------
+    @property
+    def config(self) -> TeleopTrialConfig:
+        return self.model.config
+
+    @property
+    def mode(self) -> str:
+        return self.model.mode
+
+    @property
+    def task(self) -> NeedleTask:
+        return self.model.task
+
+    @property
+    def profile(self) -> OperatorProfile:
+        return self.model.profile
+
+    @property
+    def effects(self) -> TeleopEffects:
+        return self.model.effects
+
+    @property
+    def adjustment(self) -> TeleopAdjustment:
+        """The hands' profiles of this mode and mode practice (``teleop_profile``)."""
+        return self.model.adjustment
+
+    @property
+    def dt(self) -> float:
+        return self.model.dt
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
@@ -358,83 +339,110 @@ class TeleopTrial:
 
     def _physics(self) -> None:
         """Steps the abdomen up to the current time with every instrument as its tools."""
+        ts = self.state
         ab = self.abdomen
         if ab is None:
             return
         tools = self.instruments()
-        while ab.t + 0.5 * ab.dt <= self.t:
-            self._snap = ab.step(tools)
-            self.deformation.add(ab.dt, self._snap.target_displacement)
-            for kind, detail in self._snap.events:
-                self.events.append((self._snap.t, kind, detail))
-        if self._snap is not None:
-            self.rings = np.array(self._snap.targets)
+        while ab.t + 0.5 * ab.dt <= ts.t:
+            ts.snap = ab.step(tools)
+            self.deformation.add(ab.dt, ts.snap.target_displacement)
+            for kind, detail in ts.snap.events:
+                ts.events.append((ts.snap.t, kind, detail))
+        if ts.snap is not None:
+            ts.rings = np.array(ts.snap.targets)
 
     def _goal(self) -> np.ndarray:
-        return self.rings[min(self.i, self.task.n_rings - 1)]
+        return self.state.rings[min(self.state.i, self.task.n_rings - 1)]
 
     def _waypoint(self) -> np.ndarray:
         """The next waypoint of the needle route (``needle_route``; the same in every
         mode): the via point before ring ``i`` (from the rings where they are now), or
         ring ``i``."""
-        if self._via:
-            return handover_point(self.rings[self.i - 1], self.rings[self.i])
+        ts = self.state
+        if ts.via:
+            return handover_point(ts.rings[ts.i - 1], ts.rings[ts.i])
         return self._goal()
 
     def _check_via(self) -> bool:
         """Marks the via point reached when the needle is within the ring radius of it."""
+        ts = self.state
         w = self._waypoint()
-        if self._via and float(np.linalg.norm(self.needle - w)) <= self.task.ring_radius:
-            self._via = False
-            self.route_j += 1
-            self.route_log.append((-1, self.t, w.copy(), self.needle.copy()))
-            self.events.append((self.t, "route", f"via point {self.i - 1}->{self.i} "
-                                f"({self.holder}) at " + ", ".join(
-                                    f"{1e3 * v:.2f}" for v in w) + " mm"))
+        if ts.via and float(np.linalg.norm(ts.needle - w)) <= self.task.ring_radius:
+            ts.via = False
+            ts.route_j += 1
+            ts.route_log.append((-1, ts.t, w.copy(), ts.needle.copy()))
+            ts.events.append((ts.t, "route", f"via point {ts.i - 1}->{ts.i} "
+                              f"({ts.holder}) at " + ", ".join(
+                                  f"{1e3 * v:.2f}" for v in w) + " mm"))
             return True
         return False
 
     def _check_ring(self) -> None:
-        if self.i < self.task.n_rings and not self._via and float(
-                np.linalg.norm(self.needle - self._goal())) <= self.task.ring_radius:
-            self.reach_times.append(self.t)
-            self.route_log.append((self.i, self.t, self._goal().copy(), self.needle.copy()))
-            self.events.append((self.t, "ring", f"ring {self.i} passed ({self.holder})"))
-            self.i += 1
-            self.route_j += 1
-            self._via = needs_via(self.task.sides, self.i)
+        ts = self.state
+        if ts.i < self.task.n_rings and not ts.via and float(
+                np.linalg.norm(ts.needle - self._goal())) <= self.task.ring_radius:
+            ts.reach_times.append(ts.t)
+            ts.route_log.append((ts.i, ts.t, self._goal().copy(), ts.needle.copy()))
+            ts.events.append((ts.t, "ring", f"ring {ts.i} passed ({ts.holder})"))
+            ts.i += 1
+            ts.route_j += 1
+            ts.via = needs_via(self.task.sides, ts.i)
 
     def _log(self, g: np.ndarray, i: int) -> None:
-        snap = self._snap
-        view = 1 if self.camera.contains(self.needle) else 0
+        ts = self.state
+        snap = ts.snap
+        view = 1 if self.camera.contains(ts.needle) else 0
         if snap is not None and snap.any_contact:
-            held = snap.tool(self.holder)
-            self.samples.append(self.k, self.t, self.needle, g, i, None, None,
-                                self.camera.zoom, 0.0, 0.0, 0.0, 1, held.force, held.torque,
-                                1 if snap.delicate_any else 0, self._clutch, view)
+            held = snap.tool(ts.holder)
+            ts.samples.append(ts.k, ts.t, ts.needle, g, i, None, None,
+                              self.camera.zoom, 0.0, 0.0, 0.0, 1, held.force, held.torque,
+                              1 if snap.delicate_any else 0, ts.clutch, view)
         else:
-            self.samples.append(self.k, self.t, self.needle, g, i, None, None,
-                                self.camera.zoom, 0.0, 0.0, 0.0, 0, None, None, 0,
-                                self._clutch, view)
+            ts.samples.append(ts.k, ts.t, ts.needle, g, i, None, None,
+                              self.camera.zoom, 0.0, 0.0, 0.0, 0, None, None, 0,
+                              ts.clutch, view)
 
-    def _tick(self) -> None:
-        self.k += 1
-        self.t = (self.k + 1) * self.dt
+    # -- the phases of a cycle (module docstring) ----------------------------------------
+    def before_step(self) -> None:
+        """The clock: k += 1, t = (k + 1) dt."""
+        st = self.state
+        st.k += 1
+        st.t = (st.k + 1) * self.dt
 
-    def _finish_cycle(self) -> None:
-        """Physics, the ring test, the camera hand, the sample (with the ring it was
-        compared with: the goal advances after the row, as in ``vasim.trials.vf``)."""
-        part = ("transfer" if self._transferring else "to_via" if self._via else "to_ring")
-        self.em_parts[part] += float(np.linalg.norm(self.needle - self._em_from))
-        self._em_from = self.needle.copy()
+    def after_step(self) -> None:
+        """The cycle's common phases after the mode's operator and master phases: the
+        needle's path, physics, the route (via point, ring), the camera hand, the sample
+        (with the ring it was compared with: the goal advances after the row, as in
+        ``vasim.trials.vf``), then ``done = should_terminate()``."""
+        self.path_phase()
         self._physics()
-        g, i = self._goal().copy(), self.i
+        g, i = self._goal().copy(), self.state.i
+        self.route_phase()
+        self.camera_phase()
+        self._log(g, i)
+        self.state.done = self.should_terminate()
+
+    def path_phase(self) -> None:
+        """The needle's path of this cycle, by what moved it (``EM_PARTS``)."""
+        st = self.state
+        part = "transfer" if st.transferring else "to_via" if st.via else "to_ring"
+        st.em_parts[part] += float(np.linalg.norm(st.needle - st.em_from))
+        st.em_from = st.needle.copy()
+
+    def route_phase(self) -> None:
+        """The route's tests: the via point, then the ring."""
         self._check_via()
         self._check_ring()
-        self.camera.follow(self.needle, self.dt)
-        self._log(g, i)
-        self.done = (self.i >= self.task.n_rings
-                     or self.t >= self.config.max_time - 1e-12)
+
+    def camera_phase(self) -> None:
+        """The camera hand follows the needle (``mrcp_cam``; the others stay aimed)."""
+        self.camera.follow(self.state.needle, self.dt)
+
+    def should_terminate(self) -> bool:
+        """Every ring passed, or the time limit."""
+        return (self.state.i >= self.task.n_rings
+                or self.state.t >= self.config.max_time - 1e-12)
 
     # -- the modes -------------------------------------------------------------------
     def run(self) -> TrialResult:
@@ -450,104 +458,106 @@ class TeleopTrial:
         yield from loop
 
     def _mrcp(self) -> Iterator[int]:
+        ts = self.state
         st = self.station
-        kernel = MRCPKernel(st.arms, st.world, needle_points(), "right", 0, self.needle,
+        kernel = MRCPKernel(st.arms, st.world, needle_points(), "right", 0, ts.needle,
                             config=kernel_config(st, self.config.seed))
-        master = self.needle.copy()
+        master = ts.needle.copy()
         key = 0
-        hand = self._hand(self._waypoint()[None, :], self.needle, self.task.ring_radius, key,
-                          carry=not self._via)
+        hand = self._hand(self._waypoint()[None, :], ts.needle, self.task.ring_radius, key,
+                          carry=not ts.via)
         dt_op = self.dt / OPERATOR_SUBSTEPS
         ack = 0.0            # time left until the operator acknowledges a safety stop
         holding = False
-        while not self.done:
-            self._tick()
+        while not ts.done:
+            self.before_step()
             if kernel.state is not KernelState.FAULT:
                 for _ in range(OPERATOR_SUBSTEPS):
-                    dx = hand.move(dt_op, self.needle, self._waypoint(), self.camera.zoom)
+                    dx = hand.move(dt_op, ts.needle, self._waypoint(), self.camera.zoom)
                     master = master + dx
-                    self.master_path += float(np.linalg.norm(dx))
-            rec = kernel.step(self.t, master)   # the kernel applies its increments
-            self.needle = kernel.task_pose()[0]
-            self.holder = "right" if kernel.rsel == "right" else "left"
-            self._clutch = 0 if rec.state is KernelState.TOP else 1
-            self._transferring = rec.state.mode == "TT"
-            if self._clutch:
-                self.tt_time += self.dt
+                    ts.master_path += float(np.linalg.norm(dx))
+            rec = kernel.step(ts.t, master)   # the kernel applies its increments
+            ts.needle = kernel.task_pose()[0]
+            ts.holder = "right" if kernel.rsel == "right" else "left"
+            ts.clutch = 0 if rec.state is KernelState.TOP else 1
+            ts.transferring = rec.state.mode == "TT"
+            if ts.clutch:
+                ts.tt_time += self.dt
             hold_now = False
             for e in rec.events:
                 kind = e.split(" ", 1)[0]
                 if kind == "transfer_done":
-                    self.counts["transfers"] += 1
+                    ts.counts["transfers"] += 1
                 elif kind == "transfer_abort":
-                    self.counts["transfer_aborts"] += 1
+                    ts.counts["transfer_aborts"] += 1
                 elif kind == "rsel_hold":
-                    self.counts["rsel_holds"] += 1
+                    ts.counts["rsel_holds"] += 1
                     hold_now = True
                     if holding:
                         continue               # one event per run of held cycles
                 elif kind == "fault:":
                     continue                   # "fault: no motion", every stopped cycle
-                self.events.append((self.t, "mrcp", e))
+                ts.events.append((ts.t, "mrcp", e))
             holding = hold_now
             if rec.state is KernelState.FAULT:
                 if ack <= 0.0:                 # the stop has just happened
-                    self.counts["safety_stops"] += 1
+                    ts.counts["safety_stops"] += 1
                     ack = self.profile.reaction_delay + FAULT_ACK_TIME
-                    if self.counts["safety_stops"] > MAX_SAFETY_STOPS:
-                        self.events.append((self.t, "aborted", "repeated safety stops"))
-                        self._finish_cycle()
-                        self.done = True
-                        yield self.k
+                    if ts.counts["safety_stops"] > MAX_SAFETY_STOPS:
+                        ts.events.append((ts.t, "aborted", "repeated safety stops"))
+                        self.after_step()
+                        ts.done = True
+                        yield ts.k
                         break
                 else:
                     ack -= self.dt
                     if ack <= 0.0:             # acknowledged: resume, a new movement
                         kernel.reset_fault()
-                        self.events.append((self.t, "mrcp", "safety stop acknowledged"))
+                        ts.events.append((ts.t, "mrcp", "safety stop acknowledged"))
                         key += 1
-                        hand = self._hand(self._waypoint()[None, :], self.needle,
-                                          self.task.ring_radius, key, carry=not self._via)
-            before = self.route_j
-            self._finish_cycle()
-            if self.route_j != before and not self.done:   # the next waypoint: a new path
+                        hand = self._hand(self._waypoint()[None, :], ts.needle,
+                                          self.task.ring_radius, key, carry=not ts.via)
+            before = ts.route_j
+            self.after_step()
+            if ts.route_j != before and not ts.done:   # the next waypoint: a new path
                 key += 1
-                hand = self._hand(self._waypoint()[None, :], self.needle,
-                                  self.task.ring_radius, key, carry=not self._via)
-            yield self.k
-        self.master_path += self.camera.path
+                hand = self._hand(self._waypoint()[None, :], ts.needle,
+                                  self.task.ring_radius, key, carry=not ts.via)
+            yield ts.k
+        ts.master_path += self.camera.path
 
     def _stdt(self) -> Iterator[int]:
+        ts = self.state
         st = self.station
         dt_op = self.dt / OPERATOR_SUBSTEPS
         sigma = grasp_sigma(self.adjustment.handover, self.config.practice)
         delay = self.profile.reaction_delay + GRIPPER_TIME
         key = 0
-        offset = self.needle - st.tip(self.holder)       # needle centre - holder tip
-        hand = self._hand(self.rings[:1], self.needle, self.task.ring_radius, key, carry=True)
+        offset = ts.needle - st.tip(ts.holder)       # needle centre - holder tip
+        hand = self._hand(ts.rings[:1], ts.needle, self.task.ring_radius, key, carry=True)
         phase = "carry"
         other: Side = "left"
         wait = 0.0
         attempts = 0
-        while not self.done:
-            self._tick()
+        while not ts.done:
+            self.before_step()
             if phase in ("carry", "handover"):
                 goal = self._waypoint()
                 dx = np.zeros(3)
                 for _ in range(OPERATOR_SUBSTEPS):
-                    dx = dx + hand.move(dt_op, self.needle + dx, goal, self.camera.zoom)
-                self._move_tool(self.holder, dx)
-                self.needle = st.tip(self.holder) + offset
+                    dx = dx + hand.move(dt_op, ts.needle + dx, goal, self.camera.zoom)
+                self._move_tool(ts.holder, dx)
+                ts.needle = st.tip(ts.holder) + offset
                 self._check_via()
-                if phase == "handover" and not self._via:
+                if phase == "handover" and not ts.via:
                     phase, attempts = "approach", 0
-                    self.events.append((self.t, "stdt", f"at hand-over point; {other} "
+                    ts.events.append((ts.t, "stdt", f"at hand-over point; {other} "
                                                         "approaches"))
                     key += 1
                     hand = self._approach_hand(other, key)
             elif phase == "approach":
                 tip = st.tip(other)
-                goal = self.needle + (pregrasp_offset(other) if hand.j == 0
+                goal = ts.needle + (pregrasp_offset(other) if hand.j == 0
                                       else grasp_offset(other))
                 dx = np.zeros(3)
                 for _ in range(OPERATOR_SUBSTEPS):
@@ -556,19 +566,19 @@ class TeleopTrial:
                 hand.check(st.tip(other), goal)
                 if hand.done:
                     phase, wait = "close", delay
-                    self.events.append((self.t, "stdt", f"{other} closes its jaw"))
+                    ts.events.append((ts.t, "stdt", f"{other} closes its jaw"))
             elif phase == "close":
                 wait -= self.dt
                 if wait <= 0.0:
                     attempts += 1
                     # across the needle: where the tip is, plus the misjudgement
-                    error = st.tip(other) - (self.needle + grasp_offset(other))
+                    error = st.tip(other) - (ts.needle + grasp_offset(other))
                     error = error * np.array([0.0, 1.0, 1.0]) + lateral_error(self.rng, sigma)
                     miss = float(np.linalg.norm(error))
                     outcome = classify_grasp(miss)
                     if outcome == "missed" and attempts < MAX_GRASP_ATTEMPTS:
-                        self.counts["regrasps"] += 1
-                        self.events.append((self.t, "regrasp",
+                        ts.counts["regrasps"] += 1
+                        ts.events.append((ts.t, "regrasp",
                                             f"{other} missed the needle by "
                                             f"{1e3 * miss:.1f} mm"))
                         key += 1
@@ -576,41 +586,42 @@ class TeleopTrial:
                         phase = "approach"
                     else:
                         if outcome != "clean":
-                            self.counts["misaligned_transfers"] += 1
-                            self.events.append((self.t, "misaligned_transfer",
+                            ts.counts["misaligned_transfers"] += 1
+                            ts.events.append((ts.t, "misaligned_transfer",
                                                 f"{other} grasped {1e3 * miss:.1f} mm "
                                                 "off the grasp point"))
-                        self.needle = self.needle + error     # the closing jaw drags it
+                        ts.needle = ts.needle + error     # the closing jaw drags it
                         phase, wait = "release", delay
             elif phase == "release":
                 wait -= self.dt
                 if wait <= 0.0:
-                    self.counts["transfers"] += 1
-                    self.events.append((self.t, "transfer", f"{self.holder} -> {other}"))
-                    self.holder, other = other, self.holder
-                    offset = self.needle - st.tip(self.holder)
+                    ts.counts["transfers"] += 1
+                    ts.events.append((ts.t, "transfer", f"{ts.holder} -> {other}"))
+                    ts.holder, other = other, ts.holder
+                    offset = ts.needle - st.tip(ts.holder)
                     key += 1
-                    hand = self._hand(self._goal()[None, :], self.needle,
+                    hand = self._hand(self._goal()[None, :], ts.needle,
                                       self.task.ring_radius, key, carry=True)
                     phase = "carry"
-            before = self.i
-            self._transferring = phase in ("approach", "close", "release")
-            self._finish_cycle()
-            if self.i != before and not self.done:     # a ring passed: what next
+            before = ts.i
+            ts.transferring = phase in ("approach", "close", "release")
+            self.after_step()
+            if ts.i != before and not ts.done:     # a ring passed: what next
                 key += 1
-                if self.task.sides[self.i] != self.holder:
+                if self.task.sides[ts.i] != ts.holder:
                     # the route's via point (needle_route) is the hand-over point
-                    hand = self._hand(self._waypoint()[None, :], self.needle,
+                    hand = self._hand(self._waypoint()[None, :], ts.needle,
                                       self.task.ring_radius, key)
                     phase = "handover"
                 else:
-                    hand = self._hand(self._goal()[None, :], self.needle,
+                    hand = self._hand(self._goal()[None, :], ts.needle,
                                       self.task.ring_radius, key, carry=True)
                     phase = "carry"
-            yield self.k
+            yield ts.k
 
     def _approach_hand(self, side: Side, key: int) -> Hand:
-        pts = np.array([self.needle + pregrasp_offset(side), self.needle + grasp_offset(side)])
+        needle = self.state.needle
+        pts = np.array([needle + pregrasp_offset(side), needle + grasp_offset(side)])
         return self._hand(pts, self.station.tip(side), (PREGRASP_REACH, GRASP_REACH), key)
 
     def _move_tool(self, side: Side, dx: np.ndarray) -> None:
@@ -618,10 +629,10 @@ class TeleopTrial:
         st = self.station
         arm = st.arms[side]
         q = st.world.configuration(side)
-        self.master_path += float(np.linalg.norm(dx))
+        self.state.master_path += float(np.linalg.norm(dx))
         sol = arm.ik(st.tip(side) + dx, None, q)
         if sol is None:
-            self.counts["tool_holds"] += 1
+            self.state.counts["tool_holds"] += 1
             return
         st.world.set_configuration(side, sol)
 
@@ -629,20 +640,21 @@ class TeleopTrial:
     def result(self, wall_time: float = 0.0, *,
                metric_params: MetricParams | None = None) -> TrialResult:
         """Samples, per-ring metrics, summary and trial metrics (module docstring)."""
+        ts = self.state
         from vasim.fixtures.schema import load_schema
 
-        view = self.samples.view()
+        view = ts.samples.view()
         n = self.task.n_rings
         metrics, summary = evaluate_trial(
             view["t"], view["x"], view["g"], view["goal_index"], self.task.rings,
             r_reach=self.task.ring_radius,
-            t_reached=self.reach_times + [math.nan] * (n - len(self.reach_times)))
+            t_reached=ts.reach_times + [math.nan] * (n - len(ts.reach_times)))
         summary.update({
-            "finished": bool(self.i >= n), "sim_time": self.t, "steps": self.k + 1,
+            "finished": bool(ts.i >= n), "sim_time": ts.t, "steps": ts.k + 1,
             # how it ended (TRIAL_OUTCOMES): an abort for repeated safety stops failed it
-            "outcome": ("reached_all" if self.i >= n else "failed"
-                        if any(e[1] == "aborted" for e in self.events) else "timed_out"
-                        if self.t >= self.config.max_time - 1e-12 else "stopped"),
+            "outcome": ("reached_all" if ts.i >= n else "failed"
+                        if any(e[1] == "aborted" for e in ts.events) else "timed_out"
+                        if ts.t >= self.config.max_time - 1e-12 else "stopped"),
             "schema": "none", "active_fixtures": "", "nonfinite_inputs": 0,
             "scene": self.config.scene, "mode": self.mode, "task": "needle",
             "n_rings": n, "n_transfers_needed": self.task.n_transfers,
@@ -650,7 +662,7 @@ class TeleopTrial:
             "teleop_effects": (f"thread_time={self.effects.thread_time} stdt_noise="
                                f"{self.effects.stdt_noise} camera_cost="
                                f"{self.effects.camera_cost}"),
-            **{k: int(v) for k, v in self.counts.items()},
+            **{k: int(v) for k, v in ts.counts.items()},
         })
         if self.abdomen is not None:
             summary.update({f"tissue_{k}": v
@@ -660,24 +672,19 @@ class TeleopTrial:
         if self.abdomen is not None:   # Q over every instrument (module docstring)
             quality = self.abdomen.quality.as_dict()
             tm.update({k: float(quality[v]) for k, v in TISSUE_METRICS.items()})
-        tm.update({"master_path_l2": self.master_path, "camera_path_l2": self.camera.path,
-                   "transfers": float(self.counts["transfers"]),
-                   "regrasps": float(self.counts["regrasps"]),
-                   "misaligned_transfers": float(self.counts["misaligned_transfers"]),
-                   "safety_stops": float(self.counts["safety_stops"]),
-                   "tt_time": self.tt_time,
-                   **{f"em_{k}": v for k, v in self.em_parts.items()}})
+        tm.update({"master_path_l2": ts.master_path, "camera_path_l2": self.camera.path,
+                   "transfers": float(ts.counts["transfers"]),
+                   "regrasps": float(ts.counts["regrasps"]),
+                   "misaligned_transfers": float(ts.counts["misaligned_transfers"]),
+                   "safety_stops": float(ts.counts["safety_stops"]),
+                   "tt_time": ts.tt_time,
+                   **{f"em_{k}": v for k, v in ts.em_parts.items()}})
         if self.abdomen is not None:
             tm.update(self.deformation.as_metrics())
         return TrialResult(config=self.config, schema=load_schema("none"),
                            task=self.task.operator_task(self.task.rings, self.task.start),
-                           samples=self.samples, metrics=metrics, summary=summary,
-                           events=list(self.events), wall_time=wall_time, trial_metrics=tm)
-
-
-def _preset(skill: str) -> OperatorProfile:
-    return {"novice": OperatorProfile.novice, "expert": OperatorProfile.expert}.get(
-        skill, OperatorProfile.intermediate)()
+                           samples=ts.samples, metrics=metrics, summary=summary,
+                           events=list(ts.events), wall_time=wall_time, trial_metrics=tm)
 
 
 __all__ = [

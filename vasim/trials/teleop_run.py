@@ -17,14 +17,15 @@ from vasim.records.trial_metrics import MetricParams
 from vasim.trials.lifecycle import stored_trial
 from vasim.trials.sink import TrialSink
 from vasim.trials.teleop import CYCLE_DT, TeleopTrial
-from vasim.trials.vf import TrialConfig, TrialResult, make_profile
+from vasim.trials.teleop_config import TeleopTrialConfig
+from vasim.trials.vf import TrialResult, make_profile
 from vasim.trials.vf_run import config_record
 
 if TYPE_CHECKING:
     from vasim.abdomen.world import Abdomen
 
 
-def teleop_meta(config: TrialConfig, *, schema: Schema | None = None,
+def teleop_meta(config: TeleopTrialConfig, *, schema: Schema | None = None,
                 session_id: int | None = None, schedule_index: int | None = None,
                 protocol: str | None = None) -> TrialMeta:
     """The store's ``TrialMeta`` of a teleoperation trial (task ``"needle"``, schema
@@ -39,7 +40,7 @@ def teleop_meta(config: TrialConfig, *, schema: Schema | None = None,
         schedule_index=schedule_index, protocol=protocol)
 
 
-def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]:
+def simulate_teleop(config: TeleopTrialConfig, params: MetricParams) -> dict[str, Any]:
     """``vasim.study.cohort.simulate_trial`` for a teleoperation trial (same dict)."""
     t0 = time.perf_counter()
     trial = TeleopTrial(config)
@@ -56,7 +57,7 @@ def simulate_teleop(config: TrialConfig, params: MetricParams) -> dict[str, Any]
             "sim_time": float(result.summary["sim_time"])}
 
 
-def run_teleop_trial(config: TrialConfig, sink: TrialSink | None = None, *,
+def run_teleop_trial(config: TeleopTrialConfig, sink: TrialSink | None = None, *,
                      progress: bool = False, session_id: int | None = None,
                      schedule_index: int | None = None,
                      protocol: str | None = None, metric_params: MetricParams | None = None,

@@ -15,26 +15,32 @@ from vasim.core.progress import progress_bar
 from vasim.fixtures.gain import rule_record
 from vasim.fixtures.schema import Schema, dumps_schema, load_schema
 from vasim.operator.scripted import OperatorProfile
+from vasim.operator.teleop_profile import TeleopEffects
 from vasim.records.trial_meta import TrialMeta
 from vasim.records.trial_metrics import MetricParams
+from vasim.trials.configs import AnyTrialConfig
 from vasim.trials.lifecycle import stored_trial
 from vasim.trials.sink import TrialSink
 from vasim.trials.vf import TrialConfig, TrialResult, TrialRunner, make_profile
 
 
-def config_record(config: TrialConfig, profile: OperatorProfile) -> dict[str, object]:
-    """The trial configuration as plain JSON-able data (stored with the trial)."""
-    # mode and label only when set: the records of other trials stay as they were
-    rec = {f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
-           and not (f.name in ("mode", "label", "poi_spacing", "mode_practice",
-                               "mode_effects") and getattr(config, f.name) is None)}
-    if config.mode_effects is not None:  # the teleoperation scenario's penalties
-        rec["mode_effects"] = asdict(config.mode_effects)
+def config_record(config: AnyTrialConfig, profile: OperatorProfile) -> dict[str, object]:
+    """The trial configuration (of any kind) as plain JSON-able data (stored with the
+    trial): its fields in order, the profile last."""
+    # label, poi_spacing and the mode fields only when set: older records stay as they were
+    rec: dict[str, object] = {
+        f.name: getattr(config, f.name) for f in fields(config) if f.name != "profile"
+        and not (f.name in ("label", "poi_spacing", "mode_practice", "mode_effects")
+                 and getattr(config, f.name) is None)}
+    effects = rec.get("mode_effects")
+    if isinstance(effects, TeleopEffects):  # the teleoperation scenario's penalties
+        rec["mode_effects"] = asdict(effects)
     rec["profile"] = {f.name: getattr(profile, f.name) for f in fields(profile)}
-    if config.gain == 1.0:  # the schema as written: the record stays as it was
-        rec.pop("gain", None)
-    else:
-        rec["gain"] = rule_record(config.gain)
+    if "gain" in rec:
+        if rec["gain"] == 1.0:  # the schema as written: the record stays as it was
+            del rec["gain"]
+        else:
+            rec["gain"] = rule_record(rec["gain"])  # type: ignore[arg-type]  # a GainRule field
     return rec
 
 
@@ -89,13 +95,13 @@ def run_vf_trial(config: TrialConfig, sink: TrialSink | None = None, *,
         return runner.result(wall_time=time.perf_counter() - t0, metric_params=metric_params)
 
     def meta() -> TrialMeta:  # built only with a sink
-        return trial_meta(config, runner.schema, runner.operator.profile,
+        return trial_meta(config, runner.schema, runner.person.profile,
                           session_id=session_id, schedule_index=schedule_index,
                           protocol=protocol)
 
     with stored_trial(sink, meta, partial=partial, samples=runner.samples) as rec:
         t0 = time.perf_counter()
-        bar = (progress_bar(runner._n, f"trial {config.schema}", "pt", leave=False)
+        bar = (progress_bar(runner.model.n, f"trial {config.schema}", "pt", leave=False)
                if progress else None)
         chunk = 0.25
         last_i = 0

@@ -14,7 +14,14 @@ from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.trials.vf import TrialConfig
 from vasim.viewer.condition import named_edit
-from vasim.viewer.state import PanelState, TrialInfo, f5pl_fields, schema_choices, with_f5pl
+from vasim.viewer.state import (
+    PanelState,
+    TrialInfo,
+    demo_config,
+    f5pl_fields,
+    schema_choices,
+    with_f5pl,
+)
 
 DEFAULT_SCHEMA_FOR_TASK: dict[str, str] = {
     "trajectory": "trajectory_following",
@@ -83,7 +90,8 @@ class ConditionCommands:
         self._publish(schema=name, task=task, f5pl=f5pl_fields(schema))
         if p.mode == "demo":
             self._close_trial("schema changed")
-            variant = self.info.config.variant if task == self.info.config.task else 0
+            cfg = demo_config(self.info)
+            variant = cfg.variant if task == cfg.task else 0
             self._start_demo(replace(self._base, schema=name, task=task, variant=variant))  # type: ignore[arg-type]  # strs
 
     def _set_task(self, task: str) -> None:
@@ -126,7 +134,7 @@ class ConditionCommands:
                              f"{edited.name}")
         if p.mode == "demo":
             self._close_trial("f5PL edited")
-            self._start_demo(self.info.config)
+            self._start_demo(demo_config(self.info))
         elif self._running_stored():
             self._close_trial("f5PL edited")
             self._launch(self._free_config(), mode="free", schema=edited, input_kind=p.input)

@@ -71,6 +71,7 @@ from vasim.haptics.devices.browser import BrowserDevice
 from vasim.haptics.devices.laparoscopic import LaparoscopicDevice
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.tasks import TRAJECTORY_VARIANTS
+from vasim.trials.configs import AnyTrialConfig, TeleopTrialConfig
 from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
 from vasim.trials.teleop_run import teleop_meta
 from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
@@ -95,6 +96,7 @@ from vasim.viewer.state import (
     Command,
     PanelState,
     TrialInfo,
+    demo_config,
     f5pl_fields,
     gain_plan,
     plain,
@@ -268,7 +270,7 @@ class TrainingController(ConditionCommands):
         return self._store
 
     # -- trials ------------------------------------------------------------------------
-    def _launch(self, config: TrialConfig, *, mode: str, schema: Schema | None = None,
+    def _launch(self, config: AnyTrialConfig, *, mode: str, schema: Schema | None = None,
                 input_kind: str = "scripted", session: Any = None,
                 scheduled: Any = None) -> TrialInfo:
         """Builds, registers (stored modes) and starts a trial; returns its info.
@@ -280,9 +282,12 @@ class TrainingController(ConditionCommands):
         # A teleoperation mode (a protocol's stdt / mrcp / mrcp_cam trial) runs the station's
         # needle task: vasim.viewer.teleop_live (issue #28).
         teleop = is_teleop(config)
-        if teleop and input_kind != "scripted":
-            config = person_config(config)
-        task = teleop_task(config) if teleop else make_task(config)
+        if isinstance(config, TeleopTrialConfig):
+            if input_kind != "scripted":
+                config = person_config(config)
+            task = teleop_task(config)
+        else:
+            task = make_task(config)
         if input_kind == "browser":
             device = BrowserDevice()
         elif input_kind == "laparoscopic":
@@ -291,15 +296,17 @@ class TrainingController(ConditionCommands):
             device = instrument_device(tool_trocar(config.task, np.asarray(task.start)),
                                        np.asarray(task.start), self.input_mapping, screen)
             self.screen = screen
-        trial = (self.teleop_factory if teleop else self._factory)(
-            config, device, schema=schema, speed=self.speed)
-        sch = schema if schema is not None else load_schema(config.schema)
+        trial = (self._factory(config, device, schema=schema, speed=self.speed)
+                 if isinstance(config, TrialConfig)
+                 else self.teleop_factory(config, device, schema=schema, speed=self.speed))
+        sch = schema if schema is not None else load_schema(
+            config.schema if isinstance(config, TrialConfig) else "none")
         self._stored = StoredTrial(None, None)  # a demo is not stored
         if mode != "demo":
             where = {"session_id": None if session is None else session.id,
                      "schedule_index": None if scheduled is None else scheduled.index,
                      "protocol": None if session is None else session.protocol.name}
-            meta = (teleop_meta(config, **where) if teleop
+            meta = (teleop_meta(config, **where) if isinstance(config, TeleopTrialConfig)
                     else trial_meta(config, sch, make_profile(config), **where))
             if input_kind != "scripted":
                 cfg = dict(meta.config or {})
@@ -346,7 +353,7 @@ class TrainingController(ConditionCommands):
         return self.info
 
     @staticmethod
-    def _gain_plan(config: TrialConfig, session: Any, scheduled: Any) -> str:
+    def _gain_plan(config: AnyTrialConfig, session: Any, scheduled: Any) -> str:
         """How the trial's fixture gain is set (``state.gain_plan``): a protocol trial's
         from its block (``vasim.study.gain_plan.gain_text``), any other's from its config."""
         text = ""
@@ -354,7 +361,7 @@ class TrainingController(ConditionCommands):
             from vasim.study.gain_plan import gain_text
 
             text = gain_text(session.protocol, scheduled)
-        return gain_plan(config.gain, text)
+        return gain_plan(config.gain if isinstance(config, TrialConfig) else 1.0, text)
 
     def _close_trial(self, reason: str, *, failed: bool = False) -> None:
         """Stops the running trial; a stored one that is not done (or whose loop ``failed``)
@@ -525,7 +532,8 @@ class TrainingController(ConditionCommands):
         except StoreError as exc:
             self._publish(running=False, status=str(exc), **self._progress())
             raise
-        cfg = replace(session.trial_config(nxt), scene=self.scene)
+        # A VF trial's config, or a teleoperation mode's own (issue #29): teleop_live runs it.
+        cfg: AnyTrialConfig = replace(session.trial_config(nxt), scene=self.scene)
         # The session's input (stored with it when it was created) drives all its trials.
         kind = str(session.settings.extra.get("input", self.panel.input))
         mapping = session.settings.extra.get("input_mapping")
@@ -535,7 +543,7 @@ class TrainingController(ConditionCommands):
         # The greyed f5PL editor shows the running trial's condition (issue #26 §5), not
         # the free-training schema: the trial's own schema, as _launch loaded it.
         self._publish(running=True, summary=None, scorecard=None, input=kind,
-                      f5pl=f5pl_fields(load_schema(cfg.schema)),
+                      f5pl=f5pl_fields(load_schema(self.info.schema)),
                       status=f"{self.info.title} running ({nxt.condition}; store id "
                       f"{self.info.trial_id})", **self._progress())
 
@@ -689,7 +697,7 @@ class TrainingController(ConditionCommands):
         p = self.panel
         if p.mode == "demo":
             self._close_trial("restarted")
-            self._start_demo(self.info.config)
+            self._start_demo(demo_config(self.info))
         else:
             raise ConfigError("use Stop, then Start (a stored trial is not restarted)",
                               field="restart")
@@ -794,7 +802,7 @@ class TrainingController(ConditionCommands):
         self._pending = self.countdown_until = None
         if p.mode == "demo":
             self._close_trial("restarted")
-            self._start_demo(self.info.config)
+            self._start_demo(demo_config(self.info))
         elif p.mode == "free":
             self._close_trial("replaced")
             self._launch(self._free_config(), mode="free", schema=self._schema_obj,
@@ -845,7 +853,7 @@ class TrainingController(ConditionCommands):
             return
         p = self.panel
         if p.mode == "demo" and self.info.mode == "demo":
-            cfg = self.info.config
+            cfg = demo_config(self.info)
             variant = (cfg.variant + 1) % TRAJECTORY_VARIANTS if cfg.task == "trajectory" else 0
             self._start_demo(replace(cfg, variant=variant, seed=cfg.seed + 1))
         elif (p.mode == "protocol" and p.auto_advance and self.info.schedule_index is not None

@@ -10,6 +10,7 @@ import json
 import math
 from typing import Any
 
+from vasim.trials.configs import TeleopTrialConfig
 from vasim.viewer.state import TrialInfo
 from vasim.viewer.trainee import GateCard, ScoreCard, gate_card, score_card
 
@@ -45,7 +46,7 @@ def trial_score_card(st: Any, info: TrialInfo, metrics: dict[str, float],
         outcome: how it ended.
     """
     df = st.trials("completed")
-    if info.config.mode is None:
+    if not isinstance(info.config, TeleopTrialConfig):
         same = (df["schema"] == info.schema) & (df["task"] == info.config.task)
     else:   # a teleoperation trial: the needle task in the same mode (teleop_live)
         modes = df["config_json"].map(lambda c: json.loads(c).get("mode")

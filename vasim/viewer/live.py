@@ -3,7 +3,7 @@
 ``vasim.trials.realtime.RealtimeTrial`` is the servo loop driving a trial at 1 kHz on its
 own thread (physics on another). The viewer codes against its interface::
 
-    RealtimeTrial(config, device=None, *, schema=None, physics=..., rate_hz=1000.0)
+    RealtimeTrial(config, device=None, *, schema=None, physics=..., servo=None)
     .start(); .stop(); .done; .frame() -> TrialFrame; .timing(); .result(**kw)
 
 :class:`SimThreadTrial` is the viewer's own implementation of that shape: one thread
@@ -14,11 +14,11 @@ tracks wall time (times ``speed``). :func:`make_live_trial` picks ``RealtimeTria
 module exists and ``speed`` is 1, else this class: swapping is that one function.
 
 Input devices: a ``TrialRunner`` asks its operator for the master increment dX_M each step
-(``step(observation)``). :class:`DeviceOperator` turns any ``vasim.haptics`` ``Device``
-(the browser's dragged tool tip, a haptic device) into such an operator: dX_M is the
-difference of two successive readings; an invalid reading or a held clutch button
-(``BUTTON_2``, the servo loop's clutch) moves nothing, and the first reading after either
-is the new reference (indexing, as the servo loop's clutch does).
+(``act(percept)``, ``vasim.operator.port``). :class:`DeviceOperator` turns any
+``vasim.haptics`` ``Device`` (the browser's dragged tool tip, a haptic device) into such an
+operator: dX_M is the difference of two successive readings; an invalid reading or a held
+clutch button (``BUTTON_2``, the servo loop's clutch) moves nothing, and the first reading
+after either is the new reference (indexing, as the servo loop's clutch does).
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import BUTTON_2, Device
 from vasim.haptics.observation import OperatorObservation
+from vasim.operator.port import Percept
 from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, TrialRunner
 
 log = logging.getLogger(__name__)
@@ -84,6 +85,10 @@ class DeviceOperator:
 
     def reset(self, start: np.ndarray) -> None:
         self._ref = None
+
+    def act(self, percept: Percept) -> tuple[float, float, float]:
+        """The trial operator protocol (``vasim.operator.port``): :meth:`step`."""
+        return self.step(percept.observation())
 
     def step(self, obs: OperatorObservation) -> tuple[float, float, float]:
         """The master increment dX_M [m] since the previous step."""
@@ -260,7 +265,7 @@ class SimThreadTrial(PacedThread):
         self.config = config
         self.runner = TrialRunner(config, schema)
         if device is not None:
-            self.runner.operator = DeviceOperator(device)  # type: ignore[assignment]  # a device operator in the operator slot
+            self.runner.operator = DeviceOperator(device)
 
     def _finished(self) -> bool:
         return bool(self.runner.done)

@@ -43,6 +43,7 @@ from vasim.viewer.f5pl_view import (
     parameter_lines,
 )
 from vasim.viewer.history import AGAIN_FIELD
+from vasim.viewer.state import demo_config
 from vasim.viewer.trainee import OUTCOME_TEXT, frame_outcome, score_card_markdown
 from vasim.viewer.views import set_gui_value
 
@@ -569,7 +570,7 @@ class ExperimenterPanel:
             self._trial_key = info.number
             self._trial_schema = info.schema
             try:
-                self._task_scale = float(make_task(info.config).scale)
+                self._task_scale = float(make_task(demo_config(info)).scale)
             except Exception:   # the editor keeps the last scale; the trial is unaffected
                 self._task_scale = DEFAULT_TASK_SCALE
         view = self.fixture_view(self.fixture.value)

@@ -16,7 +16,8 @@ from vasim.core.errors import ConfigError
 from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, available_schemas
-from vasim.trials.vf import TrialConfig
+from vasim.trials.configs import AnyTrialConfig
+from vasim.trials.configs import VfTrialConfig as TrialConfig
 from vasim.viewer.trainee import ScoreCard, trial_title
 
 FloatArray = NDArray[np.float64]
@@ -72,7 +73,7 @@ class TrialInfo:
     """
 
     number: int
-    config: TrialConfig
+    config: AnyTrialConfig
     schema: str
     fixtures: tuple[str, ...]
     task_name: str
@@ -191,5 +192,14 @@ def schema_choices(current: str) -> tuple[str, ...]:
     names = available_schemas()
     return names if current in names else (*names, current)
 
-__all__ = ["Command", "PanelState", "TrialInfo", "f5pl_fields", "gain_plan", "plain",
+__all__ = ["Command", "PanelState", "TrialInfo", "demo_config", "f5pl_fields", "gain_plan", "plain",
            "plain_dict", "schema_choices", "with_f5pl"]
+
+
+def demo_config(info: TrialInfo) -> TrialConfig:
+    """The VF config of a demo trial's info (a demo is always a VF trial: a teleoperation
+    trial runs only from a protocol's schedule)."""
+    if not isinstance(info.config, TrialConfig):
+        raise ConfigError(f"{info.title} is a {info.config.kind} trial: it has no demo",
+                          field="mode")
+    return info.config

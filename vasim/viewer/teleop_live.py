@@ -68,9 +68,10 @@ from vasim.haptics.device import Device
 from vasim.haptics.observation import OperatorObservation
 from vasim.operator.needle import RING_RADIUS, RING_SITES, needle_task
 from vasim.tasks import Task
+from vasim.trials.configs import AnyTrialConfig, TeleopTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES
 from vasim.trials.teleop import CYCLE_DT, TeleopTrial
-from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, make_profile
+from vasim.trials.vf import TrialFrame, TrialResult, make_profile
 from vasim.viewer.live import DeviceOperator, PacedThread
 
 log = logging.getLogger(__name__)
@@ -82,12 +83,12 @@ NO_FIXTURES = FixtureOutputs(active=(), dx_slave=np.zeros(3), ms_factors=np.ones
 """The fixture outputs of a teleoperation frame: a teleoperation trial has no fixtures."""
 
 
-def is_teleop(config: TrialConfig) -> bool:
-    """True for a teleoperation trial (``config.mode`` one of ``TELEOPERATION_MODES``)."""
-    return config.mode in TELEOPERATION_MODES
+def is_teleop(config: AnyTrialConfig) -> bool:
+    """True for a teleoperation trial (its own config, ``TeleopTrialConfig``)."""
+    return isinstance(config, TeleopTrialConfig)
 
 
-def teleop_task(config: TrialConfig) -> Task:
+def teleop_task(config: TeleopTrialConfig) -> Task:
     """The task of a teleoperation trial as the viewer draws it: the rings at rest, in
     visiting order, and the needle's start (``TeleopTrial``'s task: all of ``RING_SITES``,
     pass radius the protocol's ``reach_radius``, else ``RING_RADIUS``)."""
@@ -96,7 +97,7 @@ def teleop_task(config: TrialConfig) -> Task:
     return task.operator_task(task.rings, task.start)
 
 
-def person_config(config: TrialConfig) -> TrialConfig:
+def person_config(config: TeleopTrialConfig) -> TeleopTrialConfig:
     """The config of a trial a person drives: its profile without simulated perception
     noise (module docstring, decisions)."""
     return replace(config, profile=replace(make_profile(config), perception_noise=0.0))
@@ -188,7 +189,7 @@ class PersonTeleopTrial(TeleopTrial):
         **kw: ``TeleopTrial``'s keyword arguments (``n_rings``, ``abdomen``, ...).
     """
 
-    def __init__(self, config: TrialConfig, device: Device, **kw: Any) -> None:
+    def __init__(self, config: TeleopTrialConfig, device: Device, **kw: Any) -> None:
         check_hand_seam()
         super().__init__(config, **kw)
         self.device_operator = DeviceOperator(device)
@@ -218,11 +219,12 @@ class LiveTeleopTrial(PacedThread):
         ConfigError: not a teleoperation mode, or a bad speed.
     """
 
-    def __init__(self, config: TrialConfig, device: Device | None = None, *,
+    def __init__(self, config: AnyTrialConfig, device: Device | None = None, *,
                  schema: Any = None, speed: float = 1.0, loop_hz: float = 120.0,
                  max_catch_up_s: float = 0.1, **kw: Any) -> None:
-        if not is_teleop(config):
-            raise ConfigError(f"not a teleoperation mode: {config.mode!r} (one of "
+        if not isinstance(config, TeleopTrialConfig):
+            raise ConfigError(f"not a teleoperation trial: a {config.kind!r} trial's config "
+                              f"(a teleoperation mode is one of "
                               f"{', '.join(TELEOPERATION_MODES)})", field="mode")
         super().__init__(device, dt=CYCLE_DT, speed=speed, loop_hz=loop_hz,
                          max_catch_up_s=max_catch_up_s)
@@ -236,10 +238,10 @@ class LiveTeleopTrial(PacedThread):
 
     # -- PacedThread ---------------------------------------------------------------------
     def _finished(self) -> bool:
-        return bool(self.trial.done) or self._exhausted
+        return bool(self.trial.state.done) or self._exhausted
 
     def _clock(self) -> tuple[float, int]:
-        return max(0.0, self.trial.t), self.trial.k + 1
+        return max(0.0, self.trial.state.t), self.trial.state.k + 1
 
     def _advance(self, n: int) -> None:
         self.advance(n)
@@ -286,15 +288,16 @@ class LiveTeleopTrial(PacedThread):
     def _make_frame(self) -> TrialFrame:
         tr = self.trial
         n = tr.task.n_rings
-        needle = np.array(tr.needle, dtype=np.float64)
+        needle = np.array(tr.state.needle, dtype=np.float64)
         snap = tr.abdomen.latest if tr.abdomen is not None else None
-        return TrialFrame(k=tr.k, t=max(0.0, tr.t), tcp=needle, master=needle.copy(),
-                          goal=np.array(tr.rings[min(tr.i, n - 1)], dtype=np.float64),
-                          goal_index=int(tr.i), n_points=n,
+        st = tr.state
+        return TrialFrame(k=st.k, t=max(0.0, st.t), tcp=needle, master=needle.copy(),
+                          goal=np.array(st.rings[min(st.i, n - 1)], dtype=np.float64),
+                          goal_index=int(st.i), n_points=n,
                           done=self.done, outputs=camera_outputs(tr), abdomen=snap)
 
 
-def make_live_teleop_trial(config: TrialConfig, device: Device | None = None, *,
+def make_live_teleop_trial(config: AnyTrialConfig, device: Device | None = None, *,
                            schema: Any = None, speed: float = 1.0) -> LiveTeleopTrial:
     """The viewer's factory of teleoperation trials (``TrainingController``)."""
     return LiveTeleopTrial(config, device, schema=schema, speed=speed)

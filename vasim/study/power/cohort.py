@@ -59,9 +59,9 @@ from vasim.study.report.data import StudyData, load_study
 from vasim.study.report.primary import primary_tests, probe_model_tests
 from vasim.study.session import Session, SessionSettings, start_session
 from vasim.study.store import SCHEDULE_COLUMNS, TrialStore
+from vasim.trials.configs import AnyTrialConfig
 from vasim.trials.lifecycle import stored_trial
 from vasim.trials.registry import TRIAL_KINDS
-from vasim.trials.vf import TrialConfig
 
 POINT_READ = ("point", "reached", "t_reached", "error_l1", "error_l1_mm_s", "latency")
 """The per-point columns the report reads (``load_study``)."""
@@ -85,7 +85,7 @@ def subject_session(protocol: Protocol, subject: SimulatedSubject, *, dt: float,
 
 def trial_configs(session: Session, profile: Any,
                   effects: Mapping[str, FixtureEffect] | None = None
-                  ) -> list[tuple[ScheduledTrial, TrialConfig]]:
+                  ) -> list[tuple[ScheduledTrial, AnyTrialConfig]]:
     """Each scheduled trial with its configuration under ``effects`` (module decisions).
 
     Args:
@@ -97,7 +97,7 @@ def trial_configs(session: Session, profile: Any,
     out = []
     for st in session.schedule:
         cfg = session.trial_config(st)
-        if effects is not None and cfg.mode is None:
+        if effects is not None and cfg.kind == "vf":
             history = [t.condition for t in session.schedule[:st.index]]
             adj = trial_adjustment(history, st.condition, effects)
             cfg = replace(cfg, profile=adj.apply(profile), practice=round(adj.practice))

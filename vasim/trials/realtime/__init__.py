@@ -115,7 +115,7 @@ Example (deterministic, no tissue, the emulated Omni held still):
 
 from __future__ import annotations
 
-from vasim.trials.realtime.loop import DEFAULT_RT_PRIORITY, RealtimeTrial
+from vasim.trials.realtime.loop import DEFAULT_RT_PRIORITY, RealtimeTrial, ServoSettings
 from vasim.trials.realtime.plant import DEFAULT_BLEND_S, PhysicsMode, TrialPlant
 from vasim.trials.realtime.process import ProcessRealtimeTrial
 from vasim.trials.realtime.recording import (
@@ -140,6 +140,7 @@ __all__ = [
     "RealtimeTiming",
     "RealtimeTrial",
     "ReplayReport",
+    "ServoSettings",
     "TrialPlant",
     "realtime_path",
     "recorded_files",

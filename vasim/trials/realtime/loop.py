@@ -7,7 +7,7 @@ from __future__ import annotations
 import gc
 import math
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from vasim.abdomen.runner import PhysicsThread
@@ -17,7 +17,6 @@ from vasim.haptics.coupling import CouplingParams
 from vasim.haptics.device import BUTTON_2, Device, ScheduledDevice
 from vasim.haptics.servo import ServoLoop
 from vasim.operator.device import ScriptedDevice
-from vasim.operator.scripted import ScriptedOperator
 from vasim.trials.realtime.plant import (
     DEFAULT_BLEND_S,
     InlineFeed,
@@ -41,17 +40,14 @@ DEFAULT_RT_PRIORITY = 40
 normal thread, below the kernel's threaded interrupt handlers (50)."""
 
 
-class RealtimeTrial:
-    """One trial driven by the 1 kHz servo loop (module docstring).
+@dataclass(frozen=True)
+class ServoSettings:
+    """How the servo loop of a real-time trial runs (grouped out of ``RealtimeTrial``'s
+    and ``ProcessRealtimeTrial``'s parameters, issue #29).
 
-    Args:
-        config: the trial.
-        device: the input device; None: the config's scripted operator as a device.
-        schema: a loaded schema overriding ``config.schema``.
-        physics: ``"thread"``, ``"inline"`` or ``"off"`` (``PhysicsMode``), or a
-            :class:`PhysicsLog` to replay.
+    Attributes:
         rate_hz: the servo rate [Hz]; must equal 1 / ``config.dt``.
-        coupling: virtual-coupling parameters (default ``CouplingParams()``).
+        coupling: virtual-coupling parameters.
         record: keep the device stream and the physics log (for replays).
         clutch_button: the clutch's button bitmask.
         switch_interval_s: the interpreter's switch interval while the loop runs in real
@@ -62,6 +58,28 @@ class RealtimeTrial:
         freeze_gc: collect and freeze the garbage collector's heap when the run starts
             (``gc.freeze``; undone by ``stop``), so that a full collection during the run
             scans only what the run allocates (module docstring).
+    """
+
+    rate_hz: float = 1000.0
+    coupling: CouplingParams = field(default_factory=CouplingParams)
+    record: bool = True
+    clutch_button: int = BUTTON_2
+    switch_interval_s: float | None = 5e-4
+    rt_priority: int | None = DEFAULT_RT_PRIORITY
+    blend_s: float = DEFAULT_BLEND_S
+    freeze_gc: bool = True
+
+
+class RealtimeTrial:
+    """One trial driven by the 1 kHz servo loop (module docstring).
+
+    Args:
+        config: the trial.
+        device: the input device; None: the config's scripted operator as a device.
+        schema: a loaded schema overriding ``config.schema``.
+        physics: ``"thread"``, ``"inline"`` or ``"off"`` (``PhysicsMode``), or a
+            :class:`PhysicsLog` to replay.
+        servo: how the servo loop runs (``ServoSettings``; default: its defaults).
 
     Raises:
         ConfigError: a rate that does not match ``dt``, an unknown physics mode, or what
@@ -70,11 +88,9 @@ class RealtimeTrial:
 
     def __init__(self, config: TrialConfig, device: Device | None = None, *,
                  schema: Schema | None = None, physics: PhysicsMode | PhysicsLog = "thread",
-                 rate_hz: float = 1000.0, coupling: CouplingParams | None = None,
-                 record: bool = True, clutch_button: int = BUTTON_2,
-                 switch_interval_s: float | None = 5e-4,
-                 rt_priority: int | None = DEFAULT_RT_PRIORITY, freeze_gc: bool = True,
-                 blend_s: float = DEFAULT_BLEND_S):
+                 servo: ServoSettings | None = None):
+        servo = servo if servo is not None else ServoSettings()
+        rate_hz = servo.rate_hz
         if not (math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9):
             raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
                               f"{config.dt!r} (rate_hz must be 1 / dt)", field="rate_hz")
@@ -82,15 +98,16 @@ class RealtimeTrial:
             raise ConfigError(f"physics must be 'thread', 'inline', 'off' or a PhysicsLog, "
                               f"got {physics!r}", field="physics")
         self.config = config
+        self.servo = servo
         self.runner = TrialRunner(config, schema)
-        scripted = self.runner.operator
-        self.profile = scripted.profile if isinstance(scripted, ScriptedOperator) else None
+        person = self.runner.person  # the config's simulated person
+        self.profile = person.profile
         if device is None:
-            assert isinstance(scripted, ScriptedOperator)
-            device = ScriptedDevice(scripted, self.runner.task.start, dt=config.dt)
+            device = ScriptedDevice(person, self.runner.task.start, dt=config.dt)
         self.device = device
-        self.coupling = coupling if coupling is not None else CouplingParams()
-        self.plant = TrialPlant(self.runner, self.coupling, dt=config.dt, blend_s=blend_s)
+        self.coupling = servo.coupling
+        self.plant = TrialPlant(self.runner, self.coupling, dt=config.dt,
+                                blend_s=servo.blend_s)
         self.physics_mode = "replay" if isinstance(physics, PhysicsLog) else str(physics)
         self.physics_log: PhysicsLog | None = None
         self.physics_thread: PhysicsThread | None = None
@@ -115,11 +132,11 @@ class RealtimeTrial:
             else:  # "off": the abdomen is never stepped
                 self.runner.set_physics_feed(lambda k, pose: None)
         self.loop = ServoLoop(device, self.plant, rate_hz=rate_hz,
-                              home=self.runner.task.start, clutch_button=clutch_button,
-                              record=record, switch_interval_s=switch_interval_s,
-                              rt_priority=rt_priority)
+                              home=self.runner.task.start, clutch_button=servo.clutch_button,
+                              record=servo.record, switch_interval_s=servo.switch_interval_s,
+                              rt_priority=servo.rt_priority)
         self.plant.on_done.append(self._mark_done)
-        self.freeze_gc = freeze_gc
+        self.freeze_gc = servo.freeze_gc
         self._gc_frozen = False
         self._t_start: float | None = None
         self._t_done: float | None = None
@@ -236,11 +253,15 @@ class RealtimeTrial:
             self._replay.finish()
         if self._world is not None:
             self._world.freeze()  # waits for a physics step in flight
-        wall = 0.0
-        if self._t_start is not None:
-            wall = (self._t_done or time.perf_counter()) - self._t_start
-        kw.setdefault("wall_time", wall)
+        kw.setdefault("wall_time", self.wall_time())
         return self.runner.result(**kw)
+
+    def wall_time(self) -> float:
+        """Wall-clock time from the start to the end (or to now while it runs) [s]; 0
+        before the start."""
+        if self._t_start is None:
+            return 0.0
+        return (self._t_done or time.perf_counter()) - self._t_start
 
     def recording(self) -> RealtimeRecording:
         """The device stream and the physics log of the run so far (``record=True``)."""
@@ -256,4 +277,4 @@ class RealtimeTrial:
         return RealtimeRecording(rec.stream(), plog, meta)
 
 
-__all__ = ["DEFAULT_RT_PRIORITY", "RealtimeTrial"]
+__all__ = ["DEFAULT_RT_PRIORITY", "RealtimeTrial", "ServoSettings"]

@@ -166,12 +166,12 @@ class TrialPlant:
         self.blend_s = float(blend_s)
         self._decay = math.exp(-dt / blend_s) if blend_s > 0 else 0.0
         self._offset: tuple[float, ...] = _ZERO
-        self._snap_id = id(runner._snap)
+        self._snap_id = id(runner.state.snap)
         self._fc_prev: tuple[float, ...] = _ZERO
         self._kt_prev: tuple[float, ...] | None = None
-        self._x_prev: tuple[float, ...] = tuple(runner._x)
+        self._x_prev: tuple[float, ...] = tuple(runner.state.x)
         self.input = MasterIncrement()
-        runner.operator = self.input  # type: ignore[assignment]  # the increment source plays the o
+        runner.operator = self.input  # the increment source plays the operator
         self.coupled = CoupledToolPlant(coupling, dt=dt)
         self.on_done: list[Any] = []
         self._prev: tuple[float, float, float] | None = None
@@ -191,8 +191,7 @@ class TrialPlant:
         r = self.runner
         if r.done:
             return None
-        obs = r._observation()
-        return replace(obs, force=np.array(self.force))
+        return replace(r.observation(), force=np.array(self.force))
 
     def tick(self, t: float, master: FloatArray, buttons: int) -> tuple[float, ...]:
         r = self.runner
@@ -208,11 +207,12 @@ class TrialPlant:
         if r.done:
             for fn in self.on_done:
                 fn()
-        c, fc, kt, x = r._cues, r._fc, r._kt, r._x
+        st = r.state
+        c, fc, kt, x = st.cues, st.fc, st.kt, st.x
         o = self._offset
         if self._decay:
-            if id(r._snap) != self._snap_id:  # a new snapshot: blend its force step in
-                self._snap_id = id(r._snap)
+            if id(st.snap) != self._snap_id:  # a new snapshot: blend its force step in
+                self._snap_id = id(st.snap)
                 q, kp = self._fc_prev, self._kt_prev
                 if kp is not None:  # what the old planes give here, to first order
                     d0, d1, d2 = (x[0] - self._x_prev[0], x[1] - self._x_prev[1],
@@ -228,7 +228,7 @@ class TrialPlant:
         if kt is None:
             k = _ZERO9
         else:  # dF/dmaster = dF/dx diag(1 / MS): the slave moves dX_M / MS per axis
-            s0, s1, s2 = (1.0 / v if v else 0.0 for v in r._ms)
+            s0, s1, s2 = (1.0 / v if v else 0.0 for v in st.ms)
             k = (kt[0] * s0, kt[1] * s1, kt[2] * s2, kt[3] * s0, kt[4] * s1, kt[5] * s2,
                  kt[6] * s0, kt[7] * s1, kt[8] * s2)
         self.coupled.set_tissue(LinearForce(np.array(felt), np.array(k), master))

@@ -60,15 +60,14 @@ from vasim.abdomen.contact import ContactPatch, ToolPose
 from vasim.abdomen.runner import PhysicsThread
 from vasim.core.errors import ConfigError, DeviceError
 from vasim.fixtures.schema import Schema
-from vasim.haptics.coupling import CouplingParams
 from vasim.haptics.device import Device
 from vasim.haptics.devices.replay import DeviceStream
 from vasim.haptics.timing import TimingStats
-from vasim.trials.realtime.loop import DEFAULT_RT_PRIORITY, RealtimeTrial
-from vasim.trials.realtime.plant import DEFAULT_BLEND_S
+from vasim.trials.realtime.loop import RealtimeTrial, ServoSettings
 from vasim.trials.realtime.recording import PhysicsLog, RealtimeRecording
 from vasim.trials.realtime.timing import RealtimeTiming
 from vasim.trials.vf import TrialConfig, TrialFrame, TrialResult, TrialRunner
+from vasim.trials.vf_model import VfGeometry
 
 log = logging.getLogger(__name__)
 
@@ -252,9 +251,7 @@ def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, con
         factory = spec["device_factory"]
         device = factory() if factory is not None else None
         trial = RealtimeTrial(spec["config"], device, schema=spec["schema"], physics="off",
-                              rate_hz=spec["rate_hz"], coupling=spec["coupling"],
-                              record=spec["record"], rt_priority=spec["rt_priority"],
-                              blend_s=spec["blend_s"])
+                              servo=spec["servo"])
         runner = trial.runner
         feed = _PipeFeed(board, snaps, taken)
         if runner.abdomen is not None:
@@ -270,20 +267,20 @@ def _child(spec: dict[str, Any], board: _PoseBoard, snaps: Any, frames: Any, con
         trial.stop()
         err = trial.error
         rec = trial.loop.recording
+        st = runner.state
         control.send(("end", {
             "error": None if err is None else f"{type(err).__name__}: {err}",
             "error_trace": None if err is None else "".join(traceback.format_exception(err)),
-            "samples": runner.samples, "reach_times": list(runner._reach_times),
-            "i": runner._i, "t": runner._t, "k": runner._k, "done": runner.done,
-            "points": runner._points, "events": list(runner.events),
-            "n_bad_input": runner._n_bad_input, "frame": replace(runner.frame, abdomen=None),
+            "samples": st.samples, "reach_times": list(st.reach_times),
+            "i": st.i, "t": st.t, "k": st.k, "done": st.done,
+            "points": st.geometry.points, "events": list(st.events),
+            "n_bad_input": st.n_bad_input, "frame": replace(runner.frame, abdomen=None),
             "servo": trial.loop.stats(), "saturated": trial.loop.saturated_ticks,
             "guard": trial.loop.guard.total, "clutch": trial.loop.clutch.count,
             "priority_granted": trial.loop.priority_granted,
             "stream": None if rec is None else rec.stream(), "applied": feed.applied,
             "ticks": trial.loop.ticks, "meta": trial.recording().meta if rec else None,
-            "wall": ((trial._t_done or time.perf_counter()) - trial._t_start
-                     if trial._t_start is not None else 0.0),
+            "wall": trial.wall_time(),
         }))
     except BaseException as exc:  # reported to the parent, never silent
         if trial is not None:
@@ -309,7 +306,7 @@ class ProcessRealtimeTrial:
             config's scripted operator.
         schema: a loaded schema overriding ``config.schema``.
         physics: ``"thread"`` (the abdomen here, in a thread) or ``"off"``.
-        rate_hz, coupling, blend_s, rt_priority, record: as ``RealtimeTrial``.
+        servo: how the child's servo loop runs (``ServoSettings``, as ``RealtimeTrial``).
         frame_every: ticks between frames sent to this process (10: 100 Hz).
         start_timeout_s: how long the child may take to build the trial [s].
 
@@ -320,19 +317,19 @@ class ProcessRealtimeTrial:
     def __init__(self, config: TrialConfig,
                  device_factory: Callable[[], Device] | None = None, *,
                  schema: Schema | None = None, physics: str = "thread",
-                 rate_hz: float = 1000.0, coupling: CouplingParams | None = None,
-                 blend_s: float = DEFAULT_BLEND_S,
-                 rt_priority: int | None = DEFAULT_RT_PRIORITY, record: bool = True,
+                 servo: ServoSettings | None = None,
                  frame_every: int = 10, start_timeout_s: float = 120.0):
         if physics not in ("thread", "off"):
             raise ConfigError(f"physics must be 'thread' or 'off', got {physics!r}",
                               field="physics")
+        servo = servo if servo is not None else ServoSettings()
+        rate_hz = servo.rate_hz
         if not (math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9):
             raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
                               f"{config.dt!r} (rate_hz must be 1 / dt)", field="rate_hz")
         self.config = config
         self.runner = TrialRunner(config, schema)  # for the abdomen and the result
-        self.coupling = coupling if coupling is not None else CouplingParams()
+        self.coupling = servo.coupling
         self.physics_mode = ("process" if physics == "thread"
                              and self.runner.abdomen is not None else "off")
         self._ctx = mp.get_context("spawn")
@@ -346,9 +343,7 @@ class ProcessRealtimeTrial:
         self._read = self._ctx.Value("l", 0, lock=False)
         self._taken = self._ctx.Value("l", 0, lock=False)
         self._spec = {"config": config, "schema": self.runner.schema,
-                      "device_factory": device_factory, "rate_hz": float(rate_hz),
-                      "coupling": self.coupling, "record": record,
-                      "rt_priority": rt_priority, "blend_s": blend_s,
+                      "device_factory": device_factory, "servo": servo,
                       "frame_every": int(frame_every)}
         self.start_timeout_s = float(start_timeout_s)
         self.physics_log: PhysicsLog | None = None
@@ -541,12 +536,13 @@ class ProcessRealtimeTrial:
         if end is None:
             raise DeviceError(f"the servo process failed: {self._failure}")
         r = self.runner
-        r.samples = end["samples"]
-        r._reach_times = end["reach_times"]
-        r._i, r._t, r._k, r.done = end["i"], end["t"], end["k"], end["done"]
-        r._points = end["points"]
-        r.events = end["events"]
-        r._n_bad_input = end["n_bad_input"]
+        st = r.state  # the child's end state, taken over by this process's runner
+        st.samples = end["samples"]
+        st.reach_times = end["reach_times"]
+        st.i, st.t, st.k, st.done = end["i"], end["t"], end["k"], end["done"]
+        st.geometry = VfGeometry(end["points"], st.geometry.normals, r.model.start_xyz)
+        st.events = end["events"]
+        st.n_bad_input = end["n_bad_input"]
         kw.setdefault("wall_time", float(end["wall"]))
         return r.result(**kw)
 

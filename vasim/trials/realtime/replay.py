@@ -15,7 +15,7 @@ from vasim.core.errors import ConfigError, DeviceError
 from vasim.fixtures.schema import parse_schema
 from vasim.haptics.coupling import CouplingParams
 from vasim.haptics.devices.replay import ReplayDevice
-from vasim.trials.realtime.loop import RealtimeTrial
+from vasim.trials.realtime.loop import RealtimeTrial, ServoSettings
 from vasim.trials.realtime.plant import PhysicsMode
 from vasim.trials.realtime.recording import PhysicsLog, RealtimeRecording, recorded_files
 from vasim.trials.sink import TrialSource
@@ -78,11 +78,12 @@ def replay_trial(store: TrialSource, trial_id: int) -> ReplayReport:
         if row.get("schema_toml") else None
     meta = rec.meta
     physics: PhysicsMode | PhysicsLog = rec.physics if rec.physics is not None else "off"
-    trial = RealtimeTrial(config, ReplayDevice(rec.stream), schema=schema, physics=physics,
-                          rate_hz=float(meta["rate_hz"]),
+    servo = ServoSettings(rate_hz=float(meta["rate_hz"]),
                           coupling=CouplingParams(**meta["coupling"]),
                           clutch_button=int(meta["clutch_button"]), record=False,
                           blend_s=float(meta["blend_s"]))
+    trial = RealtimeTrial(config, ReplayDevice(rec.stream), schema=schema, physics=physics,
+                          servo=servo)
     trial.loop.workspace_margin_m = float(meta["workspace_margin_m"])
     t0 = time.perf_counter()
     ticks = trial.run_ticks(len(rec.stream))
