@@ -521,7 +521,7 @@ def test_unreachable_addresses_fail_within_seconds(silent_server: int, http_serv
 
 
 def test_init_in_thread_times_out_and_passes_errors() -> None:
-    from vasim.study.power.driver import _init_in_thread
+    from vasim.study.power.ray_join import _init_in_thread
 
     release = threading.Event()      # the hung "join" ends with the test (no thread left)
     try:

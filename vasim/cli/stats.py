@@ -362,7 +362,7 @@ def cmd_spearman(args: argparse.Namespace) -> int:
 
 
 def _json_value(value: Any) -> Any:
-    from vasim.study.stats._data import nan_to_none
+    from vasim.study.stats import nan_to_none
 
     return nan_to_none(value)
 
@@ -417,9 +417,9 @@ def _print_table(frame: pd.DataFrame, columns: Sequence[str], out: TextIO) -> No
 
 
 def _plain(value: Any) -> Any:
-    from vasim.study.stats._data import _py
+    from vasim.study.stats import python_scalar
 
-    return None if value is pd.NA else _py(value)
+    return None if value is pd.NA else python_scalar(value)
 
 
 def _is_number(value: Any) -> bool:

@@ -86,18 +86,19 @@ from vasim.study.gain_plan import (
     schedule_gains,
     trial_gain,
 )
+from vasim.study.gates import apply_gates
 from vasim.study.protocol import (
     Protocol,
     ScheduledTrial,
     block_of,
     day_offsets,
     generate_schedule,
-    parse_protocol,
     sitting_numbers,
     validate_answers,
 )
 from vasim.study.sitting_rule import early_sitting
 from vasim.study.store import SessionMeta, TrialStore
+from vasim.study.stored_session import read_session
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 from vasim.trials.registry import run_trial
 from vasim.trials.vf import TrialConfig, make_profile
@@ -410,21 +411,16 @@ def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
 
 
 def load_session(store: TrialStore, session_id: int) -> Session:
-    """Reads a session back from the store (protocol from its stored text).
+    """Reads a session back from the store (protocol from its stored text,
+    :func:`vasim.study.stored_session.read_session`).
 
     Raises:
         StoreError: unknown session.
     """
-    row = store.session(session_id)
-    protocol = parse_protocol(row["protocol_toml"],
-                              source=f"{store.path} session {row['id']} (stored protocol)")
-    sched = store.schedule(session_id)
-    schedule = tuple(ScheduledTrial.from_row(r) for r in sched.to_dict("records"))
-    completed = tuple(None if pd.isna(v) else int(v) for v in sched["trial_id"])
-    return Session(id=int(row["id"]), subject=row["subject"], protocol=protocol,
-                   seed=int(row["seed"]), status=row["status"],
-                   settings=SessionSettings.from_record(row["config"] or {}),
-                   schedule=schedule, completed=completed)
+    rec = read_session(store, session_id)
+    return Session(id=rec.id, subject=rec.subject, protocol=rec.protocol, seed=rec.seed,
+                   status=rec.status, settings=SessionSettings.from_record(rec.config),
+                   schedule=rec.schedule, completed=rec.completed)
 
 
 def find_session(store: TrialStore, *, subject: str | None = None,
@@ -497,7 +493,6 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
         raise StoreError(f"session {session.id} is being run: trial {int(busy['id'].iloc[0])} "
                          f"is 'running' (process {busy['pid'].iloc[0]} on "
                          f"{busy['host'].iloc[0]})")
-    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
 
     if _release_timed_out(store, session):
         session = load_session(store, session.id)
@@ -648,7 +643,6 @@ def after_simulated_trial(store: TrialStore, session: Session, st: ScheduledTria
     """What follows a simulated trial (``vasim study simulate``): the record of a later
     sitting it began (a simulated delay: no real waiting) and the gates' decisions
     (``vasim.study.gates.apply_gates``); returns the trials the gates added."""
-    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
 
     delay = sitting_begins(session, st)
     if delay is not None:

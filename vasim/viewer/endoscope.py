@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from scipy import optimize
 
 from vasim.fixtures.types import CameraView
-from vasim.viewer.views import CameraPose
+from vasim.viewer.camera_pose import CameraPose
 
 FloatArray = NDArray[np.float64]
 

@@ -6,7 +6,7 @@ not depend on which backend ran the tasks, nor on their order).
 
 ``ray``
     A local Ray on this machine, or the cluster ``--address`` names
-    (:func:`vasim.study.power.driver.init_ray`). Needs the ``cluster`` extra.
+    (:func:`vasim.study.power.ray_join.init_ray`). Needs the ``cluster`` extra.
 ``processes``
     A ``concurrent.futures.ProcessPoolExecutor`` of ``workers`` processes (default: the
     machine's cores) started with ``spawn`` (a fresh interpreter per worker, as a Ray worker
@@ -36,6 +36,7 @@ from typing import Any, Literal
 
 from vasim.core.errors import ConfigError
 from vasim.core.extras import installed, require
+from vasim.study.power.ray_join import init_ray
 
 Backend = Literal["ray", "processes"]
 BACKENDS: tuple[str, ...] = ("auto", "ray", "processes")
@@ -115,8 +116,6 @@ def open_backend(name: Backend, *, address: str | None = None,
 
 
 def _ray(address: str | None, workers: int | None) -> Iterator[Running]:
-    from vasim.study.power.driver import init_ray
-
     ray = require("ray", "--backend ray")
     cpus = init_ray(address, workers)
     shared: dict[int, Any] = {}
