@@ -319,13 +319,16 @@ def check_bool(value: object, field: str | None = None, *,
 
 def check_str(value: object, field: str | None = None, *, one_line: bool = True,
               empty: bool = False, max_length: int | None = None,
-              file: str | Path | None = None, error: type[FieldError] = ConfigError) -> str:
-    """A string (one line unless ``one_line=False``; not empty unless ``empty``)."""
-    what = "a one-line string" if one_line else "a string"
-    if not empty:
-        what += " (not empty)"
-    if max_length is not None:
-        what += f" of at most {max_length} characters"
+              file: str | Path | None = None, what: str | None = None,
+              error: type[FieldError] = ConfigError) -> str:
+    """A string (one line unless ``one_line=False``; not empty unless ``empty``); ``what``
+    words the expectation (default: ``a one-line string (not empty)``)."""
+    if what is None:
+        what = "a one-line string" if one_line else "a string"
+        if not empty:
+            what += " (not empty)"
+        if max_length is not None:
+            what += f" of at most {max_length} characters"
     if (not isinstance(value, str) or (not empty and not value)
             or (one_line and "\n" in value)
             or (max_length is not None and len(value) > max_length)):
