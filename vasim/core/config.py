@@ -91,10 +91,13 @@ def join(*parts: str | None) -> str:
     return ".".join(p for p in parts if p)
 
 
-def rewrap(exc: ConfigError, prefix: str | None = None,
-           file: str | Path | None = None) -> ConfigError:
-    """``exc`` with its field under ``prefix`` and ``file`` named (unless it names one)."""
-    return ConfigError(exc.reason, file=exc.file or file, field=join(prefix, exc.field) or None)
+def rewrap(exc: FieldError, prefix: str | None = None, file: str | Path | None = None, *,
+           error: type[FieldError] | None = None) -> FieldError:
+    """``exc`` with its field under ``prefix`` and ``file`` named (unless it names one), of
+    the same class (or ``error``: an :class:`InputError` when a config check was applied to
+    input data)."""
+    return (error or type(exc))(exc.reason, file=exc.file or file,
+                                field=join(prefix, exc.field) or None)
 
 
 # -- TOML --------------------------------------------------------------------------------
@@ -183,10 +186,11 @@ def toml_nesting(text: str) -> tuple[int, int]:
 
 
 def check_table(value: object, field: str | None = None, *, file: str | Path | None = None,
-                what: str = "a table") -> dict[str, Any]:
+                what: str = "a table", error: type[FieldError] = ConfigError,
+                ) -> dict[str, Any]:
     """A TOML table (``dict``), returned as a new dict."""
     if not isinstance(value, Mapping):
-        raise fail(value, what, field=field, file=file)
+        raise fail(value, what, field=field, file=file, error=error)
     return dict(value)
 
 

@@ -71,7 +71,15 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.config import (
+    check_choice,
+    check_file,
+    check_table,
+    check_type,
+    parse_toml,
+    require,
+)
+from vasim.core.errors import ConfigError, InputError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.operator.learning import OPERATOR_LABEL, VF_FREE, trial_adjustment
 from vasim.operator.retention import practice_weights, weighted_adjustment
@@ -162,25 +170,15 @@ class SessionSettings:
     def __post_init__(self) -> None:
         if self.operator == "browser":
             raise ConfigError(BROWSER_HINT, field="operator")
-        if self.operator not in OPERATORS:
-            raise ConfigError(f"unknown operator {self.operator!r} (available: "
-                              f"{', '.join(OPERATORS)}, and browser sessions from `vasim "
-                              "serve`)", field="operator")
-        if self.skill not in ("novice", "intermediate", "expert"):
-            raise ConfigError(f"unknown skill {self.skill!r} (novice, intermediate, expert)",
-                              field="skill")
-        if self.profile is not None and not isinstance(self.profile, OperatorProfile):
-            raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
-                              field="profile")
-        m = self.max_trial_time
-        if m is not None:
-            try:
-                check_trial_time(m, "max_trial_time")
-            except ConfigError as exc:
-                raise ConfigError(f"max_trial_time {exc.reason}",
-                                  field="max_trial_time") from None
-        if not isinstance(self.extra, Mapping):
-            raise ConfigError(f"extra must be a mapping, got {self.extra!r}", field="extra")
+        require(self.operator in OPERATORS, self.operator, f"a known operator: "
+                f"{', '.join(OPERATORS)} (browser sessions run from `vasim serve`)",
+                field="operator")
+        check_choice(self.skill, "skill", ("novice", "intermediate", "expert"))
+        if self.profile is not None:
+            check_type(self.profile, "profile", OperatorProfile, "an OperatorProfile")
+        if self.max_trial_time is not None:
+            check_trial_time(self.max_trial_time, "max_trial_time")
+        check_type(self.extra, "extra", Mapping, "a mapping")
 
     def resolved_profile(self) -> OperatorProfile:
         """The operator profile: ``profile``, or the ``skill`` preset."""
@@ -688,8 +686,8 @@ def abort_session(store: TrialStore, session_id: int, reason: str) -> None:
     Raises:
         StoreError: unknown session or not running. ConfigError: empty reason.
     """
-    if not isinstance(reason, str) or not reason.strip():
-        raise ConfigError("give the reason for aborting the session", field="reason")
+    require(isinstance(reason, str) and reason.strip(), reason,
+            "the reason for aborting the session", field="reason")
     store.set_session_status(session_id, "aborted", notes=reason)
 
 
@@ -736,20 +734,15 @@ def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
     Raises:
         ConfigError: unreadable file, invalid TOML, or other top-level tables.
     """
-    from vasim.core.config import parse_toml  # the one TOML reader (nesting checked)
-
-    p = Path(path)
+    p = check_file(path, what="an answers file")
     try:
         text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("answers file not found", file=p) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read answers file: {exc}", file=p) from exc
-    data = parse_toml(text, file=p, kind="answers file")
+        raise InputError(f"cannot read answers file: {exc}", file=p) from exc
+    data = parse_toml(text, file=p, kind="answers file")   # the one TOML reader
     for key, value in data.items():
-        if key not in ("pre", "post") or not isinstance(value, dict):
-            raise ConfigError(f"expected [pre] and [post] tables, got {key} = {value!r}",
-                              file=p, field=key)
+        check_choice(key, key, ("pre", "post"), file=p)
+        check_table(value, key, file=p, what="a [pre] or [post] table of item -> answer")
     return data
 
 

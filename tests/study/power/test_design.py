@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.operator.learning import DEFAULT_EFFECTS, trial_adjustment
 from vasim.study.power.design import (
     COARSE_DT,
@@ -47,7 +47,7 @@ def test_range_spec_is_inclusive_like_the_issue_example() -> None:
     ("1.5:3", "START:STOP:STEP"),
 ])
 def test_bad_subject_specs_are_clear_errors(spec: str, words: str) -> None:
-    with pytest.raises(ConfigError) as info:
+    with pytest.raises(InputError) as info:   # a command-line argument (issue #29)
         parse_subjects(spec)
     assert info.value.field == "--subjects"
     assert words in str(info.value)

@@ -11,8 +11,15 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Literal
 
-from vasim.core.config import check_choice, check_int, check_str, rewrap, show
-from vasim.core.errors import ConfigError
+from vasim.core.config import (
+    check_choice,
+    check_int,
+    check_str,
+    check_table,
+    require,
+    rewrap,
+)
+from vasim.core.errors import FieldError, InputError
 from vasim.study.protocol.model import Protocol
 from vasim.study.protocol.questionnaires import LIKERT_POINTS, QuestionItem, Questionnaire
 from vasim.study.store import DEMOGRAPHIC_FIELDS, Demographics
@@ -42,100 +49,88 @@ def validate_answers(protocol: Protocol, questionnaire: Literal["pre", "post"],
         (else None).
 
     Raises:
-        ConfigError: an unknown item, a missing required answer, or a bad value (field =
-            the item id).
+        InputError: (the answers are input data, not a config file; issue #29) an unknown
+            item, a missing required answer, or a bad value (field = the item id).
     """
     q: Questionnaire = getattr(protocol, questionnaire)
-    if not isinstance(answers, Mapping):
-        raise ConfigError(f"answers must be a table of item -> answer, got {show(answers)}",
-                          file=source, field=questionnaire)
+    check_table(answers, questionnaire, file=source, what="a table of item -> answer",
+                error=InputError)
     known = [*(DEMOGRAPHIC_FIELDS if q.demographics else ()), *(i.id for i in q.items)]
     for key in answers:
-        if key not in known:
-            raise ConfigError(f"unknown item (the {questionnaire} questionnaire of "
-                              f"{protocol.name!r} has: {', '.join(known) or 'no items'})",
-                              file=source, field=f"{questionnaire}.{key}")
+        require(key in known, key, f"an item of the {questionnaire} questionnaire of "
+                f"{protocol.name!r} ({', '.join(known) or 'no items'}; unknown item)",
+                file=source, field=f"{questionnaire}.{key}", error=InputError)
     rows: list[AnswerRow] = []
     demo = None
     if q.demographics:
         try:
             demo = Demographics.from_mapping({k: answers[k] for k in DEMOGRAPHIC_FIELDS
                                               if k in answers})
-        except ConfigError as exc:
-            raise rewrap(exc, questionnaire, source) from exc
+        except FieldError as exc:
+            raise rewrap(exc, questionnaire, source, error=InputError) from exc
         rows += [(k, "", str(answers[k]), None) for k in DEMOGRAPHIC_FIELDS]
     for item in q.items:
         path = f"{questionnaire}.{item.id}"
         if item.id not in answers:
-            if item.required:
-                raise ConfigError("missing answer to a required item", file=source, field=path)
+            require(not item.required, None, "an answer (a required item)", file=source,
+                    field=path, error=InputError)
             continue
         try:
             rows += _item_rows(item, answers[item.id])
-        except ConfigError as exc:
+        except FieldError as exc:
             # An inner field (a condition of a rating: "rating.vg") keeps its detail.
             inner = exc.field or ""
             field = (f"{questionnaire}.{inner}" if inner.startswith(f"{item.id}.")
                      else path)
-            raise ConfigError(exc.reason, file=source, field=field) from exc
+            raise InputError(exc.reason, file=source, field=field) from exc
     return rows, demo
 
 
 def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
-    t = item.type
-    if t == "choice":
-        check_choice(a, item.id, item.options)
-        return [(item.id, "", a, None)]
+    """One answer's rows (errors name ``item.id`` or ``item.id.condition``; the caller
+    words them as the answers file's)."""
+    t, name = item.type, item.id
+    if t in ("choice", "condition_choice"):
+        check_choice(a, name, item.options if t == "choice" else item.conditions)
+        return [(name, "", a, None)]
     if t == "text":
-        check_str(a, item.id, one_line=False, empty=True)
-        if len(a) > item.max_length:
-            raise ConfigError(f"text longer than {item.max_length} characters ({len(a)})")
-        return [(item.id, "", a, None)]
-    if t == "integer":
-        check_int(a, item.id, lo=item.min, hi=item.max)
-        return [(item.id, "", str(int(a)), float(a))]
-    if t == "likert":
-        check_int(a, item.id, lo=1, hi=LIKERT_POINTS)
-        return [(item.id, "", str(int(a)), float(a))]
-    if t == "condition_choice":
-        check_choice(a, item.id, item.conditions)
-        return [(item.id, "", a, None)]
+        check_str(a, name, one_line=False, empty=True, max_length=item.max_length)
+        return [(name, "", a, None)]
+    if t in ("integer", "likert"):
+        lo, hi = (item.min, item.max) if t == "integer" else (1, LIKERT_POINTS)
+        check_int(a, name, lo=lo, hi=hi)
+        return [(name, "", str(int(a)), float(a))]
     if t == "condition_rating":
-        if not isinstance(a, Mapping):
-            raise ConfigError(f"must be a table condition -> rating, got {show(a)}")
+        check_table(a, name, what="a table condition -> rating")
         for c in a:
-            if c not in item.conditions:
-                raise ConfigError(f"unknown condition {c!r} (expected "
-                                  f"{', '.join(item.conditions)})")
+            check_choice(c, name, item.conditions)
         missing = [c for c in item.conditions if c not in a]
-        if missing and item.required:
-            raise ConfigError(f"missing ratings for {', '.join(missing)}")
+        require(not (missing and item.required), sorted(a), f"ratings for every condition "
+                f"(missing: {', '.join(missing)})", field=name)
         out: list[AnswerRow] = []
         for c in item.conditions:
             if c in a:
-                check_int(a[c], f"{item.id}.{c}", lo=item.min, hi=item.max)
-                out.append((item.id, c, str(int(a[c])), float(a[c])))
+                check_int(a[c], f"{name}.{c}", lo=item.min, hi=item.max)
+                out.append((name, c, str(int(a[c])), float(a[c])))
         return out
     # condition_sets
-    if not isinstance(a, list | tuple) or len(a) > item.max_entries:
-        raise ConfigError(f"must be a list of at most {item.max_entries} sets of conditions, "
-                          f"got {show(a)}")
+    require(isinstance(a, list | tuple) and len(a) <= item.max_entries, a,
+            f"a list of at most {item.max_entries} sets of conditions", field=name)
     out = []
     seen: set[frozenset[str]] = set()
     for e, entry in enumerate(a, start=1):
-        if not isinstance(entry, list | tuple) or not all(isinstance(c, str) for c in entry):
-            raise ConfigError(f"entry {e} must be a list of conditions, got {show(entry)}")
+        require(isinstance(entry, list | tuple) and all(isinstance(c, str) for c in entry),
+                entry, f"entry {e}: a list of conditions", field=name)
         members = set(entry)
         unknown = sorted(members - set(item.conditions))
-        if unknown:
-            raise ConfigError(f"entry {e}: unknown condition(s) {unknown} (expected "
-                              f"{', '.join(item.conditions)})")
-        if len(members) != len(entry) or len(members) < item.min_size:
-            raise ConfigError(f"entry {e} must list at least {item.min_size} different "
-                              f"conditions, got {show(entry)}")
-        if frozenset(members) in seen:
-            raise ConfigError(f"entry {e} repeats an earlier proposal: {show(entry)}")
+        require(not unknown, unknown, f"entry {e}: conditions of "
+                f"{', '.join(item.conditions)} (unknown condition(s))", field=name)
+        require(len(members) == len(entry) and len(members) >= item.min_size, entry,
+                f"entry {e}: at least {item.min_size} different conditions", field=name)
+        require(frozenset(members) not in seen, entry,
+                f"entry {e}: a set not proposed before (it repeats an earlier proposal)",
+                field=name)
         seen.add(frozenset(members))
         canon = "+".join(c for c in item.conditions if c in members)
-        out.append((item.id, str(e), canon, None))
+        out.append((name, str(e), canon, None))
     return out
