@@ -15,7 +15,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import fail, require
+from vasim.core.errors import ConfigError, FieldError, InputError
 
 ADDRESS_CHECK_S = 15.0
 """Seconds the address check waits for the name lookup, the connection and the answer. A
@@ -32,7 +33,8 @@ def parse_ray_address(address: str) -> tuple[str, int] | None:
     """The (host, port) of a Ray address, or None for ``auto`` (the cluster on this node).
 
     Raises:
-        ConfigError: (field ``--address``) an empty or malformed address, a bad host or port.
+        InputError: (field ``--address``, a command-line argument) an empty or malformed
+            address, a bad host or port.
 
     Examples:
         >>> parse_ray_address("ray://10.0.0.5:10001"), parse_ray_address("[::1]:6379")
@@ -42,29 +44,25 @@ def parse_ray_address(address: str) -> tuple[str, int] | None:
         >>> parse_ray_address("127.0.0.1:99999")
         Traceback (most recent call last):
         ...
-        vasim.core.errors.ConfigError: field '--address': got '127.0.0.1:99999', expected a \
+        vasim.core.errors.InputError: field '--address': got '127.0.0.1:99999', expected a \
 port in 1-65535 (ray://HOST:PORT, HOST:PORT or auto)
     """
     import ipaddress
     import re
 
-    from vasim.core.config import show
-
     form = "(ray://HOST:PORT, HOST:PORT or auto)"
-    if not isinstance(address, str) or not address.strip():
-        raise ConfigError(f"got {show(address)}, expected a Ray address {form}; leave "
-                          "--address out for a local Ray", field="--address")
+    arg: dict[str, Any] = {"field": "--address", "error": InputError}   # an argument
+    require(isinstance(address, str) and address.strip(), address,
+            f"a Ray address {form}; leave --address out for a local Ray", **arg)
     if address == "auto":
         return None
     rest = address[len("ray://"):] if address.startswith("ray://") else address
     m = re.fullmatch(r"\[([0-9A-Fa-f:.]+)\]:(\d{1,5})|([^:\[\]/]+):(\d{1,5})", rest)
     if m is None:
-        raise ConfigError(f"got {show(address)}, expected a Ray address {form} (an IPv6 host "
-                          "in brackets: [::1]:6379)", field="--address")
+        raise fail(address, f"a Ray address {form} (an IPv6 host in brackets: [::1]:6379)",
+                   **arg)
     host, port = (m.group(1), int(m.group(2))) if m.group(1) else (m.group(3), int(m.group(4)))
-    if not 1 <= port <= 65535:
-        raise ConfigError(f"got {show(address)}, expected a port in 1-65535 {form}",
-                          field="--address")
+    require(1 <= port <= 65535, address, f"a port in 1-65535 {form}", **arg)
     try:
         ipaddress.ip_address(host)
     except ValueError:
@@ -72,9 +70,8 @@ port in 1-65535 (ray://HOST:PORT, HOST:PORT or auto)
         ok = (len(host) <= 253 and all(re.fullmatch(
             r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?", lb) for lb in labels)
             and not all(lb.isdigit() for lb in labels))
-        if not ok:
-            raise ConfigError(f"got {show(address)}, expected an IP address or a host name "
-                              f"(RFC 1123) before the port {form}", field="--address") from None
+        require(ok, address, f"an IP address or a host name (RFC 1123) before the port {form}",
+                **arg)
     return host, port
 
 
@@ -178,9 +175,9 @@ def init_ray(address: str | None, workers: int | None) -> int:
     """
     import ray
 
-    if workers is not None and workers < 1:
-        raise ConfigError(f"got {workers!r}, expected at least 1 Ray worker (a power run "
-                          "always runs on Ray)", field="--workers")
+    if workers is not None:
+        require(workers >= 1, workers, "at least 1 Ray worker (a power run always runs on "
+                "Ray)", field="--workers")
     if address is not None:
         target = parse_ray_address(address)
         if address.startswith("ray://"):   # Ray Client needs grpcio (the ray[client] extra)
@@ -201,7 +198,7 @@ def init_ray(address: str | None, workers: int | None) -> int:
                      log_to_driver=False, _node_ip_address="127.0.0.1")
     except KeyboardInterrupt:
         raise
-    except ConfigError:
+    except FieldError:
         raise
     except (ConnectionError, RuntimeError, ValueError) as exc:
         ray.shutdown()
