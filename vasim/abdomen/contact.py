@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.abdomen._contact_kernels import patch_tip_force, tool_contacts
-from vasim.core.config import check_int, check_number, require
+from vasim.core.config import check_int, check_number, expect
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -100,7 +100,7 @@ class ToolShape:
     def __post_init__(self) -> None:
         for name in ("radius", "contact_stiffness", "spacing"):
             check_number(getattr(self, name), f"tool.{name}", gt=0)
-        require(self.spacing <= self.radius, self.spacing,
+        expect(self.spacing <= self.radius, self.spacing,
                 f"at most tool.radius ({self.radius}) so spheres overlap", field="tool.spacing")
         check_int(self.max_spheres, "tool.max_spheres", lo=1)
 

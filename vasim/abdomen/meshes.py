@@ -41,7 +41,7 @@ import trimesh
 
 from vasim.abdomen import _kernels
 from vasim.core.bounds import COORDINATE_M, MESH_FILE_COORDINATE, ORGAN_EXTENT_M, Bound
-from vasim.core.config import require
+from vasim.core.config import expect
 from vasim.core.errors import ConfigError
 
 Units = Literal["m", "cm", "mm"]
@@ -185,9 +185,9 @@ def load_user_mesh(
         ConfigError: naming the file, the field and every problem (module docstring).
     """
     p = Path(path)
-    require(units in UNIT_SCALE, units, f"units, one of {', '.join(UNIT_SCALE)}", file=p,
+    expect(units in UNIT_SCALE, units, f"units, one of {', '.join(UNIT_SCALE)}", file=p,
             field=field)
-    require(p.is_file(), str(p), "an existing mesh file (mesh file not found)", file=p,
+    expect(p.is_file(), str(p), "an existing mesh file (mesh file not found)", file=p,
             field=field)
     ext = p.suffix.lower().lstrip(".")
     if ext not in SUPPORTED_FORMATS:

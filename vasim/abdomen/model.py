@@ -77,7 +77,7 @@ from vasim.core.config import (
     check_number,
     check_type,
     check_vec3,
-    require,
+    expect,
 )
 from vasim.core.errors import ConfigError
 
@@ -150,7 +150,7 @@ class AnchorRule:
 
     def __post_init__(self) -> None:
         check_choice(self.to, "to", _ANCHOR_TARGETS)
-        require((self.within is None) != (self.fraction is None),
+        expect((self.within is None) != (self.fraction is None),
                 {"within": self.within, "fraction": self.fraction},
                 "exactly one of 'within' [m] and 'fraction'", field="within")
         if self.within is not None:
@@ -158,12 +158,12 @@ class AnchorRule:
         if self.fraction is not None:
             _number(self.fraction, field_name="fraction", low=0.0, low_open=True, high=1.0)
         if self.to in ("plane", "point"):
-            require(self.point is not None, None, f"a point (an anchor to a {self.to} needs "
+            expect(self.point is not None, None, f"a point (an anchor to a {self.to} needs "
                     "'point')", field="point")
             object.__setattr__(self, "point", _vec3(self.point, field_name="point",
                                                     bound=COORDINATE_M))
         if self.to == "plane":
-            require(self.normal is not None, None, "a normal (an anchor to a plane needs "
+            expect(self.normal is not None, None, "a normal (an anchor to a plane needs "
                     "'normal')", field="normal")
             object.__setattr__(self, "normal", _vec3(self.normal, field_name="normal",
                                                      unit=True, bound=DIRECTION))

@@ -117,9 +117,9 @@ from vasim.core.config import (
     check_str,
     check_table,
     check_type,
+    expect,
     fail,
     parse_toml,
-    require,
     rewrap,
 )
 from vasim.core.errors import ConfigError
@@ -195,7 +195,7 @@ class PhysicsConfig:
         object.__setattr__(self, "gravity", _vec3(self.gravity, field_name="gravity",
                                                   bound=GRAVITY_COMPONENT))
         g = math.sqrt(sum(c * c for c in self.gravity))
-        require(g <= MAX_GRAVITY, list(self.gravity),  # plausibility bound (MAX_GRAVITY)
+        expect(g <= MAX_GRAVITY, list(self.gravity),  # plausibility bound (MAX_GRAVITY)
                 f"a magnitude <= {MAX_GRAVITY:g} m/s² (this one: {g:.3g} m/s²)",
                 field="gravity")
         _number(self.tol, field_name="tol", low=0.0, low_open=True, high=0.5)
@@ -403,7 +403,7 @@ class Scene:
 
 
 def _check_name(name: object, source: str | None = None) -> str:
-    require(isinstance(name, str) and _NAME_RE.match(name), name,
+    expect(isinstance(name, str) and _NAME_RE.match(name), name,
             "a name of letters, digits, '_', '-' or '.'", field="name", file=source)
     return str(name)
 
@@ -481,10 +481,10 @@ def _organ(name: str, table: Any, base: Path, source: str) -> OrganConfig:
         t.setdefault("delicate", organ.delicate)
     else:
         looks_like_file = Path(mesh).suffix != "" or "/" in mesh or "\\" in mesh
-        require(looks_like_file, mesh, f"a procedural organ ({', '.join(procedural)}) or a "
+        expect(looks_like_file, mesh, f"a procedural organ ({', '.join(procedural)}) or a "
                 "mesh file path (unknown organ mesh)", file=source, field=f"{path}.mesh")
         mesh_path = Path(mesh) if Path(mesh).is_absolute() else base / mesh
-        require(mesh_path.is_file(), str(mesh_path), "an existing mesh file (mesh file not "
+        expect(mesh_path.is_file(), str(mesh_path), "an existing mesh file (mesh file not "
                 "found)", file=source, field=f"{path}.mesh")
         mesh = str(mesh_path.resolve())
     anchors_raw = check_type(t.pop("anchors", []), f"{path}.anchors", list,

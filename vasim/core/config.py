@@ -70,14 +70,14 @@ def fail(value: object, expected: str, *, field: str | None = None,
     return error(f"got {show(value)}, expected {expected}", file=file, field=field)
 
 
-def require(ok: object, value: object, expected: str, *, field: str | None = None,
+def expect(ok: object, value: object, expected: str, *, field: str | None = None,
             file: str | Path | None = None, error: type[FieldError] = ConfigError) -> None:
     """Raises :func:`fail` ``(value, expected)`` unless ``ok``: the one-line form of a check
     no other helper covers (a relation between fields: ``lower < upper``, a count that must
     match another field's).
 
-    >>> require(1 < 2, 1, "less than 2", field="lo")
-    >>> require(3 < 2, 3, "less than upper (2)", field="lo")
+    >>> expect(1 < 2, 1, "less than 2", field="lo")
+    >>> expect(3 < 2, 3, "less than upper (2)", field="lo")
     Traceback (most recent call last):
     ...
     vasim.core.errors.ConfigError: field 'lo': got 3, expected less than upper (2)
@@ -458,6 +458,18 @@ def check_dir(path: str | Path, field: str | None = None, *,
     return p
 
 
+def check_dir_path(path: str | Path, field: str | None = None, *,
+                   what: str = "a folder (existing or new)",
+                   error: type[FieldError] = InputError) -> Path:
+    """``path`` as a :class:`~pathlib.Path` unless it exists and is not a folder (an output
+    folder that may or may not exist yet)."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise error(f"got {show(str(p))} (exists and is not a folder), expected {what}",
+                    field=field)
+    return p
+
+
 def check_not_dir(path: str | Path, field: str | None = None, *, what: str = "a file path",
                   error: type[FieldError] = InputError) -> Path:
     """``path`` as a :class:`~pathlib.Path` unless it is an existing folder (an output file
@@ -476,6 +488,7 @@ __all__ = [
     "check_bool",
     "check_choice",
     "check_dir",
+    "check_dir_path",
     "check_file",
     "check_int",
     "check_keys",
@@ -488,12 +501,12 @@ __all__ = [
     "check_type",
     "check_vec3",
     "describe_range",
+    "expect",
     "fail",
     "is_int",
     "is_number",
     "join",
     "parse_toml",
-    "require",
     "rewrap",
     "show",
     "toml_nesting",

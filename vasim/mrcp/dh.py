@@ -85,9 +85,9 @@ from vasim.core.config import (
     check_required,
     check_str,
     check_type,
+    expect,
     fail,
     parse_toml,
-    require,
     rewrap,
 )
 from vasim.core.errors import ConfigError
@@ -137,7 +137,7 @@ class DHJoint:
     def __post_init__(self) -> None:
         for name in ("alpha", "a", "d", "theta_offset", "lower", "upper"):
             check_number(getattr(self, name), name)
-        require(self.lower < self.upper, self.lower, f"a limit below upper ({self.upper!r})",
+        expect(self.lower < self.upper, self.lower, f"a limit below upper ({self.upper!r})",
                 field="lower")
         check_number(self.max_velocity, "max_velocity", gt=0)
         check_number(self.max_acceleration, "max_acceleration", gt=0)
@@ -168,11 +168,11 @@ class RobotModel:
 
     def __post_init__(self) -> None:
         # the name becomes a cache folder, a file name and URDF (XML) text
-        require(isinstance(self.name, str) and _NAME.fullmatch(self.name), self.name,
+        expect(isinstance(self.name, str) and _NAME.fullmatch(self.name), self.name,
                 f"a name matching {_NAME.pattern} (letters, digits, _ . -; no leading dot)",
                 field="name")
         n = len(self.joints)
-        require(n > 0, self.joints, "at least one joint", field="joints")
+        expect(n > 0, self.joints, "at least one joint", field="joints")
         tcp = check_array(self.tcp, "tcp", shape=(3,))
         home = check_array(self.home, "home", shape=(n,), what=f"{n} finite angles")
         outside = np.flatnonzero((home < self.lower) | (home > self.upper))
@@ -180,11 +180,11 @@ class RobotModel:
             i = int(outside[0])
             raise fail(float(home[i]), f"an angle within the joint limits "
                        f"[{self.lower[i]!r}, {self.upper[i]!r}]", field=f"home[{i}]")
-        require(not self.links or len(self.links) == n + 1, len(self.links),
+        expect(not self.links or len(self.links) == n + 1, len(self.links),
                 f"{n + 1} [[links]] tables (base + one per joint)", field="links")
         for k in range(len(self.links)):    # else the compiled distance model fails later
             distinct = _distinct_points(self.link_key_points(k))
-            require(distinct <= MAX_KEY_POINTS, distinct,
+            expect(distinct <= MAX_KEY_POINTS, distinct,
                     f"at most {MAX_KEY_POINTS} distinct key points in link {k} (the DH "
                     "chain's and its points)", field=f"links[{k}].points")
         tcp.setflags(write=False)
@@ -590,7 +590,7 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
     _check_keys(data, {"name", "tcp", "home", "joints", "links"}, "", file)
     name = check_str(data.get("name"), "name", file=file)
     # the name becomes a path and XML text (see RobotModel)
-    require(_NAME.fullmatch(name), name, f"a name matching {_NAME.pattern}", file=file,
+    expect(_NAME.fullmatch(name), name, f"a name matching {_NAME.pattern}", file=file,
             field="name")
     raw_joints = data.get("joints")
     if not isinstance(raw_joints, list) or not raw_joints:
@@ -609,7 +609,7 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
                                  ("lower", MAX_JOINT_ANGLE, "rad"),
                                  ("upper", MAX_JOINT_ANGLE, "rad")):
-            require(abs(vals[key]) <= bound, vals[key], f"|{key}| <= {bound:g} {unit} (units?)",
+            expect(abs(vals[key]) <= bound, vals[key], f"|{key}| <= {bound:g} {unit} (units?)",
                     file=file, field=f"{path}.{key}")
         try:
             joints.append(DHJoint(
@@ -639,7 +639,7 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
                                                    LINK_LENGTH_M))
                     for j, p in enumerate(pts_raw))
         chain = check_bool(lt.get("chain", True), f"{path}.chain", file=file)
-        require(chain or pts, pts_raw, "points (a link with chain = false needs them)",
+        expect(chain or pts, pts_raw, "points (a link with chain = false needs them)",
                 file=file, field=f"{path}.points")
         try:
             links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file,

@@ -76,8 +76,8 @@ from vasim.core.config import (
     check_file,
     check_table,
     check_type,
+    expect,
     parse_toml,
-    require,
 )
 from vasim.core.errors import ConfigError, InputError, StoreError
 from vasim.core.progress import progress_bar
@@ -170,7 +170,7 @@ class SessionSettings:
     def __post_init__(self) -> None:
         if self.operator == "browser":
             raise ConfigError(BROWSER_HINT, field="operator")
-        require(self.operator in OPERATORS, self.operator, f"a known operator: "
+        expect(self.operator in OPERATORS, self.operator, f"a known operator: "
                 f"{', '.join(OPERATORS)} (browser sessions run from `vasim serve`)",
                 field="operator")
         check_choice(self.skill, "skill", ("novice", "intermediate", "expert"))
@@ -686,7 +686,7 @@ def abort_session(store: TrialStore, session_id: int, reason: str) -> None:
     Raises:
         StoreError: unknown session or not running. ConfigError: empty reason.
     """
-    require(isinstance(reason, str) and reason.strip(), reason,
+    expect(isinstance(reason, str) and reason.strip(), reason,
             "the reason for aborting the session", field="reason")
     store.set_session_status(session_id, "aborted", notes=reason)
 

@@ -34,7 +34,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, expect
 from vasim.core.extras import installed, require
 from vasim.study.power.ray_join import init_ray
 
@@ -57,13 +57,11 @@ def choose_backend(backend: str = "auto", address: str | None = None) -> Backend
     >>> choose_backend("processes")
     'processes'
     """
-    if backend not in BACKENDS:
-        raise ConfigError(f"got {backend!r}, expected one of {', '.join(BACKENDS)}",
-                          field="--backend")
+    check_choice(backend, "--backend", BACKENDS)
     if address:
-        if backend == "processes":
-            raise ConfigError(f"--address {address} joins a Ray cluster; it cannot run on "
-                              "local processes (drop --backend processes)", field="--backend")
+        expect(backend != "processes", backend, f"ray: --address {address} joins a Ray "
+                "cluster; it cannot run on local processes (drop --backend processes)",
+                field="--backend")
         require("ray", "--address (a Ray cluster)")
         return "ray"
     if backend == "ray":
@@ -92,9 +90,8 @@ def pool_workers(workers: int | None) -> int:
     >>> pool_workers(3)
     3
     """
-    if workers is not None and workers < 1:
-        raise ConfigError(f"got {workers!r}, expected at least 1 worker process",
-                          field="--workers")
+    if workers is not None:
+        expect(workers >= 1, workers, "at least 1 worker process", field="--workers")
     return workers or (os.cpu_count() or 1)
 
 

@@ -42,8 +42,8 @@ from vasim.core.config import (
     check_int,
     check_number,
     check_type,
+    expect,
     parse_toml,
-    require,
 )
 from vasim.core.errors import ConfigError, InputError
 from vasim.operator.effects import FixtureEffect, scale_effect
@@ -115,18 +115,18 @@ def parse_subjects(spec: str) -> tuple[int, ...]:
     if m:
         start, stop = int(m.group(1)), int(m.group(2))
         step = int(m.group(3)) if m.group(3) is not None else 1
-        require(step >= 1, spec, f"a STEP >= 1 (STEP {step})", **arg)
-        require(start <= stop, spec, f"START <= STOP (START {start} > STOP {stop})", **arg)
+        expect(step >= 1, spec, f"a STEP >= 1 (STEP {step})", **arg)
+        expect(start <= stop, spec, f"START <= STOP (START {start} > STOP {stop})", **arg)
         points = (stop - start) // step + 1
-        require(points <= 1000, spec, f"at most 1000 design points ({points})", **arg)
+        expect(points <= 1000, spec, f"at most 1000 design points ({points})", **arg)
         counts = list(range(start, stop + 1, step))
     else:
         parts = [p.strip() for p in spec.split(",")]
-        require(spec.strip() and all(p.isdigit() for p in parts), spec,
+        expect(spec.strip() and all(p.isdigit() for p in parts), spec,
                 "START:STOP:STEP (e.g. 10:60:5), a comma list of counts (e.g. 8,12,20) or "
                 "one count", **arg)
         counts = [int(p) for p in parts]
-        require(len(set(counts)) <= 1000, len(set(counts)), "at most 1000 design points",
+        expect(len(set(counts)) <= 1000, len(set(counts)), "at most 1000 design points",
                 **arg)
     for n in counts:
         check_int(n, bound=SUBJECTS, lo=2, **arg)
@@ -278,13 +278,13 @@ class PowerDesign:
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        require(self.subjects, self.subjects, "at least one subject count", field="--subjects")
+        expect(self.subjects, self.subjects, "at least one subject count", field="--subjects")
         for n in self.subjects:
             check_int(n, "--subjects", bound=SUBJECTS, lo=2)
         check_int(self.cohorts, "--cohorts", bound=COHORTS)
         check_int(self.seed, "--seed", bound=SEED)
         check_number(self.alpha, "--alpha", bound=ALPHA)
-        require(self.dt in (FULL_DT, COARSE_DT), self.dt,
+        expect(self.dt in (FULL_DT, COARSE_DT), self.dt,
                 f"{FULL_DT} (full) or {COARSE_DT} (coarse, validated) s", field="dt")
         check_choice(self.p_column, "--p", ("p_gg", "p_unc"))
         if self.max_trial_time is not None:

@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from vasim.core.config import check_dir_path
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.study.power.backend import choose_backend, open_backend
@@ -140,8 +141,7 @@ def run_power(protocol: Protocol, design: PowerDesign, *, address: str | None = 
     keep = None
     if keep_dir is not None:
         kd = os.fspath(keep_dir)
-        if os.path.exists(kd) and not os.path.isdir(kd):
-            raise ConfigError("is not a folder", file=kd, field="--keep-cohorts")
+        check_dir_path(kd, "--keep-cohorts", error=ConfigError)
         os.makedirs(kd, exist_ok=True)
         keep = os.path.abspath(kd)
     t0 = time.perf_counter()

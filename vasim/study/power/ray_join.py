@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from vasim.core.config import fail, require
+from vasim.core.config import expect, fail
 from vasim.core.errors import ConfigError, FieldError, InputError
 
 ADDRESS_CHECK_S = 15.0
@@ -52,7 +52,7 @@ port in 1-65535 (ray://HOST:PORT, HOST:PORT or auto)
 
     form = "(ray://HOST:PORT, HOST:PORT or auto)"
     arg: dict[str, Any] = {"field": "--address", "error": InputError}   # an argument
-    require(isinstance(address, str) and address.strip(), address,
+    expect(isinstance(address, str) and address.strip(), address,
             f"a Ray address {form}; leave --address out for a local Ray", **arg)
     if address == "auto":
         return None
@@ -62,7 +62,7 @@ port in 1-65535 (ray://HOST:PORT, HOST:PORT or auto)
         raise fail(address, f"a Ray address {form} (an IPv6 host in brackets: [::1]:6379)",
                    **arg)
     host, port = (m.group(1), int(m.group(2))) if m.group(1) else (m.group(3), int(m.group(4)))
-    require(1 <= port <= 65535, address, f"a port in 1-65535 {form}", **arg)
+    expect(1 <= port <= 65535, address, f"a port in 1-65535 {form}", **arg)
     try:
         ipaddress.ip_address(host)
     except ValueError:
@@ -70,7 +70,7 @@ port in 1-65535 (ray://HOST:PORT, HOST:PORT or auto)
         ok = (len(host) <= 253 and all(re.fullmatch(
             r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?", lb) for lb in labels)
             and not all(lb.isdigit() for lb in labels))
-        require(ok, address, f"an IP address or a host name (RFC 1123) before the port {form}",
+        expect(ok, address, f"an IP address or a host name (RFC 1123) before the port {form}",
                 **arg)
     return host, port
 
@@ -176,7 +176,7 @@ def init_ray(address: str | None, workers: int | None) -> int:
     import ray
 
     if workers is not None:
-        require(workers >= 1, workers, "at least 1 Ray worker (a power run always runs on "
+        expect(workers >= 1, workers, "at least 1 Ray worker (a power run always runs on "
                 "Ray)", field="--workers")
     if address is not None:
         target = parse_ray_address(address)

@@ -16,7 +16,7 @@ from vasim.core.config import (
     check_int,
     check_str,
     check_table,
-    require,
+    expect,
     rewrap,
 )
 from vasim.core.errors import FieldError, InputError
@@ -57,7 +57,7 @@ def validate_answers(protocol: Protocol, questionnaire: Literal["pre", "post"],
                 error=InputError)
     known = [*(DEMOGRAPHIC_FIELDS if q.demographics else ()), *(i.id for i in q.items)]
     for key in answers:
-        require(key in known, key, f"an item of the {questionnaire} questionnaire of "
+        expect(key in known, key, f"an item of the {questionnaire} questionnaire of "
                 f"{protocol.name!r} ({', '.join(known) or 'no items'}; unknown item)",
                 file=source, field=f"{questionnaire}.{key}", error=InputError)
     rows: list[AnswerRow] = []
@@ -72,7 +72,7 @@ def validate_answers(protocol: Protocol, questionnaire: Literal["pre", "post"],
     for item in q.items:
         path = f"{questionnaire}.{item.id}"
         if item.id not in answers:
-            require(not item.required, None, "an answer (a required item)", file=source,
+            expect(not item.required, None, "an answer (a required item)", file=source,
                     field=path, error=InputError)
             continue
         try:
@@ -105,7 +105,7 @@ def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
         for c in a:
             check_choice(c, name, item.conditions)
         missing = [c for c in item.conditions if c not in a]
-        require(not (missing and item.required), sorted(a), f"ratings for every condition "
+        expect(not (missing and item.required), sorted(a), f"ratings for every condition "
                 f"(missing: {', '.join(missing)})", field=name)
         out: list[AnswerRow] = []
         for c in item.conditions:
@@ -114,20 +114,20 @@ def _item_rows(item: QuestionItem, a: Any) -> list[AnswerRow]:
                 out.append((name, c, str(int(a[c])), float(a[c])))
         return out
     # condition_sets
-    require(isinstance(a, list | tuple) and len(a) <= item.max_entries, a,
+    expect(isinstance(a, list | tuple) and len(a) <= item.max_entries, a,
             f"a list of at most {item.max_entries} sets of conditions", field=name)
     out = []
     seen: set[frozenset[str]] = set()
     for e, entry in enumerate(a, start=1):
-        require(isinstance(entry, list | tuple) and all(isinstance(c, str) for c in entry),
+        expect(isinstance(entry, list | tuple) and all(isinstance(c, str) for c in entry),
                 entry, f"entry {e}: a list of conditions", field=name)
         members = set(entry)
         unknown = sorted(members - set(item.conditions))
-        require(not unknown, unknown, f"entry {e}: conditions of "
+        expect(not unknown, unknown, f"entry {e}: conditions of "
                 f"{', '.join(item.conditions)} (unknown condition(s))", field=name)
-        require(len(members) == len(entry) and len(members) >= item.min_size, entry,
+        expect(len(members) == len(entry) and len(members) >= item.min_size, entry,
                 f"entry {e}: at least {item.min_size} different conditions", field=name)
-        require(frozenset(members) not in seen, entry,
+        expect(frozenset(members) not in seen, entry,
                 f"entry {e}: a set not proposed before (it repeats an earlier proposal)",
                 field=name)
         seen.add(frozenset(members))

@@ -18,10 +18,9 @@ from vasim.core.config import (
     check_int,
     check_str,
     check_str_tuple,
+    expect,
     fail,
-    show,
 )
-from vasim.core.errors import ConfigError
 from vasim.study.store import DEMOGRAPHIC_FIELDS
 
 ITEM_TYPES: tuple[str, ...] = ("choice", "text", "integer", "likert", "condition_choice",
@@ -59,10 +58,8 @@ class QuestionItem:
     max_length: int = 2000
 
     def __post_init__(self) -> None:
-        if not isinstance(self.id, str) or not _ID_RE.fullmatch(self.id):
-            raise ConfigError(f"got {show(self.id)}, expected an identifier (letters, digits, "
-                              "'_')",
-                              field="id")
+        expect(isinstance(self.id, str) and _ID_RE.fullmatch(self.id), self.id,
+                "an identifier (letters, digits, '_')", field="id")
         check_choice(self.type, "type", ITEM_TYPES)
         check_str(self.prompt, "prompt")
         check_bool(self.required, "required")
@@ -115,10 +112,9 @@ class Questionnaire:
 
     def __post_init__(self) -> None:
         check_bool(self.demographics, "demographics")
-        if not isinstance(self.items, tuple) or not all(
-                isinstance(i, QuestionItem) for i in self.items):
-            raise ConfigError(f"must be a tuple of QuestionItem, got {show(self.items)}",
-                              field="items")
+        expect(isinstance(self.items, tuple) and all(
+                isinstance(i, QuestionItem) for i in self.items), self.items,
+                "a tuple of QuestionItem", field="items")
         seen: set[str] = set()
         for k, item in enumerate(self.items):
             if item.id in seen:
