@@ -484,8 +484,8 @@ def _organ(name: str, table: Any, base: Path, source: str) -> OrganConfig:
         expect(looks_like_file, mesh, f"a procedural organ ({', '.join(procedural)}) or a "
                 "mesh file path (unknown organ mesh)", file=source, field=f"{path}.mesh")
         mesh_path = Path(mesh) if Path(mesh).is_absolute() else base / mesh
-        expect(mesh_path.is_file(), str(mesh_path), "an existing mesh file (mesh file not "
-                "found)", file=source, field=f"{path}.mesh")
+        expect(mesh_path.is_file(), mesh, f"an existing mesh file (mesh file not found: "
+               f"{str(mesh_path)!r})", file=source, field=f"{path}.mesh")
         mesh = str(mesh_path.resolve())
     anchors_raw = check_type(t.pop("anchors", []), f"{path}.anchors", list,
                              f"an array of tables ([[{path}.anchors]])", file=source)

@@ -437,6 +437,21 @@ finite numbers
     return arr
 
 
+MAX_PATH_CHARS = 200
+"""Longest echo of a path in an error message (a longer one keeps its end: the file name)."""
+
+
+def show_path(path: str | Path) -> str:
+    """``repr`` of a path, cut at the front to :data:`MAX_PATH_CHARS` characters (the end
+    names the file).
+
+    >>> show_path("/data/" + "x" * 300 + "/kidney.obj")[-12:]
+    "/kidney.obj'"
+    """
+    text = repr(str(path))
+    return text if len(text) <= MAX_PATH_CHARS else "..." + text[-MAX_PATH_CHARS:]
+
+
 def check_file(path: str | Path, field: str | None = None, *, what: str = "an existing file",
                error: type[FieldError] = InputError) -> Path:
     """``path`` as a :class:`~pathlib.Path` if it is an existing file (an
@@ -444,7 +459,7 @@ def check_file(path: str | Path, field: str | None = None, *, what: str = "an ex
     p = Path(path)
     if not p.is_file():
         state = "a folder" if p.is_dir() else "no such file"
-        raise error(f"got {show(str(p))} ({state}), expected {what}", field=field)
+        raise error(f"got {show_path(p)} ({state}), expected {what}", field=field)
     return p
 
 
@@ -454,7 +469,7 @@ def check_dir(path: str | Path, field: str | None = None, *,
     p = Path(path)
     if not p.is_dir():
         state = "a file" if p.exists() else "no such folder"
-        raise error(f"got {show(str(p))} ({state}), expected {what}", field=field)
+        raise error(f"got {show_path(p)} ({state}), expected {what}", field=field)
     return p
 
 
@@ -465,7 +480,7 @@ def check_dir_path(path: str | Path, field: str | None = None, *,
     folder that may or may not exist yet)."""
     p = Path(path)
     if p.exists() and not p.is_dir():
-        raise error(f"got {show(str(p))} (exists and is not a folder), expected {what}",
+        raise error(f"got {show_path(p)} (exists and is not a folder), expected {what}",
                     field=field)
     return p
 
@@ -476,7 +491,7 @@ def check_not_dir(path: str | Path, field: str | None = None, *, what: str = "a 
     that may or may not exist yet)."""
     p = Path(path)
     if p.is_dir():
-        raise error(f"got {show(str(p))} (a folder), expected {what}", field=field)
+        raise error(f"got {show_path(p)} (a folder), expected {what}", field=field)
     return p
 
 
@@ -509,5 +524,6 @@ __all__ = [
     "parse_toml",
     "rewrap",
     "show",
+    "show_path",
     "toml_nesting",
 ]
