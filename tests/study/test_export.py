@@ -146,7 +146,7 @@ def test_cli_export_and_bad_requests(study: Path, tmp_path: Path, capsys) -> Non
         export_study(study, out, tables=("trialz",))
     assert main(["study", "export", "--db", str(tmp_path / "none.db"), "--out",
                  str(out)]) == 2
-    assert "no study database" in capsys.readouterr().err
+    assert "expected an existing study database file" in capsys.readouterr().err
 
 
 def test_units_are_in_the_manifest(study: Path, tmp_path: Path) -> None:
