@@ -1,6 +1,8 @@
-"""The one toolkit every TOML loader validates with (schemas, protocols, scenes, robots).
+"""The one toolkit every TOML loader and config object validates with (schemas, protocols,
+scenes, robots, the frozen config dataclasses of every layer).
 
-Every check raises :class:`vasim.core.errors.ConfigError` with the same words::
+Every check raises :class:`vasim.core.errors.ConfigError` (or, with ``error=``, an
+:class:`~vasim.core.errors.InputError`) with the same words::
 
     protocols/schemas/ff.toml: field 'fixtures.ff.max_force_n': got 1000.0, expected a
     number in [0, 3.3] N (the Phantom Omni's peak force, 3.3 N (Geomagic spec))
@@ -13,6 +15,26 @@ truncated to :data:`vasim.core.bounds.MAX_MESSAGE_CHARS` characters.
 than msgspec/pydantic models, because the dataclasses (and their ``__post_init__`` checks)
 are the public types every layer already uses, and a second model layer would duplicate
 them; the functions are what the five former toolkits had in common, worded once.
+
+**Validating a config field** (issue #29 item 3: one route). Every field check goes through
+a helper here: the scalar checks (:func:`check_number`, :func:`check_int`,
+:func:`check_bool`, :func:`check_str`, :func:`check_choice`), vectors and arrays
+(:func:`check_vec3`, :func:`check_array`), nested objects (:func:`check_type`), tables
+(:func:`check_table`, :func:`check_keys`, :func:`check_required`,
+:func:`check_array_of_tables`), paths (:func:`check_file`, :func:`check_dir`,
+:func:`check_dir_path`, :func:`check_not_dir`) and, for any other rule (a relation between
+fields), :func:`expect` ``(ok, value, expected, field=...)``. A number's plausible range is
+a :class:`~vasim.core.bounds.Bound` of :mod:`vasim.core.bounds` (the bounds table). A
+``__post_init__`` calls helpers rather than spelling ``if ...: raise ConfigError(...)``;
+:func:`fail` builds the error for the few raises no helper expresses, :func:`rewrap` puts a
+nested object's error under its parent's field and file. The TOML of every file is parsed
+by :func:`parse_toml` (nothing else imports ``tomllib``).
+
+**Config or input** (``error=``): a field of a config file or config object raises
+:class:`~vasim.core.errors.ConfigError` (the default); a command-line argument or a value of
+an input data file (answers) raises :class:`~vasim.core.errors.InputError`: every helper
+takes ``error=InputError``; path helpers default to it. Both are a
+:class:`~vasim.core.errors.FieldError`, which the command line prints as one line (exit 2).
 
 **Decision**: a UTF-8 byte-order mark at the start of a TOML text is stripped (editors on
 Windows write one; ``tomllib`` would report "invalid statement at line 1").
