@@ -480,9 +480,13 @@ def check_file(path: str | Path, field: str | None = None, *, what: str = "an ex
     :class:`InputError` by default: a path is what a user typed)."""
     p = Path(path)
     if not p.is_file():
-        state = "a folder" if p.is_dir() else "no such file"
-        raise error(f"got {show_path(p)} ({state}), expected {what}", field=field)
+        raise _path_error(p, "a folder" if p.is_dir() else "no such file", what, field, error)
     return p
+
+
+def _path_error(p: Path, state: str, what: str, field: str | None,
+                error: type[FieldError]) -> FieldError:
+    return error(f"got {show_path(p)} ({state}), expected {what}", field=field)
 
 
 def check_dir(path: str | Path, field: str | None = None, *,
@@ -490,8 +494,7 @@ def check_dir(path: str | Path, field: str | None = None, *,
     """``path`` as a :class:`~pathlib.Path` if it is an existing folder."""
     p = Path(path)
     if not p.is_dir():
-        state = "a file" if p.exists() else "no such folder"
-        raise error(f"got {show_path(p)} ({state}), expected {what}", field=field)
+        raise _path_error(p, "a file" if p.exists() else "no such folder", what, field, error)
     return p
 
 
@@ -502,8 +505,7 @@ def check_dir_path(path: str | Path, field: str | None = None, *,
     folder that may or may not exist yet)."""
     p = Path(path)
     if p.exists() and not p.is_dir():
-        raise error(f"got {show_path(p)} (exists and is not a folder), expected {what}",
-                    field=field)
+        raise _path_error(p, "exists and is not a folder", what, field, error)
     return p
 
 
@@ -513,7 +515,7 @@ def check_not_dir(path: str | Path, field: str | None = None, *, what: str = "a 
     that may or may not exist yet)."""
     p = Path(path)
     if p.is_dir():
-        raise error(f"got {show_path(p)} (a folder), expected {what}", field=field)
+        raise _path_error(p, "a folder", what, field, error)
     return p
 
 

@@ -53,8 +53,8 @@ def point_metric_rows(df: pd.DataFrame) -> list[tuple[Any, ...]]:
     # the v4 path columns are optional: a frame without them stores NULL (not measured)
     df = df.assign(**{c: np.nan for c in PATH_POINT_COLUMNS if c not in df.columns})
     missing = [c for c in POINT_COLUMNS if c not in df.columns]
-    expect(not missing, missing, f"no missing column (point_metrics has "
-           f"{list(POINT_COLUMNS)})", field="point_metrics")
+    expect(not missing, missing, f"all of {list(POINT_COLUMNS)} (point_metrics lacks the "
+           "columns shown)", field="point_metrics")
     cols = []
     for c in POINT_COLUMNS:
         v = df[c].to_numpy()
