@@ -154,6 +154,6 @@ def test_effects_file_sets_single_fixtures_then_the_scale_applies(tmp_path) -> N
         with pytest.raises(ConfigError) as info:
             parse_effects(text, file="e.toml")
         assert info.value.field == field and str(info.value.file) == "e.toml", text
-    with pytest.raises(ConfigError) as info:
+    with pytest.raises(InputError) as info:   # the --effects path (issue #29)
         load_effects(tmp_path / "missing.toml")
     assert info.value.field == "--effects"
