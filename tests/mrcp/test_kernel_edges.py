@@ -194,8 +194,9 @@ def test_cli_refuses_bad_values_before_running(tmp_path: Path,
     cases = [(["--duration", "nan"], "argument --duration: got nan, expected a finite number"),
              (["--duration", "inf"], "argument --duration: got inf, expected a finite number"),
              (["--seed", "-1"], "argument --seed: got -1, expected an integer in [0,"),
-             (["--plot", str(tmp_path / "run.txt")], "the suffix must be .png, .pdf or .svg"),
-             (["--plot", str(tmp_path / "nope" / "run.png")], "does not exist")]
+             (["--plot", str(tmp_path / "run.txt")], "expected a .png, .pdf or .svg file"),
+             (["--plot", str(tmp_path / "nope" / "run.png")],
+              "(no such folder), expected an existing folder for the plot")]
     for extra, message in cases:
         assert main(["mrcp", "run", "cube_rotation", *extra]) == 2, extra
         err = capsys.readouterr().err

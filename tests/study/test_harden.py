@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 from bench.bad_inputs import tcp_listener
 from tests.study.tiny_protocols import RETENTION, TINY
 from vasim.cli import main
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.study.protocol import parse_protocol
 
 
@@ -465,7 +465,7 @@ def test_parse_ray_address_forms() -> None:
     assert parse_ray_address("10.0.0.5:6379") == ("10.0.0.5", 6379)
     assert parse_ray_address("[::1]:1") == ("::1", 1)
     for bad in ("999.1.1.1:1", "h:0", "ray://h", "h:6379/x", "[::1]", "h:-1"):
-        with pytest.raises(ConfigError):
+        with pytest.raises(InputError):   # a command-line argument (issue #29)
             parse_ray_address(bad)
 
 
@@ -521,7 +521,7 @@ def test_unreachable_addresses_fail_within_seconds(silent_server: int, http_serv
 
 
 def test_init_in_thread_times_out_and_passes_errors() -> None:
-    from vasim.study.power.driver import _init_in_thread
+    from vasim.study.power.ray_join import _init_in_thread
 
     release = threading.Event()      # the hung "join" ends with the test (no thread left)
     try:

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.core.resources import studies_dir
 from vasim.study.protocol import (
     available_protocols,
@@ -274,12 +274,12 @@ def test_bad_answers_name_the_item(q: str, change: dict, field: str) -> None:
     p = load_protocol("vf_learning_curve")
     answers = copy.deepcopy(GOOD_PRE if q == "pre" else GOOD_POST)
     answers.update(change)
-    with pytest.raises(ConfigError) as e:
+    with pytest.raises(InputError) as e:   # answers are input data (issue #29)
         validate_answers(p, q, answers, source="answers.toml")  # type: ignore[arg-type]
     assert e.value.field == field and "answers.toml" in str(e.value)
     missing = copy.deepcopy(GOOD_POST)
     del missing["best_vf"]
-    with pytest.raises(ConfigError, match="required"):
+    with pytest.raises(InputError, match="required"):
         validate_answers(p, "post", missing)
 
 

@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from vasim.cli import main
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.errors import InputError, StoreError
 from vasim.operator.learning import trial_adjustment
 from vasim.operator.profile import OperatorProfile
 from vasim.records.samples import FRAME_COLUMNS
@@ -263,7 +263,7 @@ def test_questionnaires_are_stored_tidy_and_once(tmp_path: Path, tiny: Path) -> 
                  ].values.tolist() == [["Q01", "resident", "1-10", sid]]
         with pytest.raises(StoreError, match="already answered"):
             record_answers(st, sid, "post", {"best": "ff"})
-        with pytest.raises(ConfigError, match=r"post\.best"):
+        with pytest.raises(InputError, match=r"post\.best"):   # input data (issue #29)
             record_answers(st, sid + 0, "post", {"best": "none"})
         # the SQL CHECK holds even if someone bypasses the dataclass
         with pytest.raises(sqlite3.IntegrityError):

@@ -177,7 +177,7 @@ def test_finish_stores_the_outcome_the_summary_states(store, summary, outcome):
 
 def test_an_unknown_outcome_is_refused_and_nothing_is_written(store):
     tid = store.begin_trial(TrialMeta(subject="S01", task="trajectory"))
-    with pytest.raises(ConfigError, match="unknown trial outcome 'done'") as e:
+    with pytest.raises(ConfigError, match="got 'done', expected one of 'reached_all'") as e:
         store.finish_trial(tid, buffer(), summary={"outcome": "done"})
     assert e.value.field == "summary.outcome"
     assert store.trial(tid)["status"] == "running" and store.samples(tid).empty

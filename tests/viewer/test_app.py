@@ -20,7 +20,7 @@ import pytest
 from tests.polling import wait_for, wait_until
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.core.geometry import matrix_z_to, quat_z_to
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
 from vasim.viewer import CameraController, CameraPose, ViewerApp
@@ -208,7 +208,7 @@ def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(
     monkeypatch.setattr("vasim.viewer.app.ViewerApp", _FakeApp)
     monkeypatch.chdir(tmp_path)  # a named study.sqlite lands here, not in the checkout
     # Without --expose a public bind is refused before anything starts.
-    with pytest.raises(ConfigError, match="add --expose"):
+    with pytest.raises(InputError, match="add --expose"):   # a command-line argument
         viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080))
     n_before = len(_FakeApp.instances)
     assert main(["serve", "--host", "0.0.0.0", "--port", "8080", "--duration", "0"]) == 2

@@ -72,7 +72,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vasim.abdomen._contact_kernels import patch_tip_force, tool_contacts
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_int, check_number, expect
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -99,14 +99,10 @@ class ToolShape:
 
     def __post_init__(self) -> None:
         for name in ("radius", "contact_stiffness", "spacing"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"must be a finite number > 0, got {v!r}", field=f"tool.{name}")
-        if self.spacing > self.radius:
-            raise ConfigError(f"must be <= tool.radius ({self.radius}) so spheres overlap, got "
-                              f"{self.spacing!r}", field="tool.spacing")
-        if self.max_spheres < 1:
-            raise ConfigError(f"must be >= 1, got {self.max_spheres!r}", field="tool.max_spheres")
+            check_number(getattr(self, name), f"tool.{name}", gt=0)
+        expect(self.spacing <= self.radius, self.spacing,
+                f"at most tool.radius ({self.radius}) so spheres overlap", field="tool.spacing")
+        check_int(self.max_spheres, "tool.max_spheres", lo=1)
 
 
 @dataclass(frozen=True)

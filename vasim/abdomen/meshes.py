@@ -41,6 +41,7 @@ import trimesh
 
 from vasim.abdomen import _kernels
 from vasim.core.bounds import COORDINATE_M, MESH_FILE_COORDINATE, ORGAN_EXTENT_M, Bound
+from vasim.core.config import expect
 from vasim.core.errors import ConfigError
 
 Units = Literal["m", "cm", "mm"]
@@ -184,11 +185,10 @@ def load_user_mesh(
         ConfigError: naming the file, the field and every problem (module docstring).
     """
     p = Path(path)
-    if units not in UNIT_SCALE:
-        raise ConfigError(f"units must be one of {', '.join(UNIT_SCALE)}, got {units!r}",
-                          file=p, field=field)
-    if not p.is_file():
-        raise ConfigError("mesh file not found", file=p, field=field)
+    expect(units in UNIT_SCALE, units, f"units, one of {', '.join(UNIT_SCALE)}", file=p,
+            field=field)
+    expect(p.is_file(), str(p), "an existing mesh file (mesh file not found)", file=p,
+            field=field)
     ext = p.suffix.lower().lstrip(".")
     if ext not in SUPPORTED_FORMATS:
         raise ConfigError(f"unsupported mesh format {p.suffix!r} (supported: "

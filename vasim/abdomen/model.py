@@ -71,7 +71,14 @@ from vasim.core.bounds import (
     ORGAN_STIFFNESS_N_PER_M,
     Bound,
 )
-from vasim.core.config import check_number, check_vec3
+from vasim.core.config import (
+    check_bool,
+    check_choice,
+    check_number,
+    check_type,
+    check_vec3,
+    expect,
+)
 from vasim.core.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
@@ -142,25 +149,22 @@ class AnchorRule:
     fraction: float | None = None
 
     def __post_init__(self) -> None:
-        if self.to not in _ANCHOR_TARGETS:
-            raise ConfigError(f"must be one of {', '.join(_ANCHOR_TARGETS)}, got {self.to!r}",
-                              field="to")
-        if (self.within is None) == (self.fraction is None):
-            raise ConfigError("give exactly one of 'within' [m] and 'fraction', got "
-                              f"within={self.within!r}, fraction={self.fraction!r}",
-                              field="within")
+        check_choice(self.to, "to", _ANCHOR_TARGETS)
+        expect((self.within is None) != (self.fraction is None),
+                {"within": self.within, "fraction": self.fraction},
+                "exactly one of 'within' [m] and 'fraction'", field="within")
         if self.within is not None:
             _number(self.within, field_name="within", low=0.0, bound=ANCHOR_DISTANCE_M)
         if self.fraction is not None:
             _number(self.fraction, field_name="fraction", low=0.0, low_open=True, high=1.0)
         if self.to in ("plane", "point"):
-            if self.point is None:
-                raise ConfigError(f"an anchor to a {self.to} needs 'point'", field="point")
+            expect(self.point is not None, None, f"a point (an anchor to a {self.to} needs "
+                    "'point')", field="point")
             object.__setattr__(self, "point", _vec3(self.point, field_name="point",
                                                     bound=COORDINATE_M))
         if self.to == "plane":
-            if self.normal is None:
-                raise ConfigError("an anchor to a plane needs 'normal'", field="normal")
+            expect(self.normal is not None, None, "a normal (an anchor to a plane needs "
+                    "'normal')", field="normal")
             object.__setattr__(self, "normal", _vec3(self.normal, field_name="normal",
                                                      unit=True, bound=DIRECTION))
 
@@ -206,18 +210,12 @@ class OrganParams:
         if self.volume_spacing is not None:
             _number(self.volume_spacing, field_name="volume_spacing", low=0.0, low_open=True,
                     bound=ORGAN_EXTENT_M)
-        if not isinstance(self.volume, bool):
-            raise ConfigError(f"must be true or false, got {self.volume!r}", field="volume")
-        if not isinstance(self.kinematic, bool):
-            raise ConfigError(f"must be true or false, got {self.kinematic!r}",
-                              field="kinematic")
-        if self.mass_distribution not in _MASS_DISTRIBUTIONS:
-            raise ConfigError(f"must be one of {', '.join(_MASS_DISTRIBUTIONS)}, got "
-                              f"{self.mass_distribution!r}", field="mass_distribution")
+        check_bool(self.volume, "volume")
+        check_bool(self.kinematic, "kinematic")
+        check_choice(self.mass_distribution, "mass_distribution", _MASS_DISTRIBUTIONS)
         anchors = tuple(self.anchors)
         for i, rule in enumerate(anchors):
-            if not isinstance(rule, AnchorRule):
-                raise ConfigError(f"must be an AnchorRule, got {rule!r}", field=f"anchors[{i}]")
+            check_type(rule, f"anchors[{i}]", AnchorRule, "an AnchorRule")
         object.__setattr__(self, "anchors", anchors)
 
 

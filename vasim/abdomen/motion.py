@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vasim.abdomen.model import FloatArray, _number, _vec3
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_type
 
 BREATHING_HZ = 0.25
 """Default breathing rate [Hz] (15 breaths per minute; spec: ~0.2–0.3 Hz)."""
@@ -104,10 +104,8 @@ class PhysioMotion:
     heartbeat: Heartbeat = Heartbeat()
 
     def __post_init__(self) -> None:
-        if not isinstance(self.breathing, Breathing):
-            raise ConfigError(f"must be a Breathing, got {self.breathing!r}", field="breathing")
-        if not isinstance(self.heartbeat, Heartbeat):
-            raise ConfigError(f"must be a Heartbeat, got {self.heartbeat!r}", field="heartbeat")
+        check_type(self.breathing, "breathing", Breathing, "a Breathing")
+        check_type(self.heartbeat, "heartbeat", Heartbeat, "a Heartbeat")
 
     @property
     def is_static(self) -> bool:

@@ -100,6 +100,7 @@ from vasim.core.bounds import (
     ANCHOR_DISTANCE_M,
     BREATHING_AMPLITUDE_M,
     BREATHING_RATE_HZ,
+    COLOR_RGB,
     COORDINATE_M,
     DT_S,
     GRAVITY_M_S2,
@@ -108,7 +109,19 @@ from vasim.core.bounds import (
     SOLVER_ITERATIONS,
     Bound,
 )
-from vasim.core.config import check_choice, check_int, check_keys, fail, parse_toml
+from vasim.core.config import (
+    check_bool,
+    check_choice,
+    check_int,
+    check_keys,
+    check_str,
+    check_table,
+    check_type,
+    expect,
+    fail,
+    parse_toml,
+    rewrap,
+)
 from vasim.core.errors import ConfigError
 from vasim.core.resources import data_file, read_data_file, scenes_dir
 
@@ -182,9 +195,9 @@ class PhysicsConfig:
         object.__setattr__(self, "gravity", _vec3(self.gravity, field_name="gravity",
                                                   bound=GRAVITY_COMPONENT))
         g = math.sqrt(sum(c * c for c in self.gravity))
-        if g > MAX_GRAVITY:  # plausibility bound (MAX_GRAVITY)
-            raise ConfigError(f"magnitude must be <= {MAX_GRAVITY:g} m/s², got "
-                              f"{list(self.gravity)!r} ({g:.3g} m/s²)", field="gravity")
+        expect(g <= MAX_GRAVITY, list(self.gravity),  # plausibility bound (MAX_GRAVITY)
+                f"a magnitude <= {MAX_GRAVITY:g} m/s² (this one: {g:.3g} m/s²)",
+                field="gravity")
         _number(self.tol, field_name="tol", low=0.0, low_open=True, high=0.5)
         _number(self.cg_tol, field_name="cg_tol", low=0.0, low_open=True, high=0.99)
         for name in ("max_newton", "max_iterations"):
@@ -251,26 +264,13 @@ class OrganConfig:
     heartbeat_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.name, str) and _NAME_RE.match(self.name)):
-            raise ConfigError(f"must be a name of letters, digits, '_', '-' or '.', got "
-                              f"{self.name!r}", field="name")
-        if not isinstance(self.mesh, str) or not self.mesh:
-            raise ConfigError(f"must be a procedural organ name or a file path, got "
-                              f"{self.mesh!r}", field="mesh")
-        if self.units not in UNIT_SCALE:
-            raise ConfigError(f"must be one of {', '.join(UNIT_SCALE)}, got {self.units!r}",
-                              field="units")
-        if self.kind not in KINDS:
-            raise ConfigError(f"must be one of {', '.join(KINDS)}, got {self.kind!r}",
-                              field="kind")
-        color = _vec3(self.color, field_name="color")
-        if not all(0.0 <= c <= 1.0 for c in color):
-            raise ConfigError(f"must be 3 numbers in [0, 1], got {self.color!r}", field="color")
-        object.__setattr__(self, "color", color)
-        if not isinstance(self.delicate, bool):
-            raise ConfigError(f"must be true or false, got {self.delicate!r}", field="delicate")
-        if not isinstance(self.params, OrganParams):
-            raise ConfigError(f"must be OrganParams, got {self.params!r}", field="params")
+        _check_name(self.name)
+        _check_mesh_ref(self.mesh, "mesh")
+        check_choice(self.units, "units", tuple(UNIT_SCALE))
+        check_choice(self.kind, "kind", KINDS)
+        object.__setattr__(self, "color", _vec3(self.color, field_name="color", bound=COLOR_RGB))
+        check_bool(self.delicate, "delicate")
+        check_type(self.params, "params", OrganParams, "an OrganParams")
         object.__setattr__(self, "breathing_m", _vec3(self.breathing_m,
                                                       field_name="breathing_m",
                                                       bound=BREATHING_AMPLITUDE_M))
@@ -311,18 +311,12 @@ class Scene:
     source: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.name, str) and _NAME_RE.match(self.name)):
-            raise ConfigError(f"must be a name of letters, digits, '_', '-' or '.', got "
-                              f"{self.name!r}", field="name", file=self.source)
-        if not isinstance(self.description, str) or "\n" in self.description:
-            raise ConfigError(f"must be a one-line string, got {self.description!r}",
-                              field="description", file=self.source)
+        _check_name(self.name, self.source)
+        check_str(self.description, "description", empty=True, file=self.source)
         organs = tuple(self.organs)
         seen = set()
         for o in organs:
-            if not isinstance(o, OrganConfig):
-                raise ConfigError(f"must be OrganConfig, got {o!r}", field="organs",
-                                  file=self.source)
+            check_type(o, "organs", OrganConfig, "an OrganConfig", file=self.source)
             if o.name in seen:
                 raise fail(o.name, f"an organ name not used before (duplicate organ name "
                            f"{o.name!r})", field=f"organs.{o.name}", file=self.source)
@@ -401,16 +395,21 @@ class Scene:
                                           color=o.color, delicate=o.delicate,
                                           gravity=self.physics.gravity, wall=wall))
             except ConfigError as exc:
-                raise ConfigError(exc.reason, file=self.source,
-                                  field=_join("organs", o.name, exc.field)) from exc
+                raise rewrap(exc, f"organs.{o.name}", self.source) from exc
         return models
 
     def __str__(self) -> str:
         return dumps_scene(self)
 
 
-def _join(*parts: str | None) -> str:
-    return ".".join(p for p in parts if p)
+def _check_name(name: object, source: str | None = None) -> str:
+    expect(isinstance(name, str) and _NAME_RE.match(name), name,
+            "a name of letters, digits, '_', '-' or '.'", field="name", file=source)
+    return str(name)
+
+
+def _check_mesh_ref(mesh: object, field: str, source: str | None = None) -> str:
+    return check_str(mesh, field, file=source, what="a procedural organ name or a file path")
 
 
 # -- loading -----------------------------------------------------------------------------
@@ -449,7 +448,7 @@ def _build(cls: Any, kwargs: dict[str, Any], path: str, source: str) -> Any:
     try:
         return cls(**kwargs)
     except ConfigError as exc:
-        raise ConfigError(exc.reason, file=source, field=_join(path, exc.field)) from exc
+        raise rewrap(exc, path, source) from exc
     except TypeError as exc:
         raise ConfigError(str(exc), file=source, field=path) from exc
 
@@ -461,10 +460,8 @@ def scene_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Scene
                                                 "physics", source), "physics", source)
     motion = _build(MotionConfig, _check_keys(top.get("motion", {}), _MOTION_FIELDS, "motion",
                                               source), "motion", source)
-    organs_table = top.get("organs", {})
-    if not isinstance(organs_table, Mapping):
-        raise ConfigError(f"must be a table of organ tables, got {organs_table!r}",
-                          file=source, field="organs")
+    organs_table = check_table(top.get("organs", {}), "organs", file=source,
+                               what="a table of organ tables")
     base = Path(source).parent if source and not source.startswith("<") else Path.cwd()
     organs = [_organ(name, table, base, source) for name, table in organs_table.items()]
     return _build(Scene, {"name": top["name"], "description": top.get("description", ""),
@@ -475,10 +472,7 @@ def scene_from_dict(data: Mapping[str, Any], *, source: str = "<dict>") -> Scene
 def _organ(name: str, table: Any, base: Path, source: str) -> OrganConfig:
     path = f"organs.{name}"
     t = _check_keys(table, _ORGAN_FIELDS, path, source)
-    mesh = t.pop("mesh", name)
-    if not isinstance(mesh, str) or not mesh:
-        raise ConfigError(f"must be a procedural organ name or a file path, got {mesh!r}",
-                          file=source, field=f"{path}.mesh")
+    mesh = _check_mesh_ref(t.pop("mesh", name), f"{path}.mesh", source)
     procedural = _procedural()
     if mesh in procedural:
         organ = procedural[mesh]
@@ -487,19 +481,14 @@ def _organ(name: str, table: Any, base: Path, source: str) -> OrganConfig:
         t.setdefault("delicate", organ.delicate)
     else:
         looks_like_file = Path(mesh).suffix != "" or "/" in mesh or "\\" in mesh
-        if not looks_like_file:
-            raise ConfigError(f"unknown organ mesh {mesh!r}: not a procedural organ (known: "
-                              f"{', '.join(procedural)}) nor a mesh file path", file=source,
-                              field=f"{path}.mesh")
+        expect(looks_like_file, mesh, f"a procedural organ ({', '.join(procedural)}) or a "
+                "mesh file path (unknown organ mesh)", file=source, field=f"{path}.mesh")
         mesh_path = Path(mesh) if Path(mesh).is_absolute() else base / mesh
-        if not mesh_path.is_file():
-            raise ConfigError(f"mesh file not found: {str(mesh_path)!r}", file=source,
-                              field=f"{path}.mesh")
+        expect(mesh_path.is_file(), mesh, f"an existing mesh file (mesh file not found: "
+               f"{str(mesh_path)!r})", file=source, field=f"{path}.mesh")
         mesh = str(mesh_path.resolve())
-    anchors_raw = t.pop("anchors", [])
-    if not isinstance(anchors_raw, list):
-        raise ConfigError(f"must be an array of tables ([[{path}.anchors]]), got "
-                          f"{anchors_raw!r}", file=source, field=f"{path}.anchors")
+    anchors_raw = check_type(t.pop("anchors", []), f"{path}.anchors", list,
+                             f"an array of tables ([[{path}.anchors]])", file=source)
     anchors = []
     for i, a in enumerate(anchors_raw):
         apath = f"{path}.anchors[{i}]"

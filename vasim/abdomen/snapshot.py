@@ -9,17 +9,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vasim.abdomen.contact import ContactPatch
 
-if TYPE_CHECKING:
-    from vasim.abdomen.world import _Body
-
 FloatArray = NDArray[np.float64]
+
+
+class _SurfaceModel(Protocol):
+    @property
+    def n_surface(self) -> int: ...
+
+
+class SleepingBody(Protocol):
+    """What a snapshot reads of a sleeping organ (the world's per-organ body): its model's
+    surface size and its positions at a time. Declared here, below the world, so that the
+    snapshot does not import :mod:`vasim.abdomen.world` (issue #29: no module cycle)."""
+
+    @property
+    def model(self) -> _SurfaceModel: ...
+
+    def sleeping_x(self, t: float) -> FloatArray: ...
 
 
 def readonly(a: FloatArray) -> FloatArray:
@@ -40,7 +53,7 @@ class OrganView:
     name: str
     awake: bool
     _x: FloatArray | None = field(repr=False, default=None)
-    _body: _Body | None = field(repr=False, default=None)
+    _body: SleepingBody | None = field(repr=False, default=None)
     _t: float = 0.0
 
     @cached_property
@@ -108,7 +121,7 @@ class AbdomenSnapshot:
 
     t: float
     seq: int
-    organ_sources: tuple[tuple[str, FloatArray | None, _Body], ...] = field(repr=False)
+    organ_sources: tuple[tuple[str, FloatArray | None, SleepingBody], ...] = field(repr=False)
     targets: FloatArray
     target_normals: FloatArray
     target_displacement: FloatArray

@@ -11,14 +11,14 @@ safety stop ended the run (its cause is printed).
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 from typing import Any, TextIO
 
 from vasim.cli.args import bounded_float, bounded_int
 from vasim.core.bounds import DURATION_S, SEED
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_dir, check_int, check_number, expect
+from vasim.core.errors import InputError
 from vasim.core.jsonio import dumps
 from vasim.trials.kinds import MAX_TRIAL_TIME_S
 
@@ -98,13 +98,12 @@ def check_plot_path(path: Path) -> None:
         >>> check_plot_path(Path("run.txt"))  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        vasim.core.errors.ConfigError: ... run.txt: the suffix must be .png, .pdf or .svg
+        vasim.core.errors.InputError: field '--plot': got 'run.txt', expected a .png, .pdf \
+or .svg file
     """
-    if path.suffix.lower() not in PLOT_SUFFIXES:
-        raise ConfigError(f"{path}: the suffix must be .png, .pdf or .svg", field="--plot")
-    folder = path.parent
-    if not folder.is_dir():
-        raise ConfigError(f"{path}: folder {folder} does not exist", field="--plot")
+    expect(path.suffix.lower() in PLOT_SUFFIXES, str(path), "a .png, .pdf or .svg file",
+           field="--plot", error=InputError)
+    check_dir(path.parent, "--plot", what="an existing folder for the plot")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -113,12 +112,10 @@ def cmd_run(args: argparse.Namespace) -> int:
     from vasim.mrcp.scenarios.runner import run
 
     out: TextIO = getattr(args, "out", None) or sys.stdout
-    if args.duration is not None and not (math.isfinite(args.duration)
-                                          and 0.0 < args.duration <= MAX_TRIAL_TIME_S):
-        raise ConfigError(f"--duration must be a finite number of seconds in "
-                          f"(0, {MAX_TRIAL_TIME_S:g}], got {args.duration!r}", field="duration")
-    if args.seed < 0:
-        raise ConfigError(f"--seed must be >= 0, got {args.seed!r}", field="seed")
+    if args.duration is not None:
+        check_number(args.duration, "--duration", gt=0.0, le=MAX_TRIAL_TIME_S,
+                     error=InputError)
+    check_int(args.seed, "--seed", lo=0, error=InputError)
     if args.plot:
         check_plot_path(Path(args.plot))      # before the run, not after it
     scenario = get_scenario(args.scenario)

@@ -86,12 +86,12 @@ def register_power(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 def ray_address(text: str) -> str:
     """``--address``: the syntax of a Ray address (``vasim.study.power.driver
     .parse_ray_address``), refused at parse time with exit code 2 (``''`` included)."""
-    from vasim.core.errors import ConfigError
+    from vasim.core.errors import FieldError
     from vasim.study.power.driver import parse_ray_address
 
     try:
         parse_ray_address(text)
-    except ConfigError as exc:
+    except FieldError as exc:
         raise argparse.ArgumentTypeError(exc.reason) from None
     return text
 

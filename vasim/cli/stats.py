@@ -20,7 +20,8 @@ from typing import Any, TextIO
 
 import pandas as pd
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import expect
+from vasim.core.errors import InputError
 
 _EPILOG = """\
 Input is a long-format CSV: one row per observation, with the dependent variable, the
@@ -155,9 +156,8 @@ def cmd_rm_anova(args: argparse.Namespace) -> int:
     from vasim.study.stats import RM_ANOVA_COLUMNS, read_long_csv, rm_anova
 
     within = [w.strip() for w in str(args.within).split(",")]
-    if not 1 <= len(within) <= 2 or not all(within):
-        raise ConfigError(f"--within takes one factor or two separated by a comma, got "
-                          f"{args.within!r}")
+    expect(1 <= len(within) <= 2 and all(within), args.within,
+           "one factor or two separated by a comma", field="--within", error=InputError)
     data = read_long_csv(args.csv, text_columns=[args.subject, *within])
     aov, notes = _run(lambda: rm_anova(data, args.dv, args.subject, within))
     out = sys.stdout
@@ -266,12 +266,10 @@ def _check_factors(data: pd.DataFrame, factors: list[str], formula: str, source:
     check_formula(formula, columns, source=source)
     used = formula_columns(formula, columns)
     for f in factors:
-        if f not in columns:
-            raise ConfigError(f"got {f!r}, expected a column of the file ("
-                              f"{', '.join(columns)})", file=source, field="--factors")
-        if f not in used:
-            raise ConfigError(f"got {f!r}, expected a column the formula {formula!r} uses "
-                              f"({', '.join(used)})", file=source, field="--factors")
+        expect(f in columns, f, f"a column of the file ({', '.join(columns)})", file=source,
+               field="--factors", error=InputError)
+        expect(f in used, f, f"a column the formula {formula!r} uses ({', '.join(used)})",
+               file=source, field="--factors", error=InputError)
 
 
 def cmd_tukey(args: argparse.Namespace) -> int:
@@ -280,10 +278,10 @@ def cmd_tukey(args: argparse.Namespace) -> int:
 
     rm_given = args.subject is not None or args.within is not None
     if args.between is not None and rm_given:
-        raise ConfigError("give either --between COL (independent groups) or --subject COL "
-                          "--within COL (repeated measures), not both")
+        raise InputError("give either --between COL (independent groups) or --subject COL "
+                         "--within COL (repeated measures), not both")
     if args.between is None and (args.subject is None or args.within is None):
-        raise ConfigError("tukey needs --between COL, or both --subject COL and --within COL")
+        raise InputError("tukey needs --between COL, or both --subject COL and --within COL")
     labels = [args.between] if args.between is not None else [args.subject, args.within]
     data = read_long_csv(args.csv, text_columns=labels)
     if args.between is not None:
@@ -362,7 +360,7 @@ def cmd_spearman(args: argparse.Namespace) -> int:
 
 
 def _json_value(value: Any) -> Any:
-    from vasim.study.stats._data import nan_to_none
+    from vasim.study.stats import nan_to_none
 
     return nan_to_none(value)
 
@@ -417,9 +415,9 @@ def _print_table(frame: pd.DataFrame, columns: Sequence[str], out: TextIO) -> No
 
 
 def _plain(value: Any) -> Any:
-    from vasim.study.stats._data import _py
+    from vasim.study.stats import python_scalar
 
-    return None if value is pd.NA else _py(value)
+    return None if value is pd.NA else python_scalar(value)
 
 
 def _is_number(value: Any) -> bool:

@@ -34,7 +34,8 @@ from vasim.core.bounds import (
     TRIAL_TIME_S,
     VARIANT,
 )
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_file, check_not_dir, expect
+from vasim.core.errors import ConfigError, InputError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -112,16 +113,16 @@ def _cmd_trial(args: argparse.Namespace) -> int:
         ("--in-process", getattr(args, "in_process", False))) if given]
     if getattr(args, "replay", None) is not None:
         if getattr(args, "realtime", False) or realtime_only:
-            raise ConfigError("--replay re-runs the stored trial as recorded: it takes no "
-                              f"{', '.join(['--realtime', *realtime_only][:3])}",
-                              field="replay")
+            raise InputError("--replay re-runs the stored trial as recorded: it takes no "
+                             f"{', '.join(['--realtime', *realtime_only][:3])}",
+                             field="replay")
         return _cmd_replay(args)
     if getattr(args, "realtime", False):
         return _cmd_realtime(args)
     if realtime_only:
         verb = "applies" if len(realtime_only) == 1 else "apply"
-        raise ConfigError(f"{', '.join(realtime_only)} {verb} only with --realtime",
-                          field=realtime_only[0])
+        raise InputError(f"{', '.join(realtime_only)} {verb} only with --realtime",
+                         field=realtime_only[0])
 
     config = TrialConfig(
         task=args.task, variant=args.variant, schema=args.schema, operator=args.operator,
@@ -130,9 +131,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     )
     store = None
     if args.db is not None:
-        if args.db.exists() and args.db.is_dir():
-            raise ConfigError(f"--db {args.db} is a directory, expected a database file")
-        store = TrialStore(args.db)
+        store = TrialStore(_new_db(args.db))
     try:
         result, trial_id = run_trial(config, store, progress=sys.stderr.isatty())
     finally:
@@ -160,10 +159,8 @@ def _gain(args: argparse.Namespace) -> float:
         from vasim.fixtures.schema import load_schema
 
         schema = load_schema(args.schema)
-        if not schema.fixtures:
-            raise ConfigError(f"got {gain:g}, expected 1 for schema {schema.name!r}, which "
-                              "has no fixtures (a gain scales a schema's fixtures)",
-                              field="--gain")
+        expect(schema.fixtures, gain, f"1 for schema {schema.name!r}, which has no "
+               "fixtures (a gain scales a schema's fixtures)", field="--gain", error=InputError)
     return gain
 
 
@@ -207,9 +204,7 @@ def _cmd_realtime(args: argparse.Namespace) -> int:
     in_process = bool(getattr(args, "in_process", False))
     store = None
     if args.db is not None:
-        if args.db.exists() and args.db.is_dir():
-            raise ConfigError(f"--db {args.db} is a directory, expected a database file")
-        store = TrialStore(args.db)
+        store = TrialStore(_new_db(args.db))
     try:
         if in_process:
             device = factory() if callable(factory) else None
@@ -234,11 +229,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     from vasim.trials.realtime import replay_trial
 
     if args.db is None:
-        raise ConfigError("--replay needs --db (the database the trial is stored in)",
-                          field="db")
-    if not args.db.is_file():
-        raise ConfigError(f"--db {args.db} does not exist", field="db")
-    store = TrialStore(args.db, readonly=True)
+        raise InputError("--replay needs --db (the database the trial is stored in)",
+                         field="db")
+    store = TrialStore(_existing_db(args.db), readonly=True)
     try:
         report = replay_trial(store, args.replay)
     finally:
@@ -377,17 +370,11 @@ def _add_simulate(ss: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
 
 
 def _existing_db(path: Path) -> Path:
-    if not path.exists():
-        raise ConfigError(f"no study database {path}", field="db")
-    if path.is_dir():
-        raise ConfigError(f"--db {path} is a directory, expected a database file", field="db")
-    return path
+    return check_file(path, "--db", what="an existing study database file")
 
 
 def _new_db(path: Path) -> Path:
-    if path.exists() and path.is_dir():
-        raise ConfigError(f"--db {path} is a directory, expected a database file", field="db")
-    return path
+    return check_not_dir(path, "--db", what="a database file (new or existing)")
 
 
 def _no_progress_flag(parser: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ from typing import Any
 
 from vasim.cli.args import bounded_float, bounded_int, host_address
 from vasim.core.bounds import DURATION_S, PORT, SEED
-from vasim.core.errors import ConfigError
+from vasim.core.errors import InputError
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -120,9 +120,9 @@ def serve(args: argparse.Namespace) -> int:
     token: str | None = None
     if not is_loopback(args.host):
         if not getattr(args, "expose", False):
-            raise ConfigError(f"--host {args.host} exposes the viewer beyond this machine; add "
-                              "--expose to confirm (every page then needs an access token)",
-                              field="--host")
+            raise InputError(f"--host {args.host} exposes the viewer beyond this machine; add "
+                             "--expose to confirm (every page then needs an access token)",
+                             field="--host")
         token = new_token()
     warning = exposure_warning(args.host, args.port)
     if warning:
@@ -194,11 +194,11 @@ def check_protocol(name: str | None, db: str | None) -> str | None:
 
     known = available_protocols()
     if name not in known:
-        raise ConfigError(f"unknown protocol {name!r} (available: {', '.join(known)})",
-                          field="--protocol")
+        raise InputError(f"unknown protocol {name!r} (available: {', '.join(known)})",
+                         field="--protocol")
     if not db:
-        raise ConfigError("--protocol needs --db FILE (a session's trials are stored there)",
-                          field="--protocol")
+        raise InputError("--protocol needs --db FILE (a session's trials are stored there)",
+                         field="--protocol")
     return name
 
 

@@ -93,6 +93,7 @@ ZOOM = Bound(0.01, 100.0, "x", "a laparoscope zooms ~1-10x")
 CAMERA_DISTANCE_M = Bound(0.0, 2.0, "m", "a laparoscope sits centimetres from the tissue")
 LINE_WIDTH_PX = Bound(0.0, 100.0, "px", "an overlay arrow on a screen")
 DIRECTION = Bound(-1000.0, 1000.0, "", "a direction vector, normalised on use")
+COLOR_RGB = Bound(0.0, 1.0, "", "an RGB colour component")
 
 # -- the abdomen -------------------------------------------------------------------------
 ORGAN_MASS_KG = Bound(1e-3, 10.0, "kg",

@@ -1,6 +1,8 @@
-"""The one toolkit every TOML loader validates with (schemas, protocols, scenes, robots).
+"""The one toolkit every TOML loader and config object validates with (schemas, protocols,
+scenes, robots, the frozen config dataclasses of every layer).
 
-Every check raises :class:`vasim.core.errors.ConfigError` with the same words::
+Every check raises :class:`vasim.core.errors.ConfigError` (or, with ``error=``, an
+:class:`~vasim.core.errors.InputError`) with the same words::
 
     protocols/schemas/ff.toml: field 'fixtures.ff.max_force_n': got 1000.0, expected a
     number in [0, 3.3] N (the Phantom Omni's peak force, 3.3 N (Geomagic spec))
@@ -13,6 +15,26 @@ truncated to :data:`vasim.core.bounds.MAX_MESSAGE_CHARS` characters.
 than msgspec/pydantic models, because the dataclasses (and their ``__post_init__`` checks)
 are the public types every layer already uses, and a second model layer would duplicate
 them; the functions are what the five former toolkits had in common, worded once.
+
+**Validating a config field** (issue #29 item 3: one route). Every field check goes through
+a helper here: the scalar checks (:func:`check_number`, :func:`check_int`,
+:func:`check_bool`, :func:`check_str`, :func:`check_choice`), vectors and arrays
+(:func:`check_vec3`, :func:`check_array`), nested objects (:func:`check_type`), tables
+(:func:`check_table`, :func:`check_keys`, :func:`check_required`,
+:func:`check_array_of_tables`), paths (:func:`check_file`, :func:`check_dir`,
+:func:`check_dir_path`, :func:`check_not_dir`) and, for any other rule (a relation between
+fields), :func:`expect` ``(ok, value, expected, field=...)``. A number's plausible range is
+a :class:`~vasim.core.bounds.Bound` of :mod:`vasim.core.bounds` (the bounds table). A
+``__post_init__`` calls helpers rather than spelling ``if ...: raise ConfigError(...)``;
+:func:`fail` builds the error for the few raises no helper expresses, :func:`rewrap` puts a
+nested object's error under its parent's field and file. The TOML of every file is parsed
+by :func:`parse_toml` (nothing else imports ``tomllib``).
+
+**Config or input** (``error=``): a field of a config file or config object raises
+:class:`~vasim.core.errors.ConfigError` (the default); a command-line argument or a value of
+an input data file (answers) raises :class:`~vasim.core.errors.InputError`: every helper
+takes ``error=InputError``; path helpers default to it. Both are a
+:class:`~vasim.core.errors.FieldError`, which the command line prints as one line (exit 2).
 
 **Decision**: a UTF-8 byte-order mark at the start of a TOML text is stripped (editors on
 Windows write one; ``tomllib`` would report "invalid statement at line 1").
@@ -31,14 +53,17 @@ import math
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vasim.core.bounds import MAX_MESSAGE_CHARS, Bound
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, FieldError, InputError
 
 BOM = "\ufeff"
+
+T = TypeVar("T")
 
 MAX_TOML_NESTING = 64
 """Deepest nesting of arrays / inline tables :func:`parse_toml` accepts (shipped files: 4)."""
@@ -59,9 +84,28 @@ def show(value: object, limit: int = MAX_MESSAGE_CHARS) -> str:
 
 
 def fail(value: object, expected: str, *, field: str | None = None,
-         file: str | Path | None = None) -> ConfigError:
-    """The standard error: ``got <value>, expected <expected>`` at ``file``/``field``."""
-    return ConfigError(f"got {show(value)}, expected {expected}", file=file, field=field)
+         file: str | Path | None = None, error: type[FieldError] = ConfigError,
+         ) -> FieldError:
+    """The standard error: ``got <value>, expected <expected>`` at ``file``/``field``
+    (a :class:`ConfigError`, or ``error``: :class:`InputError` for a command-line argument
+    or an input data value)."""
+    return error(f"got {show(value)}, expected {expected}", file=file, field=field)
+
+
+def expect(ok: object, value: object, expected: str, *, field: str | None = None,
+            file: str | Path | None = None, error: type[FieldError] = ConfigError) -> None:
+    """Raises :func:`fail` ``(value, expected)`` unless ``ok``: the one-line form of a check
+    no other helper covers (a relation between fields: ``lower < upper``, a count that must
+    match another field's).
+
+    >>> expect(1 < 2, 1, "less than 2", field="lo")
+    >>> expect(3 < 2, 3, "less than upper (2)", field="lo")
+    Traceback (most recent call last):
+    ...
+    vasim.core.errors.ConfigError: field 'lo': got 3, expected less than upper (2)
+    """
+    if not ok:
+        raise fail(value, expected, field=field, file=file, error=error)
 
 
 def join(*parts: str | None) -> str:
@@ -69,10 +113,13 @@ def join(*parts: str | None) -> str:
     return ".".join(p for p in parts if p)
 
 
-def rewrap(exc: ConfigError, prefix: str | None = None,
-           file: str | Path | None = None) -> ConfigError:
-    """``exc`` with its field under ``prefix`` and ``file`` named (unless it names one)."""
-    return ConfigError(exc.reason, file=exc.file or file, field=join(prefix, exc.field) or None)
+def rewrap(exc: FieldError, prefix: str | None = None, file: str | Path | None = None, *,
+           error: type[FieldError] | None = None) -> FieldError:
+    """``exc`` with its field under ``prefix`` and ``file`` named (unless it names one), of
+    the same class (or ``error``: an :class:`InputError` when a config check was applied to
+    input data)."""
+    return (error or type(exc))(exc.reason, file=exc.file or file,
+                                field=join(prefix, exc.field) or None)
 
 
 # -- TOML --------------------------------------------------------------------------------
@@ -161,10 +208,11 @@ def toml_nesting(text: str) -> tuple[int, int]:
 
 
 def check_table(value: object, field: str | None = None, *, file: str | Path | None = None,
-                what: str = "a table") -> dict[str, Any]:
+                what: str = "a table", error: type[FieldError] = ConfigError,
+                ) -> dict[str, Any]:
     """A TOML table (``dict``), returned as a new dict."""
     if not isinstance(value, Mapping):
-        raise fail(value, what, field=field, file=file)
+        raise fail(value, what, field=field, file=file, error=error)
     return dict(value)
 
 
@@ -180,11 +228,18 @@ def check_keys(table: object, known: Sequence[str], path: str | None = None, *,
         if key not in known:
             raise ConfigError(f"got unknown field (value {show(value)}), expected one of "
                               f"{', '.join(known)}", file=file, field=join(path, str(key)))
+    return check_required(t, required, path, file=file)
+
+
+def check_required(table: dict[str, Any], required: Sequence[str], path: str | None = None,
+                   *, file: str | Path | None = None) -> dict[str, Any]:
+    """``table`` if it has every ``required`` key (``got nothing (missing required field),
+    expected a value`` at ``path.key`` otherwise)."""
     for key in required:
-        if key not in t:
+        if key not in table:
             raise ConfigError("got nothing (missing required field), expected a value", file=file,
                               field=join(path, key))
-    return t
+    return table
 
 
 def check_array_of_tables(value: object, field: str, *, file: str | Path | None = None,
@@ -240,7 +295,8 @@ def describe_range(*, bound: Bound | None = None, gt: float | None = None,
 
 def check_number(value: object, field: str | None = None, *, bound: Bound | None = None,
                  gt: float | None = None, ge: float | None = None, lt: float | None = None,
-                 le: float | None = None, file: str | Path | None = None) -> float:
+                 le: float | None = None, file: str | Path | None = None,
+                 error: type[FieldError] = ConfigError) -> float:
     """A finite real number within ``bound`` and the strict/loose limits; returned as float.
 
     Raises:
@@ -249,91 +305,95 @@ def check_number(value: object, field: str | None = None, *, bound: Bound | None
     rng = describe_range(bound=bound, gt=gt, ge=ge, lt=lt, le=le)
     expected = f"a finite number {rng}".rstrip()
     if not is_number(value):
-        raise fail(value, expected, field=field, file=file)
+        raise fail(value, expected, field=field, file=file, error=error)
     try:
         x = float(value)  # type: ignore[arg-type]  # is_number proved it a real number
     except OverflowError:  # an int beyond the float range
-        raise fail(value, expected, field=field, file=file) from None
+        raise fail(value, expected, field=field, file=file, error=error) from None
     if not math.isfinite(x):
-        raise fail(value, expected, field=field, file=file)
+        raise fail(value, expected, field=field, file=file, error=error)
     ok = ((bound is None or bound.low <= x <= bound.high)
           and (gt is None or x > gt) and (ge is None or x >= ge)
           and (lt is None or x < lt) and (le is None or x <= le))
     if not ok:
-        raise fail(value, expected, field=field, file=file)
+        raise fail(value, expected, field=field, file=file, error=error)
     return x
 
 
 def check_int(value: object, field: str | None = None, *, bound: Bound | None = None,
               lo: int | None = None, hi: int | None = None,
-              file: str | Path | None = None) -> int:
+              file: str | Path | None = None, error: type[FieldError] = ConfigError) -> int:
     """An integer (not a bool) within ``bound`` and [lo, hi]; returned as int."""
     rng = describe_range(bound=bound, ge=lo, le=hi)
     expected = f"an integer {rng}".rstrip()
     if not is_int(value):
-        raise fail(value, expected, field=field, file=file)
+        raise fail(value, expected, field=field, file=file, error=error)
     v = int(value)  # type: ignore[call-overload]  # is_int proved it an integer
     if ((bound is not None and not bound.low <= v <= bound.high)
             or (lo is not None and v < lo) or (hi is not None and v > hi)):
-        raise fail(value, expected, field=field, file=file)
+        raise fail(value, expected, field=field, file=file, error=error)
     return v
 
 
 def check_bool(value: object, field: str | None = None, *,
-               file: str | Path | None = None) -> bool:
+               file: str | Path | None = None, error: type[FieldError] = ConfigError) -> bool:
     """``true`` or ``false``."""
     if not isinstance(value, bool):
-        raise fail(value, "true or false", field=field, file=file)
+        raise fail(value, "true or false", field=field, file=file, error=error)
     return value
 
 
 def check_str(value: object, field: str | None = None, *, one_line: bool = True,
               empty: bool = False, max_length: int | None = None,
-              file: str | Path | None = None) -> str:
-    """A string (one line unless ``one_line=False``; not empty unless ``empty``)."""
-    what = "a one-line string" if one_line else "a string"
-    if not empty:
-        what += " (not empty)"
-    if max_length is not None:
-        what += f" of at most {max_length} characters"
+              file: str | Path | None = None, what: str | None = None,
+              error: type[FieldError] = ConfigError) -> str:
+    """A string (one line unless ``one_line=False``; not empty unless ``empty``); ``what``
+    words the expectation (default: ``a one-line string (not empty)``)."""
+    if what is None:
+        what = "a one-line string" if one_line else "a string"
+        if not empty:
+            what += " (not empty)"
+        if max_length is not None:
+            what += f" of at most {max_length} characters"
     if (not isinstance(value, str) or (not empty and not value)
             or (one_line and "\n" in value)
             or (max_length is not None and len(value) > max_length)):
-        raise fail(value, what, field=field, file=file)
+        raise fail(value, what, field=field, file=file, error=error)
     return value
 
 
 def check_choice(value: object, field: str | None, choices: Sequence[Any], *,
-                 file: str | Path | None = None) -> Any:
+                 file: str | Path | None = None, error: type[FieldError] = ConfigError) -> Any:
     """One of ``choices``."""
     try:
         ok = value in choices
     except TypeError:  # unhashable against a set-like
         ok = False
     if not ok or isinstance(value, bool) != any(isinstance(c, bool) for c in choices):
-        raise fail(value, f"one of {', '.join(map(repr, choices))}", field=field, file=file)
+        raise fail(value, f"one of {', '.join(map(repr, choices))}", field=field, file=file,
+                   error=error)
     return value
 
 
 def check_vec3(value: object, field: str | None = None, *, bound: Bound | None = None,
                nonzero: bool = False, file: str | Path | None = None,
-               ) -> tuple[float, float, float]:
+               error: type[FieldError] = ConfigError) -> tuple[float, float, float]:
     """Three finite numbers (each within ``bound``), as a tuple of floats."""
     rng = describe_range(bound=bound)
     what = f"3 finite numbers {rng}".rstrip()
     if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
-        raise fail(value, what, field=field, file=file)
+        raise fail(value, what, field=field, file=file, error=error)
     items = list(value)
     if len(items) != 3:
-        raise fail(value, what, field=field, file=file)
+        raise fail(value, what, field=field, file=file, error=error)
     out = []
     for c in items:
         try:
-            out.append(check_number(c, field, bound=bound, file=file))
-        except ConfigError:
-            raise fail(value, what, field=field, file=file) from None
+            out.append(check_number(c, field, bound=bound, file=file, error=error))
+        except FieldError:
+            raise fail(value, what, field=field, file=file, error=error) from None
     if nonzero and not any(out):
-        raise fail(value, "a non-zero vector", field=field, file=file)
+        raise fail(value, "a non-zero vector", field=field, file=file, error=error)
     return (out[0], out[1], out[2])
 
 
@@ -353,20 +413,134 @@ def check_str_tuple(value: object, field: str, *, unique: bool = True, empty: bo
     return value
 
 
+# -- types, arrays, paths ------------------------------------------------------------------
+def check_type(value: T, field: str | None, types: type | tuple[type, ...], what: str, *,
+               file: str | Path | None = None, error: type[FieldError] = ConfigError) -> T:
+    """``value`` if it is an instance of ``types`` (``what`` names them in the error:
+    ``"an OrganParams"``); a bool is not accepted as an int or float unless ``types``
+    names ``bool``."""
+    kinds = types if isinstance(types, tuple) else (types,)
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        raise fail(value, what, field=field, file=file, error=error)
+    return value
+
+
+def check_array(value: object, field: str | None = None, *,
+                shape: tuple[int | None, ...] | None = None, finite: bool = True,
+                what: str | None = None, file: str | Path | None = None,
+                error: type[FieldError] = ConfigError) -> NDArray[np.float64]:
+    """A float64 array of ``shape`` (``None`` in it: any length on that axis), finite unless
+    told; the error reads ``expected an array of shape (n, 3) of finite numbers`` (or
+    ``what``).
+
+    >>> check_array([1, 2, 3], "p", shape=(3,)).tolist()
+    [1.0, 2.0, 3.0]
+    >>> check_array([1, 2], "p", shape=(3,))
+    Traceback (most recent call last):
+    ...
+    vasim.core.errors.ConfigError: field 'p': got [1, 2], expected an array of shape (3,) of \
+finite numbers
+    """
+    if what is None:
+        dims = "" if shape is None else (
+            "(" + ", ".join("n" if d is None else str(d) for d in shape)
+            + ("," if len(shape) == 1 else "") + ")")
+        what = ("an array" + (f" of shape {dims}" if dims else "")
+                + (" of finite numbers" if finite else " of numbers"))
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise fail(value, what, field=field, file=file, error=error) from None
+    if shape is not None and (arr.ndim != len(shape) or any(
+            d is not None and n != d for n, d in zip(arr.shape, shape, strict=True))):
+        raise fail(value, what, field=field, file=file, error=error)
+    if finite and not np.all(np.isfinite(arr)):
+        raise fail(value, what, field=field, file=file, error=error)
+    return arr
+
+
+MAX_PATH_CHARS = 200
+"""Longest echo of a path in an error message (a longer one keeps its end: the file name)."""
+
+
+def show_path(path: str | Path) -> str:
+    """``repr`` of a path, cut at the front to :data:`MAX_PATH_CHARS` characters (the end
+    names the file).
+
+    >>> show_path("/data/" + "x" * 300 + "/kidney.obj")[-12:]
+    "/kidney.obj'"
+    """
+    text = repr(str(path))
+    return text if len(text) <= MAX_PATH_CHARS else "..." + text[-MAX_PATH_CHARS:]
+
+
+def check_file(path: str | Path, field: str | None = None, *, what: str = "an existing file",
+               error: type[FieldError] = InputError) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it is an existing file (an
+    :class:`InputError` by default: a path is what a user typed)."""
+    p = Path(path)
+    if not p.is_file():
+        raise _path_error(p, "a folder" if p.is_dir() else "no such file", what, field, error)
+    return p
+
+
+def _path_error(p: Path, state: str, what: str, field: str | None,
+                error: type[FieldError]) -> FieldError:
+    return error(f"got {show_path(p)} ({state}), expected {what}", field=field)
+
+
+def check_dir(path: str | Path, field: str | None = None, *,
+              what: str = "an existing folder", error: type[FieldError] = InputError) -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it is an existing folder."""
+    p = Path(path)
+    if not p.is_dir():
+        raise _path_error(p, "a file" if p.exists() else "no such folder", what, field, error)
+    return p
+
+
+def check_dir_path(path: str | Path, field: str | None = None, *,
+                   what: str = "a folder (existing or new)",
+                   error: type[FieldError] = InputError) -> Path:
+    """``path`` as a :class:`~pathlib.Path` unless it exists and is not a folder (an output
+    folder that may or may not exist yet)."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise _path_error(p, "exists and is not a folder", what, field, error)
+    return p
+
+
+def check_not_dir(path: str | Path, field: str | None = None, *, what: str = "a file path",
+                  error: type[FieldError] = InputError) -> Path:
+    """``path`` as a :class:`~pathlib.Path` unless it is an existing folder (an output file
+    that may or may not exist yet)."""
+    p = Path(path)
+    if p.is_dir():
+        raise _path_error(p, "a folder", what, field, error)
+    return p
+
+
 __all__ = [
     "BOM",
     "MAX_TOML_NESTING",
+    "check_array",
     "check_array_of_tables",
     "check_bool",
     "check_choice",
+    "check_dir",
+    "check_dir_path",
+    "check_file",
     "check_int",
     "check_keys",
+    "check_not_dir",
     "check_number",
+    "check_required",
     "check_str",
     "check_str_tuple",
     "check_table",
+    "check_type",
     "check_vec3",
     "describe_range",
+    "expect",
     "fail",
     "is_int",
     "is_number",
@@ -374,5 +548,6 @@ __all__ = [
     "parse_toml",
     "rewrap",
     "show",
+    "show_path",
     "toml_nesting",
 ]

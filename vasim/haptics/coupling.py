@@ -57,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vasim.abdomen.contact import ContactPatch, ToolPose, patch_force
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number
 
 FloatArray = NDArray[np.float64]
 
@@ -97,14 +97,9 @@ class CouplingParams:
 
     def __post_init__(self) -> None:
         for name in ("stiffness", "proxy_mass", "force_scale", "velocity_cutoff_hz"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"must be a finite number > 0, got {v!r}",
-                                  field=f"coupling.{name}")
-        d = self.damping
-        if d is not None and not (isinstance(d, int | float) and math.isfinite(d) and d >= 0):
-            raise ConfigError(f"must be a finite number >= 0 or None, got {d!r}",
-                              field="coupling.damping")
+            check_number(getattr(self, name), f"coupling.{name}", gt=0)
+        if self.damping is not None:
+            check_number(self.damping, "coupling.damping", ge=0)
 
     @property
     def kd(self) -> float:

@@ -32,7 +32,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number, expect
 from vasim.haptics.observation import OperatorObservation
 
 FloatArray = NDArray[np.float64]
@@ -78,26 +78,18 @@ class DeviceLimits:
     def __post_init__(self) -> None:
         lo = tuple(float(v) for v in self.workspace_min)
         hi = tuple(float(v) for v in self.workspace_max)
-        if len(lo) != 3 or len(hi) != 3:
-            raise ConfigError(f"workspace corners must have 3 components, got {lo!r}, {hi!r}",
-                              field="workspace")
-        if any(math.isnan(v) for v in lo + hi) or not all(a < b for a, b in zip(lo, hi,
-                                                                                   strict=True)):
-            raise ConfigError(f"workspace_min must be < workspace_max per axis, got {lo!r} and "
-                              f"{hi!r}", field="workspace")
+        expect(len(lo) == 3 and len(hi) == 3, (lo, hi), "workspace corners of 3 components",
+               field="workspace")
+        expect(not any(math.isnan(v) for v in lo + hi)
+               and all(a < b for a, b in zip(lo, hi, strict=True)), (lo, hi),
+               "workspace_min < workspace_max per axis", field="workspace")
         object.__setattr__(self, "workspace_min", lo)
         object.__setattr__(self, "workspace_max", hi)
         for name in ("max_force_n", "max_continuous_force_n", "position_resolution_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
-                raise ConfigError(f"must be a finite number >= 0, got {v!r}", field=name)
-        if self.max_continuous_force_n > self.max_force_n:
-            raise ConfigError(f"must be <= max_force_n ({self.max_force_n}), got "
-                              f"{self.max_continuous_force_n!r}", field="max_continuous_force_n")
-        w = self.continuous_window_s
-        if not (isinstance(w, int | float) and math.isfinite(w) and w > 0):
-            raise ConfigError(f"must be a finite number > 0 s, got {w!r}",
-                              field="continuous_window_s")
+            check_number(getattr(self, name), name, ge=0)
+        check_number(self.max_continuous_force_n, "max_continuous_force_n",
+                     le=self.max_force_n)
+        check_number(self.continuous_window_s, "continuous_window_s", gt=0)
 
     def contains(self, position: ArrayLike) -> bool:
         """True when ``position`` (3,) [m] lies in the closed workspace box."""

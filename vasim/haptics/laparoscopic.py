@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vasim.core import geometry
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number, expect
 
 FloatArray = NDArray[np.float64]
 
@@ -54,9 +54,8 @@ MAX_INSERTION_M = 0.30
 def _unit(v: ArrayLike, name: str) -> FloatArray:
     a = np.asarray(v, dtype=float).reshape(3)
     n = float(np.linalg.norm(a))
-    if not np.isfinite(a).all() or n < 1e-9:
-        raise ConfigError(f"{name} must be a finite non-zero 3-vector, got {a.tolist()!r}",
-                          field=name)
+    expect(np.isfinite(a).all() and n >= 1e-9, a.tolist(), "a finite non-zero 3-vector",
+           field=name)
     return a / n
 
 
@@ -81,17 +80,13 @@ class Port:
 
     def __post_init__(self) -> None:
         f = np.asarray(self.fulcrum, dtype=float).reshape(3)
-        if not np.isfinite(f).all() or float(np.abs(f).max()) > 10.0:
-            raise ConfigError(f"fulcrum must be a finite point within 10 m, got {f.tolist()!r}",
-                              field="fulcrum")
+        expect(np.isfinite(f).all() and float(np.abs(f).max()) <= 10.0, f.tolist(),
+               "a finite point within 10 m", field="fulcrum")
         z = _unit(self.axis, "axis")
-        if not 0.0 < self.max_angle_rad < math.pi / 2:
-            raise ConfigError(f"max_angle_rad must be in (0, pi/2), got {self.max_angle_rad!r}",
-                              field="max_angle_rad")
-        if not 0.0 <= self.min_insertion_m < self.max_insertion_m <= 1.0:
-            raise ConfigError("insertion range must satisfy 0 <= min < max <= 1 m, got "
-                              f"{(self.min_insertion_m, self.max_insertion_m)!r}",
-                              field="max_insertion_m")
+        check_number(self.max_angle_rad, "max_angle_rad", gt=0.0, lt=math.pi / 2)
+        expect(0.0 <= self.min_insertion_m < self.max_insertion_m <= 1.0,
+               (self.min_insertion_m, self.max_insertion_m),
+               "an insertion range 0 <= min < max <= 1 m", field="max_insertion_m")
         # Port frame: z along the shaft, x horizontal (world z cross shaft), y completing it.
         ref = np.array([0.0, 0.0, 1.0]) if abs(z[2]) < 0.95 else np.array([0.0, 1.0, 0.0])
         x = np.cross(ref, z)
@@ -219,12 +214,8 @@ class InputMapping:
     def __post_init__(self) -> None:
         for name in ("rad_per_px", "m_per_line", "insert_m_per_s", "roll_rad_per_s",
                      "stick_rad_per_s"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name} must be a finite number > 0, got {v!r}", field=name)
-        if not (math.isfinite(self.sensitivity) and 0.1 <= self.sensitivity <= 5.0):
-            raise ConfigError(f"sensitivity must be in [0.1, 5], got {self.sensitivity!r}",
-                              field="sensitivity")
+            check_number(getattr(self, name), name, gt=0)
+        check_number(self.sensitivity, "sensitivity", ge=0.1, le=5.0)
 
     def apply(self, port: Port, pose: InstrumentPose, inc: Increment,
               screen: tuple[ArrayLike, ArrayLike] | None = None) -> InstrumentPose:

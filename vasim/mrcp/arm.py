@@ -41,7 +41,7 @@ import pybullet as pb
 from scipy.stats import qmc
 
 from vasim.core import geometry
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice
 from vasim.mrcp import _ik_kernels, closed_form_ik, dh
 from vasim.mrcp.batch_ik import FirstAttempt
 from vasim.mrcp.dh import RobotModel
@@ -134,9 +134,7 @@ class PybulletArm:
     def __init__(self, robot: RobotModel, base: FloatArray | None = None,
                  name: str | None = None, kinematics: Literal["dh", "pybullet"] = "dh",
                  closed_form: bool = True) -> None:
-        if kinematics not in ("dh", "pybullet"):
-            raise ConfigError(f"kinematics must be 'dh' or 'pybullet', got {kinematics!r}",
-                              field="kinematics")
+        check_choice(kinematics, "kinematics", ("dh", "pybullet"))
         self.kinematics = kinematics
         self.robot = robot
         self.name = name or robot.name

@@ -35,13 +35,12 @@ Example:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_array, check_number, expect
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 #: the seed's controller cycle [s] (minimum communication cycle of the Stäubli controllers)
@@ -63,18 +62,15 @@ class JointLimits:
         n = arrays[0].shape
         for name, arr in zip(("lower", "upper", "max_velocity", "max_acceleration"), arrays,
                              strict=True):
-            if arr.ndim != 1 or arr.shape != n or not np.all(np.isfinite(arr)):
-                raise ConfigError(f"{name} must be {n[0] if n else 'n'} finite values, got "
-                                  f"{getattr(self, name)!r}", field=name)
+            check_array(arr, name, shape=n if len(n) == 1 else (None,),
+                        what=f"{n[0] if n else 'n'} finite values")
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
-        if not np.all(self.lower < self.upper):
-            raise ConfigError(f"lower must be below upper, got {self.lower!r} / {self.upper!r}",
-                              field="lower")
+        expect(np.all(self.lower < self.upper), self.lower,
+               f"limits below upper ({self.upper!r})", field="lower")
         for name in ("max_velocity", "max_acceleration"):
-            if not np.all(getattr(self, name) > 0):
-                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)!r}",
-                                  field=name)
+            expect(np.all(getattr(self, name) > 0), getattr(self, name), "values > 0",
+                   field=name)
 
     @classmethod
     def of(cls, arm: ArmKinematics) -> JointLimits:
@@ -172,8 +168,7 @@ class EmulatedController:
 
     def __init__(self, arm: ArmKinematics, q0: FloatArray | None = None,
                  cycle: float = DEFAULT_CYCLE, name: str | None = None) -> None:
-        if not (math.isfinite(cycle) and cycle > 0):
-            raise ConfigError(f"cycle must be > 0 s, got {cycle!r}", field="cycle")
+        check_number(cycle, "cycle", gt=0)
         self.name = name or arm.name
         self.limits = JointLimits.of(arm)
         self._dt = float(cycle)
@@ -181,10 +176,9 @@ class EmulatedController:
             home = getattr(arm, "home", None)
             q0 = home if home is not None else (self.limits.lower + self.limits.upper) / 2
         q = np.array(q0, dtype=float)
-        if q.shape != self.limits.lower.shape or not np.all(
-                (q >= self.limits.lower) & (q <= self.limits.upper)):
-            raise ConfigError(f"q0 must be {self.limits.lower.size} joint values within the "
-                              f"limits, got {q0!r}", field="q0")
+        expect(q.shape == self.limits.lower.shape and bool(np.all(
+            (q >= self.limits.lower) & (q <= self.limits.upper))), q0,
+            f"{self.limits.lower.size} joint values within the limits", field="q0")
         self._t = 0.0
         self._q = q
         self._qd = np.zeros_like(q)

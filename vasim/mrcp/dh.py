@@ -77,7 +77,19 @@ from vasim.core.bounds import (
     LINK_RADIUS_M,
     Bound,
 )
-from vasim.core.config import check_keys, check_number, fail, parse_toml, show
+from vasim.core.config import (
+    check_array,
+    check_bool,
+    check_keys,
+    check_number,
+    check_required,
+    check_str,
+    check_type,
+    expect,
+    fail,
+    parse_toml,
+    rewrap,
+)
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import rot_x, rot_z
 from vasim.core.resources import data_file, protocols_dir, read_data_file
@@ -123,20 +135,12 @@ class DHJoint:
     max_acceleration: float   # [rad/s^2]
 
     def __post_init__(self) -> None:
-        for name in ("alpha", "a", "d", "theta_offset", "lower", "upper", "max_velocity",
-                     "max_acceleration"):
-            if not math.isfinite(getattr(self, name)):
-                raise ConfigError(f"{name} must be finite, got {getattr(self, name)!r}",
-                                  field=name)
-        if not self.lower < self.upper:
-            raise ConfigError(f"lower ({self.lower!r}) must be below upper ({self.upper!r})",
-                              field="lower")
-        if self.max_velocity <= 0:
-            raise ConfigError(f"max_velocity must be > 0, got {self.max_velocity!r}",
-                              field="max_velocity")
-        if self.max_acceleration <= 0:
-            raise ConfigError(f"max_acceleration must be > 0, got {self.max_acceleration!r}",
-                              field="max_acceleration")
+        for name in ("alpha", "a", "d", "theta_offset", "lower", "upper"):
+            check_number(getattr(self, name), name)
+        expect(self.lower < self.upper, self.lower, f"a limit below upper ({self.upper!r})",
+                field="lower")
+        check_number(self.max_velocity, "max_velocity", gt=0)
+        check_number(self.max_acceleration, "max_acceleration", gt=0)
 
 
 @dataclass(frozen=True)
@@ -148,8 +152,7 @@ class LinkGeometry:
     chain: bool = True                            # include the DH key points
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.radius) and self.radius > 0):
-            raise ConfigError(f"radius must be > 0, got {self.radius!r}", field="radius")
+        check_number(self.radius, "radius", gt=0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,32 +168,25 @@ class RobotModel:
 
     def __post_init__(self) -> None:
         # the name becomes a cache folder, a file name and URDF (XML) text
-        if not isinstance(self.name, str) or not _NAME.fullmatch(self.name):
-            raise ConfigError(f"name must match {_NAME.pattern} (letters, digits, _ . -; "
-                              f"no leading dot), got {self.name!r}", field="name")
+        expect(isinstance(self.name, str) and _NAME.fullmatch(self.name), self.name,
+                f"a name matching {_NAME.pattern} (letters, digits, _ . -; no leading dot)",
+                field="name")
         n = len(self.joints)
-        if n == 0:
-            raise ConfigError("a robot needs at least one joint", field="joints")
-        tcp = np.asarray(self.tcp, dtype=float)
-        if tcp.shape != (3,) or not np.all(np.isfinite(tcp)):
-            raise ConfigError(f"tcp must be 3 finite numbers, got {self.tcp!r}", field="tcp")
-        home = np.asarray(self.home, dtype=float)
-        if home.shape != (n,) or not np.all(np.isfinite(home)):
-            raise ConfigError(f"home must be {n} finite angles, got {self.home!r}", field="home")
+        expect(n > 0, self.joints, "at least one joint", field="joints")
+        tcp = check_array(self.tcp, "tcp", shape=(3,))
+        home = check_array(self.home, "home", shape=(n,), what=f"{n} finite angles")
         outside = np.flatnonzero((home < self.lower) | (home > self.upper))
         if outside.size:
             i = int(outside[0])
-            raise ConfigError(f"home[{i}] = {home[i]!r} is outside the joint limits "
-                              f"[{self.lower[i]!r}, {self.upper[i]!r}]", field=f"home[{i}]")
-        if self.links and len(self.links) != n + 1:
-            raise ConfigError(f"links must list {n + 1} tables (base + one per joint), got "
-                              f"{len(self.links)}", field="links")
+            raise fail(float(home[i]), f"an angle within the joint limits "
+                       f"[{self.lower[i]!r}, {self.upper[i]!r}]", field=f"home[{i}]")
+        expect(not self.links or len(self.links) == n + 1, len(self.links),
+                f"{n + 1} [[links]] tables (base + one per joint)", field="links")
         for k in range(len(self.links)):    # else the compiled distance model fails later
             distinct = _distinct_points(self.link_key_points(k))
-            if distinct > MAX_KEY_POINTS:
-                raise ConfigError(f"link {k} has {distinct} distinct key points (the DH chain's "
-                                  f"and its points); at most {MAX_KEY_POINTS} are supported",
-                                  field=f"links[{k}].points")
+            expect(distinct <= MAX_KEY_POINTS, distinct,
+                    f"at most {MAX_KEY_POINTS} distinct key points in link {k} (the DH "
+                    "chain's and its points)", field=f"links[{k}].points")
         tcp.setflags(write=False)
         home.setflags(write=False)
         object.__setattr__(self, "tcp", tcp)
@@ -592,22 +588,16 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
     """
     data = parse_toml(text, file=file, kind="robot")
     _check_keys(data, {"name", "tcp", "home", "joints", "links"}, "", file)
-    name = data.get("name")
-    if not isinstance(name, str) or not name:
-        raise ConfigError(f"name must be a non-empty string, got {name!r}", file=file,
-                          field="name")
-    if not _NAME.fullmatch(name):       # becomes a path and XML text (see RobotModel)
-        raise ConfigError(f"name must match {_NAME.pattern}, got {name!r}", file=file,
-                          field="name")
+    name = check_str(data.get("name"), "name", file=file)
+    # the name becomes a path and XML text (see RobotModel)
+    expect(_NAME.fullmatch(name), name, f"a name matching {_NAME.pattern}", file=file,
+            field="name")
     raw_joints = data.get("joints")
     if not isinstance(raw_joints, list) or not raw_joints:
-        raise ConfigError("at least one [[joints]] table is required", file=file,
-                          field="joints")
+        raise fail(raw_joints, "at least one [[joints]] table", file=file, field="joints")
     joints = []
     for i, jt in enumerate(raw_joints):
         path = f"joints[{i}]"
-        if not isinstance(jt, dict):
-            raise ConfigError(f"got {show(jt)}, expected a table", file=file, field=path)
         _check_keys(jt, _JOINT_KEYS, path, file)
         check_keys(jt, sorted(_JOINT_KEYS), path, file=file,
                    required=sorted(_REQUIRED_JOINT_KEYS))
@@ -619,9 +609,8 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
         for key, bound, unit in (("a", MAX_LENGTH, "m"), ("d", MAX_LENGTH, "m"),
                                  ("lower", MAX_JOINT_ANGLE, "rad"),
                                  ("upper", MAX_JOINT_ANGLE, "rad")):
-            if abs(vals[key]) > bound:
-                raise ConfigError(f"|{key}| must be <= {bound:g} {unit} (units?), got "
-                                  f"{vals[key]!r}", file=file, field=f"{path}.{key}")
+            expect(abs(vals[key]) <= bound, vals[key], f"|{key}| <= {bound:g} {unit} (units?)",
+                    file=file, field=f"{path}.{key}")
         try:
             joints.append(DHJoint(
                 alpha=math.radians(vals["alpha_deg"]), a=vals["a"], d=vals["d"],
@@ -629,12 +618,10 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
                 lower=vals["lower"], upper=vals["upper"], max_velocity=vals["max_velocity"],
                 max_acceleration=vals["max_acceleration"]))
         except ConfigError as exc:
-            raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
+            raise rewrap(exc, path, file) from None
     n = len(joints)
     tcp = _vec(data.get("tcp", [0.0, 0.0, 0.0]), 3, "tcp", file, LINK_LENGTH_M)
-    if "home" not in data:
-        raise ConfigError("got nothing (missing required field), expected a value", file=file,
-                          field="home")
+    check_required(data, ["home"], file=file)
     home = _vec(data["home"], n, "home", file, JOINT_LIMIT_RAD)
     for i, (h, jt) in enumerate(zip(home, joints, strict=True)):
         if not jt.lower <= h <= jt.upper:
@@ -642,43 +629,30 @@ def parse_robot(text: str, file: str | Path | None = None) -> RobotModel:
                        f"{jt.upper!r}] rad", field=f"home[{i}]", file=file)
     links = []
     raw_links = data.get("links", [])
-    if not isinstance(raw_links, list):     # e.g. links = 5: was a TypeError
-        raise ConfigError(f"got {show(raw_links)}, expected [[links]] tables", file=file,
-                          field="links")
-    for k, lt in enumerate(raw_links):
+    check_type(raw_links, "links", list, "[[links]] tables", file=file)  # links = 5: was a
+    for k, lt in enumerate(raw_links):                                    # TypeError
         path = f"links[{k}]"
-        if not isinstance(lt, dict):
-            raise ConfigError(f"got {show(lt)}, expected a table", file=file, field=path)
-        _check_keys(lt, {"radius", "points", "chain"}, path, file)
-        if "radius" not in lt:
-            raise ConfigError("got nothing (missing required field), expected a value",
-                              file=file, field=f"{path}.radius")
-        pts_raw = lt.get("points", [])
-        if not isinstance(pts_raw, list):
-            raise ConfigError(f"got {show(pts_raw)}, expected a list of points", file=file,
-                              field=f"{path}.points")
+        check_keys(lt, ["chain", "points", "radius"], path, file=file, required=["radius"])
+        pts_raw = check_type(lt.get("points", []), f"{path}.points", list, "a list of points",
+                             file=file)
         pts = tuple(tuple(float(x) for x in _vec(p, 3, f"{path}.points[{j}]", file,
                                                    LINK_LENGTH_M))
                     for j, p in enumerate(pts_raw))
-        chain = lt.get("chain", True)
-        if not isinstance(chain, bool):
-            raise ConfigError(f"got {show(chain)}, expected true or false", file=file,
-                              field=f"{path}.chain")
-        if not chain and not pts:
-            raise ConfigError("a link with chain = false needs points", file=file,
-                              field=f"{path}.points")
+        chain = check_bool(lt.get("chain", True), f"{path}.chain", file=file)
+        expect(chain or pts, pts_raw, "points (a link with chain = false needs them)",
+                file=file, field=f"{path}.points")
         try:
             links.append(LinkGeometry(radius=_num(lt["radius"], f"{path}.radius", file,
                                                    LINK_RADIUS_M),
                                       points=pts,  # type: ignore[arg-type]  # checked (k, 3) floats
                                       chain=chain))
         except ConfigError as exc:
-            raise ConfigError(exc.reason, file=file, field=f"{path}.{exc.field}") from None
+            raise rewrap(exc, path, file) from None
     try:
         return RobotModel(name=name, joints=tuple(joints), tcp=tcp, home=home,
                           links=tuple(links))
     except ConfigError as exc:
-        raise ConfigError(exc.reason, file=file, field=exc.field) from None
+        raise rewrap(exc, None, file) from None
 
 
 def load_robot(ref: str | Path) -> RobotModel:

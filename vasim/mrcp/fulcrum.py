@@ -32,15 +32,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_array, check_number, expect
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 
 def _unit(v: FloatArray, what: str) -> FloatArray:
     v = np.asarray(v, dtype=float)
     n = float(np.linalg.norm(v))
-    if v.shape != (3,) or not math.isfinite(n) or n < 1e-12:
-        raise ConfigError(f"{what} must be a non-zero 3-vector, got {v!r}", field=what)
+    expect(v.shape == (3,) and math.isfinite(n) and n >= 1e-12, v, "a non-zero 3-vector",
+           field=what)
     return v / n
 
 
@@ -52,10 +52,7 @@ class Fulcrum:
     normal: FloatArray
 
     def __post_init__(self) -> None:
-        p = np.asarray(self.point, dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ConfigError(f"point must be 3 finite numbers, got {self.point!r}",
-                              field="point")
+        p = check_array(self.point, "point", shape=(3,), what="3 finite numbers")
         object.__setattr__(self, "point", p)
         object.__setattr__(self, "normal", _unit(self.normal, "normal"))
 
@@ -69,11 +66,8 @@ class LaparoscopicTool:
     min_outside: float = 0.05
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.length) and self.length > 0):
-            raise ConfigError(f"length must be > 0 m, got {self.length!r}", field="length")
-        if not (0 <= self.min_outside < self.length):
-            raise ConfigError(f"min_outside must be in [0, length), got {self.min_outside!r}",
-                              field="min_outside")
+        check_number(self.length, "length", gt=0)
+        check_number(self.min_outside, "min_outside", ge=0, lt=self.length)
 
     @property
     def max_insertion(self) -> float:

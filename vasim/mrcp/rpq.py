@@ -57,6 +57,7 @@ import trimesh
 from numba import njit
 from numpy.typing import NDArray
 
+from vasim.core.config import check_number
 from vasim.core.errors import ConfigError
 from vasim.mrcp import dh
 from vasim.mrcp.backend import HULL_MARGIN, PybulletWorld
@@ -250,8 +251,7 @@ class RPQ:
     def __init__(self, world: PybulletWorld, *, rate: float = 0.05, use_box: bool = True,
                  use_obb: bool = True, use_weights: bool = True, use_matrix: bool = True
                  ) -> None:
-        if not 0.0 <= rate <= 1.0:
-            raise ConfigError(f"rate must be in [0, 1], got {rate!r}", field="rate")
+        check_number(rate, "rate", ge=0.0, le=1.0)
         self.world = world
         self.rate = rate
         self.use_box, self.use_obb = use_box, use_obb

@@ -7,7 +7,6 @@ Subjects are pseudonymous codes, never names.
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import socket
@@ -15,9 +14,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-import numpy as np
-
-from vasim.core.config import show
+from vasim.core.config import check_int, check_number, check_str, check_type, expect
 from vasim.core.errors import ConfigError
 
 SUBJECT_CODE_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
@@ -33,13 +30,10 @@ def validate_subject_code(code: object) -> str:
         >>> validate_subject_code("S01")
         'S01'
     """
-    if not isinstance(code, str) or not _SUBJECT_RE.fullmatch(code):
-        raise ConfigError(
-            f"invalid subject code {show(code)}: use 1-32 letters, digits, '_' or '-' "
-            "(a pseudonymous code, never a name)",
-            field="subject",
-        )
-    return code
+    expect(isinstance(code, str) and _SUBJECT_RE.fullmatch(code), code,
+           "a subject code of 1-32 letters, digits, '_' or '-' (a pseudonymous code, never "
+           "a name)", field="subject")
+    return str(code)
 
 
 @dataclass(frozen=True)
@@ -85,26 +79,21 @@ class TrialMeta:
     def __post_init__(self) -> None:
         if self.subject is not None:
             validate_subject_code(self.subject)
-        if self.label is not None and (
-                not isinstance(self.label, str) or not 1 <= len(self.label) <= 64
-                or _SUBJECT_RE.fullmatch(self.label)):
-            raise ConfigError(
-                f"trial label {self.label!r} must be 1-64 characters that cannot be mistaken "
-                "for a subject code (give one with a space or ':' in it, e.g. "
-                "'free: warm-up')", field="label")
-        if not isinstance(self.task, str) or not self.task:
-            raise ConfigError(f"task must be a non-empty string, got {self.task!r}", field="task")
+        if self.label is not None:
+            expect(isinstance(self.label, str) and 1 <= len(self.label) <= 64
+                   and not _SUBJECT_RE.fullmatch(self.label), self.label,
+                   "a label of 1-64 characters that cannot be mistaken for a subject code "
+                   "(give one with a space or ':' in it, e.g. 'free: warm-up')", field="label")
+        check_str(self.task, "task", one_line=False)
         for name in ("variant", "seed", "session_id", "pid", "schedule_index"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
-                raise ConfigError(f"{name} must be an integer or None, got {v!r}", field=name)
-        if self.dt is not None and not (math.isfinite(self.dt) and self.dt > 0):
-            raise ConfigError(f"dt must be > 0 s, got {self.dt!r}", field="dt")
-        if not isinstance(self.active_fixtures, str):
-            raise ConfigError(f"active_fixtures must be a string, got {self.active_fixtures!r}",
-                              field="active_fixtures")
-        if self.schedule_index is not None and self.session_id is None:
-            raise ConfigError("a schedule_index needs its session_id", field="schedule_index")
+            if getattr(self, name) is not None:
+                check_int(getattr(self, name), name)
+        if self.dt is not None:
+            check_number(self.dt, "dt", gt=0)
+        check_type(self.active_fixtures, "active_fixtures", str, "a string")
+        expect(self.schedule_index is None or self.session_id is not None,
+               self.schedule_index, "no schedule_index without its session_id",
+               field="schedule_index")
 
     @classmethod
     def from_mapping(cls, meta: Mapping[str, Any]) -> TrialMeta:

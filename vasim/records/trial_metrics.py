@@ -63,7 +63,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import signal
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, check_int, check_number
 from vasim.records.path_deviation import PATH_TRIAL_KEYS
 from vasim.records.samples import IN_VIEW_UNKNOWN
 
@@ -101,30 +101,14 @@ class MetricParams:
     path_tolerance_m: float = 0.002
 
     def __post_init__(self) -> None:
-        fc = self.filter_cutoff_hz
-        if fc is not None and not (_is_number(fc) and fc > 0 and math.isfinite(fc)):
-            raise ConfigError(f"must be a number > 0 Hz or None, got {fc!r}",
-                              field="filter_cutoff_hz")
-        if isinstance(self.filter_order, bool) or not isinstance(self.filter_order, int) \
-                or not 1 <= self.filter_order <= 8:
-            raise ConfigError(f"must be an integer in [1, 8], got {self.filter_order!r}",
-                              field="filter_order")
+        if self.filter_cutoff_hz is not None:
+            check_number(self.filter_cutoff_hz, "filter_cutoff_hz", gt=0)
+        check_int(self.filter_order, "filter_order", lo=1, hi=8)
         for name in ("movement_on_speed", "movement_off_speed", "excessive_force_n",
                      "path_tolerance_m"):
-            v = getattr(self, name)
-            if not (_is_number(v) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"must be a finite number > 0, got {v!r}", field=name)
-        if self.movement_off_speed > self.movement_on_speed:
-            raise ConfigError(
-                f"must not exceed movement_on_speed ({self.movement_on_speed!r}), got "
-                f"{self.movement_off_speed!r}", field="movement_off_speed")
-        if self.force_source not in ("contact", "rendered"):
-            raise ConfigError(f"must be 'contact' or 'rendered', got {self.force_source!r}",
-                              field="force_source")
-
-
-def _is_number(v: object) -> bool:
-    return isinstance(v, int | float | np.floating | np.integer) and not isinstance(v, bool)
+            check_number(getattr(self, name), name, gt=0)
+        check_number(self.movement_off_speed, "movement_off_speed", le=self.movement_on_speed)
+        check_choice(self.force_source, "force_source", ("contact", "rendered"))
 
 
 TRIAL_METRICS: dict[str, tuple[str, str]] = {

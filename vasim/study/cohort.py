@@ -74,6 +74,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from vasim.core.bounds import SEED
+from vasim.core.config import check_choice, check_int, check_number
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
@@ -195,9 +197,7 @@ def draw_demographics(rng: np.random.Generator, group: str,
     Raises:
         ConfigError: unknown group.
     """
-    if group not in DEMOGRAPHIC_MODEL:
-        raise ConfigError(f"group must be one of {', '.join(DEMOGRAPHIC_MODEL)}, got "
-                          f"{group!r}", field="group")
+    check_choice(group, "group", tuple(DEMOGRAPHIC_MODEL))
     if laparoscopy_experience is None:
         laparoscopy_experience = default_scenario().sample_subject(rng, group)[1]
     values = {"group": group, "laparoscopy_experience": laparoscopy_experience}
@@ -252,15 +252,9 @@ def _cohort_subjects(n_subjects: int, n_surgeons: int, seed: int, prefix: str,
         >>> [x.code for x in s], sorted(x.group for x in s).count("surgeon")
         (['SIM001', 'SIM002', 'SIM003', 'SIM004'], 3)
     """
-    if isinstance(n_subjects, bool) or not isinstance(n_subjects, int) or n_subjects < 1:
-        raise ConfigError(f"subjects must be an integer >= 1, got {n_subjects!r}",
-                          field="subjects")
-    if isinstance(n_surgeons, bool) or not isinstance(n_surgeons, int) \
-            or not 0 <= n_surgeons <= n_subjects:
-        raise ConfigError(f"surgeons must be an integer in [0, {n_subjects}], got "
-                          f"{n_surgeons!r}", field="surgeons")
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        raise ConfigError(f"seed must be an integer in [0, 2**63), got {seed!r}", field="seed")
+    check_int(n_subjects, "subjects", lo=1)
+    check_int(n_surgeons, "surgeons", lo=0, hi=n_subjects)
+    check_int(seed, "seed", bound=SEED)
     groups = ["surgeon"] * n_surgeons + ["resident"] * (n_subjects - n_surgeons)
     order = _stream(seed, 4).permutation(n_subjects).tolist()
     width = max(3, len(str(n_subjects)))
@@ -648,15 +642,12 @@ def simulate_cohort(
     sc = plan.scenario or default_scenario_for(protocol)
     check_scenario_kind(protocol, sc)
     effect_scale, workers = plan.effect_scale, run.workers
-    if not math.isfinite(effect_scale) or effect_scale < 0:
-        raise ConfigError(f"got {effect_scale!r}, expected a number >= 0",
-                          field="effect_scale")
+    check_number(effect_scale, "effect_scale", ge=0)
     subjects = cohort_subjects(plan.n_subjects, plan.n_surgeons, plan.seed,
                                latin_square=protocol.block_order == "latin_square",
                                scenario=sc)
     n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if n_workers < 0:
-        raise ConfigError(f"workers must be >= 0, got {workers!r}", field="workers")
+    check_int(n_workers, "workers", lo=0)
     t0 = time.perf_counter()
     with TrialStore(db) as store:
         sessions = prepare_sessions(store, protocol, subjects, cohort_seed=plan.seed,

@@ -88,6 +88,7 @@ import pandas as pd
 
 from vasim import __version__
 from vasim.core.atomic import atomic_folder
+from vasim.core.config import check_choice, check_dir_path, check_file, expect
 from vasim.core.errors import ConfigError
 from vasim.core.extras import require
 from vasim.core.progress import progress_bar
@@ -169,9 +170,7 @@ def table_columns(table: str) -> dict[str, str]:
     Raises:
         ConfigError: unknown table.
     """
-    if table not in _SPECS:
-        raise ConfigError(f"unknown table {table!r} (tables: {', '.join(EXPORT_TABLES)})",
-                          field="tables")
+    check_choice(table, "tables", EXPORT_TABLES)
     return dict(_SPECS[table])
 
 
@@ -358,9 +357,8 @@ def export_study(
     """
     fmts = list(dict.fromkeys(formats))
     bad = [f for f in fmts if f not in FORMATS]
-    if bad or not fmts:
-        raise ConfigError(f"unknown export format(s) {bad or fmts} (formats: "
-                          f"{', '.join(FORMATS)})", field="format")
+    expect(fmts and not bad, bad or fmts, f"export formats of {', '.join(FORMATS)} "
+            "(unknown export format)", field="format")
     if "parquet" in fmts:  # before any work: one line naming the extra (issue #27 item 1)
         require("pyarrow.parquet", "Parquet export")
     names = list(dict.fromkeys(tables))
@@ -369,9 +367,7 @@ def export_study(
                           field="--tables")
     for t in names:
         table_columns(t)
-    out_dir = Path(out)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError(f"--out {out_dir} exists and is not a folder", field="out")
+    out_dir = check_dir_path(Path(out), "out", what="an export folder", error=ConfigError)
     with atomic_folder(out_dir, owned=_export_file, what="export") as tmp:
         _export_into(db, tmp, fmts, names, progress)
     return out_dir
@@ -448,11 +444,9 @@ def read_export(out: str | os.PathLike[str], table: str, fmt: str = "csv") -> pd
         ConfigError: unknown table or format, or the file is missing.
     """
     spec = table_columns(table)
-    if fmt not in FORMATS:
-        raise ConfigError(f"unknown format {fmt!r} ({', '.join(FORMATS)})", field="format")
-    path = Path(out) / f"{table}.{fmt}"
-    if not path.is_file():
-        raise ConfigError(f"no exported table {table!r} in {fmt} format", file=path)
+    check_choice(fmt, "format", FORMATS)
+    path = check_file(Path(out) / f"{table}.{fmt}", "table",
+                      what=f"an exported table {table!r} in {fmt} format")
     if fmt == "parquet":
         require("pyarrow.parquet", "reading a Parquet export")
         df = pd.read_parquet(path)

@@ -52,6 +52,7 @@ import pandas as pd
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import Block, Protocol, gated_blocks, gated_trials
 from vasim.study.protocol.schedule import extend_gated_block
+from vasim.study.stored_session import read_session
 
 GATE_EVENT = "gate"
 """``events.kind`` of a stored gate decision."""
@@ -278,9 +279,7 @@ def apply_gates(store: Any, session_id: int) -> int:
         ConfigError: a trainee's gate without a benchmark (fewer than 2 expert trials of
             the block in the store).
     """
-    from vasim.study.session import load_session  # session runs the gates: no cycle
-
-    session = load_session(store, session_id)
+    session = read_session(store, session_id)
     protocol = session.protocol
     if session.status != "running" or not gated_blocks(protocol):
         return 0
@@ -292,7 +291,7 @@ def apply_gates(store: Any, session_id: int) -> int:
         assert block.gate is not None
         gate = block.gate
         while True:
-            session = load_session(store, session.id)
+            session = read_session(store, session.id)
             own = gated_trials(session.schedule, block)
             ids = [session.completed[t.index] for t in own]
             todo = next((i for i, tid in enumerate(ids) if tid is not None

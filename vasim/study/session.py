@@ -71,7 +71,15 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.config import (
+    check_choice,
+    check_file,
+    check_table,
+    check_type,
+    expect,
+    parse_toml,
+)
+from vasim.core.errors import ConfigError, InputError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.operator.learning import OPERATOR_LABEL, VF_FREE, trial_adjustment
 from vasim.operator.retention import practice_weights, weighted_adjustment
@@ -86,18 +94,19 @@ from vasim.study.gain_plan import (
     schedule_gains,
     trial_gain,
 )
+from vasim.study.gates import apply_gates
 from vasim.study.protocol import (
     Protocol,
     ScheduledTrial,
     block_of,
     day_offsets,
     generate_schedule,
-    parse_protocol,
     sitting_numbers,
     validate_answers,
 )
 from vasim.study.sitting_rule import early_sitting
 from vasim.study.store import SessionMeta, TrialStore
+from vasim.study.stored_session import read_session
 from vasim.trials.configs import AnyTrialConfig, TeleopTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES, check_trial_time
 from vasim.trials.registry import run_trial
@@ -162,25 +171,15 @@ class SessionSettings:
     def __post_init__(self) -> None:
         if self.operator == "browser":
             raise ConfigError(BROWSER_HINT, field="operator")
-        if self.operator not in OPERATORS:
-            raise ConfigError(f"unknown operator {self.operator!r} (available: "
-                              f"{', '.join(OPERATORS)}, and browser sessions from `vasim "
-                              "serve`)", field="operator")
-        if self.skill not in ("novice", "intermediate", "expert"):
-            raise ConfigError(f"unknown skill {self.skill!r} (novice, intermediate, expert)",
-                              field="skill")
-        if self.profile is not None and not isinstance(self.profile, OperatorProfile):
-            raise ConfigError(f"profile must be an OperatorProfile, got {self.profile!r}",
-                              field="profile")
-        m = self.max_trial_time
-        if m is not None:
-            try:
-                check_trial_time(m, "max_trial_time")
-            except ConfigError as exc:
-                raise ConfigError(f"max_trial_time {exc.reason}",
-                                  field="max_trial_time") from None
-        if not isinstance(self.extra, Mapping):
-            raise ConfigError(f"extra must be a mapping, got {self.extra!r}", field="extra")
+        expect(self.operator in OPERATORS, self.operator, f"a known operator: "
+                f"{', '.join(OPERATORS)} (browser sessions run from `vasim serve`)",
+                field="operator")
+        check_choice(self.skill, "skill", ("novice", "intermediate", "expert"))
+        if self.profile is not None:
+            check_type(self.profile, "profile", OperatorProfile, "an OperatorProfile")
+        if self.max_trial_time is not None:
+            check_trial_time(self.max_trial_time, "max_trial_time")
+        check_type(self.extra, "extra", Mapping, "a mapping")
 
     def resolved_profile(self) -> OperatorProfile:
         """The operator profile: ``profile``, or the ``skill`` preset."""
@@ -414,21 +413,16 @@ def start_session(store: TrialStore, protocol: Protocol, subject: str, *,
 
 
 def load_session(store: TrialStore, session_id: int) -> Session:
-    """Reads a session back from the store (protocol from its stored text).
+    """Reads a session back from the store (protocol from its stored text,
+    :func:`vasim.study.stored_session.read_session`).
 
     Raises:
         StoreError: unknown session.
     """
-    row = store.session(session_id)
-    protocol = parse_protocol(row["protocol_toml"],
-                              source=f"{store.path} session {row['id']} (stored protocol)")
-    sched = store.schedule(session_id)
-    schedule = tuple(ScheduledTrial.from_row(r) for r in sched.to_dict("records"))
-    completed = tuple(None if pd.isna(v) else int(v) for v in sched["trial_id"])
-    return Session(id=int(row["id"]), subject=row["subject"], protocol=protocol,
-                   seed=int(row["seed"]), status=row["status"],
-                   settings=SessionSettings.from_record(row["config"] or {}),
-                   schedule=schedule, completed=completed)
+    rec = read_session(store, session_id)
+    return Session(id=rec.id, subject=rec.subject, protocol=rec.protocol, seed=rec.seed,
+                   status=rec.status, settings=SessionSettings.from_record(rec.config),
+                   schedule=rec.schedule, completed=rec.completed)
 
 
 def find_session(store: TrialStore, *, subject: str | None = None,
@@ -501,7 +495,6 @@ def run_session(store: TrialStore, session_id: int, *, progress: bool = True,
         raise StoreError(f"session {session.id} is being run: trial {int(busy['id'].iloc[0])} "
                          f"is 'running' (process {busy['pid'].iloc[0]} on "
                          f"{busy['host'].iloc[0]})")
-    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
 
     if _release_timed_out(store, session):
         session = load_session(store, session.id)
@@ -652,7 +645,6 @@ def after_simulated_trial(store: TrialStore, session: Session, st: ScheduledTria
     """What follows a simulated trial (``vasim study simulate``): the record of a later
     sitting it began (a simulated delay: no real waiting) and the gates' decisions
     (``vasim.study.gates.apply_gates``); returns the trials the gates added."""
-    from vasim.study.gates import apply_gates  # the gates read sessions: no cycle
 
     delay = sitting_begins(session, st)
     if delay is not None:
@@ -698,8 +690,8 @@ def abort_session(store: TrialStore, session_id: int, reason: str) -> None:
     Raises:
         StoreError: unknown session or not running. ConfigError: empty reason.
     """
-    if not isinstance(reason, str) or not reason.strip():
-        raise ConfigError("give the reason for aborting the session", field="reason")
+    expect(isinstance(reason, str) and reason.strip(), reason,
+            "the reason for aborting the session", field="reason")
     store.set_session_status(session_id, "aborted", notes=reason)
 
 
@@ -746,20 +738,15 @@ def load_answers_file(path: str | Path) -> dict[str, dict[str, Any]]:
     Raises:
         ConfigError: unreadable file, invalid TOML, or other top-level tables.
     """
-    from vasim.core.config import parse_toml  # the one TOML reader (nesting checked)
-
-    p = Path(path)
+    p = check_file(path, what="an answers file")
     try:
         text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError("answers file not found", file=p) from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read answers file: {exc}", file=p) from exc
-    data = parse_toml(text, file=p, kind="answers file")
+        raise InputError(f"cannot read answers file: {exc}", file=p) from exc
+    data = parse_toml(text, file=p, kind="answers file")   # the one TOML reader
     for key, value in data.items():
-        if key not in ("pre", "post") or not isinstance(value, dict):
-            raise ConfigError(f"expected [pre] and [post] tables, got {key} = {value!r}",
-                              file=p, field=key)
+        check_choice(key, key, ("pre", "post"), file=p)
+        check_table(value, key, file=p, what="a [pre] or [post] table of item -> answer")
     return data
 
 

@@ -18,7 +18,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_array, check_choice, check_int, check_number, expect
 from vasim.fixtures.types import TaskState, Vec3
 
 FloatArray = NDArray[np.float64]
@@ -99,46 +99,27 @@ class Task:
     start: FloatArray = field(default_factory=lambda: np.zeros(3))
 
     def __post_init__(self) -> None:
-        if self.kind not in ("trajectory", "point"):
-            raise ConfigError(f"task kind must be 'trajectory' or 'point', got {self.kind!r}",
-                              field="kind")
-        pts = np.array(self.points, dtype=np.float64)
-        if pts.ndim != 2 or pts.shape[1] != 3 or pts.shape[0] < 1:
-            raise ConfigError(f"points must have shape (N, 3) with N >= 1, got {pts.shape}",
-                              field="points")
-        if not np.all(np.isfinite(pts)):
-            raise ConfigError("points must be finite", field="points")
-        if self.kind == "point" and pts.shape[0] != 1:
-            raise ConfigError(f"a point task has exactly one POI, got {pts.shape[0]}",
-                              field="points")
+        check_choice(self.kind, "kind", ("trajectory", "point"))
+        # copies (np.array): the task's arrays are made read-only, never the caller's
+        pts = np.array(check_array(self.points, "points", shape=(None, 3)))
+        expect(len(pts) >= 1 and (self.kind != "point" or len(pts) == 1), pts.shape,
+               "at least one POI (exactly one in a point task)", field="points")
         pts.setflags(write=False)
         object.__setattr__(self, "points", pts)
         if self.normals is not None:
-            nrm = np.array(self.normals, dtype=np.float64)
-            if nrm.shape != pts.shape:
-                raise ConfigError(f"normals must have shape {pts.shape}, got {nrm.shape}",
-                                  field="normals")
+            nrm = np.array(check_array(self.normals, "normals", shape=pts.shape))
             lens = np.linalg.norm(nrm, axis=1)
-            if not np.all(np.isfinite(nrm)) or np.any(np.abs(lens - 1.0) > 1e-9):
-                raise ConfigError(f"normals must be unit vectors, got lengths {lens.tolist()!r}",
-                                  field="normals")
+            expect(not np.any(np.abs(lens - 1.0) > 1e-9), lens.tolist(),
+                   "unit vectors (normals' lengths)", field="normals")
             nrm.setflags(write=False)
             object.__setattr__(self, "normals", nrm)
-        start = np.array(self.start, dtype=np.float64).reshape(-1)
-        if start.shape != (3,) or not np.all(np.isfinite(start)):
-            raise ConfigError(f"start must be a finite 3-vector, got {self.start!r}",
-                              field="start")
+        start = check_array(np.array(self.start, dtype=np.float64).reshape(-1), "start",
+                            shape=(3,))
         start.setflags(write=False)
         object.__setattr__(self, "start", start)
         for name in ("reach_radius", "scale"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
-                    or v <= 0:
-                raise ConfigError(f"{name} must be a finite number > 0, got {v!r}", field=name)
-        if isinstance(self.variant, bool) or not isinstance(self.variant, int) \
-                or self.variant < 0:
-            raise ConfigError(f"variant must be an int >= 0, got {self.variant!r}",
-                              field="variant")
+            check_number(getattr(self, name), name, gt=0)
+        check_int(self.variant, "variant", lo=0)
 
     # -- queries --------------------------------------------------------------------------
     @property

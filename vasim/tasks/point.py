@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_array, check_number, expect
 from vasim.tasks.base import DEFAULT_REACH_RADIUS, Task
 
 LIVER_POI = (-0.058, 0.0851, 0.0704)
@@ -49,16 +49,12 @@ def point_task(poi: object = LIVER_POI, normal: object = LIVER_NORMAL, *,
     """
     p = np.array(poi, dtype=np.float64).reshape(-1)
     n = np.array(normal, dtype=np.float64).reshape(-1)
-    if p.shape != (3,) or not np.all(np.isfinite(p)):
-        raise ConfigError(f"poi must be a finite 3-vector, got {poi!r}", field="poi")
+    check_array(p, "poi", shape=(3,), what="a finite 3-vector")
     ln = float(np.linalg.norm(n)) if n.shape == (3,) else float("nan")
-    if not math.isfinite(ln) or ln <= 1e-12:
-        raise ConfigError(f"normal must be a finite non-zero 3-vector, got {normal!r}",
-                          field="normal")
+    expect(math.isfinite(ln) and ln > 1e-12, normal, "a finite non-zero 3-vector",
+           field="normal")
     n = n / ln
-    if not (math.isfinite(start_distance) and start_distance > 0):
-        raise ConfigError(f"start_distance must be > 0 m, got {start_distance!r}",
-                          field="start_distance")
+    check_number(start_distance, "start_distance", gt=0)
     return Task(
         name=name, kind="point", variant=0, points=p[None, :], normals=n[None, :],
         reach_radius=reach_radius, scale=start_distance if scale is None else scale,

@@ -31,13 +31,12 @@ identical (same difficulty). The start position is transformed with the path.
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_int, check_number, expect
 from vasim.tasks.base import DEFAULT_REACH_RADIUS, WORKSPACE_CENTRE, FloatArray, Task
 
 TRAJECTORY_VARIANTS = 7
@@ -104,11 +103,7 @@ def variant_matrix(variant: int) -> FloatArray:
     Raises:
         ConfigError: if ``variant`` is not an int in [0, 6].
     """
-    if isinstance(variant, bool) or not isinstance(variant, int | np.integer) \
-            or not 0 <= int(variant) < TRAJECTORY_VARIANTS:
-        raise ConfigError(
-            f"trajectory variant must be an int in [0, {TRAJECTORY_VARIANTS - 1}], "
-            f"got {variant!r}", field="variant")
+    check_int(variant, "variant", lo=0, hi=TRAJECTORY_VARIANTS - 1)
     m = np.eye(3)
     m[:2, :2] = np.array(_M2[int(variant)])
     return m
@@ -166,13 +161,10 @@ def trajectory_task(variant: int = 0, *, reach_radius: float = DEFAULT_REACH_RAD
     """
     m = variant_matrix(variant)
     lo, hi = POI_SPACING_RANGE
-    if isinstance(poi_spacing, bool) or not isinstance(poi_spacing, int | float) \
-            or not math.isfinite(poi_spacing) or not lo <= poi_spacing <= hi:
-        raise ConfigError(f"POI spacing must be a number in [{lo}, {hi}] m, got "
-                          f"{poi_spacing!r}", field="poi_spacing")
-    if isinstance(reach_radius, int | float) and not poi_spacing > 2.0 * reach_radius:
-        raise ConfigError(f"POI spacing {poi_spacing!r} m must exceed twice the reach radius "
-                          f"({reach_radius!r} m)", field="poi_spacing")
+    check_number(poi_spacing, "poi_spacing", ge=lo, le=hi)
+    expect(not isinstance(reach_radius, int | float) or poi_spacing > 2.0 * reach_radius,
+           poi_spacing, f"a POI spacing [m] more than twice the reach radius "
+           f"({reach_radius!r} m)", field="poi_spacing")
     pts, start, c = _original(float(poi_spacing))
     vpts = (pts - c) @ m.T + c
     vstart = (start - c) @ m.T + c

@@ -51,6 +51,8 @@ import viser
 from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
+from vasim.core.bounds import PORT
+from vasim.core.config import check_choice, check_int, check_number
 from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.laparoscopic import InputMapping
@@ -118,8 +120,7 @@ def check_bind_address(host: str, port: int) -> None:
     """Raises ``ConfigError`` unless ``port`` is a valid TCP port and ``host`` an address of
     this machine (viser would otherwise fail in a background thread and hang the server).
     A busy port is fine: viser moves to the next free one."""
-    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
-        raise ConfigError(f"port must be an integer in 0..65535, got {port!r}", field="port")
+    check_int(port, "port", bound=PORT)
     try:
         infos = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)
         family, _, _, _, addr = infos[0]
@@ -217,11 +218,10 @@ class ViewerApp(ErrorReporter):
         self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
         for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
                         ("view_hz", view_hz), ("audio_hz", audio_hz)):
-            if not (isinstance(v, int | float) and np.isfinite(v) and v >= 0):
-                raise ConfigError(f"{name} must be a finite number >= 0, got {v!r}", field=name)
-        if speed <= 0 or control_hz <= 0 or view_hz <= 0 or audio_hz <= 0:
-            raise ConfigError("speed, control_hz, view_hz and audio_hz must be > 0, got "
-                              f"{(speed, control_hz, view_hz, audio_hz)!r}")
+            check_number(v, name, ge=0)
+        for name, v in (("speed", speed), ("control_hz", control_hz), ("view_hz", view_hz),
+                        ("audio_hz", audio_hz)):
+            check_number(v, name, gt=0)
         if scene.startswith("mrcp:"):
             raise ConfigError(f"scene {scene!r} is an MRCP slave station: it is served by "
                               "vasim.viewer.mrcp_panel.MrcpViewerApp (vasim serve --scene "
@@ -247,10 +247,8 @@ class ViewerApp(ErrorReporter):
         self._init_loop_state()
         self.view_hz = float(view_hz)
         self.speed = float(speed)
-        if scene_hz is not None and not (isinstance(scene_hz, int | float)
-                                         and np.isfinite(scene_hz) and scene_hz > 0):
-            raise ConfigError(f"scene_hz must be a finite number > 0 or None, got {scene_hz!r}",
-                              field="scene_hz")
+        if scene_hz is not None:
+            check_number(scene_hz, "scene_hz", gt=0)
         self._init_pacing(scene_hz)
         self.controller.viewer_timing = self.viewer_timing
 
@@ -760,8 +758,7 @@ class ViewerApp(ErrorReporter):
 
 def default_schema(task: str) -> str:
     """The schema ``vasim serve`` starts with for ``task``."""
-    if task not in DEFAULT_SCHEMA_FOR_TASK:
-        raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
+    check_choice(task, "task", tuple(DEFAULT_SCHEMA_FOR_TASK))
     load_schema(DEFAULT_SCHEMA_FOR_TASK[task])
     return DEFAULT_SCHEMA_FOR_TASK[task]
 

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
+from vasim.core.config import check_choice, check_type, expect
 from vasim.core.errors import ConfigError
 from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import Schema, load_schema
@@ -74,11 +75,8 @@ class ConditionCommands:
         # load_schema accepts file paths, so any client could make the server read (and
         # broadcast errors about) an arbitrary TOML file; only the offered menu is accepted.
         choices = schema_choices(self._base.schema)
-        if not isinstance(name, str) or name not in choices:
-            shown = repr(name)
-            shown = shown if len(shown) <= 80 else shown[:77] + "..."
-            raise ConfigError(f"unknown schema {shown}: choose one from the Schema menu",
-                              field="schema")
+        expect(isinstance(name, str) and name in choices, name,
+               "a schema of the Schema menu (an unknown schema is not read)", field="schema")
         if name == p.schema and self._schema_obj is None:
             return
         schema = load_schema(name)
@@ -98,8 +96,7 @@ class ConditionCommands:
         p = self.panel
         if p.mode == "protocol":
             raise ConfigError("the protocol sets the task", field="task")
-        if task not in DEFAULT_SCHEMA_FOR_TASK:
-            raise ConfigError(f"unknown task {task!r} (trajectory, point)", field="task")
+        check_choice(task, "task", tuple(DEFAULT_SCHEMA_FOR_TASK))
         if task == p.task:
             return
         if self._running_stored():
@@ -122,8 +119,7 @@ class ConditionCommands:
         if p.mode == "protocol":
             raise ConfigError("the protocol's schemas are fixed; edit f5PL parameters in "
                               "free training", field="f5pl")
-        if not isinstance(params, Logistic5):
-            raise ConfigError(f"expected f5PL parameters, got {params!r}", field="f5pl")
+        check_type(params, "f5pl", Logistic5, "f5PL parameters (a Logistic5)")
         shipped = load_schema(p.schema)
         base = self._schema_obj if self._schema_obj is not None else shipped
         edited = named_edit(with_f5pl(base, instance, params), shipped)

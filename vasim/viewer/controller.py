@@ -64,6 +64,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.config import check_choice, check_not_dir, check_type
 from vasim.core.errors import ConfigError, StoreError, VasimError
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.device import Device
@@ -190,9 +191,9 @@ class TrainingController(ConditionCommands):
         self.db = None if db is None else Path(db)
         # a directory was only refused when Free mode first opened the store;
         # refuse it at start-up (vasim serve prints this as one line and exits 2).
-        if self.db is not None and self.db.is_dir():
-            raise ConfigError(f"--db {self.db} is a directory, expected a database file",
-                              field="db")
+        if self.db is not None:
+            check_not_dir(self.db, "db", what="a database file (--db is a directory)",
+                          error=ConfigError)
         self.pause_s = float(pause_s)
         self.speed = float(speed)
         self.max_time = float(max_time)
@@ -583,8 +584,7 @@ class TrainingController(ConditionCommands):
 
     def _on_mode(self, value: Any) -> None:
         p = self.panel
-        if value not in MODES:
-            raise ConfigError(f"unknown mode {value!r} ({', '.join(MODES)})", field="mode")
+        check_choice(value, "mode", MODES)
         if value == p.mode:
             return
         if value != "demo":
@@ -611,9 +611,7 @@ class TrainingController(ConditionCommands):
 
     def _on_input_mapping(self, value: Any) -> None:
         p = self.panel
-        if not isinstance(value, InputMapping):
-            raise ConfigError(f"input_mapping must be an InputMapping, got {value!r}",
-                              field="input_mapping")
+        check_type(value, "input_mapping", InputMapping, "an InputMapping")
         if p.mode == "protocol" and self._running_stored():
             raise ConfigError("the running protocol trial keeps its instrument mapping; "
                               "change it between trials", field="input_mapping")
@@ -623,9 +621,7 @@ class TrainingController(ConditionCommands):
 
     def _on_input(self, value: Any) -> None:
         p = self.panel
-        if value not in INPUTS:
-            raise ConfigError(f"unknown input {value!r} ({', '.join(INPUTS)})",
-                              field="input")
+        check_choice(value, "input", INPUTS)
         if value == p.input:
             return
         if self._running_stored() or self._pending is not None:
@@ -666,9 +662,7 @@ class TrainingController(ConditionCommands):
         p = self.panel
         from vasim.study.protocol import available_protocols
 
-        if value not in available_protocols():
-            raise ConfigError(f"unknown protocol {value!r} (available: "
-                              f"{', '.join(available_protocols())})", field="protocol")
+        check_choice(value, "protocol", available_protocols())
         if self._running_stored():
             raise ConfigError("stop the running trial before changing the protocol",
                               field="protocol")

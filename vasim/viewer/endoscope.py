@@ -32,8 +32,9 @@ import viser
 from numpy.typing import NDArray
 from scipy import optimize
 
+from vasim.core.config import check_choice
 from vasim.fixtures.types import CameraView
-from vasim.viewer.views import CameraPose
+from vasim.viewer.camera_pose import CameraPose
 
 FloatArray = NDArray[np.float64]
 
@@ -64,11 +65,7 @@ class Scope:
     min_clearance_m: float = 0.02
 
     def __post_init__(self) -> None:
-        from vasim.core.errors import ConfigError
-
-        if self.optics_deg not in OPTICS_DEG:
-            raise ConfigError(f"endoscope optics must be one of {OPTICS_DEG} deg, got "
-                              f"{self.optics_deg!r}", field="optics")
+        check_choice(self.optics_deg, "optics", OPTICS_DEG)
 
 
 def _unit(v: FloatArray) -> FloatArray:

@@ -10,6 +10,7 @@ import json
 import math
 from typing import Any
 
+from vasim.core.config import expect
 from vasim.trials.configs import TeleopTrialConfig
 from vasim.viewer.state import TrialInfo
 from vasim.viewer.trainee import GateCard, ScoreCard, gate_card, score_card
@@ -180,15 +181,13 @@ def check_again_reason(text: str) -> str | None:
     Raises:
         ConfigError: a multi-line or over-long reason (``check_again``'s limits).
     """
-    from vasim.core.errors import ConfigError
     from vasim.study.session import MAX_REASON_CHARS
 
     reason = str(text).strip()
     if not reason:
         return None
-    if "\n" in reason or "\r" in reason or len(reason) > MAX_REASON_CHARS:
-        raise ConfigError(f"got {reason!r:.80}, expected a one-line reason of 1-"
-                          f"{MAX_REASON_CHARS} characters", field=AGAIN_OPTION)
+    expect("\n" not in reason and "\r" not in reason and len(reason) <= MAX_REASON_CHARS,
+           reason, f"a one-line reason of 1-{MAX_REASON_CHARS} characters", field=AGAIN_OPTION)
     return reason
 
 

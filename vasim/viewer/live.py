@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import importlib.util
 import logging
-import math
 import threading
 import time
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number, expect
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import BUTTON_2, Device
 from vasim.haptics.observation import OperatorObservation
@@ -145,8 +144,7 @@ class PacedThread:
 
     def __init__(self, device: Device | None, *, dt: float, speed: float, loop_hz: float,
                  max_catch_up_s: float) -> None:
-        if not (isinstance(speed, int | float) and math.isfinite(speed) and speed > 0):
-            raise ConfigError(f"speed must be > 0, got {speed!r}", field="speed")
+        check_number(speed, "speed", gt=0)
         self.device = device
         self.dt = float(dt)
         self.speed = float(speed)
@@ -257,9 +255,8 @@ class SimThreadTrial(PacedThread):
                  schema: Schema | None = None, physics: str = "thread",
                  rate_hz: float = 1000.0, speed: float = 1.0, loop_hz: float = 120.0,
                  max_catch_up_s: float = 0.05):
-        if abs(rate_hz * config.dt - 1.0) > 1e-9:
-            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
-                              f"{config.dt!r}", field="rate_hz")
+        expect(abs(rate_hz * config.dt - 1.0) <= 1e-9, rate_hz,
+               f"1 / the trial's dt ({config.dt!r} s)", field="rate_hz")
         super().__init__(device, dt=config.dt, speed=speed, loop_hz=loop_hz,
                          max_catch_up_s=max_catch_up_s)
         self.config = config

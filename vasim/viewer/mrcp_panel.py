@@ -56,6 +56,7 @@ import numpy as np
 import viser
 from numpy.typing import NDArray
 
+from vasim.core.config import check_array, check_number, expect
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import matrix_from_quat
 from vasim.viewer.access import viewer_url
@@ -108,8 +109,9 @@ def resolve_scenario(scenario: Any) -> Any:
         ConfigError: for an unknown name; the message lists the known MRCP scenes.
     """
     if not isinstance(scenario, str):
-        if not callable(getattr(scenario, "build", None)) or not hasattr(scenario, "name"):
-            raise ConfigError(f"not an MRCP scenario: {scenario!r}", field="scene")
+        expect(callable(getattr(scenario, "build", None)) and hasattr(scenario, "name"),
+               scenario, "an MRCP scenario (a name, or an object with build and name)",
+               field="scene")
         return scenario
     from vasim.mrcp.scenarios import SCENARIOS
 
@@ -556,9 +558,7 @@ class MrcpViewerApp(ErrorReporter):
         self.access = access_policy(host, token)
         for name, v in (("speed", speed), ("view_hz", view_hz), ("plot_hz", plot_hz),
                         ("history_s", history_s)):
-            if isinstance(v, bool) or not isinstance(v, int | float) or not (
-                    math.isfinite(v) and v > 0):
-                raise ConfigError(f"{name} must be a finite number > 0, got {v!r}", field=name)
+            check_number(v, name, gt=0)
         from vasim.mrcp.scenarios import ScenarioOptions
 
         self.scenario = resolve_scenario(scenario)
@@ -702,9 +702,8 @@ class MrcpViewerApp(ErrorReporter):
         """
         from vasim.mrcp.scenarios.runner import OPERATOR_MODES
 
-        if mode not in OPERATOR_MODES:
-            raise ConfigError(f"operator mode must be one of {OPERATOR_MODES}, got {mode!r}",
-                              field="operator")
+        expect(mode in OPERATOR_MODES, mode, f"an operator mode of {OPERATOR_MODES}",
+               field="operator")
         if self.live.operator is None or self.gizmo is None or self.panel is None:
             raise ConfigError("the MRCP viewer is not started", field="operator")
         if mode == self.live.operator.mode:
@@ -731,10 +730,9 @@ class MrcpViewerApp(ErrorReporter):
         Raises:
             ConfigError: for a non-finite pose or a zero quaternion.
         """
-        q = np.asarray(wxyz, float)
-        if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
-            raise ConfigError(f"gizmo orientation must be a non-zero quaternion wxyz, got "
-                              f"{q!r}", field="operator")
+        what = "a non-zero quaternion wxyz (the gizmo's orientation)"
+        q = check_array(wxyz, "operator", shape=(4,), what=what)
+        expect(np.linalg.norm(q) >= 1e-9, q, what, field="operator")
         rot = matrix_from_quat(q)
         self.live.operator.set_pose(np.asarray(position, float), rot)
 

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.config import expect
 from vasim.core.errors import ConfigError
 from vasim.fixtures.gain import AdaptiveRule, GainRule
 from vasim.fixtures.logistic import Logistic5
@@ -162,9 +163,8 @@ def with_f5pl(schema: Schema, instance: str, params: Logistic5) -> Schema:
     found = False
     for fx in schema.fixtures:
         if fx.name == instance:
-            if not isinstance(getattr(fx.params, "f5pl", None), Logistic5):
-                raise ConfigError(f"fixture {instance!r} has no f5PL to edit",
-                                  field=f"fixtures.{instance}.f5pl")
+            expect(isinstance(getattr(fx.params, "f5pl", None), Logistic5), instance,
+                   "a fixture with an f5PL to edit", field=f"fixtures.{instance}.f5pl")
             fx = replace(fx, params=replace(fx.params, f5pl=params))
             found = True
         fixtures.append(fx)

@@ -25,7 +25,6 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -36,6 +35,8 @@ from numpy.typing import NDArray
 from vasim.abdomen.anatomy import Organ
 from vasim.core.geometry import matrix_z_to
 from vasim.fixtures.types import Arrow, CameraView
+from vasim.viewer.camera_pose import CameraPose
+from vasim.viewer.endoscope import tissue_patches
 
 log = logging.getLogger(__name__)
 
@@ -104,8 +105,6 @@ class OrganView:
         self.n_vertices = len(v)
         parts = [(f, rgb255(organ.color))]
         if tones and organ.kind != "wall":  # the endoscope's tissue look (endoscope.py)
-            from vasim.viewer.endoscope import tissue_patches
-
             seed = int.from_bytes(organ.name.encode()[:8].ljust(8, b"_"), "little")
             parts = tissue_patches(organ.mesh.vertices, f, organ.color, seed=seed) or parts
         self.handle = server.scene.add_mesh_simple(
@@ -523,34 +522,6 @@ class GhostView:
 
 # ---------------------------------------------------------------------------------------
 # Camera
-
-
-@dataclass(frozen=True, eq=False)
-class CameraPose:
-    """A camera placement for the browser (world frame).
-
-    Attributes:
-        position: (3,) [m]. look_at: (3,) [m]. up: (3,) direction. fov: vertical [rad].
-    """
-
-    position: FloatArray
-    look_at: FloatArray
-    up: FloatArray
-    fov: float
-
-    @staticmethod
-    def from_view(view: CameraView) -> CameraPose:
-        return CameraPose(np.asarray(view.position, dtype=np.float64),
-                          np.asarray(view.look_at, dtype=np.float64),
-                          np.asarray(view.up, dtype=np.float64), float(view.fov))
-
-    def close_to(self, other: CameraPose, *, tol_m: float = 2e-4, tol_rad: float = 2e-3) -> bool:
-        return (
-            float(np.max(np.abs(self.position - other.position))) < tol_m
-            and float(np.max(np.abs(self.look_at - other.look_at))) < tol_m
-            and float(np.max(np.abs(self.up - other.up))) < tol_rad
-            and abs(self.fov - other.fov) < tol_rad
-        )
 
 
 class CameraController:

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.operator.learning import DEFAULT_EFFECTS, trial_adjustment
 from vasim.study.power.design import (
     COARSE_DT,
@@ -47,7 +47,7 @@ def test_range_spec_is_inclusive_like_the_issue_example() -> None:
     ("1.5:3", "START:STOP:STEP"),
 ])
 def test_bad_subject_specs_are_clear_errors(spec: str, words: str) -> None:
-    with pytest.raises(ConfigError) as info:
+    with pytest.raises(InputError) as info:   # a command-line argument (issue #29)
         parse_subjects(spec)
     assert info.value.field == "--subjects"
     assert words in str(info.value)
@@ -154,6 +154,6 @@ def test_effects_file_sets_single_fixtures_then_the_scale_applies(tmp_path) -> N
         with pytest.raises(ConfigError) as info:
             parse_effects(text, file="e.toml")
         assert info.value.field == field and str(info.value.file) == "e.toml", text
-    with pytest.raises(ConfigError) as info:
+    with pytest.raises(InputError) as info:   # the --effects path (issue #29)
         load_effects(tmp_path / "missing.toml")
     assert info.value.field == "--effects"

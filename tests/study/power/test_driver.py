@@ -105,7 +105,7 @@ def test_bad_subject_spec_fails_before_ray_starts(tiny_protocol_path: Path,
     (["--workers", "1000"], "got 1000, expected an integer in [0, "),
     (["--workers", "0"], "got 0, expected at least 1 Ray worker"),
     (["--subjects", "1:5"], "got 1, expected an integer"),
-    (["--subjects", "10:60:0"], "STEP 0, expected a step >= 1"),
+    (["--subjects", "10:60:0"], "got '10:60:0', expected a STEP >= 1 (STEP 0)"),
     (["--effect-scale", "4"], "fixture 'ff' would get an invalid effect"),
 ])
 def test_bad_power_arguments_are_one_line_errors(tiny_protocol_path: Path, args: list[str],

@@ -57,7 +57,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import check_int, check_number
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray, as_force
 
 BROWSER_WORKSPACE_HALF_M = 1.0
@@ -150,11 +151,8 @@ class BrowserDevice:
                  history: int = 64, clock: Callable[[], float] = time.perf_counter,
                  limits: DeviceLimits = BROWSER_LIMITS, name: str = "browser"):
         for fname, v in (("delay_s", delay_s), ("max_extrapolation_s", max_extrapolation_s)):
-            if not (math.isfinite(v) and v >= 0):
-                raise ConfigError(f"must be a finite number >= 0 s, got {v!r}",
-                                  field=f"browser.{fname}")
-        if history < 2:
-            raise ConfigError(f"must be >= 2, got {history!r}", field="browser.history")
+            check_number(v, f"browser.{fname}", ge=0)
+        check_int(history, "browser.history", lo=2)
         self.name = name
         self.delay_s = float(delay_s)
         self.max_extrapolation_s = float(max_extrapolation_s)

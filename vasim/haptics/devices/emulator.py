@@ -67,7 +67,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg import expm
 
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import check_number
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import (
     OMNI_LIMITS,
     DeviceLimits,
@@ -102,15 +103,9 @@ class EmulatorParams:
 
     def __post_init__(self) -> None:
         for name in ("stylus_mass_kg", "dt"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
-                raise ConfigError(f"must be a finite number > 0, got {v!r}",
-                                  field=f"emulator.{name}")
+            check_number(getattr(self, name), f"emulator.{name}", gt=0)
         for name in ("hand_stiffness", "hand_damping", "free_damping", "end_stop_margin_m"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
-                raise ConfigError(f"must be a finite number >= 0, got {v!r}",
-                                  field=f"emulator.{name}")
+            check_number(getattr(self, name), f"emulator.{name}", ge=0)
 
 
 def zoh_matrices(mass: float, stiffness: float, damping: float,

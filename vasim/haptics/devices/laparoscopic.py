@@ -41,7 +41,8 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import check_number
+from vasim.core.errors import DeviceError
 from vasim.haptics.device import DeviceLimits, DeviceSample, FloatArray
 from vasim.haptics.laparoscopic import (
     Increment,
@@ -75,9 +76,7 @@ class LaparoscopicDevice:
     def __init__(self, port: Port, mapping: InputMapping | None = None, *,
                  start: InstrumentPose | None = None, tau_s: float = 0.015,
                  clock: Callable[[], float] = time.monotonic):
-        if not (isinstance(tau_s, int | float) and math.isfinite(tau_s) and tau_s > 0):
-            raise ConfigError(f"tau_s must be a finite number > 0 s, got {tau_s!r}",
-                              field="tau_s")
+        check_number(tau_s, "tau_s", gt=0)
         self.port = port
         self.mapping = mapping or InputMapping()
         self.tau_s = float(tau_s)

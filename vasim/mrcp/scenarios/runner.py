@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from vasim.core.config import check_array, expect
 from vasim.core.geometry import matrix_from_rotvec, rotvec_from_matrix
 from vasim.mrcp.interfaces import FloatArray
 from vasim.mrcp.kernel import CycleRecord, MRCPKernel
@@ -261,11 +262,8 @@ class OperatorSwitch:
         Raises:
             ConfigError: for another mode.
         """
-        from vasim.core.errors import ConfigError
-
-        if mode not in OPERATOR_MODES:
-            raise ConfigError(f"operator mode must be one of {OPERATOR_MODES}, got {mode!r}",
-                              field="operator")
+        expect(mode in OPERATOR_MODES, mode, f"an operator mode of {OPERATOR_MODES}",
+               field="operator")
         with self._lock:
             self._mode = mode
 
@@ -275,14 +273,10 @@ class OperatorSwitch:
         Raises:
             ConfigError: for a non-finite or mis-shaped pose.
         """
-        from vasim.core.errors import ConfigError
-
-        p = np.asarray(position, float)
-        r = np.asarray(rotation, float)
-        if p.shape != (3,) or r.shape != (3, 3) or not (np.all(np.isfinite(p))
-                                                       and np.all(np.isfinite(r))):
-            raise ConfigError(f"operator pose must be a finite (3,) position and (3, 3) "
-                              f"rotation, got {p!r}, {r!r}", field="operator")
+        p = check_array(position, "operator", shape=(3,),
+                        what="a finite (3,) position (the operator pose)")
+        r = check_array(rotation, "operator", shape=(3, 3),
+                        what="a finite (3, 3) rotation (the operator pose)")
         with self._lock:
             self._pose = (p.copy(), r.copy())
 

@@ -6,7 +6,7 @@ not depend on which backend ran the tasks, nor on their order).
 
 ``ray``
     A local Ray on this machine, or the cluster ``--address`` names
-    (:func:`vasim.study.power.driver.init_ray`). Needs the ``cluster`` extra.
+    (:func:`vasim.study.power.ray_join.init_ray`). Needs the ``cluster`` extra.
 ``processes``
     A ``concurrent.futures.ProcessPoolExecutor`` of ``workers`` processes (default: the
     machine's cores) started with ``spawn`` (a fresh interpreter per worker, as a Ray worker
@@ -34,8 +34,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, expect
 from vasim.core.extras import installed, require
+from vasim.study.power.ray_join import init_ray
 
 Backend = Literal["ray", "processes"]
 BACKENDS: tuple[str, ...] = ("auto", "ray", "processes")
@@ -56,13 +57,11 @@ def choose_backend(backend: str = "auto", address: str | None = None) -> Backend
     >>> choose_backend("processes")
     'processes'
     """
-    if backend not in BACKENDS:
-        raise ConfigError(f"got {backend!r}, expected one of {', '.join(BACKENDS)}",
-                          field="--backend")
+    check_choice(backend, "--backend", BACKENDS)
     if address:
-        if backend == "processes":
-            raise ConfigError(f"--address {address} joins a Ray cluster; it cannot run on "
-                              "local processes (drop --backend processes)", field="--backend")
+        expect(backend != "processes", backend, f"ray: --address {address} joins a Ray "
+                "cluster; it cannot run on local processes (drop --backend processes)",
+                field="--backend")
         require("ray", "--address (a Ray cluster)")
         return "ray"
     if backend == "ray":
@@ -91,9 +90,8 @@ def pool_workers(workers: int | None) -> int:
     >>> pool_workers(3)
     3
     """
-    if workers is not None and workers < 1:
-        raise ConfigError(f"got {workers!r}, expected at least 1 worker process",
-                          field="--workers")
+    if workers is not None:
+        expect(workers >= 1, workers, "at least 1 worker process", field="--workers")
     return workers or (os.cpu_count() or 1)
 
 
@@ -115,8 +113,6 @@ def open_backend(name: Backend, *, address: str | None = None,
 
 
 def _ray(address: str | None, workers: int | None) -> Iterator[Running]:
-    from vasim.study.power.driver import init_ray
-
     ray = require("ray", "--backend ray")
     cpus = init_ray(address, workers)
     shared: dict[int, Any] = {}

@@ -28,17 +28,24 @@ integration step.
 
 from __future__ import annotations
 
-import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from vasim.core.bounds import ALPHA, COHORTS, EFFECT_SCALE, SEED, SUBJECTS
-from vasim.core.config import check_int, check_number, parse_toml
-from vasim.core.errors import ConfigError
+from vasim.core.config import (
+    check_choice,
+    check_int,
+    check_number,
+    check_type,
+    expect,
+    parse_toml,
+)
+from vasim.core.errors import ConfigError, InputError
 from vasim.operator.effects import FixtureEffect, scale_effect
 from vasim.operator.learning import DEFAULT_EFFECTS
 from vasim.operator.scenario import Scenario
@@ -101,35 +108,28 @@ def parse_subjects(spec: str) -> tuple[int, ...]:
         >>> parse_subjects("12, 8,8")
         (8, 12)
     """
-    if not isinstance(spec, str):
-        raise ConfigError(f"got {spec!r}, expected a text START:STOP:STEP or a list "
-                          "N1,N2,...", field="--subjects")
+    arg: dict[str, Any] = {"field": "--subjects", "error": InputError}   # an argument
+    check_type(spec, "--subjects", str, "a text START:STOP:STEP or a list N1,N2,...",
+               error=InputError)
     m = _RANGE.match(spec)
     if m:
         start, stop = int(m.group(1)), int(m.group(2))
         step = int(m.group(3)) if m.group(3) is not None else 1
-        if step < 1:
-            raise ConfigError(f"got {spec!r}: STEP {step}, expected a step >= 1",
-                              field="--subjects")
-        if start > stop:
-            raise ConfigError(f"got {spec!r}: START {start} > STOP {stop}, expected "
-                              "START <= STOP", field="--subjects")
-        if (stop - start) // step + 1 > 1000:
-            raise ConfigError(f"got {spec!r}: {(stop - start) // step + 1} design points, "
-                              "expected at most 1000", field="--subjects")
+        expect(step >= 1, spec, f"a STEP >= 1 (STEP {step})", **arg)
+        expect(start <= stop, spec, f"START <= STOP (START {start} > STOP {stop})", **arg)
+        points = (stop - start) // step + 1
+        expect(points <= 1000, spec, f"at most 1000 design points ({points})", **arg)
         counts = list(range(start, stop + 1, step))
     else:
         parts = [p.strip() for p in spec.split(",")]
-        if not spec.strip() or not all(p.isdigit() for p in parts):
-            raise ConfigError(f"got {spec!r}, expected START:STOP:STEP (e.g. 10:60:5), a "
-                              "comma list of counts (e.g. 8,12,20) or one count",
-                              field="--subjects")
+        expect(spec.strip() and all(p.isdigit() for p in parts), spec,
+                "START:STOP:STEP (e.g. 10:60:5), a comma list of counts (e.g. 8,12,20) or "
+                "one count", **arg)
         counts = [int(p) for p in parts]
-        if len(set(counts)) > 1000:
-            raise ConfigError(f"got {len(set(counts))} design points, expected at most "
-                              "1000", field="--subjects")
+        expect(len(set(counts)) <= 1000, len(set(counts)), "at most 1000 design points",
+                **arg)
     for n in counts:
-        check_int(n, "--subjects", bound=SUBJECTS, lo=2)
+        check_int(n, bound=SUBJECTS, lo=2, **arg)
     return tuple(sorted(set(counts)))
 
 
@@ -237,8 +237,8 @@ def load_effects(path: str | Path, base: Mapping[str, FixtureEffect] = DEFAULT_E
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read the effects file: {exc}", file=p,
-                          field="--effects") from None
+        raise InputError(f"cannot read the effects file: {exc}", file=p,
+                         field="--effects") from None
     return parse_effects(text, file=p, base=base)
 
 
@@ -278,24 +278,17 @@ class PowerDesign:
     effects: dict[str, FixtureEffect] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if not self.subjects:
-            raise ConfigError("got no subject count, expected at least one",
-                              field="--subjects")
+        expect(self.subjects, self.subjects, "at least one subject count", field="--subjects")
         for n in self.subjects:
             check_int(n, "--subjects", bound=SUBJECTS, lo=2)
         check_int(self.cohorts, "--cohorts", bound=COHORTS)
         check_int(self.seed, "--seed", bound=SEED)
         check_number(self.alpha, "--alpha", bound=ALPHA)
-        if self.dt not in (FULL_DT, COARSE_DT):
-            raise ConfigError(f"got {self.dt!r}, expected {FULL_DT} (full) or {COARSE_DT} "
-                              "(coarse, validated) s", field="dt")
-        if self.p_column not in ("p_gg", "p_unc"):
-            raise ConfigError(f"got {self.p_column!r}, expected 'p_gg' or 'p_unc'",
-                              field="--p")
-        if self.max_trial_time is not None and not (
-                math.isfinite(self.max_trial_time) and self.max_trial_time > 0):
-            raise ConfigError(f"got {self.max_trial_time!r}, expected a time > 0 s",
-                              field="--max-time")
+        expect(self.dt in (FULL_DT, COARSE_DT), self.dt,
+                f"{FULL_DT} (full) or {COARSE_DT} (coarse, validated) s", field="dt")
+        check_choice(self.p_column, "--p", ("p_gg", "p_unc"))
+        if self.max_trial_time is not None:
+            check_number(self.max_trial_time, "--max-time", gt=0)
         object.__setattr__(self, "effects",
                            scaled_effects(self.effect_scale, self.base_effects))
 

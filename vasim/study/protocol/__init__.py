@@ -116,6 +116,7 @@ Example:
 
 from __future__ import annotations
 
+from vasim.study.protocol.answers import AnswerRow, validate_answers
 from vasim.study.protocol.loader import (
     available_protocols,
     load_protocol,
@@ -131,16 +132,15 @@ from vasim.study.protocol.model import (
     Block,
     Protocol,
     TaskKind,
+    gated_blocks,
 )
-from vasim.study.protocol.phases import PHASES, Gate, gated_blocks
+from vasim.study.protocol.phases import PHASES, Gate
 from vasim.study.protocol.power import PowerPlan
 from vasim.study.protocol.questionnaires import (
     ITEM_TYPES,
     LIKERT_POINTS,
-    AnswerRow,
     QuestionItem,
     Questionnaire,
-    validate_answers,
 )
 from vasim.study.protocol.schedule import (
     ScheduledTrial,

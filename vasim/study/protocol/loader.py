@@ -12,6 +12,7 @@ from vasim.core.config import (
     check_array_of_tables,
     check_keys,
     check_table,
+    expect,
     parse_toml,
     rewrap,
 )
@@ -88,21 +89,20 @@ def protocol_from_dict(data: Mapping[str, Any], *, text: str | None = None,
                       required=("name", "description", "task", "blocks"))
     rnd = _table(data, "randomisation", "", source, ("block_order", "variant_order"))
     probe = _table(data, "probe", "", source, ("condition", "variant", "variants"))
-    if "variant" in probe and "variants" in probe:
-        raise ConfigError("give either probe.variant (one trajectory for every probe) or "
-                          "probe.variants (a rotation), not both", file=source,
-                          field="probe.variants")
+    expect("variant" not in probe or "variants" not in probe, probe.get("variants"),
+            "either probe.variant (one trajectory for every probe) or probe.variants (a "
+            "rotation), not both", file=source, field="probe.variants")
     raw_blocks = check_array_of_tables(data["blocks"], "blocks", file=source)
     blocks = []
     for i, raw in enumerate(raw_blocks):
         path = f"blocks[{i}]"
         check_keys(raw, _BLOCK + _BLOCK_GAIN, path, file=source,
                    required=("name", "condition"))
-        if ("variants" in probe and raw.get("probe") is True and "variants" in raw
-                and raw.get("phase") != "transfer"):  # transfer: its own untrained variants
-            raise ConfigError("a probe block takes its variants from probe.variants in "
-                              "rotation: leave out its variants (repetitions = its number "
-                              "of trials)", file=source, field=f"{path}.variants")
+        # transfer: its own untrained variants
+        expect(not ("variants" in probe and raw.get("probe") is True and "variants" in raw
+                     and raw.get("phase") != "transfer"), raw.get("variants"),
+                "no variants in a probe block: it takes them from probe.variants in rotation "
+                "(repetitions = its number of trials)", file=source, field=f"{path}.variants")
         bkw = {k: _tuple(v) for k, v in raw.items()}
         if "gate" in raw:
             gate = _table(raw, "gate", path, source, _GATE)

@@ -27,6 +27,8 @@ contract in pyproject.toml; issue #14), so importing it loads neither the store 
 from __future__ import annotations
 
 from vasim.study.stats._data import StatsWarning as StatsWarning
+from vasim.study.stats._data import nan_to_none as nan_to_none
+from vasim.study.stats._data import python_scalar as python_scalar
 from vasim.study.stats._data import read_long_csv as read_long_csv
 from vasim.study.stats.anova import RM_ANOVA_COLUMNS as RM_ANOVA_COLUMNS
 from vasim.study.stats.anova import rm_anova as rm_anova
@@ -76,8 +78,10 @@ __all__ = [
     "mixed_model",
     "mixed_model_lr_test",
     "n_for_power",
+    "nan_to_none",
     "paired_power",
     "pairwise_paired",
+    "python_scalar",
     "read_long_csv",
     "rm_anova",
     "seed_per_sample_anova",

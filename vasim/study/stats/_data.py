@@ -278,8 +278,8 @@ def levels_of(col: pd.Series) -> list[Any]:
     """
     if isinstance(col.dtype, pd.CategoricalDtype):
         present = set(col.dropna().unique().tolist())
-        return [_py(c) for c in col.cat.categories if c in present]
-    uniq = [_py(v) for v in pd.unique(col.dropna()).tolist()]
+        return [python_scalar(c) for c in col.cat.categories if c in present]
+    uniq = [python_scalar(v) for v in pd.unique(col.dropna()).tolist()]
     if uniq and all(isinstance(v, str) for v in uniq):
         nums = pd.to_numeric(pd.Series(uniq, dtype=object), errors="coerce")
         if nums.notna().all() and np.isfinite(nums.to_numpy(dtype=float)).all():
@@ -291,7 +291,7 @@ def levels_of(col: pd.Series) -> list[Any]:
         return uniq
 
 
-def _py(value: Any) -> Any:
+def python_scalar(value: Any) -> Any:
     """A numpy scalar as the equivalent Python scalar (for JSON and readable messages)."""
     return value.item() if isinstance(value, np.generic) else value
 
@@ -380,8 +380,8 @@ def cell_means(data: pd.DataFrame, dv: str, subject: str, within: Sequence[str],
 
 def _cell_text(subject: str, within: Sequence[str], key: Any) -> str:
     key = key if isinstance(key, tuple) else (key,)
-    cell = ", ".join(f"{w}={_py(v)!r}" for w, v in zip(within, key[1:], strict=True))
-    return f"{subject}={_py(key[0])!r} x {cell}"
+    cell = ", ".join(f"{w}={python_scalar(v)!r}" for w, v in zip(within, key[1:], strict=True))
+    return f"{subject}={python_scalar(key[0])!r} x {cell}"
 
 
 def finite_array(values: Any, name: str) -> np.ndarray:
@@ -407,7 +407,7 @@ def nan_to_none(value: Any) -> Any:
     """JSON-ready scalar: NaN/NA become None, numpy scalars become Python scalars."""
     if value is None or value is pd.NA:
         return None
-    value = _py(value)
+    value = python_scalar(value)
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value

@@ -19,10 +19,10 @@ from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
     MAX_LISTED,
     StatsWarning,
-    _py,
     factor_column,
     levels_of,
     numeric_column,
+    python_scalar,
     require_columns,
     require_frame,
     source_of,
@@ -77,7 +77,7 @@ def spearman_items(data: pd.DataFrame, subject: str, item: str, value: str) -> p
     dup = frame.duplicated(subset=["s", "i"], keep=False)
     if dup.any():
         pairs = frame.loc[dup, ["s", "i"]].drop_duplicates().itertuples(index=False)
-        shown = "; ".join(f"{subject}={_py(a)!r} x {item}={_py(b)!r}"
+        shown = "; ".join(f"{subject}={python_scalar(a)!r} x {item}={python_scalar(b)!r}"
                           for a, b in list(pairs)[:MAX_LISTED])
         raise ConfigError(f"several answers for the same subject and item: {shown}",
                           file=src, field=item)

@@ -53,11 +53,11 @@ from vasim.core.errors import ConfigError
 from vasim.study.stats._data import (
     MAX_LISTED,
     StatsWarning,
-    _py,
     cell_means,
     error_ss_is_zero,
     factor_column,
     levels_of,
+    python_scalar,
     require_columns,
     require_frame,
     source_of,
@@ -241,7 +241,8 @@ def _group_of_subject(data: pd.DataFrame, subject: str, between: str,
     per_subject = pairs.groupby("s", sort=False)["g"].unique()
     mixed = [(s, list(g)) for s, g in per_subject.items() if len(g) > 1]
     if mixed:
-        shown = "; ".join(f"{_py(s)!r} in {[_py(v) for v in g]!r}" for s, g in mixed[:MAX_LISTED])
+        shown = "; ".join(f"{python_scalar(s)!r} in {[python_scalar(v) for v in g]!r}"
+                          for s, g in mixed[:MAX_LISTED])
         more = f" and {len(mixed) - MAX_LISTED} more" if len(mixed) > MAX_LISTED else ""
         raise ConfigError(f"between factor {between!r} must be constant per subject; "
                           f"{len(mixed)} subject(s) of {subject!r} appear in several groups: "

@@ -28,7 +28,8 @@ from typing import Any, Literal
 import pandas as pd
 
 from vasim import __version__
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.config import check_type, expect
+from vasim.core.errors import StoreError
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import SampleBuffer
 from vasim.records.trial_meta import TrialMeta
@@ -253,9 +254,8 @@ class TrialLifecycle(StoreConnection):
             ConfigError: an unknown outcome.
         """
         out = outcome_of_reason(reason) if outcome is None else validate_outcome(outcome)
-        if out in ("reached_all", "timed_out"):
-            raise ConfigError(f"an interrupted trial's outcome is 'stopped', 'failed' or "
-                              f"'interrupted', got {out!r}", field="outcome")
+        expect(out not in ("reached_all", "timed_out"), out, "'stopped', 'failed' or "
+               "'interrupted' (an interrupted trial's outcome)", field="outcome")
         if summary is not None:
             summary = {**summary, "outcome": out}
         try:
@@ -286,8 +286,8 @@ class TrialLifecycle(StoreConnection):
         timing_json = to_json(timing)
         event_rows = [(None if t is None else float(t), str(kind), str(detail))
                       for t, kind, detail in events]
-        if samples is not None and not isinstance(samples, SampleBuffer):
-            raise ConfigError(f"samples must be a SampleBuffer, got {type(samples).__name__}")
+        if samples is not None:
+            check_type(samples, "samples", SampleBuffer, "a SampleBuffer")
         # packed before the write lock is taken (schema 6: one compressed blob per column)
         packed = _packed(samples, self.path, tid)
         try:

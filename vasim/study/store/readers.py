@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.config import check_choice
+from vasim.core.errors import StoreError
 from vasim.records.point_metrics import POINT_COLUMNS
 from vasim.records.samples import FRAME_COLUMNS, SampleBuffer
 from vasim.study.store.connection import StoreConnection
@@ -57,9 +58,7 @@ class StoreReaders(StoreConnection):
         where: list[str] = []
         args: list[Any] = []
         if status is not None:
-            if status not in TRIAL_STATUSES:
-                raise ConfigError(f"unknown trial status {status!r} (expected one of "
-                                  f"{TRIAL_STATUSES})", field="status")
+            check_choice(status, "status", TRIAL_STATUSES)
             where.append("status = ?")
             args.append(status)
         if subject is not None:
@@ -241,9 +240,8 @@ class StoreReaders(StoreConnection):
             if v is not None:
                 where.append(f"s.{col} = ?")
                 args.append(v)
-        if status is not None and status not in SESSION_STATUSES:
-            raise ConfigError(f"unknown session status {status!r} (expected one of "
-                              f"{SESSION_STATUSES})", field="status")
+        if status is not None:
+            check_choice(status, "status", SESSION_STATUSES)
         cols = [c for c in SESSION_COLUMNS if c not in ("protocol_toml", "config_json")]
         sql = (
             f"SELECT {', '.join('s.' + c for c in cols)}, "

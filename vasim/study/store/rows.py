@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from vasim.core.config import check_int, check_str, expect
 from vasim.core.errors import ConfigError
 from vasim.core.jsonio import dumps
 from vasim.records.path_deviation import PATH_POINT_COLUMNS
@@ -21,9 +22,7 @@ def row_id(value: object, name: str = "trial_id") -> int:
     Raises:
         ConfigError: naming ``name`` and the value.
     """
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ConfigError(f"{name} must be an integer, got {value!r}")
-    return int(value)
+    return check_int(value, name)
 
 
 def int_or_none(v: int | None) -> int | None:
@@ -54,9 +53,8 @@ def point_metric_rows(df: pd.DataFrame) -> list[tuple[Any, ...]]:
     # the v4 path columns are optional: a frame without them stores NULL (not measured)
     df = df.assign(**{c: np.nan for c in PATH_POINT_COLUMNS if c not in df.columns})
     missing = [c for c in POINT_COLUMNS if c not in df.columns]
-    if missing:
-        raise ConfigError(f"point_metrics lacks the columns {missing} "
-                          f"(expected {list(POINT_COLUMNS)})")
+    expect(not missing, missing, f"all of {list(POINT_COLUMNS)} (point_metrics lacks the "
+           "columns shown)", field="point_metrics")
     cols = []
     for c in POINT_COLUMNS:
         v = df[c].to_numpy()
@@ -77,8 +75,7 @@ def trial_metric_rows(metrics: Mapping[str, float]) -> list[tuple[str, float | N
     """
     rows = []
     for name, v in metrics.items():
-        if not isinstance(name, str) or not name:
-            raise ConfigError(f"trial metric names must be non-empty strings, got {name!r}")
+        check_str(name, "trial_metrics", one_line=False, what="a trial metric name")
         try:
             f = float(v)
         except (TypeError, ValueError):

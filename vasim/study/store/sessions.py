@@ -12,7 +12,9 @@ from typing import Any, Literal
 import numpy as np
 
 from vasim import __version__
-from vasim.core.errors import ConfigError, StoreError
+from vasim.core.bounds import SEED
+from vasim.core.config import check_choice, check_int, check_str, check_type, expect
+from vasim.core.errors import StoreError
 from vasim.records.trial_meta import validate_subject_code
 from vasim.study.store.connection import StoreConnection
 from vasim.study.store.rows import int_or_none, row_id, to_json
@@ -45,13 +47,8 @@ class SessionMeta:
     def __post_init__(self) -> None:
         validate_subject_code(self.subject)
         for name in ("protocol", "protocol_toml", "operator"):
-            v = getattr(self, name)
-            if not isinstance(v, str) or not v:
-                raise ConfigError(f"{name} must be a non-empty string, got {v!r}", field=name)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int | np.integer) \
-                or not 0 <= self.seed < 2**63:
-            raise ConfigError(f"seed must be an integer in [0, 2**63), got {self.seed!r}",
-                              field="seed")
+            check_str(getattr(self, name), name, one_line=False)
+        check_int(self.seed, "seed", bound=SEED)
 
 
 
@@ -137,9 +134,7 @@ class SessionWriters(StoreConnection):
             StoreError: unknown session, session not running, or trials left to complete.
             ConfigError: a status other than 'completed' or 'aborted'.
         """
-        if status not in ("completed", "aborted"):
-            raise ConfigError(f"a session is closed as 'completed' or 'aborted', got "
-                              f"{status!r}", field="status")
+        check_choice(status, "status", ("completed", "aborted"))
         sid = row_id(session_id)
         with self._transaction() as con:
             row = con.execute("SELECT status FROM sessions WHERE id = ?", (sid,)).fetchone()
@@ -252,8 +247,7 @@ class SessionWriters(StoreConnection):
             ConfigError: bad subject code or demographics.
         """
         validate_subject_code(subject)
-        if not isinstance(demographics, Demographics):
-            raise ConfigError(f"demographics must be a Demographics, got {demographics!r}")
+        check_type(demographics, "demographics", Demographics, "a Demographics")
         d = demographics
         with self._transaction() as con:
             con.execute("INSERT OR IGNORE INTO subjects (code, created_at) VALUES (?, ?)",
@@ -283,17 +277,14 @@ class SessionWriters(StoreConnection):
             StoreError: unknown session, or this questionnaire was already answered.
             ConfigError: a bad questionnaire name or row.
         """
-        if questionnaire not in ("pre", "post"):
-            raise ConfigError(f"questionnaire must be 'pre' or 'post', got {questionnaire!r}",
-                              field="questionnaire")
+        check_choice(questionnaire, "questionnaire", ("pre", "post"))
         sid = row_id(session_id)
         data = []
         for row in rows:
             item, key, value, num = row
-            if not isinstance(item, str) or not item or not isinstance(key, str) \
-                    or not isinstance(value, str):
-                raise ConfigError(f"an answer row is (item, key, value, value_num) with "
-                                  f"strings, got {row!r}")
+            expect(isinstance(item, str) and item and isinstance(key, str)
+                   and isinstance(value, str), row,
+                   "an answer row (item, key, value, value_num) with strings", field="rows")
             data.append((item, key, value, None if num is None else float(num)))
         with self._transaction() as con:
             srow = con.execute("SELECT subject FROM sessions WHERE id = ?", (sid,)).fetchone()

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
+from vasim.core.config import check_choice, check_keys, check_str
 from vasim.core.errors import ConfigError
 from vasim.records.trial_meta import SUBJECT_CODE_PATTERN
 
@@ -64,9 +65,7 @@ def validate_outcome(outcome: object, *, field: str = "outcome") -> str:
         >>> validate_outcome("timed_out")
         'timed_out'
     """
-    if outcome not in TRIAL_OUTCOMES:
-        raise ConfigError(f"unknown trial outcome {outcome!r} (expected one of "
-                          f"{', '.join(TRIAL_OUTCOMES)})", field=field)
+    check_choice(outcome, field, TRIAL_OUTCOMES)
     return str(outcome)
 
 
@@ -86,9 +85,8 @@ def validate_label(label: object) -> str:
         >>> validate_label("free: warm-up")
         'free: warm-up'
     """
-    if not isinstance(label, str) or not 1 <= len(label) <= 64:
-        raise ConfigError(f"a trial label is 1-64 characters of text, got {label!r}",
-                          field="label")
+    label = check_str(label, "label", one_line=False, max_length=64,
+              what="a trial label of 1-64 characters of text")
     if _SUBJECT_RE.fullmatch(label):
         raise ConfigError(
             f"trial label {label!r} could be mistaken for a subject code: give a subject "
@@ -174,9 +172,7 @@ class Demographics:
     def __post_init__(self) -> None:
         for name, allowed in DEMOGRAPHIC_FIELDS.items():
             v = getattr(self, name)
-            if v not in allowed:
-                raise ConfigError(f"{name} must be one of {', '.join(allowed)}; got {v!r}",
-                                  field=name)
+            check_choice(v, name, allowed)
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> Demographics:
@@ -185,13 +181,7 @@ class Demographics:
         Raises:
             ConfigError: a missing or unknown key, or a bad value.
         """
-        unknown = sorted(set(values) - set(DEMOGRAPHIC_FIELDS))
-        if unknown:
-            raise ConfigError(f"unknown demographic field(s) {unknown} (known: "
-                              f"{', '.join(DEMOGRAPHIC_FIELDS)})", field=unknown[0])
-        missing = [k for k in DEMOGRAPHIC_FIELDS if k not in values]
-        if missing:
-            raise ConfigError(f"missing demographic field(s) {missing}", field=missing[0])
+        check_keys(values, list(DEMOGRAPHIC_FIELDS), required=list(DEMOGRAPHIC_FIELDS))
         return cls(**{k: values[k] for k in DEMOGRAPHIC_FIELDS})
 
 
