@@ -41,11 +41,11 @@ from scipy import stats
 
 from vasim.operator.scenario import load_scenario
 from vasim.study.cohort import (
-    _stream,
     cohort_subjects,
     measured_benefits,
     scenario_record,
     simulated_answers,
+    subject_stream,
 )
 from vasim.study.power.cohort import simulate_in_memory, study_data
 from vasim.study.power.design import COARSE_DT
@@ -86,7 +86,7 @@ def test_a_null_cohort_of_the_full_engine_shows_no_fixture_effect() -> None:
     for j, subj in enumerate(subjects, start=1):
         sched = trials.schedule[trials.schedule["session_id"] == j]
         b = measured_benefits(sched, errors)
-        ans = simulated_answers(protocol, "post", _stream(subj.session_seed, 8), measured=b,
+        ans = simulated_answers(protocol, "post", subject_stream(subj.session_seed, 8), measured=b,
                                 model=sc.questionnaire)
         rows.append({"session_id": j, "item": "best_vf", "key": "", "value": ans["best_vf"],
                      "value_num": math.nan})

@@ -25,7 +25,7 @@ import pytest
 
 from tests.study.tiny_protocols import install
 from tests.viewer.driving import drive
-from vasim.core.errors import ConfigError
+from vasim.core.errors import ConfigError, InputError
 from vasim.haptics.devices.browser import BrowserDevice
 from vasim.study.protocol import load_protocol
 from vasim.study.report import build_report
@@ -181,7 +181,7 @@ def test_a_teleop_session_runs_stores_its_trials_and_its_questionnaire(
     # The post questionnaire: the form's template, a bad answer refused, a good one stored.
     text = answers_template(load_protocol("teleop_tiny"), "post")
     assert 'best_mode = ""' in text
-    with pytest.raises(ConfigError, match="best_mode"):
+    with pytest.raises(InputError, match="best_mode"):   # answers are input data
         ctl.handle(Command("answers", ("post", text)))
     assert "not recorded" in ctl.panel.status
     ctl.handle(Command("answers", ("post", text.replace('best_mode = ""',

@@ -64,7 +64,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.core.config import check_choice, check_not_dir, check_type
+from vasim.core.config import check_choice, check_not_dir
 from vasim.core.errors import ConfigError, StoreError, VasimError
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.device import Device
@@ -80,9 +80,7 @@ from vasim.trials.vf_run import trial_meta
 from vasim.viewer.condition import viewer_condition
 from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
 from vasim.viewer.history import (
-    AGAIN_FIELD,
     CURVE_METRICS,
-    check_again_reason,
     completed_note,
     learning_curve,
     open_session,
@@ -93,6 +91,7 @@ from vasim.viewer.history import (
 )
 from vasim.viewer.instrument_input import instrument_device
 from vasim.viewer.live import LiveTrial, make_live_trial
+from vasim.viewer.session_commands import INPUTS, SessionCommands
 from vasim.viewer.state import (
     Command,
     PanelState,
@@ -119,10 +118,6 @@ FloatArray = NDArray[np.float64]
 Mode = Literal["demo", "free", "protocol"]
 InputKind = Literal["scripted", "browser", "laparoscopic"]
 MODES: tuple[str, ...] = ("demo", "free", "protocol")
-INPUTS: tuple[str, ...] = ("scripted", "browser", "laparoscopic")
-"""Who moves the tool: the scripted operator, the free gizmo on the tip (an experimenter's
-option), or the trainee's laparoscopic instrument (mouse, keyboard, gamepad; the trainee
-page's default input for a person)."""
 
 
 
@@ -160,7 +155,7 @@ class TrainingSettings:
     optics_deg: float = 0.0
 
 
-class TrainingController(ConditionCommands):
+class TrainingController(ConditionCommands, SessionCommands):
     """Server-side state of the viewer (module docstring). Not thread-safe by design: one
     controller thread calls ``handle``/``poll``/``close``; other threads read the published
     ``info``, ``frame()`` and ``panel``.
@@ -609,67 +604,8 @@ class TrainingController(ConditionCommands):
     def _on_task(self, value: Any) -> None:
         self._set_task(str(value))
 
-    def _on_input_mapping(self, value: Any) -> None:
-        p = self.panel
-        check_type(value, "input_mapping", InputMapping, "an InputMapping")
-        if p.mode == "protocol" and self._running_stored():
-            raise ConfigError("the running protocol trial keeps its instrument mapping; "
-                              "change it between trials", field="input_mapping")
-        self.input_mapping = value
-        if self.instrument is not None:
-            self.instrument.set_mapping(value)
-
-    def _on_input(self, value: Any) -> None:
-        p = self.panel
-        check_choice(value, "input", INPUTS)
-        if value == p.input:
-            return
-        if self._running_stored() or self._pending is not None:
-            raise ConfigError("stop the running trial before changing the input",
-                              field="input")
-        if p.mode == "protocol" and p.session_id is not None:
-            raise ConfigError(f"session {p.session_id} runs with input {p.input!r} "
-                              "(stored with the session): every trial of it keeps that "
-                              "input", field="input")
-        self._publish(input=value)
-
     def _on_label(self, value: Any) -> None:
         self._set_label(value)
-
-    def _on_again(self, value: Any) -> None:
-        reason = check_again_reason("" if value is None else str(value))
-        if self._running_stored():
-            raise ConfigError("stop the running trial before giving a reason for a new "
-                              "session", field=AGAIN_FIELD)
-        self._publish(again=reason, status=(
-            f"reason for a new session: {reason}" if reason else "no reason: Start "
-            "resumes an open session or starts a first one"))
-
-    def _on_subject(self, value: Any) -> None:
-        p = self.panel
-        from vasim.records.trial_meta import validate_subject_code
-
-        code = validate_subject_code(str(value).strip())
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the subject",
-                              field="subject")
-        self._publish(subject=code, label=None, session_id=None, position=None,
-                      total=None, completed=None, condition=None, curve=(), again=None)
-        if p.mode == "protocol" and p.protocol:
-            self._publish(**self._select_session())
-
-    def _on_protocol(self, value: Any) -> None:
-        p = self.panel
-        from vasim.study.protocol import available_protocols
-
-        check_choice(value, "protocol", available_protocols())
-        if self._running_stored():
-            raise ConfigError("stop the running trial before changing the protocol",
-                              field="protocol")
-        self._publish(protocol=value, session_id=None, position=None, total=None,
-                      completed=None, condition=None, curve=(), again=None)
-        if p.subject:
-            self._publish(**self._select_session())
 
     def _on_start(self, value: Any) -> None:
         self._start()
@@ -702,44 +638,6 @@ class TrainingController(ConditionCommands):
 
     def _on_auto_advance(self, value: Any) -> None:
         self._publish(auto_advance=bool(value))
-
-    def _record_answers(self, value: Any) -> None:
-        """Stores one questionnaire's answers with the subject's session of the chosen
-        protocol (``questionnaire_form``; value: ``(which, TOML text)``), checked as
-        ``vasim study answer`` checks them (``record_answers``)."""
-        from vasim.study.session import record_answers
-        from vasim.viewer.questionnaire_form import (
-            QUESTIONNAIRES,
-            answers_status,
-            parse_answers,
-        )
-
-        which, text = value if isinstance(value, tuple) and len(value) == 2 else (None, None)
-        if which not in QUESTIONNAIRES or not isinstance(text, str):
-            raise ConfigError(f"answers must be (pre|post, TOML text), got {value!r}",
-                              field="answers")
-        if self.panel.mode != "protocol":
-            raise ConfigError("questionnaires belong to a protocol session: switch to "
-                              "protocol mode", field="answers")
-        try:
-            answers = parse_answers(text, which)
-        except ConfigError as exc:
-            self._publish(status=f"{which} questionnaire not recorded: {exc}")
-            raise
-        sid = self.panel.session_id
-        if sid is None:   # the subject's latest session of the protocol, else a new one
-            p = self.panel
-            known = self.store().sessions(subject=p.subject, protocol=p.protocol) \
-                if p.subject and p.protocol else None
-            sid = (int(known["id"].iloc[-1]) if known is not None and len(known)
-                   else self._session().id)
-        try:
-            n = record_answers(self.store(), sid, which, answers,
-                               source="the experimenter's questionnaire")
-        except (ConfigError, StoreError) as exc:
-            self._publish(status=f"{which} questionnaire not recorded: {exc}")
-            raise
-        self._publish(status=answers_status(which, sid, n))
 
     def _running_stored(self) -> bool:
         return self.active() and self.info.trial_id is not None

@@ -27,11 +27,11 @@ from vasim.core.errors import ConfigError
 from vasim.operator.outcome import draw_path_deviation
 from vasim.operator.scenario import Scenario
 from vasim.study.cohort import (
-    _stream,
     cohort_subjects,
     measured_benefits,
     scenario_record,
     simulated_answers,
+    subject_stream,
 )
 from vasim.study.power.cohort import subject_session
 from vasim.study.power.design import surgeons_for
@@ -80,7 +80,7 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
     tid = 0
     for subj in subjects:
         session = subject_session(protocol, subj, dt=1e-3, max_trial_time=None, extra=extra)
-        rng = _stream(seed, 9, subj.number)
+        rng = subject_stream(seed, 9, subj.number)
         u = float(rng.normal(0.0, model.subject_sd_log))
         first = tid
         for st in session.schedule:
@@ -98,7 +98,7 @@ def outcome_cohort(protocol: Protocol, scenario: Scenario, *, n_subjects: int, s
             b = measured_benefits(mine, dict(zip(mine["trial_id"], mine[PATH_DEV],
                                                  strict=True)))
             post[subj.code] = simulated_answers(protocol, "post",
-                                                _stream(subj.session_seed, 8), measured=b,
+                                                subject_stream(subj.session_seed, 8), measured=b,
                                                 model=scenario.questionnaire)
     return OutcomeCohort(trials=pd.DataFrame(rows), answers=post)
 
