@@ -2,7 +2,8 @@
 
 Prints, for ``vasim/``:
 
-* functions longer than 100 lines (outside the compiled kernels, ``_*kernels.py``),
+* modules longer than 800 lines, functions longer than 100 lines (outside the compiled
+  kernels, ``_*kernels.py``),
 * functions with more than 10 parameters,
 * ``raise ConfigError`` outside ``vasim/core/config.py`` and ``tomllib`` imports outside it,
 * private names (``_x``) imported from another package of vasim (a module may use its own
@@ -29,12 +30,14 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1] / "vasim"
+LONG_MODULE = 800
 LONG_LINES = 100
 MANY_PARAMS = 10
 
 
 @dataclass
 class Facts:
+    long_modules: list[str] = field(default_factory=list)
     long_functions: list[str] = field(default_factory=list)
     many_params: list[str] = field(default_factory=list)
     config_raises_outside: list[str] = field(default_factory=list)
@@ -74,6 +77,9 @@ def measure() -> Facts:
     for name, path, tree in _modules():
         where = str(path.relative_to(ROOT.parent))
         kernel = path.name.endswith("kernels.py")
+        n_lines = len(path.read_text().splitlines())
+        if n_lines > LONG_MODULE:
+            facts.long_modules.append(f"{where} {n_lines}")
         for node in ast.walk(tree):
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
                 length = (node.end_lineno or node.lineno) - node.lineno + 1
