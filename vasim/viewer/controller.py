@@ -357,7 +357,8 @@ class TrainingController(ConditionCommands, SessionCommands):
             from vasim.study.gain_plan import gain_text
 
             text = gain_text(session.protocol, scheduled)
-        return gain_plan(config.gain if isinstance(config, TrialConfig) else 1.0, text)
+        # a teleoperation trial has no fixtures, so no gain
+        return gain_plan(1.0 if isinstance(config, TeleopTrialConfig) else config.gain, text)
 
     def _close_trial(self, reason: str, *, failed: bool = False) -> None:
         """Stops the running trial; a stored one that is not done (or whose loop ``failed``)

@@ -85,7 +85,8 @@ def test_with_ray_auto_keeps_the_local_ray(monkeypatch: pytest.MonkeyPatch) -> N
 
 
 def test_bad_backend_choices_are_config_errors() -> None:
-    with pytest.raises(ValueError, match="expected one of auto, ray, processes"):
+    with pytest.raises(ValueError, match="field '--backend': got 'dask', expected one of "
+                                         "'auto', 'ray', 'processes'"):
         choose_backend("dask")
     with pytest.raises(ValueError, match="cannot run on local processes"):
         choose_backend("processes", "ray://head:10001")

@@ -139,7 +139,8 @@ def test_singular_design_json_null_and_note(capsys: pytest.CaptureFixture[str],
     (["tukey", "--csv", str(DATA / "reference_plantgrowth.csv"), "--dv", "weight"],
      "tukey needs --between COL"),
     (["rm-anova", "--csv", str(DATA / "reference_rm_anova2.csv"), "--dv", "Performance",
-      "--subject", "Subject", "--within", "Time,,Metric"], "--within takes one factor"),
+      "--subject", "Subject", "--within", "Time,,Metric"],
+         "field '--within': got 'Time,,Metric', expected one factor or two"),
 ])
 def test_errors_exit_2_with_one_line(capsys: pytest.CaptureFixture[str], tmp_path: Path,
                                      argv: list[str], needle: str) -> None:
