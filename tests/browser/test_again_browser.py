@@ -64,6 +64,9 @@ def test_the_page_refuses_a_second_session_and_stores_the_reason(
             app.request(kind, value)
         assert wait_for(lambda: app.panel.protocol == "tiny"), app.errors[-3:]
         field(page, "Subject code").fill("D9", force=True)
+        # the typed code reaches the server before the click (viser sends a text field
+        # on change; a click sent first set the subject to "")
+        assert wait_for(lambda: app.panel_view.subject.value == "D9"), app.errors[-3:]
         page.get_by_role("button", name="Set subject").click(force=True)
         assert wait_for(lambda: app.panel.subject == "D9"), app.errors[-3:]
         body_has(page, "already completed tiny (session 1): Start is refused")
@@ -75,6 +78,7 @@ def test_the_page_refuses_a_second_session_and_stores_the_reason(
         assert app.snapshot.info.number == n and len(sessions(db)) == 1
         # the reason, then Start: a new session with the reason stored
         field(page, AGAIN_FIELD).fill("the device failed in session 1", force=True)
+        assert wait_for(lambda: app.panel_view.again.value == "the device failed in session 1")
         page.get_by_role("button", name="Set reason").click(force=True)
         assert wait_for(lambda: app.panel.again == "the device failed in session 1"), \
             app.errors[-3:]

@@ -53,6 +53,9 @@ def test_a_person_moves_the_needle_of_an_mrcp_trial_and_it_is_stored(
         assert wait_for(lambda: app.panel.input == "laparoscopic"), app.errors[-3:]
         exp.locator("xpath=//label[normalize-space()='Subject code']"
                     "/ancestor::div[.//input][1]//input").fill("T01", force=True)
+        # the typed code reaches the server before the click (viser sends a text field on
+        # change; a click sent first set the subject to "")
+        assert wait_for(lambda: app.panel_view.subject.value == "T01"), app.errors[-3:]
         exp.get_by_role("button", name="Set subject").click(force=True)
         assert wait_for(lambda: app.panel.subject == "T01"), app.errors[-3:]
         app.request("protocol", "teleop_browser")   # the menus are tested elsewhere

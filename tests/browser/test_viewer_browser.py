@@ -171,6 +171,9 @@ def test_experimenter_starts_a_trial_and_the_store_holds_it(app: ViewerApp, exp_
     assert wait_for(lambda: app.panel.mode == "free"), app.errors[-3:]
     request(app, "task", "point", lambda: app.panel.task == "point")
     field(page, "Subject code").fill("S07", force=True)
+    # the typed code reaches the server before the click (viser sends a text field
+    # on change; a click sent first set the subject to "")
+    assert wait_for(lambda: app.panel_view.subject.value == "S07"), app.errors[-3:]
     page.get_by_role("button", name="Set subject").click(force=True)
     assert wait_for(lambda: app.panel.subject == "S07"), app.errors[-3:]
     n0 = app.snapshot.info.number
