@@ -8,7 +8,7 @@ import threading
 import numpy as np
 import pytest
 import trimesh
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from vasim.abdomen.integrate import (
@@ -270,6 +270,7 @@ def test_two_organs_step_in_two_threads_like_in_one(ball: OrganModel) -> None:
 
 
 @settings(max_examples=30, deadline=None)
+@example(seed=3432, scale=1e-4)
 @given(seed=st.integers(0, 2**32 - 1), scale=st.floats(1e-4, 0.02))
 def test_spring_forces_sum_to_zero_and_are_minus_the_energy_gradient(ball: OrganModel,
                                                                       seed: int,
@@ -278,9 +279,13 @@ def test_spring_forces_sum_to_zero_and_are_minus_the_energy_gradient(ball: Organ
     x = ball.rest + rng.normal(scale=scale, size=ball.rest.shape)
     f = spring_forces(ball, x)
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-9 * np.abs(f).max())
-    # central differences of the energy along a random direction
+    # central differences of the energy along a random unit direction, with a step 0.1 % of
+    # the perturbation: the truncation error scales as (step / perturbation)^2. (A fixed
+    # h = 1e-7 along an unnormalised direction stepped 2 % of a 0.1 mm perturbation and
+    # missed by 1.4e-4 relative: hypothesis found seed=3432, scale=1e-4.)
     d = rng.normal(size=x.shape)
-    h = 1e-7
+    d /= np.linalg.norm(d)
+    h = 1e-3 * scale
 
     def elastic(y):
         return energy(ball, type("S", (), {"x": y, "v": np.zeros_like(y)})()).elastic
