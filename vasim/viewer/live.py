@@ -23,6 +23,7 @@ after either is the new reference (indexing, as the servo loop's clutch does).
 
 from __future__ import annotations
 
+import abc
 import importlib.util
 import logging
 import threading
@@ -131,7 +132,7 @@ class LoopStats:
         return d
 
 
-class PacedThread:
+class PacedThread(abc.ABC):
     """A trial advanced in real time on its own thread, the part :class:`SimThreadTrial`
     and the teleoperation trial (``teleop_live.LiveTeleopTrial``) share (module
     docstring): each iteration advances by the wall time elapsed since the previous one
@@ -160,14 +161,17 @@ class PacedThread:
         self.error: BaseException | None = None
         """An exception that stopped the loop (the trial is then done)."""
 
+    @abc.abstractmethod
     def _advance(self, n: int) -> None:
-        raise NotImplementedError
+        """Runs ``n`` steps of the trial (called under ``_lock``)."""
 
+    @abc.abstractmethod
     def _finished(self) -> bool:
-        raise NotImplementedError
+        """True once the trial has ended by itself."""
 
+    @abc.abstractmethod
     def _clock(self) -> tuple[float, int]:
-        raise NotImplementedError
+        """(simulated time [s], steps run so far)."""
 
     @property
     def done(self) -> bool:
