@@ -175,8 +175,11 @@ def test_a_page_that_stops_acknowledging_gets_the_present_not_a_queue(app: Viewe
         marks = app.acks.marks
         seq0 = marks.seq
         windows = 0
-        t_end = time.monotonic() + 3.0
-        while time.monotonic() < t_end:
+        # At least 3 s, and until the view thread has made 20 frames more (a condition, not a
+        # time: on a busy host 20 frames took longer than 3 s).
+        t_min, t_end = time.monotonic() + 3.0, time.monotonic() + 120.0
+        while time.monotonic() < t_end and (time.monotonic() < t_min
+                                            or marks.seq <= seq0 + 20):
             try:
                 ws.recv(timeout=0.2)
                 windows += 1
@@ -224,8 +227,11 @@ def test_a_page_that_acknowledges_what_it_applied_is_never_starved(app: ViewerAp
             "fov": 1.0, "near": 0.01, "far": 100.0, "image_height": 600, "image_width": 800,
             "look_at": [0.0, 0, 0], "up_direction": [0.0, 0, 1]}))
         uuid, applied, first = None, -1, None
-        t_end = time.monotonic() + 60
-        while time.monotonic() < t_end:
+        # Until 10 frames past the first were applied (a condition: 20 Hz gives them in 0.5 s,
+        # a busy host later); a starved page (a credit waiting on a mark never sent) never
+        # gets them and fails at the deadline.
+        t_end = time.monotonic() + 120
+        while time.monotonic() < t_end and (first is None or applied - first < 10):
             try:
                 msgs = _decode(ws.recv(timeout=1.0))  # type: ignore[arg-type]
             except TimeoutError:
@@ -240,11 +246,11 @@ def test_a_page_that_acknowledges_what_it_applied_is_never_starved(app: ViewerAp
                     "type": "GuiUpdateMessage", "uuid": uuid,
                     "updates": {"value": f'{{"seq": {applied}, "q": 0}}'}}))
                 if first is None:
-                    first, t_end = applied, time.monotonic() + 4.0
+                    first = applied
         assert first is not None
         page = app.acks.pages()[max(app.acks.pages())]
         assert page.acking and page.stalls == 0
-        assert applied - first >= 10, (first, applied)   # 20 Hz for 4 s, minus the load
+        assert applied - first >= 10, (first, applied)
 
 
 # -- running behind, end to end (issue #26.2): both pages told; the record keeps the rates ---
@@ -332,7 +338,13 @@ def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not
     try:
         fast, slow = _Page(a.port), _Page(a.port, apply_every_s=1.0)
         ids: dict[str, int] = {}
-        t_end = time.monotonic() + 90
+        n: dict[tuple[int, int], str] = {}
+        # Waits on the condition, not on time: the fast page is pumped by this thread, and on
+        # a busy host it too falls behind now and then (0.8 s late once at load 8, rightly
+        # told so). The rule is proven by a moment at which the notices differ as the pages
+        # do: the slow one told, the fast one (having applied 60+ frames) not. A notice that
+        # went to every page, or to none, never shows that moment.
+        t_end = time.monotonic() + 240
         while time.monotonic() < t_end:
             for p in (fast, slow):
                 p.pump(0.02)
@@ -342,10 +354,10 @@ def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not
                 ids = {"slow": by_rate[0], "fast": by_rate[1]}
                 n = _notices(a)
                 if ("This page is behind" in n.get((a.port, ids["slow"]), "")
+                        and "This page is behind" not in n.get((a.port, ids["fast"]), "")
                         and pages[ids["fast"]].total_acks > 60):
                     break
         assert ids, a.acks.pages()
-        n = _notices(a)
         assert re.search(r"This page is behind\*\*: it shows \d of 20 updates/s",
                          n[(a.port, ids["slow"])]), n
         # (on a loaded host the loop may fall behind too: both then say so, the fast page
