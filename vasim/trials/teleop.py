@@ -171,13 +171,14 @@ from vasim.operator.needle import (
     needs_via,
     pregrasp_offset,
 )
+from vasim.operator.port import HandFactory, HandRequest, MasterHand
 from vasim.operator.profile import OperatorProfile
 from vasim.operator.teleop_profile import TeleopAdjustment, TeleopEffects
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.teleop_config import TeleopTrialConfig
-from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
+from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, ScriptedHands
 from vasim.trials.teleop_model import CYCLE_DT, TeleopTrialModel, TeleopTrialState
 from vasim.trials.teleop_quality import TargetDeformation
 from vasim.trials.vf import TrialResult
@@ -256,12 +257,22 @@ class TeleopTrial:
         effects: the operator's mode penalties (``vasim.operator.teleop_profile``);
             None: ``config.mode_effects`` (a session's declared teleoperation scenario),
             else ``NEUTRAL`` (the mechanism alone).
+        hand_factory: makes the hand of each new path (``vasim.operator.port.HandFactory``:
+            it gets a ``HandRequest``, the path's goals, start, reach, seed and whether the
+            needle is carried to a ring); None: the scripted person's
+            (``teleop_hands.ScriptedHands`` of the model's profiles). The viewer's
+            person-driven trials pass hands that read the page's device.
     """
 
     def __init__(self, config: TeleopTrialConfig, *, n_rings: int | None = None,
                  abdomen: Abdomen | None = None, holder: str = "positioner",
-                 effects: TeleopEffects | None = None) -> None:
+                 effects: TeleopEffects | None = None,
+                 hand_factory: HandFactory | None = None) -> None:
         self.model = model = TeleopTrialModel.build(config, n_rings, effects)
+        self.hand_factory: HandFactory = (
+            hand_factory if hand_factory is not None
+            else ScriptedHands(model.adjustment, model.task, config.practice))
+        """Where the trial's hands come from (the operator hook; ``__init__``)."""
         self.rng = np.random.default_rng(_seed(config.seed, 41))
         self.station = build_station({"right": model.task.start + grasp_offset("right")},
                                      holder=holder)
@@ -318,12 +329,11 @@ class TeleopTrial:
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
-              key: int, *, carry: bool = False) -> Hand:
-        """A new path of a hand; ``carry``: the needle is carried to a ring (the threading
-        movement, ``vasim.operator.teleop_profile``)."""
-        prof = self.adjustment.carry if carry else self.adjustment.handover
-        return Hand(prof, self.task, points, start,
-                     _seed(self.config.seed, 43, key), self.config.practice, reach)
+              key: int, *, carry: bool = False) -> MasterHand:
+        """A new path of a hand, from the trial's ``hand_factory``; ``carry``: the needle
+        is carried to a ring (the threading movement, ``vasim.operator.teleop_profile``)."""
+        return self.hand_factory(HandRequest(points, start, reach,
+                                             _seed(self.config.seed, 43, key), carry))
 
     def instruments(self) -> dict[str, ToolPose]:
         """Every instrument in the abdomen now: ``"right"``, ``"left"`` (trocar to tool tip)
@@ -619,7 +629,7 @@ class TeleopTrial:
                     phase = "carry"
             yield ts.k
 
-    def _approach_hand(self, side: Side, key: int) -> Hand:
+    def _approach_hand(self, side: Side, key: int) -> MasterHand:
         needle = self.state.needle
         pts = np.array([needle + pregrasp_offset(side), needle + grasp_offset(side)])
         return self._hand(pts, self.station.tip(side), (PREGRASP_REACH, GRASP_REACH), key)
