@@ -16,11 +16,16 @@ canonical like every quaternion here) and its shaft turn (:func:`rotate_by_rotve
 ``vasim.haptics.laparoscopic``; the bowel tilt of ``vasim.abdomen.anatomy`` (:func:`rot_x`,
 bit-identical to trimesh's ``rotation_matrix`` about x there); the MRCP viewer's prop meshes
 (:func:`homogeneous` of :func:`rot_y`/:func:`rot_z`); the IK's log map
-(:func:`rotvec_between`, moved from ``vasim.mrcp.arm``). Compiled kernels (``*_kernels.py``)
-keep their inlined arithmetic. What remains outside: ``trimesh.geometry.align_vectors`` for
-the vessel mesh of ``vasim.abdomen.anatomy``: it picks a different roll about the vessel's
-axis than :func:`matrix_z_to`, so replacing it would move the vessel's vertices and change
-every stored trial (issue #29 requires them identical).
+(:func:`rotvec_between`, moved from ``vasim.mrcp.arm``); the vessel mesh of
+``vasim.abdomen.anatomy`` (:func:`align_vectors`). Compiled kernels (``*_kernels.py``) keep
+their inlined arithmetic.
+
+**Decision** (:func:`align_vectors`, the one rotation built by a library other than scipy):
+it wraps ``trimesh.geometry.align_vectors``, bit for bit. Turning one direction onto
+another leaves the roll about the target free, and trimesh's choice differs from the
+smallest rotation of :func:`matrix_z_to` (and from scipy's ``Rotation.align_vectors``);
+the vessel's vertices were built with trimesh's, so only trimesh's keeps the stored trials
+identical (issue #29). This is the one place vasim calls it.
 
 Rotation matrices are ``(3, 3)`` (or ``(..., 3, 3)``) and act on column vectors:
 ``v_world = R @ v_local`` for a world-from-local ``R``. Quaternions returned here are unit
@@ -252,8 +257,27 @@ def matrix_z_to(direction: ArrayLike) -> FloatArray:
     return matrix_from_quat(quat_z_to(direction))
 
 
+def align_vectors(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """``(3, 3)`` rotation taking direction ``a`` onto direction ``b`` (any lengths > 0),
+    with trimesh's roll about ``b``: ``trimesh.geometry.align_vectors``' rotation block, bit
+    for bit (module docstring: why trimesh's and not :func:`matrix_z_to` or scipy's).
+
+    Example:
+        >>> import numpy as np
+        >>> r = align_vectors([0.0, 0.0, 1.0], [0.0, 1.0, 0.0])
+        >>> np.round(r @ [0.0, 0.0, 1.0], 12).tolist()
+        [0.0, 1.0, 0.0]
+    """
+    import trimesh  # here: its only user, and core.geometry stays quick to import
+
+    t = trimesh.geometry.align_vectors(np.asarray(a, dtype=np.float64),
+                                       np.asarray(b, dtype=np.float64))
+    return np.asarray(t, dtype=np.float64)[:3, :3]   # a view, as the vessel always used
+
+
 __all__ = [
     "QUAT_ORDER",
+    "align_vectors",
     "euler_xyz_from_matrix",
     "from_xyzw",
     "homogeneous",
