@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
 from vasim.core.bounds import PORT
-from vasim.core.config import check_choice, check_int, check_number
+from vasim.core.config import check_choice, check_int, check_number, expect
 from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.laparoscopic import InputMapping
@@ -182,18 +182,17 @@ class ViewerApp(ErrorReporter):
         token, experimenter_token = access.token, access.experimenter_token
         if token and experimenter_token is None:
             experimenter_token = new_token()
-        if token and experimenter_token and same_token(experimenter_token, token):
-            raise ConfigError("the experimenter's token must differ from the trainee's "
-                              "(one token per page)", field="experimenter_token")
+        expect(not (token and experimenter_token and same_token(experimenter_token, token)),
+               "the trainee's token", "a token that must differ from the trainee's (one "
+               "token per page)", field="experimenter_token")
         self.access = access_policy(host, token, role="trainee")
         self.exp_access = access_policy(host, experimenter_token, role="experimenter")
         self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")],
                            optics_deg=trials.optics)
         self._check_pace(trials, pace)
-        if scene.startswith("mrcp:"):
-            raise ConfigError(f"scene {scene!r} is an MRCP slave station: it is served by "
-                              "vasim.viewer.mrcp_panel.MrcpViewerApp (vasim serve --scene "
-                              "mrcp:<scenario> starts it), not by ViewerApp", field="scene")
+        expect(not scene.startswith("mrcp:"), scene, "an abdomen scene (an MRCP slave "
+               "station is served by vasim.viewer.mrcp_panel.MrcpViewerApp: vasim serve "
+               "--scene mrcp:<scenario> starts it)", field="scene")
         self.host = host
         self.requested_port = int(port)
         self.requested_experimenter_port = (

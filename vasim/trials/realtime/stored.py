@@ -9,6 +9,7 @@ import time
 from dataclasses import replace
 from typing import Any
 
+from vasim.core.config import expect
 from vasim.core.errors import ConfigError, DeviceError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import Device
@@ -57,9 +58,8 @@ def run_realtime_trial(config: TrialConfig, sink: TrialSink | None = None,
     Returns:
         (result, trial_id or None, timing).
     """
-    if physics == "inline":
-        raise ConfigError("physics 'inline' cannot keep real time; use 'thread' or 'off'",
-                          field="physics")
+    expect(physics != "inline", physics, "'thread' or 'off' ('inline' cannot keep real "
+           "time)", field="physics")
     sink = check_sink(sink)
     trial: RealtimeTrial | ProcessRealtimeTrial
     if process:
