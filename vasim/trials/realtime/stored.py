@@ -10,7 +10,7 @@ from dataclasses import replace
 from typing import Any
 
 from vasim.core.config import expect
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.errors import DeviceError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import Device
 from vasim.operator.device import ScriptedDevice
@@ -63,9 +63,8 @@ def run_realtime_trial(config: TrialConfig, sink: TrialSink | None = None,
     sink = check_sink(sink)
     trial: RealtimeTrial | ProcessRealtimeTrial
     if process:
-        if device is not None:
-            raise ConfigError("a device object cannot move to the servo process: pass "
-                              "device_factory (or process=False)", field="device")
+        expect(device is None, type(device).__name__, "no device object: it cannot move to "
+               "the servo process (pass device_factory, or process=False)", field="device")
         trial = ProcessRealtimeTrial(config, device_factory, schema=schema, physics=physics)
         scripted = device_factory is None
         name = "scripted" if scripted else (device_name or "device")
