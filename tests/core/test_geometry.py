@@ -15,6 +15,7 @@ from vasim.core.geometry import (
     QUAT_ORDER,
     align_vectors,
     euler_xyz_from_matrix,
+    frame_z_x,
     from_xyzw,
     homogeneous,
     matrix_from_axis_angle,
@@ -290,3 +291,23 @@ def test_align_vectors_roll_is_not_the_smallest_rotation_s() -> None:
     np.testing.assert_allclose(r[:, 2], d / np.linalg.norm(d), atol=1e-12)
     np.testing.assert_allclose(smallest[:, 2], d / np.linalg.norm(d), atol=1e-12)
     assert not np.allclose(r, smallest, atol=1e-6)
+
+
+@settings(max_examples=200, deadline=None)
+@given(vectors.filter(lambda d: np.linalg.norm(d) > 1e-3), vectors)
+def test_frame_z_x_is_a_rotation_with_z_and_x_in_the_hint_s_plane(d: np.ndarray,
+                                                                  hint: np.ndarray) -> None:
+    z = d / np.linalg.norm(d)
+    perp = hint - z * float(hint @ z)
+    if np.linalg.norm(perp) < 1e-6:      # (nearly) parallel: raised, or any x with any_x
+        if np.linalg.norm(perp) < 1e-9:
+            with pytest.raises(ValueError, match="parallel"):
+                frame_z_x(z, hint)
+        r = frame_z_x(z, hint, any_x=True)
+    else:
+        r = frame_z_x(z, hint)
+        # x is the hint's part orthogonal to z, normalised (Gram-Schmidt)
+        np.testing.assert_allclose(r[:, 0], perp / np.linalg.norm(perp), atol=1e-9)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_array_equal(r[:, 2], z)
