@@ -383,14 +383,13 @@ def check_no_crossover(sc: Scenario, *, file: str | None = None) -> None:
         for what, a, b in (("learnable noise", better.curve(p), worse.curve(p)),
                            ("movement time", better.time_curve(p), worse.time_curve(p))):
             cross = np.nonzero(a > b * (1 + 1e-9))[0]
-            if cross.size:
-                at = "the asymptote" if cross[0] == p.size - 1 else f"practice {int(p[cross[0]])}"
-                raise ConfigError(
-                    f"got group {worse.name!r} (mean skill {worse.mean_skill:.3f}) better "
-                    f"than {better.name!r} (mean skill {better.mean_skill:.3f}) in "
-                    f"{what} from {at}, expected the less experienced group not to overtake "
-                    "(lower its learning rate or raise its asymptote, or set "
-                    "groups.crossover_reason)", file=file, field="groups")
+            at = ("" if not cross.size else "the asymptote" if cross[0] == p.size - 1
+                  else f"practice {int(p[cross[0]])}")
+            expect(not cross.size, worse.name, f"the less experienced group (mean skill "
+                   f"{worse.mean_skill:.3f}) not to overtake {better.name!r} (mean skill "
+                   f"{better.mean_skill:.3f}); it is better in {what} from {at} (lower its "
+                   "learning rate or raise its asymptote, or set groups.crossover_reason)",
+                   file=file, field="groups")
 
 
 def scenario_path(name_or_path: str | Path) -> Path:
