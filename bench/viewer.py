@@ -30,7 +30,7 @@ Figures per run:
 
 0. before any page (issue #26.2, "measure first"): the messages the trainee's server
    queues per view frame, by node group (organs, task points, instrument, overlays, frame
-   mark, light, text/GUI), for ``ViewerApp(scene_hz=None)`` (the organs and the task's
+   mark, light, text/GUI), for ``ViewerPace(scene_hz=None)`` (the organs and the task's
    points with every frame, as before) and for the default (``flow.ScenePacer``: 10 Hz,
    slower for a slow page);
 
@@ -212,14 +212,14 @@ def _group(msg: Any) -> str:
 
 def frame_messages(seconds: float, scene_hz: float | None) -> dict[str, float]:
     """Messages the trainee's server queues per view frame, by node group (the broadcast
-    stream every trainee page gets; no page attached), for a ``ViewerApp(scene_hz=...)``
+    stream every trainee page gets; no page attached), for a ``ViewerPace(scene_hz=...)``
     on the default abdomen with ``trajectory_following`` (every overlay)."""
     import collections
 
-    from vasim.viewer import ViewerApp
+    from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 
-    app = ViewerApp(port=0, schema="trajectory_following", scene="default",
-                    scene_hz=scene_hz).start()
+    app = ViewerApp(port=0, scene="default", trials=TrialOptions(schema="trajectory_following"),
+                    pace=ViewerPace(scene_hz=scene_hz)).start()
     try:
         assert app.server is not None
         ws = app.server._websock_server  # private (viser 1.1.1): where every message goes
@@ -369,13 +369,13 @@ def _browser_missing() -> str | None:
 def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
     import tempfile
 
-    from vasim.viewer import ViewerApp
+    from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 
     rows: list[tuple[str, dict[str, float]]] = []
     tmp = tempfile.TemporaryDirectory(prefix="vasim-bench-viewer-")
     # A store: the throttled run's keyboard trial is a free-training trial (stored).
-    app = ViewerApp(port=0, schema="trajectory_following", scene="default",
-                    db=os.path.join(tmp.name, "bench.sqlite")).start()
+    app = ViewerApp(port=0, scene="default", db=os.path.join(tmp.name, "bench.sqlite"),
+                    trials=TrialOptions(schema="trajectory_following")).start()
     try:
         time.sleep(2.0)  # kernels compiled, the first trial under way
         rows.append(("no browser", _measure(app, seconds)))
@@ -408,9 +408,9 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
                 # every smoke figure, are not meaningful)
                 for label, scene_hz in THROTTLED_RUNS[-1:] if SMOKE else THROTTLED_RUNS:
                     with tempfile.TemporaryDirectory(prefix="vasim-bench-viewer-") as d:
-                        a = ViewerApp(port=0, schema="trajectory_following", scene="default",
-                                      db=os.path.join(d, "bench.sqlite"),
-                                      scene_hz=scene_hz).start()
+                        a = ViewerApp(port=0, scene="default", db=os.path.join(d, "bench.sqlite"),
+                                      trials=TrialOptions(schema="trajectory_following"),
+                                      pace=ViewerPace(scene_hz=scene_hz)).start()
                         name = f"Chromium 1280x800, CPU 4x slower, {label}"
                         try:
                             time.sleep(2.0)
@@ -430,7 +430,7 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
 
 THROTTLED_RUNS: tuple[tuple[str, float | None], ...] = (
     ("organs with every frame (before)", None), ("unsteered scene paced (after)", 10.0))
-"""The throttled page's runs: ``ViewerApp(scene_hz=...)`` (None: the organs and the task's
+"""The throttled page's runs: ``ViewerPace(scene_hz=...)`` (None: the organs and the task's
 points with every frame, as before issue #26.2; 10 Hz: ``flow.SCENE_HZ``)."""
 
 

@@ -70,7 +70,7 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
     from playwright.sync_api import sync_playwright
 
     from tests.browser.conftest import ACTION_TIMEOUT_MS, LAUNCH_ARGS, wait_ready
-    from vasim.viewer import ViewerApp
+    from vasim.viewer import TrialOptions, ViewerApp
     from vasim.viewer.render_scale import SCALES
 
     scales = (SCALES[0], SCALES[-1]) if SMOKE else SCALES
@@ -79,7 +79,8 @@ def run(seconds: float = SECONDS) -> list[tuple[str, dict[str, float]]]:
         browser = p.chromium.launch(executable_path="/usr/bin/chromium", headless=True,
                                     args=LAUNCH_ARGS)
         try:
-            app = ViewerApp(port=0, schema="trajectory_following", scene="default").start()
+            app = ViewerApp(port=0, scene="default",
+                            trials=TrialOptions(schema="trajectory_following")).start()
             app.notices.show = lambda *a, **k: None  # type: ignore[method-assign]
             try:
                 page = browser.new_page(viewport={"width": 1280, "height": 800})

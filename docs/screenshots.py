@@ -84,14 +84,15 @@ def editor_to_top(page: Any) -> None:
 def shoot(out: Path) -> list[Path]:
     from playwright.sync_api import sync_playwright
 
-    from vasim.viewer import ViewerApp
+    from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     with tempfile.TemporaryDirectory() as tmp:
-        app = ViewerApp(port=0, schema="trajectory_following", db=str(Path(tmp) / "s.sqlite"),
-                        scene="none", speed=3.0, pause_s=0.3, view_hz=5.0,
-                        countdown_s=0.0).start()
+        app = ViewerApp(port=0, db=str(Path(tmp) / "s.sqlite"), scene="none",
+                        trials=TrialOptions(schema="trajectory_following", pause_s=0.3,
+                                            countdown_s=0.0),
+                        pace=ViewerPace(speed=3.0, view_hz=5.0)).start()
         try:
             def request(kind: str, value: Any, cond: Callable[[], bool]) -> None:
                 app.request(kind, value)

@@ -120,7 +120,7 @@ def test_file_problems_name_the_file(tmp_path: Path) -> None:
     assert info.value.file == str(tmp_path / "missing.obj")
     bad_format = tmp_path / "ball.xyz"
     bad_format.write_text("1 2 3\n")
-    with pytest.raises(ConfigError, match=r"unsupported mesh format '\.xyz'"):
+    with pytest.raises(ConfigError, match=r"got '\.xyz', expected a supported mesh format"):
         load_user_mesh(bad_format)
     garbage = tmp_path / "garbage.stl"
     garbage.write_bytes(b"\x00\x01not a mesh at all" * 3)

@@ -12,7 +12,7 @@ import pytest
 
 from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_ready
 from vasim.viewer.access import new_token
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import PageAccess, TrialOptions, ViewerApp, ViewerPace
 
 _PROBE = """<!doctype html><title>another site</title><body><pre id="out">pending</pre>
 <script>
@@ -43,7 +43,8 @@ class _Foreign(http.server.BaseHTTPRequestHandler):
 
 @pytest.fixture(scope="module")
 def viewer(browser: Any) -> Iterator[ViewerApp]:
-    app = ViewerApp(port=0, schema="none", scene="none", view_hz=10.0).start()
+    app = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="none"),
+                    pace=ViewerPace(view_hz=10.0)).start()
     try:
         yield app
     finally:
@@ -85,8 +86,8 @@ def test_a_foreign_page_cannot_open_the_viewer_websocket(browser: Any, viewer: V
 
 def test_an_exposed_viewer_opens_only_with_its_token(browser: Any) -> None:
     token = new_token()
-    app = ViewerApp(host="0.0.0.0", port=0, schema="none", scene="none", view_hz=10.0,
-                    token=token).start()
+    app = ViewerApp(host="0.0.0.0", port=0, scene="none", trials=TrialOptions(schema="none"),
+                    pace=ViewerPace(view_hz=10.0), access=PageAccess(token=token)).start()
     page = browser.new_page(viewport=VIEWPORT)
     try:
         response = page.goto(f"http://127.0.0.1:{app.port}/")

@@ -15,7 +15,7 @@ from tests.polling import wait_for
 from tests.study.tiny_protocols import TINY, install
 from tests.study.tiny_protocols import session_rows as sessions
 from vasim.cli import main
-from vasim.viewer import ViewerApp
+from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.history import AGAIN_FIELD
 
 
@@ -29,8 +29,8 @@ def app(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, browser: Any,
     assert main(["study", "run", "--protocol", "tiny", "--db", str(db), "--subject", "D9",
                  "--no-progress"]) == 0
     capsys.readouterr()
-    a = ViewerApp(port=0, db=str(db), scene="none", speed=3.0, pause_s=0.3,
-                  view_hz=10.0).start()
+    a = ViewerApp(port=0, db=str(db), scene="none", trials=TrialOptions(pause_s=0.3),
+                  pace=ViewerPace(speed=3.0, view_hz=10.0)).start()
     try:
         yield a
     finally:

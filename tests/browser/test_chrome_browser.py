@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from tests.browser.conftest import WAIT_MS, wait_ready
-from vasim.viewer import ViewerApp
+from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.chrome import HIDDEN_ICONS
 
 LAPTOP = {"width": 1280, "height": 800}
@@ -21,7 +21,8 @@ CONFIG_ICONS = ("home-move", "eye", "eye-off", "pencil", "photo")
 
 @pytest.fixture(scope="module")
 def app(browser: Any) -> Iterator[ViewerApp]:
-    a = ViewerApp(port=0, schema="vg", scene="none", view_hz=10.0).start()
+    a = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="vg"),
+                  pace=ViewerPace(view_hz=10.0)).start()
     try:
         yield a
     finally:

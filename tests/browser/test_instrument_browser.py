@@ -23,15 +23,15 @@ from tests.browser.conftest import WAIT_MS, wait_ready
 from tests.polling import wait_for
 from vasim.haptics.laparoscopic import InputMapping
 from vasim.study.store import TrialStore
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.controller import Command
 
 
 @pytest.fixture(scope="module")
 def app(browser: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ViewerApp]:
     db = str(tmp_path_factory.mktemp("instrument") / "study.sqlite")
-    a = ViewerApp(port=0, schema="vg", db=db, scene="none", view_hz=10.0,
-                  countdown_s=1.0).start()
+    a = ViewerApp(port=0, db=db, scene="none", trials=TrialOptions(schema="vg", countdown_s=1.0),
+                  pace=ViewerPace(view_hz=10.0)).start()
     try:
         yield a
     finally:

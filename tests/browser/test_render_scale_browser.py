@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from tests.browser.conftest import READY_TIMEOUT_MS, wait_ready
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp
 from vasim.viewer.render_scale import SCALES
 
 RATIO_JS = """() => { const c = window.__viserMutable && window.__viserMutable.canvas;
@@ -21,7 +21,7 @@ RATIO_JS = """() => { const c = window.__viserMutable && window.__viserMutable.c
 
 @pytest.fixture(scope="module")
 def app() -> Iterator[ViewerApp]:
-    a = ViewerApp(port=0, schema="none", scene="none", countdown_s=0.0).start()
+    a = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="none", countdown_s=0.0)).start()
     try:
         yield a
     finally:

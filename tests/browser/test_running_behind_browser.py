@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from tests.browser.conftest import READY_TIMEOUT_MS, wait_ready
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.controller import Command
 
 
@@ -22,9 +22,9 @@ from vasim.viewer.controller import Command
 def app(browser: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ViewerApp]:
     # A free trial nobody steers lasts (a scripted demo may end within a wall second,
     # before the loop's factor is measured).
-    a = ViewerApp(port=0, schema="none", scene="none", speed=1000.0, view_hz=10.0,
-                  db=str(tmp_path_factory.mktemp("behind") / "s.sqlite"), max_time=3600.0,
-                  countdown_s=0.0).start()
+    a = ViewerApp(port=0, scene="none", db=str(tmp_path_factory.mktemp("behind") / "s.sqlite"),
+                  trials=TrialOptions(schema="none", max_time=3600.0, countdown_s=0.0),
+                  pace=ViewerPace(speed=1000.0, view_hz=10.0)).start()
     try:
         for cmd in (Command("mode", "free"), Command("input", "laparoscopic"),
                     Command("start")):

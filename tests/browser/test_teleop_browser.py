@@ -23,7 +23,7 @@ from tests.polling import wait_for
 from tests.study.tiny_protocols import install
 from tests.viewer.test_teleop_session import teleop_protocol
 from vasim.study.store import TrialStore
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp, ViewerPace
 
 TELEOP_BROWSER = teleop_protocol("teleop_browser", 300.0, ("mrcp",), question=False)
 
@@ -34,8 +34,8 @@ EXPERIMENTER_VIEW = {"width": 560, "height": 620}
 @pytest.fixture
 def app(browser: Any, tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> Iterator[ViewerApp]:
     install(monkeypatch, tmp_path / "protocols", teleop_browser=TELEOP_BROWSER)
-    with ViewerApp(port=0, db=str(tmp_path / "study.sqlite"), scene="none", view_hz=10.0,
-                   countdown_s=1.0) as a:
+    with ViewerApp(port=0, db=str(tmp_path / "study.sqlite"), scene="none",
+                   trials=TrialOptions(countdown_s=1.0), pace=ViewerPace(view_hz=10.0)) as a:
         yield a
 
 

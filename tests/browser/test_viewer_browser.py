@@ -19,7 +19,7 @@ import pytest
 from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_ready
 from tests.polling import wait_for
 from vasim.study.store import TrialStore
-from vasim.viewer import ViewerApp
+from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +32,9 @@ def app(db: str, browser: Any) -> Iterator[ViewerApp]:
     # speed 3: the scripted point trials finish in about a second of wall time. The static
     # anatomy and 15 view updates/s keep software WebGL on a 2-core machine responsive (the
     # deforming abdomen is tested through the Python API; its streaming rate in bench/viewer).
-    a = ViewerApp(port=0, schema="trajectory_following", db=db, scene="none", speed=3.0,
-                  pause_s=0.3, view_hz=15.0).start()
+    a = ViewerApp(port=0, db=db, scene="none",
+                  trials=TrialOptions(schema="trajectory_following", pause_s=0.3),
+                  pace=ViewerPace(speed=3.0, view_hz=15.0)).start()
     try:
         yield a
     finally:

@@ -71,7 +71,8 @@ def test_atomic_folder_keeps_files_it_did_not_write(tmp_path: Path) -> None:
         (tmp / "thesis.docx").write_text("clobber")
     assert (out / "thesis.docx").read_text() == "precious"
     (tmp_path / "file").write_text("x")
-    with pytest.raises(ConfigError, match="is a file"), \
+    not_a_folder = r"\(exists and is not a folder\), expected the output folder"
+    with pytest.raises(ConfigError, match=not_a_folder), \
             atomic_folder(tmp_path / "file", owned=_owned):
         pass
 

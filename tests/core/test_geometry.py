@@ -13,7 +13,9 @@ from scipy.spatial.transform import Rotation
 
 from vasim.core.geometry import (
     QUAT_ORDER,
+    align_vectors,
     euler_xyz_from_matrix,
+    frame_z_x,
     from_xyzw,
     homogeneous,
     matrix_from_axis_angle,
@@ -264,3 +266,48 @@ def test_homogeneous_applies_the_rotation_then_the_translation() -> None:
     np.testing.assert_allclose((m @ [*p, 1.0])[:3], r @ p + t, atol=1e-15)
     np.testing.assert_array_equal(homogeneous(), np.eye(4))
     np.testing.assert_array_equal(homogeneous(translation=t)[:3, :3], np.eye(3))
+
+
+@settings(max_examples=200, deadline=None)
+@given(vectors.filter(lambda d: np.linalg.norm(d) > 1e-3),
+       vectors.filter(lambda d: np.linalg.norm(d) > 1e-3))
+def test_align_vectors_turns_a_onto_b_with_trimesh_s_roll(a: np.ndarray, b: np.ndarray) -> None:
+    import trimesh
+
+    r = align_vectors(a, b)
+    # a rotation (orthonormal, det 1) taking the direction of a onto that of b
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(r @ (a / np.linalg.norm(a)), b / np.linalg.norm(b), atol=1e-7)
+    # trimesh's own, bit for bit (its roll: the stored vessel meshes depend on it)
+    np.testing.assert_array_equal(r, trimesh.geometry.align_vectors(a, b)[:3, :3])
+
+
+def test_align_vectors_roll_is_not_the_smallest_rotation_s() -> None:
+    # why the wrapper exists (vasim.core.geometry, decision): for +z onto a tilted
+    # direction trimesh picks another roll than matrix_z_to; both take z onto d
+    d = np.array([0.3, -0.5, 0.8])
+    r, smallest = align_vectors([0.0, 0.0, 1.0], d), matrix_z_to(d)
+    np.testing.assert_allclose(r[:, 2], d / np.linalg.norm(d), atol=1e-12)
+    np.testing.assert_allclose(smallest[:, 2], d / np.linalg.norm(d), atol=1e-12)
+    assert not np.allclose(r, smallest, atol=1e-6)
+
+
+@settings(max_examples=200, deadline=None)
+@given(vectors.filter(lambda d: np.linalg.norm(d) > 1e-3), vectors)
+def test_frame_z_x_is_a_rotation_with_z_and_x_in_the_hint_s_plane(d: np.ndarray,
+                                                                  hint: np.ndarray) -> None:
+    z = d / np.linalg.norm(d)
+    perp = hint - z * float(hint @ z)
+    if np.linalg.norm(perp) < 1e-6:      # (nearly) parallel: raised, or any x with any_x
+        if np.linalg.norm(perp) < 1e-9:
+            with pytest.raises(ValueError, match="parallel"):
+                frame_z_x(z, hint)
+        r = frame_z_x(z, hint, any_x=True)
+    else:
+        r = frame_z_x(z, hint)
+        # x is the hint's part orthogonal to z, normalised (Gram-Schmidt)
+        np.testing.assert_allclose(r[:, 0], perp / np.linalg.norm(perp), atol=1e-9)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)
+    assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_array_equal(r[:, 2], z)

@@ -40,7 +40,7 @@ def joint_margins(q: np.ndarray) -> np.ndarray:
 def test_registry_names_every_scenario_and_rejects_unknown() -> None:
     assert set(SCENARIOS) >= {"cube_rotation", "cube_translation", "obstacle_hole",
                               "laparoscopic_rings", "faucet"}
-    with pytest.raises(ConfigError, match="unknown scenario 'nope'"):
+    with pytest.raises(ConfigError, match="field 'scenario': got 'nope', expected one of"):
         get_scenario("nope")
 
 
@@ -96,7 +96,7 @@ def test_cli_run_prints_the_log_json_and_saves_the_plot(tmp_path: Path,
     assert code == 0 and out["scenario"] == "cube_rotation" and out["violations"] == []
     assert out["cycles"] == int(1.0 / 0.036) and png.stat().st_size > 10_000
     assert main(["mrcp", "run", "nope"]) == 2
-    assert "unknown scenario 'nope'" in capsys.readouterr().err
+    assert "field 'scenario': got 'nope', expected one of" in capsys.readouterr().err
     assert main(["mrcp", "list"]) == 0
     assert "cube_rotation" in capsys.readouterr().out
 

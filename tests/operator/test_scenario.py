@@ -104,7 +104,8 @@ def test_groups_that_cross_over_are_refused_unless_the_file_says_why():
     old = 'asymptote = { value = 0.6, source = "assumed (as surgeons)'
     assert old in _text()
     text = _text().replace(old, 'asymptote = { value = 0.1, source = "assumed (as surgeons)')
-    with pytest.raises(ConfigError, match="overtake") as exc:
+    with pytest.raises(ConfigError, match=r"got 'resident', expected the less experienced "
+                       r"group \(mean skill [0-9.]+\) not to overtake 'surgeon'") as exc:
         parse_scenario(text)
     assert exc.value.field == "groups"
     ok = text.replace("[groups.surgeon]\n", '[groups]\ncrossover_reason = "testing"\n\n'

@@ -51,7 +51,8 @@ def test_benchmark_is_mean_plus_k_sd_with_the_sample_sd() -> None:
 
 
 def test_a_benchmark_needs_two_expert_values() -> None:
-    with pytest.raises(ConfigError, match="1 expert value"):
+    with pytest.raises(ConfigError,
+                       match=r"got 1, expected at least 2 finite expert values of 'duration'"):
         expert_benchmark({"duration": [10.0, float("nan")]}, ("duration",), k=1.0)
 
 

@@ -382,14 +382,15 @@ def test_bad_arguments(tmp_path: Path, vf_study: tuple[Path, Path], capsys) -> N
     missing = tmp_path / "nope.sqlite"
     assert main(["report", "--db", str(missing), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "nope.sqlite" in err and "not found" in err
+    assert err.count("\n") == 1 and "nope.sqlite" in err
+    assert "(no such file), expected the study database" in err
     with pytest.raises(ConfigError, match="no session of protocol 'mrcp_vs_stdt'"):
         build_report(db, tmp_path / "o", protocol="mrcp_vs_stdt")
     f = tmp_path / "file"
     f.write_text("x")
     with pytest.raises(ConfigError, match="not a folder"):
         build_report(db, f)
-    with pytest.raises(ConfigError, match="directory"):
+    with pytest.raises(ConfigError, match=r"\(a folder\), expected the study database"):
         build_report(tmp_path, tmp_path / "o")
     other = tmp_path / "two.sqlite"
     with TrialStore(other) as st:

@@ -216,7 +216,7 @@ def test_subjects_are_registered_once(store: TrialStore):
 
 
 def test_meta_validation():
-    with pytest.raises(ConfigError, match="unknown trial meta"):
+    with pytest.raises(ConfigError, match=r"got \['name'\], expected known trial meta fields"):
         TrialMeta.from_mapping({"subject": "S01", "task": "t", "name": "Jane"})
     with pytest.raises(ConfigError, match="dt"):
         meta(dt=0.0)

@@ -311,3 +311,79 @@ def test_the_report_tables_et_em_and_q_of_the_stored_trials(session, tmp_path: P
     for d in session["data"].values():       # the trial knows its mode's practice
         assert d["trial"]["config"]["mode_practice"] == 0
         assert d["metrics"]["target_deformation"] >= 0.0
+
+
+class _StillHand:
+    """A hand that never moves its master and never reaches a goal."""
+
+    j = 0
+    done = False
+
+    def move(self, dt: float, seen: np.ndarray, goal: np.ndarray, zoom: float) -> np.ndarray:
+        return np.zeros(3)
+
+    def check(self, position: np.ndarray, goal: np.ndarray) -> bool:
+        return False
+
+
+class _RecordingHands:
+    """A ``HandFactory`` that records every request and every move of its hands, and hands
+    out ``inner``'s hands (None: still hands)."""
+
+    def __init__(self, inner=None) -> None:
+        self.inner = inner
+        self.requests: list = []
+        self.moves = 0
+
+    def __call__(self, request):
+        self.requests.append(request)
+        hand = self.inner(request) if self.inner is not None else _StillHand()
+        factory = self
+
+        class Recorded:
+            @property
+            def j(self) -> int:
+                return hand.j
+
+            @property
+            def done(self) -> bool:
+                return hand.done
+
+            def move(self, *a):
+                factory.moves += 1
+                return hand.move(*a)
+
+            def check(self, *a):
+                return hand.check(*a)
+
+        return Recorded()
+
+
+@pytest.mark.parametrize("mode", ["stdt", "mrcp"])
+def test_the_trial_s_hands_come_from_its_hand_factory(mode: str) -> None:
+    from vasim.trials.teleop import OPERATOR_SUBSTEPS
+    from vasim.trials.teleop_hands import ScriptedHands
+
+    cfg = TeleopTrialConfig(mode=mode, seed=SEED, max_time=4.0, scene="none")
+    plain = TeleopTrial(cfg, n_rings=2)
+    ref = plain.run()
+    # the default factory is the scripted person's: the same hands through the hook give
+    # the same trial, bit for bit, and every path and every hand step went through it
+    m = plain.model
+    rec = _RecordingHands(ScriptedHands(m.adjustment, m.task, cfg.practice))
+    tr = TeleopTrial(cfg, n_rings=2, hand_factory=rec)
+    res = tr.run()
+    np.testing.assert_array_equal(res.samples.view()["x"], ref.samples.view()["x"])
+    assert res.trial_metrics == ref.trial_metrics
+    first = rec.requests[0]
+    np.testing.assert_array_equal(first.start, tr.task.start)
+    assert first.carry and len(rec.requests) >= 2
+    assert len({r.seed for r in rec.requests}) == len(rec.requests)   # one seed per path
+    assert rec.moves >= OPERATOR_SUBSTEPS * (tr.state.k + 1) // 2
+    # hands that do not move: the needle stays where it started
+    still = _RecordingHands()
+    res = TeleopTrial(cfg, n_rings=2, hand_factory=still).run()
+    assert len(still.requests) == 1 and still.moves == OPERATOR_SUBSTEPS * (res.summary["steps"])
+    x = res.samples.view()["x"]
+    np.testing.assert_allclose(x, np.repeat(x[:1], len(x), axis=0), atol=1e-9)
+    assert not res.summary["finished"]

@@ -20,7 +20,7 @@ from vasim.viewer.access import (
     new_token,
     viewer_url,
 )
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import PageAccess, TrialOptions, ViewerApp
 
 # -- the policy (pure) -------------------------------------------------------------------
 
@@ -80,7 +80,7 @@ def test_a_public_bind_without_a_token_is_refused() -> None:
 
 @pytest.fixture(scope="module")
 def loop_app() -> Iterator[ViewerApp]:
-    app = ViewerApp(port=0, schema="none", scene="none").start()
+    app = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="none")).start()
     try:
         yield app
     finally:
@@ -114,7 +114,8 @@ def test_the_server_refuses_a_rebinding_host(loop_app: ViewerApp) -> None:
 
 def test_an_exposed_server_needs_its_token() -> None:
     token = new_token()
-    app = ViewerApp(host="0.0.0.0", port=0, schema="none", scene="none", token=token).start()
+    app = ViewerApp(host="0.0.0.0", port=0, scene="none", trials=TrialOptions(schema="none"),
+                    access=PageAccess(token=token)).start()
     try:
         assert app.url.endswith(f"?token={token}")
         base = f"http://127.0.0.1:{app.port}/"

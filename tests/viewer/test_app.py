@@ -23,7 +23,7 @@ from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError, InputError
 from vasim.core.geometry import matrix_z_to, quat_z_to
 from vasim.fixtures.types import Arrow, AudioCue, CameraView
-from vasim.viewer import CameraController, CameraPose, ViewerApp
+from vasim.viewer import CameraController, CameraPose, TrialOptions, ViewerApp
 from vasim.viewer.trainee import audio_text, hud_markdown
 from vasim.viewer.views import (
     arrow_mesh,
@@ -33,7 +33,7 @@ from vasim.viewer.views import (
 
 @pytest.fixture(scope="module")
 def app():
-    a = ViewerApp(port=0, schema="trajectory_following", seed=1).start()
+    a = ViewerApp(port=0, trials=TrialOptions(schema="trajectory_following", seed=1)).start()
     try:
         assert wait_for(lambda: a.stats()["view_updates"] >= 5)
         yield a
@@ -155,7 +155,7 @@ def test_view_thread_keeps_updating(app: ViewerApp) -> None:
 
 
 def test_trials_loop_and_stop_joins_everything() -> None:
-    a = ViewerApp(port=0, schema="none", max_time=0.3, pause_s=0.1).start()
+    a = ViewerApp(port=0, trials=TrialOptions(schema="none", max_time=0.3, pause_s=0.1)).start()
     port = a.port
     try:
         assert wait_for(lambda: a.snapshot.info.number >= 3)
@@ -178,8 +178,9 @@ class _FakeApp:
 
     instances: ClassVar[list[_FakeApp]] = []
 
-    def __init__(self, host, port, schema, seed, task, **kw):
-        self.host, self.port, self.schema, self.task = host, port, schema, task
+    def __init__(self, host, port, *, trials, access, **kw):
+        self.host, self.port, self.schema, self.task = host, port, trials.schema, trials.task
+        self.trials, self.access = trials, access
         self.kw = kw
         self.url = f"http://{host}:{port}/"
         self.stopped = False
@@ -219,10 +220,10 @@ def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(
     err = capsys.readouterr().err
     assert "warning" in err and "0.0.0.0" in err and "every network interface" in err
     assert _FakeApp.instances[-1].host == "0.0.0.0" and _FakeApp.instances[-1].stopped
-    token = _FakeApp.instances[-1].kw["token"]
+    token = _FakeApp.instances[-1].access.token
     assert isinstance(token, str) and len(token) >= 20
     viewer_cli.serve(_serve_args(host="0.0.0.0", port=8080, expose=True))
-    assert _FakeApp.instances[-1].kw["token"] != token
+    assert _FakeApp.instances[-1].access.token != token
     capsys.readouterr()
     # An address that is not this machine's is the error, without an exposure warning first.
     with pytest.raises(ConfigError, match=r"cannot bind to host '999\.1\.1\.1'"):
@@ -231,10 +232,10 @@ def test_cli_binds_beyond_loopback_only_with_expose_and_a_token(
     for host in ("127.0.0.1", "localhost", "::1"):
         assert viewer_cli.serve(_serve_args(host=host)) == 0
         assert "warning" not in capsys.readouterr().err
-        assert _FakeApp.instances[-1].kw["token"] is None
+        assert _FakeApp.instances[-1].access.token is None
     # --optics reaches the app (the trainee's 0 or 30 deg endoscope).
     viewer_cli.serve(_serve_args(optics=30))
-    assert _FakeApp.instances[-1].kw["optics"] == 30.0
+    assert _FakeApp.instances[-1].trials.optics == 30.0
     assert main(["serve", "--optics", "45", "--duration", "0"]) == 2
     capsys.readouterr()
     # --task point without --schema picks the point-targeting VFS.

@@ -152,7 +152,7 @@ def test_f5pl_edit_runs_and_stores_the_edited_schema(ctl: TrainingController) ->
     with closing(store(ctl)) as st:
         toml = st.trial(tid)["schema_toml"]
     assert f"c = {edited.c!r}" in toml or f"c = {edited.c}" in toml
-    with pytest.raises(ConfigError, match="no fixture"):
+    with pytest.raises(ConfigError, match="got 'ff', expected a fixture of schema 'vg'"):
         with_f5pl(load_schema("vg"), "ff", edited)
 
 

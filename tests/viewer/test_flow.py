@@ -17,7 +17,7 @@ from websockets.sync.client import connect
 
 from tests.polling import wait_until
 from vasim.viewer import flow
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.flow import (
     MAX_AHEAD,
     PageFlow,
@@ -145,7 +145,8 @@ def _decode(raw: bytes) -> list[dict[str, Any]]:
 
 @pytest.fixture(scope="module")
 def app() -> Iterator[ViewerApp]:
-    a = ViewerApp(port=0, schema="vg", scene="none", view_hz=20.0).start()
+    a = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="vg"),
+                  pace=ViewerPace(view_hz=20.0)).start()
     try:
         yield a
     finally:
@@ -308,8 +309,9 @@ def test_both_pages_are_told_when_the_loop_cannot_keep_up(tmp_path: Any) -> None
     before the factor is measured: the meter needs 1 s of one trial)."""
     from vasim.viewer.controller import Command
 
-    a = ViewerApp(port=0, schema="none", scene="none", speed=1000.0, view_hz=10.0,
-                  db=str(tmp_path / "s.sqlite"), max_time=3600.0, countdown_s=0.0).start()
+    a = ViewerApp(port=0, scene="none", db=str(tmp_path / "s.sqlite"),
+                  trials=TrialOptions(schema="none", max_time=3600.0, countdown_s=0.0),
+                  pace=ViewerPace(speed=1000.0, view_hz=10.0)).start()
     try:
         for cmd in (Command("mode", "free"), Command("input", "laparoscopic"),
                     Command("start")):
@@ -334,7 +336,8 @@ def test_both_pages_are_told_when_the_loop_cannot_keep_up(tmp_path: Any) -> None
 def test_a_page_that_draws_too_slowly_is_told_so_and_a_page_that_keeps_up_is_not() -> None:
     """Two trainee pages: one applies every frame, the other one frame a second; only the
     slow one's notice says this page is behind (its rate, how late)."""
-    a = ViewerApp(port=0, schema="vg", scene="none", view_hz=20.0).start()
+    a = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="vg"),
+                  pace=ViewerPace(view_hz=20.0)).start()
     try:
         fast, slow = _Page(a.port), _Page(a.port, apply_every_s=1.0)
         ids: dict[str, int] = {}
@@ -380,8 +383,9 @@ def test_a_stored_trial_keeps_the_loop_rate_and_the_pages_update_rate(tmp_path: 
     from vasim.viewer.controller import Command
 
     db = tmp_path / "s.sqlite"
-    a = ViewerApp(port=0, schema="vg", scene="none", db=str(db), max_time=3.0,
-                  countdown_s=0.0, view_hz=20.0).start()
+    a = ViewerApp(port=0, scene="none", db=str(db),
+                  trials=TrialOptions(schema="vg", max_time=3.0, countdown_s=0.0),
+                  pace=ViewerPace(view_hz=20.0)).start()
     try:
         page = _Page(a.port)
         t_end = time.monotonic() + 60

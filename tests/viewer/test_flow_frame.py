@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from viser.infra._async_message_buffer import AsyncMessageBuffer
 
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp
 from vasim.viewer.audio import run_js
 from vasim.viewer.flow import FRAMES_PER_SCENE, MIN_SCENE_HZ, SCENE_HZ, ScenePacer
 
@@ -135,7 +135,8 @@ def _count(app: ViewerApp, seconds: float) -> tuple[collections.Counter[str], in
 
 
 def test_frames_carry_the_organs_at_the_scene_rate_and_the_tool_with_every_frame() -> None:
-    app = ViewerApp(port=0, schema="trajectory_following", scene="default").start()
+    app = ViewerApp(port=0, scene="default",
+                    trials=TrialOptions(schema="trajectory_following")).start()
     try:
         t_end = time.monotonic() + 60
         while app.scene_pacer.sent < 2 and time.monotonic() < t_end:

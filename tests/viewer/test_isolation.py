@@ -20,7 +20,7 @@ from viser import _messages
 from websockets.sync.client import connect
 
 from vasim.viewer import isolation
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.isolation import LoopSafeEvent, Strikes, camera_refusal, message_refusal
 from vasim.viewer.views import CameraController, CameraPose
 
@@ -150,7 +150,8 @@ def test_one_client_with_a_broken_camera_does_not_stop_the_others() -> None:
 @pytest.fixture(scope="module")
 def app() -> Iterator[ViewerApp]:
     # Mag drives the camera: the view thread writes every client's camera all the time.
-    a = ViewerApp(port=0, schema="mag", scene="none", view_hz=20.0).start()
+    a = ViewerApp(port=0, scene="none", trials=TrialOptions(schema="mag"),
+                  pace=ViewerPace(view_hz=20.0)).start()
     try:
         yield a
     finally:

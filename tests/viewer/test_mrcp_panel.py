@@ -174,7 +174,8 @@ def test_failing_cycle_is_notified_logged_and_restarts(caplog: pytest.LogCapture
 
 
 def test_unknown_scenario_is_a_clear_error_before_any_socket() -> None:
-    with pytest.raises(ConfigError, match=r"unknown MRCP scenario 'nope'.*mrcp:cube_rotation"):
+    with pytest.raises(ConfigError,
+                       match=r"got 'nope', expected an MRCP scenario: one of .*mrcp:cube_rotation"):
         MrcpViewerApp(port=0, scenario="mrcp:nope")
     with pytest.raises(ConfigError, match="MrcpViewerApp"):
         ViewerApp(port=0, scene="mrcp:cube_rotation")
@@ -188,7 +189,7 @@ def test_vasim_serve_mrcp(capsys: pytest.CaptureFixture[str]) -> None:
     assert "MRCP scenario faucet" in capsys.readouterr().out
     assert main(["serve", "--port", "0", "--scene", "mrcp:nope"]) == 2
     err = capsys.readouterr().err
-    assert "unknown MRCP scenario 'nope'" in err and "mrcp:obstacle_hole" in err
+    assert "got 'nope', expected an MRCP scenario: one of" in err and "mrcp:obstacle_hole" in err
     with pytest.raises(SystemExit):
         main(["serve", "--help"])
     out = " ".join(capsys.readouterr().out.split())

@@ -20,7 +20,7 @@ from websockets.sync.client import connect
 
 from vasim.core.errors import ConfigError
 from vasim.viewer.access import AccessPolicy, cookie_name, new_token, same_token
-from vasim.viewer.app import ViewerApp
+from vasim.viewer.app import PageAccess, TrialOptions, ViewerApp, ViewerPace
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -60,14 +60,14 @@ def test_same_token_compares_bytes_and_never_raises() -> None:
 def test_the_two_pages_may_not_share_a_token() -> None:
     t = new_token()
     with pytest.raises(ConfigError, match="must differ"):
-        ViewerApp(host="0.0.0.0", port=0, schema="none", scene="none", token=t,
-                  experimenter_token=t)
+        ViewerApp(host="0.0.0.0", port=0, scene="none", trials=TrialOptions(schema="none"),
+                  access=PageAccess(token=t, experimenter_token=t))
 
 
 @pytest.fixture(scope="module")
 def exposed() -> Iterator[ViewerApp]:
-    app = ViewerApp(host="0.0.0.0", port=0, schema="none", scene="none", view_hz=10.0,
-                    token=new_token()).start()
+    app = ViewerApp(host="0.0.0.0", port=0, scene="none", trials=TrialOptions(schema="none"),
+                    pace=ViewerPace(view_hz=10.0), access=PageAccess(token=new_token())).start()
     try:
         yield app
     finally:

@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 
 from tests.polling import wait_for
-from vasim.viewer import ViewerApp
+from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 from vasim.viewer.controller import Command
 
 
 def test_a_timed_out_trial_on_both_pages(tmp_path: Path) -> None:
-    app = ViewerApp(port=0, schema="vg", db=str(tmp_path / "s.sqlite"), scene="none",
-                    max_time=1.5, speed=3.0, countdown_s=0.0).start()
+    app = ViewerApp(port=0, db=str(tmp_path / "s.sqlite"), scene="none",
+                    trials=TrialOptions(schema="vg", max_time=1.5, countdown_s=0.0),
+                    pace=ViewerPace(speed=3.0)).start()
     try:
         for cmd in (Command("mode", "free"), Command("subject", "S01"), Command("start")):
             app.submit(cmd)

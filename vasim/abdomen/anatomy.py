@@ -290,12 +290,12 @@ def vessel(
     a, b = np.asarray(start, dtype=np.float64), np.asarray(end, dtype=np.float64)
     length = float(np.linalg.norm(b - a))
     cap = _tube(length, radius, count[0], count[1])
-    v = cap.vertices.copy()  # along z in [-length/2 - r, length/2 + r]
+    v: FloatArray = cap.vertices.copy()  # along z in [-length/2 - r, length/2 + r]
     s = np.clip(v[:, 2] / length + 0.5, 0.0, 1.0)
     # Rotate +z onto the start->end direction, move to the midpoint, then sway along x.
     d = (b - a) / length
-    T = trimesh.geometry.align_vectors(np.array([0.0, 0.0, 1.0]), d)
-    v = v @ T[:3, :3].T + (a + b) / 2.0
+    R = geometry.align_vectors(np.array([0.0, 0.0, 1.0]), d)   # trimesh's roll (geometry)
+    v = v @ R.T + (a + b) / 2.0
     v[:, 0] += sway * np.sin(2.0 * np.pi * s)
     return _finish(v, cap.faces)
 

@@ -190,9 +190,8 @@ def load_user_mesh(
     expect(p.is_file(), str(p), "an existing mesh file (mesh file not found)", file=p,
             field=field)
     ext = p.suffix.lower().lstrip(".")
-    if ext not in SUPPORTED_FORMATS:
-        raise ConfigError(f"unsupported mesh format {p.suffix!r} (supported: "
-                          f"{', '.join(SUPPORTED_FORMATS)})", file=p, field=field)
+    expect(ext in SUPPORTED_FORMATS, p.suffix, f"a supported mesh format (one of "
+           f"{', '.join(SUPPORTED_FORMATS)})", file=p, field=field)
     try:
         # process=False first: merging vertices would drop a NaN vertex and report the hole
         # it leaves ("not closed") instead of the bad vertex.

@@ -114,7 +114,13 @@ def serve(args: argparse.Namespace) -> int:
         VasimError: for a bad schema/task (the caller prints it as one line).
     """
     from vasim.viewer.access import is_loopback, new_token
-    from vasim.viewer.app import DEFAULT_SCHEMA_FOR_TASK, ViewerApp, check_bind_address
+    from vasim.viewer.app import (
+        DEFAULT_SCHEMA_FOR_TASK,
+        PageAccess,
+        TrialOptions,
+        ViewerApp,
+        check_bind_address,
+    )
 
     check_bind_address(args.host, args.port)  # a bad address is the error, not a warning
     token: str | None = None
@@ -145,10 +151,12 @@ def serve(args: argparse.Namespace) -> int:
         protocol = check_protocol(getattr(args, "protocol", None), getattr(args, "db", None))
         if getattr(args, "db", None):
             check_db(Path(args.db))
-        app = ViewerApp(args.host, args.port, schema, args.seed, args.task, skill=args.skill,
-                        scene=scene, db=getattr(args, "db", None), token=token,
-                        experimenter_port=getattr(args, "experimenter_port", None),
-                        optics=float(getattr(args, "optics", 0)))
+        trials = TrialOptions(schema=schema, seed=args.seed, task=args.task, skill=args.skill,
+                              optics=float(getattr(args, "optics", 0)))
+        access = PageAccess(token=token,
+                            experimenter_port=getattr(args, "experimenter_port", None))
+        app = ViewerApp(args.host, args.port, scene=scene, db=getattr(args, "db", None),
+                        trials=trials, access=access)
         db = getattr(args, "db", None)
         stored = f"trials stored in {db}" if db else "demo only: no --db"
         what = f"schema {schema}, task {args.task}, scene {scene}, {stored}"

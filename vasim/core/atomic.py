@@ -39,6 +39,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
+from vasim.core.config import check_dir_path
 from vasim.core.errors import ConfigError
 
 _RENAME_EXCHANGE = 2
@@ -135,8 +136,8 @@ def atomic_folder(target: str | os.PathLike[str], *,
         ConfigError: ``target`` is a file.
     """
     out = Path(target)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"the {what} folder {out} is a file; name a folder", field="--out")
+    check_dir_path(out, "--out", what=f"the {what} folder (a folder, not a file)",
+                   error=ConfigError)
     blocker = next((a for a in out.parents if a.exists() and not a.is_dir()), None)
     if blocker is not None:
         raise ConfigError(f"the {what} folder {out} cannot be made: {blocker} is a file, not "

@@ -16,11 +16,17 @@ canonical like every quaternion here) and its shaft turn (:func:`rotate_by_rotve
 ``vasim.haptics.laparoscopic``; the bowel tilt of ``vasim.abdomen.anatomy`` (:func:`rot_x`,
 bit-identical to trimesh's ``rotation_matrix`` about x there); the MRCP viewer's prop meshes
 (:func:`homogeneous` of :func:`rot_y`/:func:`rot_z`); the IK's log map
-(:func:`rotvec_between`, moved from ``vasim.mrcp.arm``). Compiled kernels (``*_kernels.py``)
-keep their inlined arithmetic. What remains outside: ``trimesh.geometry.align_vectors`` for
-the vessel mesh of ``vasim.abdomen.anatomy``: it picks a different roll about the vessel's
-axis than :func:`matrix_z_to`, so replacing it would move the vessel's vertices and change
-every stored trial (issue #29 requires them identical).
+(:func:`rotvec_between`, moved from ``vasim.mrcp.arm``); the vessel mesh of
+``vasim.abdomen.anatomy`` (:func:`align_vectors`); the MRCP tool, gripper and tool-cone
+frames (:func:`frame_z_x`, one Gram-Schmidt step, formerly three copies). Compiled kernels
+(``*_kernels.py``) keep their inlined arithmetic.
+
+**Decision** (:func:`align_vectors`, the one rotation built by a library other than scipy):
+it wraps ``trimesh.geometry.align_vectors``, bit for bit. Turning one direction onto
+another leaves the roll about the target free, and trimesh's choice differs from the
+smallest rotation of :func:`matrix_z_to` (and from scipy's ``Rotation.align_vectors``);
+the vessel's vertices were built with trimesh's, so only trimesh's keeps the stored trials
+identical (issue #29). This is the one place vasim calls it.
 
 Rotation matrices are ``(3, 3)`` (or ``(..., 3, 3)``) and act on column vectors:
 ``v_world = R @ v_local`` for a world-from-local ``R``. Quaternions returned here are unit
@@ -252,9 +258,63 @@ def matrix_z_to(direction: ArrayLike) -> FloatArray:
     return matrix_from_quat(quat_z_to(direction))
 
 
+def frame_z_x(z: ArrayLike, x_hint: ArrayLike, *, any_x: bool = False,
+              what: str = "x_hint") -> FloatArray:
+    """``(3, 3)`` rotation whose columns are ``x``, ``z × x`` and ``z``: ``z`` the given unit
+    axis, ``x`` the part of ``x_hint`` orthogonal to it, normalised (one Gram-Schmidt step;
+    the MRCP tool and gripper frames and the tool cone's frame).
+
+    Args:
+        z: ``(3,)`` unit axis (not normalised here).
+        x_hint: ``(3,)`` preferred x direction.
+        any_x: when ``x_hint`` is parallel to ``z`` (its orthogonal part under 1e-9), use
+            the world axis least aligned with ``z`` instead of raising.
+        what: names ``x_hint`` in the error.
+
+    Raises:
+        ValueError: ``x_hint`` parallel to ``z`` (unless ``any_x``).
+
+    Example:
+        >>> frame_z_x([0.0, 0.0, 1.0], [1.0, 1.0, 5.0]).round(6).tolist()[0]
+        [0.707107, -0.707107, 0.0]
+    """
+    zz = np.asarray(z, dtype=np.float64)
+    hint = np.asarray(x_hint, dtype=np.float64)
+    x = hint - zz * float(hint @ zz)
+    n = float(np.linalg.norm(x))
+    if n < 1e-9:
+        if not any_x:
+            raise ValueError(f"{what} {x_hint!r} is parallel to {zz.tolist()!r}")
+        x = np.eye(3)[int(np.argmin(np.abs(zz)))]
+        x = x - zz * float(x @ zz)
+        n = float(np.linalg.norm(x))
+    x = x / n
+    return np.column_stack([x, np.cross(zz, x), zz])
+
+
+def align_vectors(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """``(3, 3)`` rotation taking direction ``a`` onto direction ``b`` (any lengths > 0),
+    with trimesh's roll about ``b``: ``trimesh.geometry.align_vectors``' rotation block, bit
+    for bit (module docstring: why trimesh's and not :func:`matrix_z_to` or scipy's).
+
+    Example:
+        >>> import numpy as np
+        >>> r = align_vectors([0.0, 0.0, 1.0], [0.0, 1.0, 0.0])
+        >>> np.round(r @ [0.0, 0.0, 1.0], 12).tolist()
+        [0.0, 1.0, 0.0]
+    """
+    import trimesh  # here: its only user, and core.geometry stays quick to import
+
+    t = trimesh.geometry.align_vectors(np.asarray(a, dtype=np.float64),
+                                       np.asarray(b, dtype=np.float64))
+    return np.asarray(t, dtype=np.float64)[:3, :3]   # a view, as the vessel always used
+
+
 __all__ = [
     "QUAT_ORDER",
+    "align_vectors",
     "euler_xyz_from_matrix",
+    "frame_z_x",
     "from_xyzw",
     "homogeneous",
     "matrix_from_axis_angle",

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vasim.core.config import check_array, check_number, expect
+from vasim.core.geometry import frame_z_x
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 
@@ -86,13 +87,8 @@ class ToolPose:
 
 def _frame(z: FloatArray, x_hint: FloatArray) -> FloatArray:
     """Rotation with z axis ``z`` and x axis the part of ``x_hint`` orthogonal to it (any
-    orthogonal axis if ``x_hint`` is parallel to ``z``)."""
-    x = x_hint - float(x_hint @ z) * z
-    if np.linalg.norm(x) < 1e-9:
-        x = np.eye(3)[int(np.argmin(np.abs(z)))]
-        x = x - float(x @ z) * z
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, np.cross(z, x), z])
+    orthogonal axis if ``x_hint`` is parallel to ``z``): ``core.geometry.frame_z_x``."""
+    return frame_z_x(z, x_hint, any_x=True)
 
 
 def tool_pose_through_fulcrum(tip: FloatArray, fulcrum: Fulcrum, tool: LaparoscopicTool,

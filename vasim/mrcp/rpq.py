@@ -57,8 +57,7 @@ import trimesh
 from numba import njit
 from numpy.typing import NDArray
 
-from vasim.core.config import check_number
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number, expect
 from vasim.mrcp import dh
 from vasim.mrcp.backend import HULL_MARGIN, PybulletWorld
 from vasim.mrcp.dh import _chain_kernel
@@ -425,9 +424,8 @@ def seed_test_bed_configurations(model: dh.RobotModel) -> FloatArray:
         (96, 6)
     """
     n = model.n_joints
-    if n < len(TEST_BED_GRID):
-        raise ConfigError(f"the RPQ test bed needs an arm with >= {len(TEST_BED_GRID)} "
-                          f"joints, {model.name!r} has {n}", field="joints")
+    expect(n >= len(TEST_BED_GRID), n, f"an arm with >= {len(TEST_BED_GRID)} joints (the "
+           f"RPQ test bed; {model.name!r})", field="joints")
     axes = [np.linspace(model.lower[j], model.upper[j], k)
             for j, k in enumerate(TEST_BED_GRID)]
     grid = np.array(np.meshgrid(*axes, indexing="ij")).reshape(len(axes), -1).T
@@ -446,9 +444,7 @@ def seed_test_bed_pairs(model: dh.RobotModel) -> FloatArray:
 def facing_pair(model: dh.RobotModel, distance: float) -> PybulletWorld:
     """The seed's test bed: robots ``a`` and ``b`` facing each other, bases ``distance``
     [m] apart on the world x axis (a at -distance/2 facing +x, b turned by 180°)."""
-    if not distance > 0.0:
-        raise ConfigError(f"test-bed distance must be > 0 m, got {distance!r}",
-                          field="distance")
+    check_number(distance, "distance", gt=0.0)
     world = PybulletWorld()
     world.add_robot("a", model, _pose_x(-distance / 2, 0.0))
     world.add_robot("b", model, _pose_x(distance / 2, np.pi))

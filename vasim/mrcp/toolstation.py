@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from vasim.core.config import check_choice
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import rot_x, rot_y, rot_z
 from vasim.mrcp.fulcrum import Fulcrum, LaparoscopicArm, LaparoscopicTool
@@ -339,6 +340,7 @@ def build_station(start_tips: Mapping[str, FloatArray] | None = None, *,
     """
     from vasim.abdomen.anatomy import TROCAR_NAMES, trocar_points
 
+    check_choice(holder, "holder", ("positioner", "rx60b"))
     ports = trocar_points()
     tool = LaparoscopicTool(TOOL_LENGTH)
     world = ShaftWorld()
@@ -351,7 +353,7 @@ def build_station(start_tips: Mapping[str, FloatArray] | None = None, *,
         base: ArmKinematics
         if holder == "positioner":
             base = ToolPositioner(name, port + np.array([0.0, 0.0, MOUNT_HEIGHT]))
-        elif holder == "rx60b":
+        else:   # "rx60b" (checked above)
             from vasim.mrcp.backend import PybulletArm, pose_matrix
             from vasim.mrcp.dh import load_robot
 
@@ -359,9 +361,6 @@ def build_station(start_tips: Mapping[str, FloatArray] | None = None, *,
             base = PybulletArm(load_robot("rx60b"),
                                pose_matrix(port - rot @ np.array([0.31, 0.049, 0.2]), rot),
                                name=name)
-        else:
-            raise ConfigError(f"unknown tool holder {holder!r} ('positioner', 'rx60b')",
-                              field="holder")
         arm = LaparoscopicArm(base, tool, fulcrum)
         tip = (np.asarray(start_tips[name], dtype=float) if start_tips and name in start_tips
                else port + np.array([0.0, 0.0, -0.06]))

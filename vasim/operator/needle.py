@@ -47,14 +47,13 @@ Example:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cache
 from typing import Literal
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, check_int, check_number, expect
 from vasim.mrcp.interfaces import FloatArray
 from vasim.operator.scripted import SKILL_NOISE, OperatorProfile, power_law
 from vasim.tasks.base import Task
@@ -120,14 +119,12 @@ def _surface_point(organ: str, x: float, y: float) -> tuple[FloatArray, FloatArr
     from vasim.abdomen.anatomy import default_anatomy
 
     meshes = {o.name: o.mesh for o in default_anatomy()}
-    if organ not in meshes:
-        raise ConfigError(f"unknown organ {organ!r} (known: {', '.join(meshes)})",
-                          field="organ")
+    check_choice(organ, "organ", tuple(meshes))
     mesh = meshes[organ]
     locs, _, tri = mesh.ray.intersects_location(np.array([[x, y, 0.5]]),
                                                 np.array([[0.0, 0.0, -1.0]]))
-    if len(locs) == 0:
-        raise ConfigError(f"no surface of {organ!r} under (x, y) = ({x}, {y})", field="site")
+    expect(len(locs) > 0, (x, y), f"a site (x, y) above the surface of {organ!r}",
+           field="site")
     top = int(np.argmax(locs[:, 2]))
     normal = np.asarray(mesh.face_normals[tri[top]], dtype=float)
     return np.asarray(locs[top], dtype=float), normal
@@ -175,13 +172,9 @@ def needle_task(n_rings: int = len(RING_SITES), *, clearance: float = RING_CLEAR
     Raises:
         ConfigError: ``n_rings`` outside 1..len(RING_SITES), or a bad clearance / radius.
     """
-    if isinstance(n_rings, bool) or not isinstance(n_rings, int) or not (
-            1 <= n_rings <= len(RING_SITES)):
-        raise ConfigError(f"n_rings must be in 1..{len(RING_SITES)}, got {n_rings!r}",
-                          field="n_rings")
+    check_int(n_rings, "n_rings", lo=1, hi=len(RING_SITES))
     for name, v in (("clearance", clearance), ("ring_radius", ring_radius)):
-        if not (math.isfinite(v) and v > 0):
-            raise ConfigError(f"{name} must be > 0 m, got {v!r}", field=name)
+        check_number(v, name, gt=0)
     rings, normals = [], []
     for _, organ, x, y in RING_SITES[:n_rings]:
         p, n = _surface_point(organ, x, y)
@@ -236,9 +229,8 @@ def needle_route(rings: FloatArray, sides: tuple[Side, ...]) -> tuple[FloatArray
         (0, -1, 1, -1, 2)
     """
     r = np.asarray(rings, dtype=float).reshape(-1, 3)
-    if len(r) != len(sides):
-        raise ConfigError(f"needle_route: {len(r)} rings but {len(sides)} sides",
-                          field="sides")
+    expect(len(r) == len(sides), len(sides), f"one side per ring ({len(r)} rings)",
+           field="sides")
     pts: list[FloatArray] = []
     kind: list[int] = []
     for i in range(len(r)):

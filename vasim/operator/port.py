@@ -19,14 +19,23 @@ Adding an operator: write a class with ``profile`` (the simulated person's
 ``OperatorProfile``, or None for a real device), ``reset(start)`` and
 ``act(percept) -> (dx, dy, dz)``, then plug it in with ``runner.operator = op``. The engine
 never asks which class it is (no ``type(op) is`` dispatch).
+
+A teleoperation trial (``vasim.trials.teleop.TeleopTrial``) moves its masters with *hands*,
+one per path of goals: a :class:`MasterHand` (``move`` gives the master increment,
+``check`` advances the goal) that the trial asks of its :class:`HandFactory` with a
+:class:`HandRequest` each time a new path starts. The default factory is the scripted
+person's (``vasim.trials.teleop_hands.ScriptedHands``); the viewer passes one whose hands
+read the page's device (``vasim.viewer.teleop_live.DeviceHands``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
+from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     from vasim.fixtures.types import Vec3
@@ -171,5 +180,52 @@ class ObservingOperator:
         return np.asarray(self.inner.step(percept.observation()), dtype=np.float64).tolist()
 
 
-__all__ = ["MasterIncrement", "ObservingOperator", "Percept", "StepsOnObservations",
-           "TrialOperator"]
+@dataclass(frozen=True, eq=False)
+class HandRequest:
+    """A new path of a teleoperation trial's hand (what ``HandFactory`` is asked).
+
+    Attributes:
+        points: ``(n, 3)`` goals of the path, in order [m].
+        start: where the moved point (the needle, or the free tool tip) is now [m].
+        reach: the reach of each goal (one for all, or one per goal) [m].
+        seed: this path's seed (a scripted hand draws its noise from it).
+        carry: the needle is carried to a ring (the threading movement; a scripted hand
+            then moves with its ``carry`` profile, else its ``handover`` one).
+    """
+
+    points: NDArray[np.float64]
+    start: NDArray[np.float64]
+    reach: float | tuple[float, ...]
+    seed: int
+    carry: bool = False
+
+
+class MasterHand(Protocol):
+    """A hand on one master following a path of goals (``j``: the current goal's index)."""
+
+    j: int
+
+    @property
+    def done(self) -> bool:
+        """Every goal of the path reached."""
+        ...
+
+    def move(self, dt: float, seen: NDArray[np.float64], goal: NDArray[np.float64],
+             zoom: float) -> NDArray[np.float64]:
+        """One hand step of ``dt`` [s] toward ``goal`` from ``seen`` (what the hand moves,
+        as seen at magnification ``zoom``): the master increment [m], finite."""
+        ...
+
+    def check(self, position: NDArray[np.float64], goal: NDArray[np.float64]) -> bool:
+        """Advances ``j`` when ``position`` is within the goal's reach; True if it did."""
+        ...
+
+
+class HandFactory(Protocol):
+    """Makes the hand of each new path of a teleoperation trial (module docstring)."""
+
+    def __call__(self, request: HandRequest) -> MasterHand: ...
+
+
+__all__ = ["HandFactory", "HandRequest", "MasterHand", "MasterIncrement", "ObservingOperator",
+           "Percept", "StepsOnObservations", "TrialOperator"]

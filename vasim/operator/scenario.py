@@ -56,10 +56,12 @@ import numpy as np
 
 from vasim.core.config import (
     check_bool,
+    check_choice,
     check_keys,
     check_number,
     check_str,
     check_table,
+    expect,
     parse_toml,
     rewrap,
 )
@@ -231,10 +233,7 @@ class Scenario:
         Raises:
             ConfigError: a group the scenario does not define.
         """
-        g = self.groups.get(group)
-        if g is None:
-            raise ConfigError(f"scenario {self.name!r} has no group {group!r} (groups: "
-                              f"{', '.join(self.groups)})", field="group")
+        g = self.groups[check_choice(group, "group", tuple(self.groups))]
         probs = np.array([e.p for e in g.experience])
         exp = g.experience[int(rng.choice(len(probs), p=probs / probs.sum()))]
         k = g.skill_concentration
@@ -287,9 +286,8 @@ def _group(name: str, t: Mapping[str, Any], file: str | None,
                    required=(*GROUP_FIELDS, "experience"))
     vals = {k: _num(t, k, path, file, sources) for k in GROUP_FIELDS}
     cats = check_table(t["experience"], f"{path}.experience", file=file)
-    if not cats:
-        raise ConfigError("got an empty table, expected at least one experience category",
-                          file=file, field=f"{path}.experience")
+    expect(bool(cats), cats, "at least one experience category", file=file,
+           field=f"{path}.experience")
     exps = []
     for cname, ct in cats.items():
         cpath = f"{path}.experience.{cname}"
@@ -297,9 +295,8 @@ def _group(name: str, t: Mapping[str, Any], file: str | None,
         exps.append(Experience(cname, _num(ct, "p", cpath, file, sources),
                                _num(ct, "skill_mean", cpath, file, sources)))
     total = sum(e.p for e in exps)
-    if not math.isclose(total, 1.0, abs_tol=1e-6):
-        raise ConfigError(f"got probabilities summing to {total:g}, expected 1",
-                          file=file, field=f"{path}.experience")
+    expect(math.isclose(total, 1.0, abs_tol=1e-6), total, "probabilities summing to 1",
+           file=file, field=f"{path}.experience")
     return GroupModel(name=name, experience=tuple(exps), **vals)
 
 
@@ -326,10 +323,9 @@ def parse_scenario(text: str, *, file: str | Path | None = None) -> Scenario:
                         required=TELEOP_FIELDS)
         teleop = TeleopEffects(**{k: _num(tt, k, "teleop", f, sources)
                                   for k in TELEOP_FIELDS})
-        if check_table(top.get("fixtures", {}), "fixtures", file=f):
-            raise ConfigError("got fixture effects in a teleoperation scenario (it has "
-                              "[teleop]), expected none (a VF scenario has no [teleop])",
-                              file=f, field="fixtures")
+        fx = check_table(top.get("fixtures", {}), "fixtures", file=f)
+        expect(not fx, fx, "no fixture effects in a teleoperation scenario (it has "
+               "[teleop]; a VF scenario has none)", file=f, field="fixtures")
     if "options" in top or not is_teleop:
         opts = check_keys(top["options"], OPTION_FIELDS, "options", file=f,
                           required=OPTION_FIELDS)
@@ -353,9 +349,8 @@ def parse_scenario(text: str, *, file: str | Path | None = None) -> Scenario:
         reason = check_str(reason, "groups.crossover_reason", file=f)
     groups = {g: _group(g, t, f, sources) for g, t in gt.items()}
     for needed in ("surgeon", "resident"):
-        if needed not in groups:
-            raise ConfigError("got nothing (missing required group), expected a table",
-                              file=f, field=f"groups.{needed}")
+        expect(needed in groups, sorted(groups), f"a [groups.{needed}] table (a required "
+               "group)", file=f, field=f"groups.{needed}")
     q = check_keys(top["questionnaire"], QUESTIONNAIRE_FIELDS, "questionnaire", file=f,
                    required=QUESTIONNAIRE_FIELDS)
     outcome = None
@@ -388,14 +383,13 @@ def check_no_crossover(sc: Scenario, *, file: str | None = None) -> None:
         for what, a, b in (("learnable noise", better.curve(p), worse.curve(p)),
                            ("movement time", better.time_curve(p), worse.time_curve(p))):
             cross = np.nonzero(a > b * (1 + 1e-9))[0]
-            if cross.size:
-                at = "the asymptote" if cross[0] == p.size - 1 else f"practice {int(p[cross[0]])}"
-                raise ConfigError(
-                    f"got group {worse.name!r} (mean skill {worse.mean_skill:.3f}) better "
-                    f"than {better.name!r} (mean skill {better.mean_skill:.3f}) in "
-                    f"{what} from {at}, expected the less experienced group not to overtake "
-                    "(lower its learning rate or raise its asymptote, or set "
-                    "groups.crossover_reason)", file=file, field="groups")
+            at = ("" if not cross.size else "the asymptote" if cross[0] == p.size - 1
+                  else f"practice {int(p[cross[0]])}")
+            expect(not cross.size, worse.name, f"the less experienced group (mean skill "
+                   f"{worse.mean_skill:.3f}) not to overtake {better.name!r} (mean skill "
+                   f"{better.mean_skill:.3f}); it is better in {what} from {at} (lower its "
+                   "learning rate or raise its asymptote, or set groups.crossover_reason)",
+                   file=file, field="groups")
 
 
 def scenario_path(name_or_path: str | Path) -> Path:

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from vasim.core.config import check_int, check_number, check_str, check_type, expect
-from vasim.core.errors import ConfigError
 
 SUBJECT_CODE_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 """Allowed subject codes: 1-32 letters, digits, '_' or '-' (a pseudonym, never a name)."""
@@ -100,6 +99,6 @@ class TrialMeta:
         """Builds a ``TrialMeta`` from a dict; unknown keys raise ``ConfigError``."""
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(meta) - known)
-        if unknown:
-            raise ConfigError(f"unknown trial meta field(s) {unknown} (known: {sorted(known)})")
+        expect(not unknown, unknown, f"known trial meta fields ({', '.join(sorted(known))})",
+               field="meta")
         return cls(**meta)

@@ -73,7 +73,7 @@ from typing import Any
 
 import pandas as pd
 
-from vasim.core.config import check_int, check_number
+from vasim.core.config import check_int, check_number, expect
 from vasim.core.errors import ConfigError, StoreError
 from vasim.core.progress import progress_bar
 from vasim.fixtures.schema import Schema, load_schema
@@ -241,14 +241,12 @@ def check_scenario_kind(protocol: Protocol, scenario: Scenario,
             the protocol's.
     """
     want = "teleop" if is_teleop_protocol(protocol) else "vf"
-    if scenario.kind == want:
-        return
     what = {"teleop": "a teleoperation scenario (with [teleop]: teleop_mechanism_only, "
                       "teleop_assumed)",
             "vf": "a VF scenario (no [teleop]: seed_plausible, null)"}
-    raise ConfigError(f"got {what[scenario.kind].split(' (')[0]} {scenario.name!r} for "
-                      f"protocol {protocol.name!r}, expected {what[want]}",
-                      file=None if file is None else str(file), field="--scenario")
+    expect(scenario.kind == want, scenario.name, f"{what[want]} for protocol "
+           f"{protocol.name!r}, not {what[scenario.kind].split(' (')[0]} {scenario.name!r}",
+           file=None if file is None else str(file), field="--scenario")
 
 
 def prepare_sessions(store: TrialStore, protocol: Protocol,

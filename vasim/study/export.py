@@ -362,9 +362,8 @@ def export_study(
     if "parquet" in fmts:  # before any work: one line naming the extra (issue #27 item 1)
         require("pyarrow.parquet", "Parquet export")
     names = list(dict.fromkeys(tables))
-    if not names:   # issue #30 item 6: `--tables ''` wrote only a manifest and exited 0
-        raise ConfigError(f"got no table, expected one or more of {', '.join(EXPORT_TABLES)}",
-                          field="--tables")
+    # issue #30 item 6: `--tables ''` wrote only a manifest and exited 0
+    expect(names, names, f"one or more of {', '.join(EXPORT_TABLES)}", field="--tables")
     for t in names:
         table_columns(t)
     out_dir = check_dir_path(Path(out), "out", what="an export folder", error=ConfigError)

@@ -49,6 +49,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from vasim.core.config import expect
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import Block, Protocol, gated_blocks, gated_trials
 from vasim.study.protocol.schedule import extend_gated_block
@@ -108,9 +109,8 @@ def expert_benchmark(values: Mapping[str, Sequence[float]], metrics: Sequence[st
     for m in metrics:
         v = np.asarray(values.get(m, ()), dtype=float)
         v = v[np.isfinite(v)]
-        if len(v) < 2:
-            raise ConfigError(f"benchmark of {m!r}: {len(v)} expert value(s), expected at "
-                              "least 2 (an SD needs two)", field="gate.metrics")
+        expect(len(v) >= 2, len(v), f"at least 2 finite expert values of {m!r} (an SD "
+               "needs two)", field="gate.metrics")
         out[m] = MetricBenchmark(m, float(v.mean()), float(v.std(ddof=1)), len(v),
                                  float(k), m in HIGHER_IS_BETTER)
     return out

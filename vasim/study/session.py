@@ -365,10 +365,9 @@ def check_again(store: TrialStore, protocol: str, subject: str, again: str | Non
             f"(session{'s' if len(done) > 1 else ''} {ids}{', ended ' + ended if ended else ''}"
             f"); to run it again {ask} (stored with the new session), or use another "
             "subject code", field=option)
-    if not isinstance(again, str) or not again.strip() or "\n" in again \
-            or len(again) > MAX_REASON_CHARS:
-        raise ConfigError(f"got {again!r:.80}, expected a one-line reason of 1-"
-                          f"{MAX_REASON_CHARS} characters", field=option)
+    expect(isinstance(again, str) and again.strip() and "\n" not in again
+           and len(again) <= MAX_REASON_CHARS, again,
+           f"a one-line reason of 1-{MAX_REASON_CHARS} characters", field=option)
     if done.empty:
         raise ConfigError(f"subject {subject!r} has no completed session of protocol "
                           f"{protocol!r} in {store.path}; a reason ({option}) is only for "
@@ -436,8 +435,7 @@ def find_session(store: TrialStore, *, subject: str | None = None,
     """
     if session_id is not None:
         return int(store.session(session_id)["id"])
-    if subject is None:
-        raise ConfigError("give a subject code or a session id", field="subject")
+    expect(subject is not None, subject, "a subject code (or a session id)", field="subject")
     validate_subject_code(subject)
     df = store.sessions(subject=subject, protocol=protocol)
     running = df[df["status"] == "running"]

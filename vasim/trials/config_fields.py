@@ -8,10 +8,9 @@ scene are the same in both and are checked here.
 
 from __future__ import annotations
 
-import math
 from typing import Protocol
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, check_number, check_type, expect
 from vasim.operator.profile import OperatorProfile
 from vasim.trials.kinds import check_trial_time
 
@@ -48,36 +47,23 @@ def check_shared_fields(cfg: SharedFields) -> None:
     Raises:
         ConfigError: naming the first bad field and its value.
     """
-    if isinstance(cfg.seed, bool) or not isinstance(cfg.seed, int) or not (
-            0 <= cfg.seed < 2**63):
-        raise ConfigError(f"seed must be an integer in [0, 2**63), got {cfg.seed!r}",
-                          field="seed")
+    seed = cfg.seed
+    expect(isinstance(seed, int) and not isinstance(seed, bool) and 0 <= seed < 2**63, seed,
+           "an integer in [0, 2**63)", field="seed")
     from vasim.records.trial_meta import validate_subject_code
 
     if cfg.subject is not None:
         validate_subject_code(cfg.subject)
-    if cfg.operator != "scripted":
-        raise ConfigError(f"unknown operator {cfg.operator!r} (available: 'scripted')",
-                          field="operator")
-    if cfg.skill not in SKILLS:
-        raise ConfigError(f"unknown skill {cfg.skill!r} (novice, intermediate, expert)",
-                          field="skill")
-    try:
-        check_trial_time(cfg.max_time, "max_time")
-    except ConfigError as exc:
-        raise ConfigError(f"max_time {exc.reason}", field="max_time") from None
-    if cfg.practice < 0:
-        raise ConfigError(f"practice must be >= 0, got {cfg.practice!r}", field="practice")
-    r = cfg.reach_radius
-    if r is not None and (isinstance(r, bool) or not isinstance(r, int | float)
-                          or not math.isfinite(r) or not r > 0):
-        raise ConfigError(f"reach_radius must be > 0 m, got {r!r}", field="reach_radius")
-    if not isinstance(cfg.scene, str) or not cfg.scene.strip():
-        raise ConfigError(f"scene must be a scene name, a TOML path or 'none', got "
-                          f"{cfg.scene!r}", field="scene")
-    if cfg.profile is not None and not isinstance(cfg.profile, OperatorProfile):
-        raise ConfigError(f"profile must be an OperatorProfile, got {cfg.profile!r}",
-                          field="profile")
+    check_choice(cfg.operator, "operator", ("scripted",))
+    check_choice(cfg.skill, "skill", SKILLS)
+    check_trial_time(cfg.max_time, "max_time")
+    expect(cfg.practice >= 0, cfg.practice, "a practice count >= 0", field="practice")
+    if cfg.reach_radius is not None:
+        check_number(cfg.reach_radius, "reach_radius", gt=0)
+    expect(isinstance(cfg.scene, str) and cfg.scene.strip(), cfg.scene,
+           "a scene name, a TOML path or 'none'", field="scene")
+    if cfg.profile is not None:
+        check_type(cfg.profile, "profile", OperatorProfile, "an OperatorProfile")
 
 
 def preset_profile(profile: OperatorProfile | None, skill: str) -> OperatorProfile:

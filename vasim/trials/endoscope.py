@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number, expect
 from vasim.tasks import WORKSPACE_CENTRE
 
 
@@ -29,12 +29,9 @@ class EndoscopeView:
 
     def __post_init__(self) -> None:
         d = np.subtract(self.look_at, self.position)
-        if not (np.all(np.isfinite(d)) and float(np.linalg.norm(d)) > 0):
-            raise ConfigError(f"look_at must differ from position, got {self.look_at!r}",
-                              field="look_at")
-        if not (0 < self.fov_deg < 180):
-            raise ConfigError(f"fov_deg must be in (0, 180), got {self.fov_deg!r}",
-                              field="fov_deg")
+        expect(bool(np.all(np.isfinite(d))) and float(np.linalg.norm(d)) > 0, self.look_at,
+               "a finite point other than position", field="look_at")
+        check_number(self.fov_deg, "fov_deg", gt=0, lt=180)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """Whether each of the (n, 3) points [m] is inside the view cone; (n,) bool."""

@@ -6,9 +6,7 @@ teleoperation trial (spec/study.md §4: StdT, MRCP or MRCP+Cam on the needle tas
 
 from __future__ import annotations
 
-import math
-
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_number
 
 TELEOPERATION_MODES: tuple[str, ...] = ("stdt", "mrcp", "mrcp_cam")
 """Conditions of the MRCP vs standard-teleoperation protocols (spec/study.md §4): StdT
@@ -20,11 +18,9 @@ loop counters are sized from the limit, and 1e308 s overflowed them)."""
 
 
 def check_trial_time(v: object, name: str) -> None:
-    """A trial time limit: a finite number of seconds in (0, :data:`MAX_TRIAL_TIME_S`]."""
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
-            or not 0 < v <= MAX_TRIAL_TIME_S:
-        raise ConfigError(f"must be a number of seconds in (0, {MAX_TRIAL_TIME_S:g}], got "
-                          f"{v!r}", field=name)
+    """A trial time limit: a finite number of seconds in (0, :data:`MAX_TRIAL_TIME_S`]
+    (``ConfigError`` at field ``name``, ``core.config.check_number``)."""
+    check_number(v, name, gt=0, le=MAX_TRIAL_TIME_S)
 
 
 __all__ = ["MAX_TRIAL_TIME_S", "TELEOPERATION_MODES", "check_trial_time"]

@@ -4,11 +4,16 @@ One trial carries the needle of :mod:`vasim.operator.needle` through its rings i
 abdomen with the two tool robots of :mod:`vasim.mrcp.toolstation`, in one of three modes
 (below). The trial is a frozen ``TeleopTrialModel`` and a ``TeleopTrialState``
 (``vasim.trials.teleop_model``, as the VF engine's model and state); one 18 ms cycle runs the
-named phases ``before_step`` (the clock), the mode's operator and master phases (``_mrcp``:
-the hand moves the master, the kernel the robots; ``_stdt``: carry, hand-over, approach,
-close, release), then ``after_step``: ``path_phase`` (EM by what moved the needle),
-physics, ``route_phase`` (via point, ring), ``camera_phase``, the sample, and
-``should_terminate``. The modes:
+named phases ``before_step`` (the clock), the mode's phases (``mrcp_operator_phase``: the
+hand moves the master, ``mrcp_master_phase``: the kernel the robots,
+``mrcp_events_phase``, ``mrcp_fault_phase``; StdT's one of ``stdt_carry_phase`` (carry,
+hand-over), ``stdt_approach_phase``, ``stdt_close_phase``, ``stdt_release_phase``), then
+``after_step``: ``path_phase`` (EM by what moved the needle), physics, ``route_phase``
+(via point, ring), ``camera_phase``, the sample, and ``should_terminate``; the mode's
+``mrcp_after_step`` / ``stdt_after_step`` start the next path. What a mode's operator
+carries between cycles is its ``MrcpLoop`` / ``StdtLoop``. The trial's hands come from
+its ``hand_factory`` (``vasim.operator.port.HandFactory``; default the scripted
+person's). The modes:
 
 * ``"stdt"`` — standard teleoperation, bimanual: each master drives one tool tip (2
   masters : 2 slaves). At every change of side the scripted operator transfers the needle
@@ -156,7 +161,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from vasim.mrcp.kernel import IndexSpec, KernelConfig, MRCPKernel, TaskPoint
+from vasim.mrcp.kernel import CycleRecord, IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 from vasim.mrcp.modes import KernelState
 from vasim.mrcp.planner import PlannerParams
 from vasim.mrcp.toolstation import CameraRobot, Station, build_station
@@ -171,14 +176,21 @@ from vasim.operator.needle import (
     needs_via,
     pregrasp_offset,
 )
+from vasim.operator.port import HandFactory, HandRequest, MasterHand
 from vasim.operator.profile import OperatorProfile
 from vasim.operator.teleop_profile import TeleopAdjustment, TeleopEffects
 from vasim.records.point_metrics import evaluate_trial
 from vasim.records.trial_metrics import MetricParams, trial_metrics
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE
 from vasim.trials.teleop_config import TeleopTrialConfig
-from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, Hand
-from vasim.trials.teleop_model import CYCLE_DT, TeleopTrialModel, TeleopTrialState
+from vasim.trials.teleop_hands import CAMERA_FOV_DEG, CAMERA_ZOOM, Camera, ScriptedHands
+from vasim.trials.teleop_model import (
+    CYCLE_DT,
+    MrcpLoop,
+    StdtLoop,
+    TeleopTrialModel,
+    TeleopTrialState,
+)
 from vasim.trials.teleop_quality import TargetDeformation
 from vasim.trials.vf import TrialResult
 
@@ -256,12 +268,22 @@ class TeleopTrial:
         effects: the operator's mode penalties (``vasim.operator.teleop_profile``);
             None: ``config.mode_effects`` (a session's declared teleoperation scenario),
             else ``NEUTRAL`` (the mechanism alone).
+        hand_factory: makes the hand of each new path (``vasim.operator.port.HandFactory``:
+            it gets a ``HandRequest``, the path's goals, start, reach, seed and whether the
+            needle is carried to a ring); None: the scripted person's
+            (``teleop_hands.ScriptedHands`` of the model's profiles). The viewer's
+            person-driven trials pass hands that read the page's device.
     """
 
     def __init__(self, config: TeleopTrialConfig, *, n_rings: int | None = None,
                  abdomen: Abdomen | None = None, holder: str = "positioner",
-                 effects: TeleopEffects | None = None) -> None:
+                 effects: TeleopEffects | None = None,
+                 hand_factory: HandFactory | None = None) -> None:
         self.model = model = TeleopTrialModel.build(config, n_rings, effects)
+        self.hand_factory: HandFactory = (
+            hand_factory if hand_factory is not None
+            else ScriptedHands(model.adjustment, model.task, config.practice))
+        """Where the trial's hands come from (the operator hook; ``__init__``)."""
         self.rng = np.random.default_rng(_seed(config.seed, 41))
         self.station = build_station({"right": model.task.start + grasp_offset("right")},
                                      holder=holder)
@@ -318,12 +340,11 @@ class TeleopTrial:
 
     # -- shared pieces ---------------------------------------------------------------
     def _hand(self, points: np.ndarray, start: np.ndarray, reach: float | tuple[float, ...],
-              key: int, *, carry: bool = False) -> Hand:
-        """A new path of a hand; ``carry``: the needle is carried to a ring (the threading
-        movement, ``vasim.operator.teleop_profile``)."""
-        prof = self.adjustment.carry if carry else self.adjustment.handover
-        return Hand(prof, self.task, points, start,
-                     _seed(self.config.seed, 43, key), self.config.practice, reach)
+              key: int, *, carry: bool = False) -> MasterHand:
+        """A new path of a hand, from the trial's ``hand_factory``; ``carry``: the needle
+        is carried to a ring (the threading movement, ``vasim.operator.teleop_profile``)."""
+        return self.hand_factory(HandRequest(points, start, reach,
+                                             _seed(self.config.seed, 43, key), carry))
 
     def instruments(self) -> dict[str, ToolPose]:
         """Every instrument in the abdomen now: ``"right"``, ``"left"`` (trocar to tool tip)
@@ -458,168 +479,235 @@ class TeleopTrial:
         yield from loop
 
     def _mrcp(self) -> Iterator[int]:
+        """The ``mrcp`` modes' cycles: the operator moves the master, the kernel the
+        robots, then the safety stop and the common phases."""
         ts = self.state
-        st = self.station
-        kernel = MRCPKernel(st.arms, st.world, needle_points(), "right", 0, ts.needle,
-                            config=kernel_config(st, self.config.seed))
-        master = ts.needle.copy()
-        key = 0
-        hand = self._hand(self._waypoint()[None, :], ts.needle, self.task.ring_radius, key,
-                          carry=not ts.via)
-        dt_op = self.dt / OPERATOR_SUBSTEPS
-        ack = 0.0            # time left until the operator acknowledges a safety stop
-        holding = False
+        m = self.mrcp_begin()
         while not ts.done:
             self.before_step()
-            if kernel.state is not KernelState.FAULT:
-                for _ in range(OPERATOR_SUBSTEPS):
-                    dx = hand.move(dt_op, ts.needle, self._waypoint(), self.camera.zoom)
-                    master = master + dx
-                    ts.master_path += float(np.linalg.norm(dx))
-            rec = kernel.step(ts.t, master)   # the kernel applies its increments
-            ts.needle = kernel.task_pose()[0]
-            ts.holder = "right" if kernel.rsel == "right" else "left"
-            ts.clutch = 0 if rec.state is KernelState.TOP else 1
-            ts.transferring = rec.state.mode == "TT"
-            if ts.clutch:
-                ts.tt_time += self.dt
-            hold_now = False
-            for e in rec.events:
-                kind = e.split(" ", 1)[0]
-                if kind == "transfer_done":
-                    ts.counts["transfers"] += 1
-                elif kind == "transfer_abort":
-                    ts.counts["transfer_aborts"] += 1
-                elif kind == "rsel_hold":
-                    ts.counts["rsel_holds"] += 1
-                    hold_now = True
-                    if holding:
-                        continue               # one event per run of held cycles
-                elif kind == "fault:":
-                    continue                   # "fault: no motion", every stopped cycle
-                ts.events.append((ts.t, "mrcp", e))
-            holding = hold_now
-            if rec.state is KernelState.FAULT:
-                if ack <= 0.0:                 # the stop has just happened
-                    ts.counts["safety_stops"] += 1
-                    ack = self.profile.reaction_delay + FAULT_ACK_TIME
-                    if ts.counts["safety_stops"] > MAX_SAFETY_STOPS:
-                        ts.events.append((ts.t, "aborted", "repeated safety stops"))
-                        self.after_step()
-                        ts.done = True
-                        yield ts.k
-                        break
-                else:
-                    ack -= self.dt
-                    if ack <= 0.0:             # acknowledged: resume, a new movement
-                        kernel.reset_fault()
-                        ts.events.append((ts.t, "mrcp", "safety stop acknowledged"))
-                        key += 1
-                        hand = self._hand(self._waypoint()[None, :], ts.needle,
-                                          self.task.ring_radius, key, carry=not ts.via)
-            before = ts.route_j
-            self.after_step()
-            if ts.route_j != before and not ts.done:   # the next waypoint: a new path
-                key += 1
-                hand = self._hand(self._waypoint()[None, :], ts.needle,
-                                  self.task.ring_radius, key, carry=not ts.via)
+            self.mrcp_operator_phase(m)
+            rec = self.mrcp_master_phase(m)
+            self.mrcp_events_phase(m, rec)
+            if self.mrcp_fault_phase(m, rec):      # too many safety stops: the end
+                self.after_step()
+                ts.done = True
+                yield ts.k
+                break
+            self.mrcp_after_step(m)
             yield ts.k
         ts.master_path += self.camera.path
 
-    def _stdt(self) -> Iterator[int]:
+    def mrcp_begin(self) -> MrcpLoop:
+        """The kernel, the master at the needle, the first path's hand."""
+        ts, st = self.state, self.station
+        kernel = MRCPKernel(st.arms, st.world, needle_points(), "right", 0, ts.needle,
+                            config=kernel_config(st, self.config.seed))
+        return MrcpLoop(kernel, ts.needle.copy(), self._mrcp_hand(0))
+
+    def _mrcp_hand(self, key: int) -> MasterHand:
+        """A new path of the one hand, to the route's next waypoint."""
         ts = self.state
-        st = self.station
+        return self._hand(self._waypoint()[None, :], ts.needle, self.task.ring_radius, key,
+                          carry=not ts.via)
+
+    def mrcp_operator_phase(self, m: MrcpLoop) -> None:
+        """The hand moves the master (not while the kernel is stopped by a fault)."""
+        ts = self.state
+        if m.kernel.state is KernelState.FAULT:
+            return
         dt_op = self.dt / OPERATOR_SUBSTEPS
-        sigma = grasp_sigma(self.adjustment.handover, self.config.practice)
-        delay = self.profile.reaction_delay + GRIPPER_TIME
-        key = 0
-        offset = ts.needle - st.tip(ts.holder)       # needle centre - holder tip
-        hand = self._hand(ts.rings[:1], ts.needle, self.task.ring_radius, key, carry=True)
-        phase = "carry"
-        other: Side = "left"
-        wait = 0.0
-        attempts = 0
+        for _ in range(OPERATOR_SUBSTEPS):
+            dx = m.hand.move(dt_op, ts.needle, self._waypoint(), self.camera.zoom)
+            m.master = m.master + dx
+            ts.master_path += float(np.linalg.norm(dx))
+
+    def mrcp_master_phase(self, m: MrcpLoop) -> CycleRecord:
+        """The kernel applies the master's increments: the needle, its holder, the clutch
+        (decoupled but in TOp) and the transfer time."""
+        ts = self.state
+        rec = m.kernel.step(ts.t, m.master)
+        ts.needle = m.kernel.task_pose()[0]
+        ts.holder = "right" if m.kernel.rsel == "right" else "left"
+        ts.clutch = 0 if rec.state is KernelState.TOP else 1
+        ts.transferring = rec.state.mode == "TT"
+        if ts.clutch:
+            ts.tt_time += self.dt
+        return rec
+
+    def mrcp_events_phase(self, m: MrcpLoop, rec: CycleRecord) -> None:
+        """The kernel's events counted, and logged but for repeats (module docstring)."""
+        ts = self.state
+        hold_now = False
+        for e in rec.events:
+            kind = e.split(" ", 1)[0]
+            if kind == "transfer_done":
+                ts.counts["transfers"] += 1
+            elif kind == "transfer_abort":
+                ts.counts["transfer_aborts"] += 1
+            elif kind == "rsel_hold":
+                ts.counts["rsel_holds"] += 1
+                hold_now = True
+                if m.holding:
+                    continue               # one event per run of held cycles
+            elif kind == "fault:":
+                continue                   # "fault: no motion", every stopped cycle
+            ts.events.append((ts.t, "mrcp", e))
+        m.holding = hold_now
+
+    def mrcp_fault_phase(self, m: MrcpLoop, rec: CycleRecord) -> bool:
+        """A safety stop: counted when it happens, acknowledged after the reaction delay
+        plus ``FAULT_ACK_TIME`` (a new movement); True when there were too many (the trial
+        is aborted)."""
+        ts = self.state
+        if rec.state is not KernelState.FAULT:
+            return False
+        if m.ack <= 0.0:                       # the stop has just happened
+            ts.counts["safety_stops"] += 1
+            m.ack = self.profile.reaction_delay + FAULT_ACK_TIME
+            if ts.counts["safety_stops"] > MAX_SAFETY_STOPS:
+                ts.events.append((ts.t, "aborted", "repeated safety stops"))
+                return True
+            return False
+        m.ack -= self.dt
+        if m.ack <= 0.0:                       # acknowledged: resume, a new movement
+            m.kernel.reset_fault()
+            ts.events.append((ts.t, "mrcp", "safety stop acknowledged"))
+            m.key += 1
+            m.hand = self._mrcp_hand(m.key)
+        return False
+
+    def mrcp_after_step(self, m: MrcpLoop) -> None:
+        """The common phases (``after_step``); a waypoint reached: a new path."""
+        ts = self.state
+        before = ts.route_j
+        self.after_step()
+        if ts.route_j != before and not ts.done:
+            m.key += 1
+            m.hand = self._mrcp_hand(m.key)
+
+    def _stdt(self) -> Iterator[int]:
+        """The ``stdt`` cycles: the operator's phase (carry or hand-over, approach, close,
+        release), then the common phases and what follows a ring."""
+        ts = self.state
+        s = self.stdt_begin()
+        phases = {"carry": self.stdt_carry_phase, "handover": self.stdt_carry_phase,
+                  "approach": self.stdt_approach_phase, "close": self.stdt_close_phase,
+                  "release": self.stdt_release_phase}
         while not ts.done:
             self.before_step()
-            if phase in ("carry", "handover"):
-                goal = self._waypoint()
-                dx = np.zeros(3)
-                for _ in range(OPERATOR_SUBSTEPS):
-                    dx = dx + hand.move(dt_op, ts.needle + dx, goal, self.camera.zoom)
-                self._move_tool(ts.holder, dx)
-                ts.needle = st.tip(ts.holder) + offset
-                self._check_via()
-                if phase == "handover" and not ts.via:
-                    phase, attempts = "approach", 0
-                    ts.events.append((ts.t, "stdt", f"at hand-over point; {other} "
-                                                        "approaches"))
-                    key += 1
-                    hand = self._approach_hand(other, key)
-            elif phase == "approach":
-                tip = st.tip(other)
-                goal = ts.needle + (pregrasp_offset(other) if hand.j == 0
-                                      else grasp_offset(other))
-                dx = np.zeros(3)
-                for _ in range(OPERATOR_SUBSTEPS):
-                    dx = dx + hand.move(dt_op, tip + dx, goal, self.camera.zoom)
-                self._move_tool(other, dx)
-                hand.check(st.tip(other), goal)
-                if hand.done:
-                    phase, wait = "close", delay
-                    ts.events.append((ts.t, "stdt", f"{other} closes its jaw"))
-            elif phase == "close":
-                wait -= self.dt
-                if wait <= 0.0:
-                    attempts += 1
-                    # across the needle: where the tip is, plus the misjudgement
-                    error = st.tip(other) - (ts.needle + grasp_offset(other))
-                    error = error * np.array([0.0, 1.0, 1.0]) + lateral_error(self.rng, sigma)
-                    miss = float(np.linalg.norm(error))
-                    outcome = classify_grasp(miss)
-                    if outcome == "missed" and attempts < MAX_GRASP_ATTEMPTS:
-                        ts.counts["regrasps"] += 1
-                        ts.events.append((ts.t, "regrasp",
-                                            f"{other} missed the needle by "
-                                            f"{1e3 * miss:.1f} mm"))
-                        key += 1
-                        hand = self._approach_hand(other, key)
-                        phase = "approach"
-                    else:
-                        if outcome != "clean":
-                            ts.counts["misaligned_transfers"] += 1
-                            ts.events.append((ts.t, "misaligned_transfer",
-                                                f"{other} grasped {1e3 * miss:.1f} mm "
-                                                "off the grasp point"))
-                        ts.needle = ts.needle + error     # the closing jaw drags it
-                        phase, wait = "release", delay
-            elif phase == "release":
-                wait -= self.dt
-                if wait <= 0.0:
-                    ts.counts["transfers"] += 1
-                    ts.events.append((ts.t, "transfer", f"{ts.holder} -> {other}"))
-                    ts.holder, other = other, ts.holder
-                    offset = ts.needle - st.tip(ts.holder)
-                    key += 1
-                    hand = self._hand(self._goal()[None, :], ts.needle,
-                                      self.task.ring_radius, key, carry=True)
-                    phase = "carry"
-            before = ts.i
-            ts.transferring = phase in ("approach", "close", "release")
-            self.after_step()
-            if ts.i != before and not ts.done:     # a ring passed: what next
-                key += 1
-                if self.task.sides[ts.i] != ts.holder:
-                    # the route's via point (needle_route) is the hand-over point
-                    hand = self._hand(self._waypoint()[None, :], ts.needle,
-                                      self.task.ring_radius, key)
-                    phase = "handover"
-                else:
-                    hand = self._hand(self._goal()[None, :], ts.needle,
-                                      self.task.ring_radius, key, carry=True)
-                    phase = "carry"
+            phases[s.phase](s)
+            self.stdt_after_step(s)
             yield ts.k
 
-    def _approach_hand(self, side: Side, key: int) -> Hand:
+    def stdt_begin(self) -> StdtLoop:
+        """The right instrument holds the needle and carries it to the first ring."""
+        ts = self.state
+        return StdtLoop(
+            hand=self._hand(ts.rings[:1], ts.needle, self.task.ring_radius, 0, carry=True),
+            offset=ts.needle - self.station.tip(ts.holder),
+            sigma=grasp_sigma(self.adjustment.handover, self.config.practice),
+            delay=self.profile.reaction_delay + GRIPPER_TIME)
+
+    def _stdt_hand_step(self, s: StdtLoop, moved: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """The hand's increment over one cycle's substeps, ``moved`` where it starts."""
+        dt_op = self.dt / OPERATOR_SUBSTEPS
+        dx = np.zeros(3)
+        for _ in range(OPERATOR_SUBSTEPS):
+            dx = dx + s.hand.move(dt_op, moved + dx, goal, self.camera.zoom)
+        return dx
+
+    def stdt_carry_phase(self, s: StdtLoop) -> None:
+        """The holder carries the needle to the next waypoint; at the hand-over point the
+        free instrument starts its approach."""
+        ts = self.state
+        dx = self._stdt_hand_step(s, ts.needle, self._waypoint())
+        self._move_tool(ts.holder, dx)
+        ts.needle = self.station.tip(ts.holder) + s.offset
+        self._check_via()
+        if s.phase == "handover" and not ts.via:
+            s.phase, s.attempts = "approach", 0
+            ts.events.append((ts.t, "stdt", f"at hand-over point; {s.other} approaches"))
+            s.key += 1
+            s.hand = self._approach_hand(s.other, s.key)
+
+    def stdt_approach_phase(self, s: StdtLoop) -> None:
+        """The free instrument to the pre-grasp, then the grasp point; there its jaw
+        closes."""
+        ts, st, other = self.state, self.station, s.other
+        goal = ts.needle + (pregrasp_offset(other) if s.hand.j == 0
+                            else grasp_offset(other))
+        dx = self._stdt_hand_step(s, st.tip(other), goal)
+        self._move_tool(other, dx)
+        s.hand.check(st.tip(other), goal)
+        if s.hand.done:
+            s.phase, s.wait = "close", s.delay
+            ts.events.append((ts.t, "stdt", f"{other} closes its jaw"))
+
+    def stdt_close_phase(self, s: StdtLoop) -> None:
+        """The jaw closes after the gripper delay: a miss is a re-grasp (up to
+        ``MAX_GRASP_ATTEMPTS``), a grasp off the point a misaligned transfer."""
+        ts, other = self.state, s.other
+        s.wait -= self.dt
+        if s.wait > 0.0:
+            return
+        s.attempts += 1
+        # across the needle: where the tip is, plus the misjudgement
+        error = self.station.tip(other) - (ts.needle + grasp_offset(other))
+        error = error * np.array([0.0, 1.0, 1.0]) + lateral_error(self.rng, s.sigma)
+        miss = float(np.linalg.norm(error))
+        outcome = classify_grasp(miss)
+        if outcome == "missed" and s.attempts < MAX_GRASP_ATTEMPTS:
+            ts.counts["regrasps"] += 1
+            ts.events.append((ts.t, "regrasp",
+                              f"{other} missed the needle by {1e3 * miss:.1f} mm"))
+            s.key += 1
+            s.hand = self._approach_hand(other, s.key)
+            s.phase = "approach"
+            return
+        if outcome != "clean":
+            ts.counts["misaligned_transfers"] += 1
+            ts.events.append((ts.t, "misaligned_transfer",
+                              f"{other} grasped {1e3 * miss:.1f} mm off the grasp point"))
+        ts.needle = ts.needle + error     # the closing jaw drags it
+        s.phase, s.wait = "release", s.delay
+
+    def stdt_release_phase(self, s: StdtLoop) -> None:
+        """The first jaw opens after the gripper delay: the other instrument holds the
+        needle and carries it to the ring."""
+        ts = self.state
+        s.wait -= self.dt
+        if s.wait > 0.0:
+            return
+        ts.counts["transfers"] += 1
+        ts.events.append((ts.t, "transfer", f"{ts.holder} -> {s.other}"))
+        ts.holder, s.other = s.other, ts.holder
+        s.offset = ts.needle - self.station.tip(ts.holder)
+        s.key += 1
+        s.hand = self._hand(self._goal()[None, :], ts.needle, self.task.ring_radius, s.key,
+                            carry=True)
+        s.phase = "carry"
+
+    def stdt_after_step(self, s: StdtLoop) -> None:
+        """The common phases (``after_step``); a ring passed: a hand-over to the via point
+        when the next ring is on the other side, else a carry to it."""
+        ts = self.state
+        before = ts.i
+        ts.transferring = s.phase in ("approach", "close", "release")
+        self.after_step()
+        if ts.i == before or ts.done:
+            return
+        s.key += 1
+        if self.task.sides[ts.i] != ts.holder:
+            # the route's via point (needle_route) is the hand-over point
+            s.hand = self._hand(self._waypoint()[None, :], ts.needle,
+                                self.task.ring_radius, s.key)
+            s.phase = "handover"
+        else:
+            s.hand = self._hand(self._goal()[None, :], ts.needle, self.task.ring_radius,
+                                s.key, carry=True)
+            s.phase = "carry"
+
+    def _approach_hand(self, side: Side, key: int) -> MasterHand:
         needle = self.state.needle
         pts = np.array([needle + pregrasp_offset(side), needle + grasp_offset(side)])
         return self._hand(pts, self.station.tip(side), (PREGRASP_REACH, GRASP_REACH), key)

@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+from vasim.core.config import check_choice, check_type, expect
 from vasim.core.errors import ConfigError
 from vasim.operator.profile import OperatorProfile
 from vasim.operator.teleop_profile import TeleopEffects
@@ -72,23 +73,19 @@ class TeleopTrialConfig:
         return "needle"
 
     def __post_init__(self) -> None:
-        if self.mode not in TELEOPERATION_MODES:
-            raise ConfigError(f"unknown teleoperation mode {self.mode!r} (expected one of "
-                              f"{', '.join(TELEOPERATION_MODES)})", field="mode")
+        check_choice(self.mode, "mode", TELEOPERATION_MODES)
         check_shared_fields(self)
         mp = self.mode_practice
-        if mp is not None and (isinstance(mp, bool) or not isinstance(mp, int) or mp < 0):
-            raise ConfigError(f"mode_practice must be an integer >= 0 or None, got {mp!r}",
-                              field="mode_practice")
+        expect(mp is None or (isinstance(mp, int) and not isinstance(mp, bool) and mp >= 0),
+               mp, "an integer >= 0 or none", field="mode_practice")
         me = self.mode_effects
         if isinstance(me, Mapping):
             try:
                 object.__setattr__(self, "mode_effects", TeleopEffects(**me))
             except (TypeError, ValueError) as exc:
                 raise ConfigError(f"mode_effects: {exc}", field="mode_effects") from None
-        elif me is not None and not isinstance(me, TeleopEffects):
-            raise ConfigError(f"mode_effects must be TeleopEffects or None, got {me!r}",
-                              field="mode_effects")
+        elif me is not None:
+            check_type(me, "mode_effects", TeleopEffects, "TeleopEffects or none")
 
 
 

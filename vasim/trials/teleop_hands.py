@@ -2,6 +2,8 @@
 
 * :class:`Hand`: one scripted hand (``vasim.operator.scripted``) on one master, following
   a path of goals; the master increment per step [m, world frame].
+* :class:`ScriptedHands`: the trial's default ``HandFactory`` (``vasim.operator.port``):
+  a scripted :class:`Hand` per path, with the mode's carry or handover profile.
 * :class:`Camera`: the endoscope, fixed on the rings' centroid (``stdt``, ``mrcp``) or
   driven by the camera hand of ``mrcp_cam`` (its decisions are in ``vasim.trials.teleop``).
 """
@@ -15,7 +17,9 @@ import numpy as np
 
 from vasim.mrcp.toolstation import CameraRobot
 from vasim.operator.needle import NeedleTask
+from vasim.operator.port import HandRequest
 from vasim.operator.scripted import OperatorProfile, ScriptedOperator
+from vasim.operator.teleop_profile import TeleopAdjustment
 from vasim.trials.endoscope import DEFAULT_ENDOSCOPE, in_view_cone
 
 CAMERA_FOV_DEG = 70.0
@@ -62,6 +66,26 @@ class Hand:
         return False
 
 
+@dataclass(frozen=True)
+class ScriptedHands:
+    """The scripted person's hands (the default ``HandFactory`` of ``TeleopTrial``).
+
+    Attributes:
+        adjustment: the hands' profiles of this mode and mode practice (``carry`` for a
+            carry to a ring, ``handover`` for every other movement).
+        task: the needle task. practice: the operator's practice (trials done).
+    """
+
+    adjustment: TeleopAdjustment
+    task: NeedleTask
+    practice: int
+
+    def __call__(self, request: HandRequest) -> Hand:
+        prof = self.adjustment.carry if request.carry else self.adjustment.handover
+        return Hand(prof, self.task, request.points, request.start, request.seed,
+                    self.practice, request.reach)
+
+
 @dataclass
 class Camera:
     """The endoscope: fixed on the rings' centroid, or (``follows``) driven by a hand."""
@@ -94,4 +118,5 @@ class Camera:
         self.path += float(np.linalg.norm(step))
 
 
-__all__ = ["CAMERA_FOV_DEG", "CAMERA_TIME_CONSTANT", "CAMERA_ZOOM", "Camera", "Hand"]
+__all__ = ["CAMERA_FOV_DEG", "CAMERA_TIME_CONSTANT", "CAMERA_ZOOM", "Camera", "Hand",
+           "ScriptedHands"]

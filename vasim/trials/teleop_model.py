@@ -5,6 +5,8 @@ state (what a control cycle changes), as in the VF engine (``vasim.trials.vf_mod
   time limit, the person's profile, the mode penalties and the hands' adjustment.
 * :class:`TeleopTrialState` -- the needle, its holder, the ring and route progress, the
   counters, the master's and needle's paths, the physics snapshot, the samples and events.
+* :class:`MrcpLoop`, :class:`StdtLoop` -- what each mode's operator carries from cycle to
+  cycle (its hand, the kernel or the StdT phase), read and changed by the mode's phases.
 
 The station, the camera hand, the abdomen and the deformation accumulator are the trial's
 world objects (``vasim.trials.teleop.TeleopTrial``): built once, stepped by the phases.
@@ -31,6 +33,8 @@ from vasim.trials.teleop_config import TeleopTrialConfig
 
 if TYPE_CHECKING:
     from vasim.abdomen.snapshot import AbdomenSnapshot
+    from vasim.mrcp.kernel import MRCPKernel
+    from vasim.operator.port import MasterHand
 
 CYCLE_DT = 0.018
 """Control cycle of the station [s] (the seed's robot controllers: 55.6 Hz)."""
@@ -135,4 +139,47 @@ class TeleopTrialState:
                                         active_fixtures=""))
 
 
-__all__ = ["COUNTS", "CYCLE_DT", "EM_PARTS", "TeleopTrialModel", "TeleopTrialState"]
+@dataclass(slots=True, eq=False)
+class MrcpLoop:
+    """What the ``mrcp`` modes' operator carries from cycle to cycle.
+
+    Attributes:
+        kernel: the MRCP kernel moving the robots. master: the master's position [m].
+        hand: the current path's hand. key: the path's number (its seed's key).
+        ack: time left until the operator acknowledges a safety stop [s].
+        holding: the kernel held RSel last cycle (one event per run of held cycles).
+    """
+
+    kernel: MRCPKernel
+    master: np.ndarray
+    hand: MasterHand
+    key: int = 0
+    ack: float = 0.0
+    holding: bool = False
+
+
+@dataclass(slots=True, eq=False)
+class StdtLoop:
+    """What the ``stdt`` operator carries from cycle to cycle.
+
+    Attributes:
+        hand: the current path's hand. offset: needle centre - holder tip [m].
+        sigma: the jaw placement error's standard deviation [m]. delay: a gripper action's
+        duration [s]. key: the path's number (its seed's key). phase: ``"carry"``,
+        ``"handover"``, ``"approach"``, ``"close"`` or ``"release"``. other: the free
+        instrument. wait: time left of the gripper action [s]. attempts: grasps tried.
+    """
+
+    hand: MasterHand
+    offset: np.ndarray
+    sigma: float
+    delay: float
+    key: int = 0
+    phase: str = "carry"
+    other: Side = "left"
+    wait: float = 0.0
+    attempts: int = 0
+
+
+__all__ = ["COUNTS", "CYCLE_DT", "EM_PARTS", "MrcpLoop", "StdtLoop", "TeleopTrialModel",
+           "TeleopTrialState"]

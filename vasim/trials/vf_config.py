@@ -16,11 +16,10 @@ is unchanged (the three teleoperation fields were left out of it when None).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, check_number, expect
 from vasim.fixtures.gain import GainRule, rule_from_record
 from vasim.operator.scripted import OperatorProfile
 from vasim.tasks import Task, point_task, trajectory_task
@@ -87,17 +86,11 @@ class VfTrialConfig:
         # the fixture gain (vasim.fixtures.gain): a constant, or the adaptive rule (a stored
         # record's table becomes the rule)
         object.__setattr__(self, "gain", rule_from_record(self.gain, "gain"))
-        if self.task not in ("trajectory", "point"):
-            raise ConfigError(f"unknown task {self.task!r} (expected 'trajectory' or 'point')",
-                              field="task")
-        if self.task == "point" and self.variant != 0:
-            raise ConfigError(f"the point task has no variants, got variant {self.variant!r}",
-                              field="variant")
-        if not (math.isfinite(self.dt) and 0 < self.dt <= 0.02):
-            raise ConfigError(f"dt must be in (0, 0.02] s, got {self.dt!r}", field="dt")
-        if not (math.isfinite(self.velocity_cutoff_hz) and self.velocity_cutoff_hz > 0):
-            raise ConfigError(f"velocity_cutoff_hz must be > 0, got {self.velocity_cutoff_hz!r}",
-                              field="velocity_cutoff_hz")
+        check_choice(self.task, "task", ("trajectory", "point"))
+        expect(self.task != "point" or self.variant == 0, self.variant,
+               "variant 0 (the point task has no variants)", field="variant")
+        check_number(self.dt, "dt", gt=0, le=0.02)
+        check_number(self.velocity_cutoff_hz, "velocity_cutoff_hz", gt=0)
         check_shared_fields(self)
 
 

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import expect
 from vasim.fixtures.schema import Schema, load_schema
 from vasim.haptics.observation import OperatorObservation
 from vasim.records.samples import SampleBuffer
@@ -88,9 +88,8 @@ class VfTrialModel:
         """
         sch = schema if schema is not None else load_schema(config.schema)
         task = make_task(config)
-        if sch.task not in ("any", task.kind):
-            raise ConfigError(f"schema {sch.name!r} is for {sch.task!r} tasks, "
-                              f"not {task.kind!r}", field="schema")
+        expect(sch.task in ("any", task.kind), sch.name, f"a schema for {task.kind!r} tasks "
+               f"({sch.name!r} is for {sch.task!r} tasks)", field="schema")
         start = np.asarray(task.start, dtype=np.float64)
         return cls(
             config=config, schema=sch, task=task, dt=config.dt, max_time=config.max_time,

@@ -17,6 +17,9 @@ from vasim.viewer.app import Snapshot as Snapshot
 from vasim.viewer.app import TrialInfo as TrialInfo
 from vasim.viewer.app import ViewerApp as ViewerApp
 from vasim.viewer.app import endoscope_pose as endoscope_pose
+from vasim.viewer.app_options import PageAccess as PageAccess
+from vasim.viewer.app_options import TrialOptions as TrialOptions
+from vasim.viewer.app_options import ViewerPace as ViewerPace
 from vasim.viewer.audio import AudioStream as AudioStream
 from vasim.viewer.controller import PanelState as PanelState
 from vasim.viewer.controller import TrainingController as TrainingController
@@ -43,13 +46,16 @@ __all__ = [
     "HudInfo",
     "HudView",
     "OrganView",
+    "PageAccess",
     "PanelState",
     "Snapshot",
     "ToolView",
     "TrainingController",
     "TrajectoryView",
     "TrialInfo",
+    "TrialOptions",
     "ViewerApp",
+    "ViewerPace",
     "endoscope_pose",
     "is_loopback",
 ]

@@ -56,7 +56,7 @@ from urllib.parse import parse_qs, urlsplit
 import viser
 import websockets.asyncio.server
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import expect
 
 log = logging.getLogger(__name__)
 
@@ -212,9 +212,9 @@ def access_policy(host: str, token: str | None, role: str | None = None) -> Acce
         ConfigError: ``host`` is beyond loopback and no token was given (the CLI makes one
             only with ``--expose``).
     """
-    if not is_loopback(host) and not token:
-        raise ConfigError(f"host {host!r} exposes the viewer beyond this machine: it needs "
-                          "an access token (vasim serve --expose makes one)", field="host")
+    expect(is_loopback(host) or token, host, "a loopback host, or a token with this one "
+           "(it exposes the viewer beyond this machine: it needs an access token; vasim "
+           "serve --expose makes one)", field="host")
     return AccessPolicy(loopback_only=is_loopback(host), token=token or None, role=role)
 
 

@@ -43,7 +43,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from vasim.abdomen.anatomy import TROCAR_NAMES, Organ, default_anatomy, trocar_points
 from vasim.core.bounds import PORT
-from vasim.core.config import check_choice, check_int, check_number
+from vasim.core.config import check_choice, check_int, check_number, expect
 from vasim.core.errors import ConfigError
 from vasim.fixtures.schema import load_schema
 from vasim.haptics.laparoscopic import InputMapping
@@ -66,6 +66,7 @@ from vasim.viewer.access import (
     same_token,
     viewer_url,
 )
+from vasim.viewer.app_options import PageAccess, TrialOptions, ViewerPace
 from vasim.viewer.audio import AudioStream
 from vasim.viewer.chrome import experimenter_chrome, lock_trainee_chrome
 from vasim.viewer.controller import (
@@ -79,7 +80,6 @@ from vasim.viewer.controller import (
 from vasim.viewer.endoscope import Scope, ScopeLight, scope_from_mag, scope_pose, task_target
 from vasim.viewer.flow import (
     MIN_SCENE_HZ,
-    SCENE_HZ,
     PageAcks,
     RateMeter,
     ScenePacer,
@@ -113,7 +113,7 @@ from vasim.viewer.views import (
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-TaskName = Literal["trajectory", "point"]
+DEFAULT_TRIALS, DEFAULT_PACE, DEFAULT_ACCESS = TrialOptions(), ViewerPace(), PageAccess()
 
 
 def check_bind_address(host: str, port: int) -> None:
@@ -146,111 +146,92 @@ class ViewerApp(ErrorReporter):
         host: interface to bind; ``127.0.0.1`` (default) admits only this machine.
         port: TCP port; 0 picks a free one. viser silently moves to the next free port when
             the requested one is busy: read ``port`` / ``url`` after ``start()``.
-        schema: fixture schema of the demo trials (a name in ``protocols/schemas``).
-        seed: operator seed of the first trial (incremented per trial).
-        task: ``"trajectory"`` or ``"point"``.
         scene: the abdomen scene of every trial (``"none"``: a static task).
         db: the study store (SQLite path) trials are stored in; None: demo only.
-        skill: scripted operator preset.
-        variant: trajectory variant of the first trial.
-        max_time: simulated time limit per demo/free trial [s].
-        pause_s: wall time a finished trial is shown before the next one starts [s].
-        speed: simulated seconds per wall second (1 = real time).
-        control_hz, view_hz: rates of the controller and view threads [Hz].
-        audio_hz: rate of the AG parameter stream [Hz].
+        trials: the first demo trial, time limit, pause, start cue and optics
+            (``TrialOptions``).
+        pace: the trials' speed and the threads' and pages' rates (``ViewerPace``).
+        access: the pages' tokens and the experimenter page's port (``PageAccess``).
         trial_factory: builds live trials (default ``make_live_trial``).
-        token: the trainee page's access token (required beyond loopback; ``--expose``).
-        experimenter_token: the experimenter page's token; must differ from ``token``;
-            None with a ``token``: a fresh one is drawn (read ``experimenter_url``).
-        optics: the trainee's endoscope optics [deg], 0 or 30 (a scene option; stored with
-            every person-driven trial).
-        countdown_s: the start cue before a person-driven trial [s] (0: none).
-        scene_hz: rate of what the trainee does not steer (organs, the task's points) on a
-            page that keeps up [Hz]; slower pages get it less often (``flow.ScenePacer``).
-            None: with every frame (as before issue #26.2; ``bench/viewer.py`` compares).
 
     Raises:
         ConfigError: for an unknown schema, task, skill or scene, a schema that does not
             fit the task, or a ``db`` that is a directory (before any socket is opened).
 
     Example:
-        >>> app = ViewerApp(port=0).start()         # doctest: +SKIP
-        >>> print(app.url)                          # doctest: +SKIP
+        >>> app = ViewerApp(port=0, trials=TrialOptions(schema="vg")).start()  # doctest: +SKIP
+        >>> print(app.url)                                                     # doctest: +SKIP
         http://127.0.0.1:40123/
-        >>> app.request_schema("vg"); app.stop()    # doctest: +SKIP
+        >>> app.request_schema("mag"); app.stop()                              # doctest: +SKIP
     """
 
     def __init__(
         self,
         host: str = "127.0.0.1",
         port: int = 8080,
-        schema: str = "trajectory_following",
-        seed: int = 0,
-        task: TaskName = "trajectory",
         *,
         scene: str = "default",
         db: str | None = None,
-        skill: Literal["novice", "intermediate", "expert"] = "intermediate",
-        variant: int = 0,
-        max_time: float = 180.0,
-        pause_s: float = 1.5,
-        speed: float = 1.0,
-        control_hz: float = 50.0,
-        view_hz: float = 40.0,
-        audio_hz: float = 20.0,
+        trials: TrialOptions = DEFAULT_TRIALS,
+        pace: ViewerPace = DEFAULT_PACE,
+        access: PageAccess = DEFAULT_ACCESS,
         trial_factory: Callable[..., Any] | None = None,
-        token: str | None = None,
-        experimenter_port: int | None = None,
-        experimenter_token: str | None = None,
-        optics: float = 0.0,
-        countdown_s: float = 3.0,
-        scene_hz: float | None = SCENE_HZ,
     ):
         # Two pages, two tokens (issue #30.1): the trainee's token never opens the
         # experimenter's page. Given only the trainee's, the experimenter's is drawn here.
+        token, experimenter_token = access.token, access.experimenter_token
         if token and experimenter_token is None:
             experimenter_token = new_token()
-        if token and experimenter_token and same_token(experimenter_token, token):
-            raise ConfigError("the experimenter's token must differ from the trainee's "
-                              "(one token per page)", field="experimenter_token")
+        expect(not (token and experimenter_token and same_token(experimenter_token, token)),
+               "the trainee's token", "a token that must differ from the trainee's (one "
+               "token per page)", field="experimenter_token")
         self.access = access_policy(host, token, role="trainee")
         self.exp_access = access_policy(host, experimenter_token, role="experimenter")
-        self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")], optics_deg=optics)
-        for name, v in (("pause_s", pause_s), ("speed", speed), ("control_hz", control_hz),
-                        ("view_hz", view_hz), ("audio_hz", audio_hz)):
-            check_number(v, name, ge=0)
-        for name, v in (("speed", speed), ("control_hz", control_hz), ("view_hz", view_hz),
-                        ("audio_hz", audio_hz)):
-            check_number(v, name, gt=0)
-        if scene.startswith("mrcp:"):
-            raise ConfigError(f"scene {scene!r} is an MRCP slave station: it is served by "
-                              "vasim.viewer.mrcp_panel.MrcpViewerApp (vasim serve --scene "
-                              "mrcp:<scenario> starts it), not by ViewerApp", field="scene")
+        self.scope = Scope(trocar_points()[TROCAR_NAMES.index("camera")],
+                           optics_deg=trials.optics)
+        self._check_pace(trials, pace)
+        expect(not scene.startswith("mrcp:"), scene, "an abdomen scene (an MRCP slave "
+               "station is served by vasim.viewer.mrcp_panel.MrcpViewerApp: vasim serve "
+               "--scene mrcp:<scenario> starts it)", field="scene")
         self.host = host
         self.requested_port = int(port)
         self.requested_experimenter_port = (
-            int(experimenter_port) if experimenter_port is not None
+            int(access.experimenter_port) if access.experimenter_port is not None
             else (0 if int(port) == 0 else int(port) + 1))
-        self.control_period = 1.0 / control_hz
-        self.view_period = 1.0 / view_hz
-        self.audio_hz = float(audio_hz)
+        self.control_period = 1.0 / pace.control_hz
+        self.view_period = 1.0 / pace.view_hz
+        self.audio_hz = float(pace.audio_hz)
         # Built here so that a bad schema/task/scene fails before a socket is opened.
+        t = trials
         self.controller = TrainingController(TrainingSettings(
-            scene=scene, db=db, schema=schema, task=task, skill=skill, seed=seed,
-            variant=variant, max_time=max_time, pause_s=pause_s, speed=speed,
-            trial_factory=trial_factory, countdown_s=countdown_s, optics_deg=optics))
+            scene=scene, db=db, schema=t.schema, task=t.task, skill=t.skill, seed=t.seed,
+            variant=t.variant, max_time=t.max_time, pause_s=t.pause_s, speed=pace.speed,
+            trial_factory=trial_factory, countdown_s=t.countdown_s, optics_deg=t.optics))
         self.scene_name = scene
         # The instrument's screen motion follows the scope's image of each trial's task.
         self.controller.view_axes = self._view_axes
         eye = self._scope_view(self.controller.info)
         self.controller.screen = screen_axes(eye.position, eye.look_at, eye.up)
         self._init_loop_state()
-        self.view_hz = float(view_hz)
-        self.speed = float(speed)
-        if scene_hz is not None:
-            check_number(scene_hz, "scene_hz", gt=0)
-        self._init_pacing(scene_hz)
+        self.view_hz = float(pace.view_hz)
+        self.speed = float(pace.speed)
+        if pace.scene_hz is not None:
+            check_number(pace.scene_hz, "scene_hz", gt=0)
+        self._init_pacing(pace.scene_hz)
         self.controller.viewer_timing = self.viewer_timing
+
+    @staticmethod
+    def _check_pace(trials: TrialOptions, pace: ViewerPace) -> None:
+        """The pause and the rates: a number, >= 0, and (but the pause) > 0."""
+        speed, control_hz, view_hz, audio_hz = (pace.speed, pace.control_hz, pace.view_hz,
+                                                pace.audio_hz)
+        for name, v in (("pause_s", trials.pause_s), ("speed", speed),
+                        ("control_hz", control_hz), ("view_hz", view_hz),
+                        ("audio_hz", audio_hz)):
+            check_number(v, name, ge=0)
+        for name, v in (("speed", speed), ("control_hz", control_hz), ("view_hz", view_hz),
+                        ("audio_hz", audio_hz)):
+            check_number(v, name, gt=0)
 
     def _init_loop_state(self) -> None:
         """The command queue, the threads' state, what the pages show and the servers
@@ -767,9 +748,12 @@ __all__ = [
     "DEFAULT_SCHEMA_FOR_TASK",
     "Command",
     "DragInput",
+    "PageAccess",
     "Snapshot",
     "TrialInfo",
+    "TrialOptions",
     "ViewerApp",
+    "ViewerPace",
     "check_bind_address",
     "default_schema",
     "endoscope_pose",

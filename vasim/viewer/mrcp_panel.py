@@ -116,9 +116,8 @@ def resolve_scenario(scenario: Any) -> Any:
     from vasim.mrcp.scenarios import SCENARIOS
 
     name = scenario_from_scene(scenario) or scenario
-    if name not in SCENARIOS:
-        raise ConfigError(f"unknown MRCP scenario {name!r} in --scene; known: "
-                          f"{scenario_help()}", field="scene")
+    expect(name in SCENARIOS, name, f"an MRCP scenario: one of {scenario_help()}",
+           field="scene")
     return SCENARIOS[name]
 
 

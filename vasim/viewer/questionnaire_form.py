@@ -19,7 +19,6 @@ from typing import Any
 
 import viser
 
-from vasim.core.errors import ConfigError
 from vasim.viewer.state import Command, PanelState
 from vasim.viewer.views import set_gui_value
 
@@ -85,13 +84,13 @@ def parse_answers(text: str, which: str) -> dict[str, Any]:
     Raises:
         ConfigError: invalid TOML (line and column), or a nested table.
     """
-    from vasim.core.config import parse_toml
+    from vasim.core.config import expect, parse_toml
 
     data = parse_toml(text, kind=f"{which} answers")
     for key, value in data.items():
-        if isinstance(value, dict) and not all(isinstance(v, int) for v in value.values()):
-            raise ConfigError(f"{key} is a table: write the {which} answers as item = value "
-                              "lines (no [pre]/[post] header)", field=f"{which}.{key}")
+        expect(not isinstance(value, dict) or all(isinstance(v, int) for v in value.values()),
+               value, f"an answer, not a table: write the {which} answers as item = value "
+               "lines (no [pre]/[post] header)", field=f"{which}.{key}")
     return data
 
 

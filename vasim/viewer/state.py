@@ -168,9 +168,8 @@ def with_f5pl(schema: Schema, instance: str, params: Logistic5) -> Schema:
             fx = replace(fx, params=replace(fx.params, f5pl=params))
             found = True
         fixtures.append(fx)
-    if not found:
-        raise ConfigError(f"schema {schema.name!r} has no fixture {instance!r} (has "
-                          f"{', '.join(schema.fixture_names) or 'none'})", field="fixtures")
+    expect(found, instance, f"a fixture of schema {schema.name!r} (it has "
+           f"{', '.join(schema.fixture_names) or 'none'})", field="fixtures")
     return replace(schema, fixtures=tuple(fixtures))
 
 

@@ -15,12 +15,11 @@ that mixes simulated and person-run sessions. What changes is who moves the mast
   instrument's ``LaparoscopicDevice``) since the previous one, read through
   :class:`vasim.viewer.live.DeviceOperator` (an invalid reading or a held clutch button
   moves nothing). Its goals are checked with the scripted hand's reach rule.
-* :class:`PersonTeleopTrial` is the trial with every hand a :class:`DeviceHand` on one
-  device. **Seam**: it overrides ``TeleopTrial._hand``, the one place the trial makes a
-  hand; ``vasim.trials`` offers no public operator hook for teleoperation trials yet
-  (issue #29 item 2 puts the operators behind one protocol); ``check_hand_seam`` refuses
-  to run if that method is gone, and ``tests/viewer/test_teleop_session.py`` fails if
-  the page's input stops moving the needle.
+* :func:`person_teleop_trial` is the trial with every hand a :class:`DeviceHand` on one
+  device: ``TeleopTrial``'s public operator hook, its ``hand_factory``
+  (``vasim.operator.port.HandFactory``), gets :class:`DeviceHands`.
+  ``tests/viewer/test_teleop_session.py`` fails if the page's input stops moving the
+  needle.
 * :class:`LiveTeleopTrial` runs it in real time on its own thread with the viewer's
   ``LiveTrial`` shape (``start``, ``stop``, ``done``, ``frame``, ``timing``, ``result``),
   publishing a ``TrialFrame`` per 18 ms cycle: ``tcp`` and ``master`` the needle centre
@@ -67,6 +66,7 @@ from vasim.fixtures.types import CameraView
 from vasim.haptics.device import Device
 from vasim.haptics.observation import OperatorObservation
 from vasim.operator.needle import RING_RADIUS, RING_SITES, needle_task
+from vasim.operator.port import HandRequest
 from vasim.tasks import Task
 from vasim.trials.configs import AnyTrialConfig, TeleopTrialConfig
 from vasim.trials.kinds import TELEOPERATION_MODES
@@ -165,40 +165,27 @@ class DeviceHand:
         return False
 
 
-def check_hand_seam() -> None:
-    """Refuses to build a person's trial when ``TeleopTrial`` no longer makes its hands in
-    ``_hand`` (the seam :class:`PersonTeleopTrial` overrides): the scripted operator would
-    otherwise drive a trial stored as the person's.
-
-    Raises:
-        ConfigError: the seam is gone.
-    """
-    if not callable(getattr(TeleopTrial, "_hand", None)):
-        raise ConfigError("this release's TeleopTrial has no _hand seam: person-driven "
-                          "teleoperation trials cannot run (vasim.viewer.teleop_live)",
-                          field="mode")
-
-
-class PersonTeleopTrial(TeleopTrial):
-    """A ``TeleopTrial`` whose hands are :class:`DeviceHand` s on one device (module
-    docstring: the seam and the decisions).
+class DeviceHands:
+    """The ``HandFactory`` (``vasim.operator.port``) of a trial a person drives: every
+    path's hand is a :class:`DeviceHand` on the same device (module docstring).
 
     Args:
-        config: the trial (a teleoperation mode; ``person_config`` applied by the caller).
-        device: the started input device.
-        **kw: ``TeleopTrial``'s keyword arguments (``n_rings``, ``abdomen``, ...).
+        operator: the started device, read as increments.
     """
 
-    def __init__(self, config: TeleopTrialConfig, device: Device, **kw: Any) -> None:
-        check_hand_seam()
-        super().__init__(config, **kw)
-        self.device_operator = DeviceOperator(device)
+    def __init__(self, operator: DeviceOperator) -> None:
+        self.operator = operator
 
-    def _hand(self, points: FloatArray, start: FloatArray,  # type: ignore[override]  # a DeviceHand
-              reach: float | tuple[float, ...], key: int, *,
-              carry: bool = False) -> DeviceHand:
-        """The person's hand on the trial's one device (the seam, module docstring)."""
-        return DeviceHand(self.device_operator, points, reach)
+    def __call__(self, request: HandRequest) -> DeviceHand:
+        return DeviceHand(self.operator, request.points, request.reach)
+
+
+def person_teleop_trial(config: TeleopTrialConfig, device: Device,
+                        **kw: Any) -> TeleopTrial:
+    """A ``TeleopTrial`` whose hands are :class:`DeviceHand` s on ``device`` (its
+    ``hand_factory``; ``person_config`` applied by the caller); ``kw``: ``TeleopTrial``'s
+    keyword arguments (``n_rings``, ``abdomen``, ...)."""
+    return TeleopTrial(config, hand_factory=DeviceHands(DeviceOperator(device)), **kw)
 
 
 class LiveTeleopTrial(PacedThread):
@@ -230,7 +217,7 @@ class LiveTeleopTrial(PacedThread):
                          max_catch_up_s=max_catch_up_s)
         self.config = config
         self.trial: TeleopTrial = (TeleopTrial(config, **kw) if device is None
-                                   else PersonTeleopTrial(config, device, **kw))
+                                   else person_teleop_trial(config, device, **kw))
         self._cycles: Iterator[int] = self.trial.cycles()
         self._exhausted = False
         self._closed = False
@@ -306,12 +293,12 @@ def make_live_teleop_trial(config: AnyTrialConfig, device: Device | None = None,
 __all__ = [
     "NO_FIXTURES",
     "DeviceHand",
+    "DeviceHands",
     "LiveTeleopTrial",
-    "PersonTeleopTrial",
     "camera_outputs",
-    "check_hand_seam",
     "is_teleop",
     "make_live_teleop_trial",
     "person_config",
+    "person_teleop_trial",
     "teleop_task",
 ]

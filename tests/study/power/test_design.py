@@ -129,7 +129,7 @@ def test_power_needs_a_vf_protocol_with_probes() -> None:
     vf = load_protocol("vf_learning_curve")
     no_probes = dataclasses.replace(vf, blocks=tuple(
         dataclasses.replace(b, probe=False, probes_after=0) for b in vf.blocks))
-    with pytest.raises(ConfigError, match="no VF-free"):
+    with pytest.raises(ConfigError, match=r"expected a protocol with VF-free \(probe\) trials"):
         check_power_protocol(no_probes)
 
 

@@ -23,6 +23,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.geometry import frame_z_x
 from vasim.mrcp.indices._index_kernels import cone_along
 from vasim.mrcp.indices.base import INDICES, EvalContext
 
@@ -75,14 +76,10 @@ class ToolCone:
     @cached_property
     def _frame(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         z = np.asarray(self.normal, dtype=np.float64)
-        z = z / np.linalg.norm(z)
-        x = np.asarray(self.x_axis, dtype=np.float64)
-        x = x - z * float(x @ z)
-        nx = float(np.linalg.norm(x))
-        if nx < 1e-9:
-            raise ValueError(f"ToolCone: x_axis {self.x_axis!r} is parallel to the normal")
-        x = x / nx
-        return x, np.cross(z, x), z
+        f = frame_z_x(z / np.linalg.norm(z), self.x_axis, what="ToolCone: x_axis")
+        # contiguous copies of the columns, as the axes were before core.geometry built them
+        return (np.ascontiguousarray(f[:, 0]), np.ascontiguousarray(f[:, 1]),
+                np.ascontiguousarray(f[:, 2]))
 
     def max_polar(self, azimuth: float) -> float:
         """``φ(θ)`` [rad]: the cone's half-angle at azimuth ``θ``."""

@@ -7,7 +7,7 @@ MRCP kernel; ``vasim mrcp run NAME`` is the command line.
 
 from __future__ import annotations
 
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice
 from vasim.mrcp.scenarios.base import Scenario, ScenarioOptions, Setup
 from vasim.mrcp.scenarios.cube_rotation import CubeRotation
 from vasim.mrcp.scenarios.cube_translation import CubeTranslation
@@ -28,11 +28,7 @@ def get_scenario(name: str) -> Scenario:
     Raises:
         ConfigError: for an unknown name (the known names are listed).
     """
-    try:
-        return SCENARIOS[name]
-    except KeyError:
-        raise ConfigError(f"unknown scenario {name!r}; known: {sorted(SCENARIOS)}",
-                          field="scenario") from None
+    return SCENARIOS[check_choice(name, "scenario", sorted(SCENARIOS))]
 
 
 __all__ = ["SCENARIOS", "Scenario", "ScenarioOptions", "Setup", "get_scenario"]

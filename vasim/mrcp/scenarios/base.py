@@ -21,7 +21,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from vasim.core.geometry import rot_z
+from vasim.core.geometry import frame_z_x, rot_z
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray, ProximityWorld
 from vasim.mrcp.kernel import KernelConfig, TaskPoint
 
@@ -104,13 +104,7 @@ def gripper_frame(approach: FloatArray, x_hint: FloatArray) -> FloatArray:
     """Gripper rotation whose z axis (the approach direction, flange -> fingers) is
     ``approach`` and whose x axis is ``x_hint`` made orthogonal to it."""
     z = np.asarray(approach, dtype=float)
-    z = z / np.linalg.norm(z)
-    x = np.asarray(x_hint, dtype=float) - z * float(np.asarray(x_hint, dtype=float) @ z)
-    n = float(np.linalg.norm(x))
-    if n < 1e-9:
-        raise ValueError(f"gripper_frame: x_hint {x_hint!r} is parallel to the approach")
-    x = x / n
-    return np.column_stack([x, np.cross(z, x), z])
+    return frame_z_x(z / np.linalg.norm(z), x_hint, what="gripper_frame: x_hint")
 
 
 def cube_points(half: float, palm: float, standoff: float,

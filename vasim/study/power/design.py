@@ -191,13 +191,13 @@ def check_power_protocol(protocol: Protocol) -> None:
     """
     conds = {b.condition for b in protocol.blocks}
     vf = conds - set(TELEOPERATION_MODES)
-    if not vf - {"none"}:
-        raise ConfigError(f"protocol {protocol.name!r} has no virtual-fixture condition "
-                          f"(conditions: {', '.join(sorted(conds))}); power planning covers "
-                          "the VF study's fixture and practice tests", field="--protocol")
-    if not any(b.probe or b.probes_after > 0 for b in protocol.blocks):
-        raise ConfigError(f"protocol {protocol.name!r} has no VF-free (probe) trial; the "
-                          "fixture and practice tests need one", field="--protocol")
+    expect(vf - {"none"}, protocol.name, "a protocol with a virtual-fixture condition (this "
+           f"one has no virtual-fixture condition; conditions: {', '.join(sorted(conds))}): "
+           "power planning covers the VF study's fixture and practice tests",
+           field="--protocol")
+    expect(any(b.probe or b.probes_after > 0 for b in protocol.blocks), protocol.name,
+           "a protocol with VF-free (probe) trials (the fixture and practice tests need one)",
+           field="--protocol")
 
 
 def parse_effects(text: str, *, file: str | Path | None = None,

@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from vasim.core.atomic import atomic_folder
+from vasim.core.config import check_dir_path
 from vasim.core.errors import ConfigError
 from vasim.core.progress import progress_bar
 from vasim.study.recovery import recovery_summary
@@ -129,8 +130,7 @@ def build_report(db: str | os.PathLike[str], out: str | os.PathLike[str], *,
     """
     t0 = time.perf_counter()
     out_dir = Path(out)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ConfigError("exists and is not a folder", file=out_dir, field="--out")
+    check_dir_path(out_dir, "--out", error=ConfigError)
     with progress_bar(len(STEPS), "vasim report", "step", enabled=progress,
                       leave=False) as bar:
         def step(name: str) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from vasim.core.config import check_file
 from vasim.core.errors import ConfigError
 from vasim.study.protocol import Protocol, parse_protocol
 from vasim.study.store import (
@@ -139,11 +140,7 @@ def load_study(db: str | os.PathLike[str], protocol: str | None = None) -> Study
         StoreError: the file is not a vasim store (or a newer or unmigrated one).
     """
     path = Path(db)
-    if not path.exists():
-        raise ConfigError("study database not found", file=path, field="--db")
-    if path.is_dir():
-        raise ConfigError("is a directory, expected the study database (SQLite file)",
-                          file=path, field="--db")
+    check_file(path, "--db", what="the study database (SQLite file)", error=ConfigError)
     if path.stat().st_size == 0:
         return _empty_data(path, protocol, ("the database file is empty (0 bytes): no "
                                             "sessions, nothing to analyse",), None)

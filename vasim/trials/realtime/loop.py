@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from vasim.abdomen.runner import PhysicsThread
-from vasim.core.errors import ConfigError
+from vasim.core.config import check_choice, expect
 from vasim.fixtures.schema import Schema
 from vasim.haptics.coupling import CouplingParams
 from vasim.haptics.device import BUTTON_2, Device, ScheduledDevice
@@ -91,12 +91,10 @@ class RealtimeTrial:
                  servo: ServoSettings | None = None):
         servo = servo if servo is not None else ServoSettings()
         rate_hz = servo.rate_hz
-        if not (math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9):
-            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
-                              f"{config.dt!r} (rate_hz must be 1 / dt)", field="rate_hz")
-        if not isinstance(physics, PhysicsLog) and physics not in ("thread", "inline", "off"):
-            raise ConfigError(f"physics must be 'thread', 'inline', 'off' or a PhysicsLog, "
-                              f"got {physics!r}", field="physics")
+        expect(math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9, rate_hz,
+               f"1 / dt of the trial (dt {config.dt!r})", field="rate_hz")
+        if not isinstance(physics, PhysicsLog):
+            check_choice(physics, "physics", ("thread", "inline", "off"))
         self.config = config
         self.servo = servo
         self.runner = TrialRunner(config, schema)

@@ -13,7 +13,8 @@ import numpy as np
 
 from vasim.abdomen.contact import ToolPose
 from vasim.abdomen.runner import PhysicsThread
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import check_number
+from vasim.core.errors import DeviceError
 from vasim.haptics.coupling import CouplingParams, LinearForce
 from vasim.haptics.device import FloatArray
 from vasim.haptics.observation import OperatorObservation
@@ -160,8 +161,7 @@ class TrialPlant:
 
     def __init__(self, runner: TrialRunner, coupling: CouplingParams | None = None, *,
                  dt: float = 1e-3, blend_s: float = DEFAULT_BLEND_S):
-        if not (math.isfinite(blend_s) and blend_s >= 0):
-            raise ConfigError(f"blend_s must be >= 0 s, got {blend_s!r}", field="blend_s")
+        check_number(blend_s, "blend_s", ge=0)
         self.runner = runner
         self.blend_s = float(blend_s)
         self._decay = math.exp(-dt / blend_s) if blend_s > 0 else 0.0

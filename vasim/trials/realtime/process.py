@@ -58,7 +58,8 @@ import numpy as np
 
 from vasim.abdomen.contact import ContactPatch, ToolPose
 from vasim.abdomen.runner import PhysicsThread
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import check_choice, expect
+from vasim.core.errors import DeviceError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import Device
 from vasim.haptics.devices.replay import DeviceStream
@@ -319,14 +320,11 @@ class ProcessRealtimeTrial:
                  schema: Schema | None = None, physics: str = "thread",
                  servo: ServoSettings | None = None,
                  frame_every: int = 10, start_timeout_s: float = 120.0):
-        if physics not in ("thread", "off"):
-            raise ConfigError(f"physics must be 'thread' or 'off', got {physics!r}",
-                              field="physics")
+        check_choice(physics, "physics", ("thread", "off"))
         servo = servo if servo is not None else ServoSettings()
         rate_hz = servo.rate_hz
-        if not (math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9):
-            raise ConfigError(f"rate_hz {rate_hz!r} does not match the trial's dt "
-                              f"{config.dt!r} (rate_hz must be 1 / dt)", field="rate_hz")
+        expect(math.isfinite(rate_hz) and abs(rate_hz * config.dt - 1.0) <= 1e-9, rate_hz,
+               f"1 / dt of the trial (dt {config.dt!r})", field="rate_hz")
         self.config = config
         self.runner = TrialRunner(config, schema)  # for the abdomen and the result
         self.coupling = servo.coupling

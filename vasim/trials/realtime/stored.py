@@ -9,7 +9,8 @@ import time
 from dataclasses import replace
 from typing import Any
 
-from vasim.core.errors import ConfigError, DeviceError
+from vasim.core.config import expect
+from vasim.core.errors import DeviceError
 from vasim.fixtures.schema import Schema
 from vasim.haptics.device import Device
 from vasim.operator.device import ScriptedDevice
@@ -57,15 +58,13 @@ def run_realtime_trial(config: TrialConfig, sink: TrialSink | None = None,
     Returns:
         (result, trial_id or None, timing).
     """
-    if physics == "inline":
-        raise ConfigError("physics 'inline' cannot keep real time; use 'thread' or 'off'",
-                          field="physics")
+    expect(physics != "inline", physics, "'thread' or 'off' ('inline' cannot keep real "
+           "time)", field="physics")
     sink = check_sink(sink)
     trial: RealtimeTrial | ProcessRealtimeTrial
     if process:
-        if device is not None:
-            raise ConfigError("a device object cannot move to the servo process: pass "
-                              "device_factory (or process=False)", field="device")
+        expect(device is None, type(device).__name__, "no device object: it cannot move to "
+               "the servo process (pass device_factory, or process=False)", field="device")
         trial = ProcessRealtimeTrial(config, device_factory, schema=schema, physics=physics)
         scripted = device_factory is None
         name = "scripted" if scripted else (device_name or "device")
