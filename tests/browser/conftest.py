@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import importlib.util
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
 
-from tests.polling import WAIT_S
+from tests.polling import WAIT_S, wait_for
 
 CHROMIUM = os.environ.get("VASIM_CHROMIUM", "/usr/bin/chromium")   # as .ci/ensure-chromium
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -71,6 +71,20 @@ class _Browser:
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._browser, name)
+
+
+def click_until(locator: Any, done: Callable[[], object], *, what: str, tries: int = 3,
+                wait_s: float = 60.0) -> None:
+    """Clicks ``locator`` until the server shows the click's effect (``done``), at most
+    ``tries`` times, waiting ``wait_s`` after each click. A click on a page re-laid out under
+    it (a notice line appearing on a busy host) can land beside its button and be lost; a
+    click is repeated only while ``done`` -- read on the server, where the click acts first --
+    is false, so a toggle is never clicked twice."""
+    for _ in range(tries):
+        locator.click(force=True)
+        if wait_for(done, timeout=wait_s):
+            return
+    raise AssertionError(f"{what}: {tries} clicks, no effect on the server")
 
 
 def wait_ready(page: Any, node: str = "/tool/tip") -> None:

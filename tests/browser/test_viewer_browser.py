@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.browser.conftest import VIEWPORT, WAIT_MS, wait_ready
+from tests.browser.conftest import VIEWPORT, WAIT_MS, click_until, wait_ready
 from tests.polling import wait_for
 from vasim.study.store import TrialStore
 from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
@@ -150,7 +150,9 @@ def test_audio_synth_receives_ag_parameter_updates(app: ViewerApp, page: Any) ->
     assert 100.0 < p["pitch"] < 5000.0 and p["period"] > 0
     # The page's control enables the synth (a click is the gesture browsers require).
     assert not s["enabled"]
-    page.get_by_role("button", name="Enable audio").click(force=True)
+    assert not any(app.audio.enabled.values())    # no page of this server has enabled it
+    click_until(page.get_by_role("button", name="Enable audio"),
+                lambda: any(app.audio.enabled.values()), what="Enable audio")
     page.wait_for_function("() => window.__vasimAudio.enabled", timeout=WAIT_MS)
 
 

@@ -193,7 +193,9 @@ def test_an_inf_camera_is_dropped_and_its_sender_disconnected(
         # The server never took the bad pose: every client's camera stays finite.
         for client in app.server.get_clients().values():  # type: ignore[union-attr]
             assert np.isfinite(client.camera.position).all()
-        for _ in range(isolation.STRIKES):
+        # One strike is in; STRIKES - 1 more reach the limit (a STRIKES-th more could meet a
+        # socket the server has already closed: it did once, on a busy host).
+        for _ in range(isolation.STRIKES - 1):
             bad.send(msgspec.msgpack.encode(camera(position=[math.inf] * 3)))
         with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
             while True:

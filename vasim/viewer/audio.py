@@ -142,6 +142,7 @@ class AudioStream:
 
     Attributes:
         sent: parameter updates sent so far (all clients).
+        enabled: whether each client's synth was last told to play, by client id.
     """
 
     def __init__(self, server: viser.ViserServer, *, rate_hz: float = 20.0):
@@ -155,6 +156,8 @@ class AudioStream:
         self._next_t = -math.inf
         self._last: dict[str, Any] | None = None
         self.sent = 0
+        self.enabled: dict[int, bool] = {}
+        """Whether each client's synth was last told to play (by client id)."""
 
     def install(self, client: viser.ClientHandle) -> None:
         """Sends the synth to a newly connected client (a reload is a new client)."""
@@ -166,6 +169,7 @@ class AudioStream:
 
     def enable(self, client: viser.ClientHandle, on: bool) -> None:
         """Unmutes (``on``) or mutes one client's synth."""
+        self.enabled[client.client_id] = bool(on)
         run_js(client, f"window.__vasimAudioEnable && window.__vasimAudioEnable({json.dumps(on)});")
 
     def update(self, cue: AudioCue | None, now: float | None = None) -> None:
