@@ -245,15 +245,16 @@ def frame_messages(seconds: float, scene_hz: float | None) -> dict[str, float]:
 LATENCY_JS = """(key) => { window.__vasimLatency = undefined; new Promise((resolve) => {
   const m = window.__viserMutable, tip = () => m.nodeRefFromName['/tool/tip'];
   const p0 = tip().position.clone();
-  let t0 = null;
-  const onKey = (e) => { if (e.code === key && t0 === null) { t0 = e.timeStamp; } };
-  window.addEventListener('keydown', onKey, true);
+  // The key's time stamp as the instrument's script took it (its listener stops the event,
+  // so a listener here would never hear it).
+  const armed = performance.now(), S = window.__vasimInput;
+  const pressed = () => (S && S.lastDown && S.lastDown.code === key && S.lastDown.t >= armed
+                         ? S.lastDown.t : null);
   const give_up = performance.now() + 20000;
   const look = (now) => {
-    if (t0 !== null && tip().position.distanceTo(p0) > 1e-5) {
-      window.removeEventListener('keydown', onKey, true); resolve(now - t0); return; }
-    if (now > give_up) { window.removeEventListener('keydown', onKey, true);
-      resolve(null); return; }
+    const t0 = pressed();
+    if (t0 !== null && tip().position.distanceTo(p0) > 1e-5) { resolve(now - t0); return; }
+    if (now > give_up) { resolve(null); return; }
     requestAnimationFrame(look);
   };
   requestAnimationFrame(look);

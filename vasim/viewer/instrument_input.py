@@ -79,7 +79,10 @@ CONTROL_JS = r"""
       // The event's own time stamp: when the key moved, even if a busy page handles the
       // event later.
       var now = e.timeStamp || performance.now();
-      if (down) { if (S.held[e.code] === undefined) { S.held[e.code] = now; } }
+      if (down) {
+        if (S.held[e.code] === undefined) { S.held[e.code] = now; }
+        S.lastDown = {code: e.code, t: now};  // for bench/viewer.py's latency (it cannot
+      }                                       // listen itself: the event stops here)
       else { release(e.code, now); }
       e.preventDefault(); e.stopImmediatePropagation();
     };
