@@ -288,6 +288,13 @@ def frame_z_x(z: ArrayLike, x_hint: ArrayLike, *, any_x: bool = False,
         x = np.eye(3)[int(np.argmin(np.abs(zz)))]
         x = x - zz * float(x @ zz)
         n = float(np.linalg.norm(x))
+    elif n < 1e-4 * float(np.linalg.norm(hint)):
+        # A hint within 1e-4 rad of z: the subtraction cancels and x keeps a part along z of
+        # order eps/n (2.6e-9 for a hint 2.6e-9 rad off z, a hypothesis example); a second
+        # Gram-Schmidt step removes it ("twice is enough"). Above that angle one step is kept:
+        # every frame the callers build stays bit for bit what it was.
+        x = x - zz * float(x @ zz)
+        n = float(np.linalg.norm(x))
     x = x / n
     return np.column_stack([x, np.cross(zz, x), zz])
 
