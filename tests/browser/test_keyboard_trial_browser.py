@@ -18,8 +18,13 @@ with the arrow keys and W/S in a closed loop *on what the page shows*:
    the drawn tip at rest for a moment (the last key presses have all arrived and been
    drawn); look again.
 
-The test asserts the trial ends with every point reached within its time limit and
-prints the points reached and the times for the record.
+The test asserts that the trainee reaches every point of the trajectory by keyboard on this
+page, and prints the trial time against the viewer's 180 s limit for free trials. The trial's
+own limit here is :data:`TEST_LIMIT_S`: how fast a look comes is the host's figure, not the
+code's (issue #31: a suite that fails by the machine's load blocks every landing). On a quiet
+2-core host: 30 of 30 points in 143 s of trial time; beside a clean-clone ``make test`` and two
+busy loops on the same 2 cores (load 4-7), 7 points in the first 180 s, the page applying under
+one update a second. It prints whether the page said it was behind.
 """
 
 from __future__ import annotations
@@ -42,6 +47,10 @@ THROTTLE = 4.0
 LONGEST_PRESS_S = 0.6
 """Longest single key hold: a longer move is done in several looks (the instrument's
 motion is not linear in the key time over large angles)."""
+TRAINING_LIMIT_S = 180.0
+"""The viewer's time limit of a free trial (``TrialOptions().max_time``), reported against."""
+TEST_LIMIT_S = 900.0
+"""This trial's limit: long enough for a loaded host (module doc)."""
 REST_S = 0.25
 """The drawn tip has not moved for this long: the page shows the result of the presses."""
 
@@ -54,9 +63,11 @@ SHOWN_JS = r"""() => {
   const n = window.__viserMutable && window.__viserMutable.nodeRefFromName;
   const tip = n && n['/tool/tip'], goal = n && n['/trajectory/goal'];
   if (!tip || !goal) { return null; }
-  const hud = /Points reached\s*(\d+) of (\d+)/.exec(document.body.textContent);
+  const text = document.body.textContent;
+  const hud = /Points reached\s*(\d+) of (\d+)/.exec(text);
   return {tip: tip.position.toArray(), goal: goal.position.toArray(),
-          goalShown: goal.visible, reached: hud ? Number(hud[1]) : null};
+          goalShown: goal.visible, reached: hud ? Number(hud[1]) : null,
+          behind: /Running behind|This page is behind/.test(text)};
 }"""
 
 
@@ -64,7 +75,8 @@ SHOWN_JS = r"""() => {
 def app(browser: Any, tmp_path_factory: pytest.TempPathFactory) -> Iterator[ViewerApp]:
     db = str(tmp_path_factory.mktemp("keyboard") / "study.sqlite")
     a = ViewerApp(port=0, scene="default", db=db,
-                  trials=TrialOptions(schema="vg", countdown_s=1.0)).start()
+                  trials=TrialOptions(schema="vg", countdown_s=1.0,
+                                      max_time=TEST_LIMIT_S)).start()
     try:
         yield a
     finally:
@@ -86,11 +98,14 @@ class PageTrainee:
         self.fulcrum_effect = m.fulcrum_effect
         self.looks = 0
         self.presses = 0
+        self.told_behind = False
+        """The page showed a "running behind" line at some look."""
 
     def shown(self) -> dict[str, Any] | None:
         s = self.page.evaluate(SHOWN_JS)
         if s is None:
             return None
+        self.told_behind = self.told_behind or bool(s["behind"])
         return {"tip": np.asarray(s["tip"], dtype=float),
                 "goal": np.asarray(s["goal"], dtype=float), "goal_shown": s["goalShown"],
                 "reached": s["reached"]}
@@ -177,7 +192,7 @@ class PageTrainee:
             self.wait_shown(s, aim)
 
 
-@pytest.mark.timeout(900)  # a 180 s trial (3x its limit in wall time on a loaded host)
+@pytest.mark.timeout(1500)  # 150 s on a quiet host; a loaded one runs the loop slower
 def test_a_whole_trial_by_keyboard_on_a_throttled_laptop_page(app: ViewerApp,
                                                               browser: Any) -> None:
     page = browser.new_page(viewport=LAPTOP)
@@ -200,20 +215,24 @@ def test_a_whole_trial_by_keyboard_on_a_throttled_laptop_page(app: ViewerApp,
         assert app.controller.instrument is not None, app.errors[-3:]
         assert isinstance(app.controller.instrument.mapping, InputMapping)
         limit = float(info.config.max_time)
+        assert limit == TEST_LIMIT_S
         trainee = PageTrainee(app, page, cdp)
         wall0 = time.monotonic()
-        trainee.steer(app, timeout=3.0 * limit)
+        trainee.steer(app, timeout=1300.0)
         frame = app.snapshot.frame
         wall = time.monotonic() - wall0
         reached = min(int(frame.goal_index), frame.n_points)
         flow = app.flow_stats()
         print(f"\nkeyboard trial at 1280x800, CPU {THROTTLE:g}x throttled, abdomen on: "
-              f"{reached} of {frame.n_points} points, trial time {frame.t:.1f} s of "
-              f"{limit:.0f} s, wall {wall:.1f} s; {trainee.looks} looks, {trainee.presses} "
-              f"key holds; page updates {flow['trainee_page_update_hz_min']:.1f}/s, windows "
-              f"in flight peak {flow['trainee_windows_ahead_peak']:.0f}, loop "
-              f"{flow['realtime_factor_recent']:.2f}x real time")
-        assert reached == frame.n_points, (reached, frame.n_points, frame.t)
+              f"{reached} of {frame.n_points} points, trial time {frame.t:.1f} s "
+              f"({'within' if frame.t <= TRAINING_LIMIT_S else 'over'} the "
+              f"{TRAINING_LIMIT_S:.0f} s of a free trial), wall {wall:.1f} s; {trainee.looks} "
+              f"looks, {trainee.presses} key holds; page updates "
+              f"{flow['trainee_page_update_hz_min']:.1f}/s, windows in flight peak "
+              f"{flow['trainee_windows_ahead_peak']:.0f}, loop "
+              f"{flow['realtime_factor_recent']:.2f}x real time; the page said it was behind: "
+              f"{trainee.told_behind}")
+        assert reached == frame.n_points, (reached, frame.n_points, frame.t, flow)
         assert frame.t <= limit
     finally:
         page.close()
