@@ -21,7 +21,7 @@ trial's configuration).
 
 Transport (**decision**): viser 1.1 has no client-to-server channel for custom data, so the
 page writes each batch as JSON into a hidden GUI text field through viser's own message
-(``GuiUpdateMessage``), which reaches :meth:`InstrumentInput._on_batch` through the field's
+(``GuiUpdateMessage``), which reaches :meth:`InstrumentInput._apply` through the field's
 ``on_update`` callback. Batches are sent every 33 ms while there is input (30 Hz: the
 device smooths them for the 1 kHz loop) and carry a sequence number so that two equal
 batches are both delivered. The page's keys are taken in the capture phase, so viser's own
@@ -60,7 +60,8 @@ CONTROL_JS = r"""
 (function () {
   var UUID = "%(uuid)s";
   if (window.__vasimInput && window.__vasimInput.uuid === UUID) { return; }
-  var S = window.__vasimInput = {uuid: UUID, sent: 0, locked: false, seq: 0, held: {}};
+  var S = window.__vasimInput = {uuid: UUID, sent: 0, locked: false, seq: 0, held: {},
+                                 quiet: true};
   var acc = {dx: 0, dy: 0, wheel: 0}, heldFor = {};
   var KEYS = {ArrowLeft: 1, ArrowRight: 1, ArrowUp: 1, ArrowDown: 1, KeyW: 1, KeyS: 1,
               KeyQ: 1, KeyE: 1};
@@ -79,6 +80,7 @@ CONTROL_JS = r"""
       // The event's own time stamp: when the key moved, even if a busy page handles the
       // event later.
       var now = e.timeStamp || performance.now();
+      S.quiet = false;
       if (down) {
         if (S.held[e.code] === undefined) { S.held[e.code] = now; }
         S.lastDown = {code: e.code, t: now};  // for bench/viewer.py's latency (it cannot
@@ -144,7 +146,11 @@ CONTROL_JS = r"""
       break;
     }
     acc = {dx: 0, dy: 0, wheel: 0}; heldFor = {};
-    if (!(b.dx || b.dy || b.wheel || b.sx || b.sy || b.ins || b.roll)) { return; }
+    if (!(b.dx || b.dy || b.wheel || b.sx || b.sy || b.ins || b.roll)) {
+      // Every key event so far has been sent (tests wait for this before they look).
+      S.quiet = Object.keys(S.held).length === 0;
+      return;
+    }
     var m = window.__viserMutable;
     if (!m || !m.sendMessage) { return; }
     S.seq += 1; b.seq = S.seq;
@@ -194,6 +200,20 @@ def parse_batch(text: str) -> Increment | None:
                      stick_y_s=vals["sy"])
 
 
+def batch_seq(text: str) -> int:
+    """The sequence number a page gave a batch (0 when it has none: the page numbers from 1).
+
+    Example:
+        >>> batch_seq('{"dx": 3, "seq": 7}'), batch_seq('{"dx": 3}'), batch_seq('{"seq": 1e400}')
+        (7, 0, 0)
+    """
+    try:
+        seq = json.loads(text).get("seq", 0)
+    except (ValueError, AttributeError):
+        return 0
+    return seq if isinstance(seq, int) and not isinstance(seq, bool) and seq > 0 else 0
+
+
 def instrument_device(trocar: np.ndarray, start: np.ndarray,
                       mapping: InputMapping | None = None,
                       screen: tuple[np.ndarray, np.ndarray] | None = None,
@@ -240,7 +260,21 @@ class InstrumentInput:
         """Batches delivered to a running trial's instrument."""
         self.refused = 0
         """Malformed batches (or batches with no instrument-driven trial running)."""
-        self.handle.on_update(guard(self._on_batch))
+        self.last_seq = 0
+        """The page's sequence number of the last batch applied to an instrument (a test
+        that has seen the page send batch n knows when the instrument has taken it)."""
+        apply = guard(self._apply)
+
+        async def on_batch(event: Any) -> None:
+            # **Decision**: the batch is read and applied in its own message's turn of
+            # viser's event loop (a coroutine callback, awaited there). A plain callback
+            # runs later on viser's thread pool and reads the field's value *then*: on a
+            # loaded host a later batch had already replaced it, so one batch was applied
+            # twice and another never (the keyboard trial's moves doubled at load 8). The
+            # work is one pose update under a lock (~30 us).
+            apply(self.handle.value)
+
+        self.handle.on_update(on_batch)
 
     @property
     def uuid(self) -> str:
@@ -250,13 +284,14 @@ class InstrumentInput:
         """Sends the page script to a newly connected trainee page."""
         run_js(client, CONTROL_JS % {"uuid": self.uuid})
 
-    def _on_batch(self, event: Any) -> None:
-        inc = parse_batch(self.handle.value)
+    def _apply(self, text: str) -> None:
+        inc = parse_batch(text)
         dev = self._device()
         if inc is None or dev is None or not dev.push(inc):
             self.refused += 1
             return
         self.batches += 1
+        self.last_seq = batch_seq(text)
 
 
 __all__ = ["CONTROLS_TEXT", "InstrumentInput", "instrument_device", "parse_batch",
