@@ -117,9 +117,6 @@ class PageTrainee:
         self.fulcrum = np.asarray(dev.port.fulcrum, dtype=float)
         self.right, self.up = (np.asarray(v, dtype=float) for v in app.controller.screen)
         self.marks, self.input = app.acks.marks, app.instrument_input
-        self.pose: InstrumentPose | None = None
-        """The instrument's pose at this look: the one whose tip is where the tool is drawn
-        (the shaft passes the port; the drawn tool is the instrument's tip)."""
         self.looks = 0
         self.timeouts = 0
         self.presses = 0
@@ -143,14 +140,14 @@ class PageTrainee:
 
         The trainee knows the controls: the holds are solved (Newton's method) on the
         instrument's own mapping (:meth:`InputMapping.apply`, one batch: :meth:`act`) from
-        :attr:`pose`."""
-        assert self.pose is not None
+        the pose whose tip is at ``tip`` (the shaft passes the port)."""
+        pose = self.pose_of(tip)   # the drawn tool is the instrument's tip
         aim = goal
-        t = self._solve(self.pose, goal - tip)
+        t = self._solve(pose, goal - tip)
         longest = float(np.max(np.abs(t)))
         if longest > LONGEST_PRESS_S:           # part of the way: re-solved for that part
             aim = tip + (LONGEST_PRESS_S / longest) * (goal - tip)
-            t = self._solve(self.pose, aim - tip)
+            t = self._solve(pose, aim - tip)
             t *= min(1.0, LONGEST_PRESS_S / float(np.max(np.abs(t))))
         t = np.where(np.abs(t) >= 0.01, t, 0.0)  # under 10 ms: under 0.5 mm, left out
         holds = [("ArrowRight" if t[0] > 0 else "ArrowLeft", abs(t[0])),
@@ -277,7 +274,6 @@ class PageTrainee:
             # Right after a point is reached the drawn tip is still on its way to where the
             # last holds take it: the trainee plans the next move from there.
             start = s["tip"] if resting is None else resting
-            self.pose = self.pose_of(start)   # the drawn tool is the instrument's tip
             holds, aim = self.plan(start, s["goal"])
             if holds:
                 self.act(holds)
