@@ -20,6 +20,8 @@ from tests.browser.conftest import VIEWPORT, WAIT_MS, click_until, wait_ready
 from tests.polling import wait_for
 from vasim.study.store import TrialStore
 from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
+from vasim.viewer.controller import Command
+from vasim.viewer.live import PacedThread
 
 
 @pytest.fixture(scope="module")
@@ -201,35 +203,48 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
     request(app, "subject", "S08", lambda: app.panel.subject == "S08")
     request(app, "protocol", "vf_point_targeting",
             lambda: app.panel.protocol == "vf_point_targeting")
-    app.controller.speed = 0.5  # a slow trial: it must outlast a page reload
+    app.controller.speed = 0.5  # a slow trial (SimThreadTrial, whose clock runs at `speed`)
     try:
         request(app, "start", None, lambda: app.snapshot.info.trial_id is not None
                 and app.snapshot.info.schedule_index == 0)
         info = app.snapshot.info
+        trial = app.controller.trial
+        assert isinstance(trial, PacedThread)
+        # Hold the trial's clock for the reload and the second tab: the loop keeps running,
+        # simulated time stands still, so the trial is certainly mid-run when the second
+        # tab presses Start. A check-then-click on a loaded host let the trial end between
+        # the two, and Start then rightly began the schedule's next trial (issue #31).
+        trial.speed = 0.0
         page.reload()
         wait_ready(page)
-        # The trial survived the reload: same trial, still running or done by itself.
+        # The trial survived the reload: same trial, still running.
         assert app.snapshot.info is info
+        assert app.controller.active()
         # The reloaded page's HUD (Trainee tab) shows that same trial.
         # One trial name everywhere: its place in the schedule, as the experimenter's
         # progress line counts it (issue #26 §6).
-        # The panel's position is the trial running, or the next once this one is done (a
-        # loaded machine can finish the slowed trial during the reload).
         assert info.title == "trial 1 of 27"
-        assert app.panel.position == 1 or (app.snapshot.frame.done and app.panel.position == 2)
+        assert app.panel.position == 1
         page.wait_for_function("(t) => document.body.innerText.includes(`${t} —`)",
                                arg=info.title, timeout=WAIT_MS)
-        # A second tab pressing Start mid-trial is refused (notification), not a duplicate.
+        # A second tab cannot start a duplicate: its Start button is disabled while the
+        # trial runs, and a Start that reaches the server anyway (a crafted message) is
+        # refused with a notice.
         second = browser.new_page(viewport=VIEWPORT)
         try:
             second.goto(app.experimenter_url)
             wait_ready(second)
-            if not app.snapshot.frame.done:
-                errors = len(app.errors)
-                second.get_by_role("button", name="Start trial").click(force=True)
-                assert wait_for(lambda: len(app.errors) > errors or app.snapshot.frame.done)
+            start = second.get_by_role("button", name="Start trial")
+            second.wait_for_function("(b) => b.disabled", arg=start.element_handle(),
+                                     timeout=WAIT_MS)
+            errors = len(app.errors)
+            app.submit(Command("start", None))
+            assert wait_for(lambda: len(app.errors) > errors)
+            assert "already running" in app.errors[-1], app.errors[-1]
+            assert app.snapshot.info is info and app.controller.active()
         finally:
             second.close()
+        trial.speed = 3.0  # let the trial finish by itself
         assert wait_for(lambda: "stored" in app.panel.status), app.panel.status
     finally:
         app.controller.speed = 3.0
