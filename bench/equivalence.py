@@ -5,6 +5,9 @@ imported through ``PYTHONPATH``), the same fixed-seed commands:
 
 * one headless trial (``vasim trial --schema ff --seed 1``),
 * a 3-subject simulated cohort of ``vf_learning_curve`` (seed 7) and its report tables,
+* one teleoperation session (``vasim study run`` of ``mrcp_vs_stdt`` cut to one trial per
+  mode: StdT, MRCP, MRCP+Cam; subject S01, seed 3), the scripted operator through the MRCP
+  slave station,
 * ``vasim mrcp run cube_rotation --json``,
 
 then compares every stored row of both databases (all tables; columns that hold wall-clock
@@ -60,6 +63,18 @@ def _vasim(args: list[str], src: Path, cwd: Path) -> str:
     return proc.stdout
 
 
+def _teleop_protocol(src: Path, out: Path) -> Path:
+    """``src``'s ``mrcp_vs_stdt`` protocol with one trial per mode (same questionnaires)."""
+    text = (src / "protocols" / "studies" / "mrcp_vs_stdt.toml").read_text(encoding="utf-8")
+    if "repetitions = 6" not in text:
+        raise SystemExit(f"{src}: mrcp_vs_stdt.toml no longer has 'repetitions = 6'; update "
+                         "bench/equivalence.py's teleoperation session")
+    path = out / "mrcp_short.toml"
+    path.write_text(text.replace("repetitions = 6", "repetitions = 1")
+                    .replace('name = "mrcp_vs_stdt"', 'name = "mrcp_short"'), encoding="utf-8")
+    return path
+
+
 def capture(src: Path, out: Path) -> None:
     """Run the fixed-seed commands with the code of ``src``; write outputs under ``out``."""
     out.mkdir(parents=True, exist_ok=True)
@@ -72,6 +87,9 @@ def capture(src: Path, out: Path) -> None:
          "--seed", "7", "--db", str(out / "cohort.sqlite")],
         src, out,
     )
+    print(f"[equivalence] {src}: teleoperation session (StdT, MRCP, MRCP+Cam)", file=sys.stderr)
+    _vasim(["study", "run", "--protocol", str(_teleop_protocol(src, out)), "--subject", "S01",
+            "--seed", "3", "--db", str(out / "teleop.sqlite")], src, out)
     print(f"[equivalence] {src}: report", file=sys.stderr)
     _vasim(["report", "--db", str(out / "cohort.sqlite"), "--out", str(out / "report")], src, out)
     print(f"[equivalence] {src}: mrcp cube_rotation", file=sys.stderr)
@@ -152,7 +170,7 @@ def _table(path: Path) -> list[list[str]]:
 def compare(a: Path, b: Path) -> list[str]:
     """Differences between two captured output folders (empty when identical)."""
     diffs: list[str] = []
-    for name in ("trial.sqlite", "cohort.sqlite"):
+    for name in ("trial.sqlite", "cohort.sqlite", "teleop.sqlite"):
         ca, cb = _columns(a / name), _columns(b / name)
         if sorted(ca) != sorted(cb):
             diffs.append(f"{name}: tables differ {sorted(ca)} vs {sorted(cb)}")
