@@ -204,6 +204,7 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
     request(app, "protocol", "vf_point_targeting",
             lambda: app.panel.protocol == "vf_point_targeting")
     app.controller.speed = 0.5  # a slow trial (SimThreadTrial, whose clock runs at `speed`)
+    trial = None
     try:
         request(app, "start", None, lambda: app.snapshot.info.trial_id is not None
                 and app.snapshot.info.schedule_index == 0)
@@ -247,6 +248,9 @@ def test_reload_and_a_second_tab_mid_trial_leave_the_trial_intact(
         trial.speed = 3.0  # let the trial finish by itself
         assert wait_for(lambda: "stored" in app.panel.status), app.panel.status
     finally:
+        # a failed assertion above must not leave the module's app with a frozen trial
+        if isinstance(trial, PacedThread):
+            trial.speed = 3.0
         app.controller.speed = 3.0
     with closing(TrialStore(db, readonly=True)) as st:
         trials = st.trials(subject="S08")
