@@ -9,7 +9,7 @@ CORE_STAMP := $(VENV)/.installed-core
 STAMP := $(VENV)/.installed
 FULL_EXTRAS := test,dev,cluster,parquet
 
-.PHONY: install install-core run test check bench lint clean
+.PHONY: install install-core run test check bench lint clean kernels-mrcp kernels-physics
 
 install: $(STAMP)
 
@@ -36,19 +36,32 @@ run: install-core
 # the ~17 s of CPU collection takes, which each parallel worker pays.
 PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
 
-# The whole suite (CI): lint, then the tests in two phases -- in parallel (pytest-xdist, one
-# worker per core, a test file per worker) all but the browser and Ray tests, then those two
+# The whole suite (CI): lint beside `kernels-*` (below); then in parallel (pytest-xdist, one
+# worker per core, a test file per worker) all but the browser and Ray tests; then those two
 # groups one test at a time (each paces real time or starts process trees sized to the
-# machine's cores) -- then every benchmark in its seconds-long smoke mode. Each phase prints
-# its slowest 20 tests.
+# machine's cores); then every benchmark in its seconds-long smoke mode. Each phase prints
+# its slowest 20 tests. (Running the Ray tests and the benchmarks beside the browser tests
+# would gain nothing: Chromium's software drawing keeps both cores ~95 % busy.)
 test: install
 	.ci/ensure-chromium
-	$(VENV)/bin/ruff check vasim tests bench
-	$(VENV)/bin/mypy
-	$(VENV)/bin/lint-imports
+	$(MAKE) --no-print-directory -j3 -Otarget lint kernels-mrcp kernels-physics
 	$(PYTEST) -n auto --dist loadfile -m "not browser and not cluster" --durations=20
 	$(PYTEST) -m "browser or cluster" --durations=20
 	$(PY) -m bench --smoke
+
+# Compiles and caches the numba kernels once, by running a second of the MRCP's eight-robot
+# demo (~95 s of CPU when cold) and of a headless trial (the physics, contact and servo
+# kernels, ~25 s). Without it the parallel test workers, and the CLI subprocesses tests
+# start, each compiled the same kernels again: phase 2 on a clean clone took 836 s, and
+# 680 s with the kernels cached (2026-12-01). A kernel these miss is compiled by the first
+# test that needs it, as before.
+kernels-mrcp: install
+	$(VENV)/bin/vasim mrcp run eight_robots --coarse --duration 1 > /dev/null
+	@echo "MRCP kernels compiled and cached"
+
+kernels-physics: install
+	$(VENV)/bin/vasim trial --max-time 1 > /dev/null
+	@echo "physics kernels compiled and cached"
 
 # A developer's quick loop (a few minutes): no slow, browser or Ray tests, in parallel.
 check: install
