@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from tests.polling import wait_for, wait_until
+from tests.viewer.lighting_state import environment_maps
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError, InputError
@@ -481,3 +482,22 @@ def test_drag_gizmo_feeds_the_device_and_snaps_back_clutched(app: ViewerApp) -> 
         assert len(dev.samples) == n
     finally:
         drag.handle.remove()
+
+
+def test_no_page_of_the_viewer_draws_viser_s_environment_map(app) -> None:
+    """Issue #26.2 (``vasim.viewer.lighting``): the map cost a software-drawn frame 7-12x
+    its CPU. A bare viser server sends no map message (its pages draw the default map),
+    so each page of the app must carry one that turns it off."""
+    import viser
+
+    bare = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        assert environment_maps(bare) == []
+    finally:
+        bare.stop()
+    for server in (app.server, app.exp_server):
+        maps = environment_maps(server)
+        assert len(maps) == 1 and maps[0].hdri_data is None
+    lights = [type(m).__name__ for m in
+              app.exp_server._websock_server._broadcast_buffer.message_from_id.values()]
+    assert "HemisphereLightMessage" in lights  # the experimenter's fill

@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from tests.polling import wait_for
+from tests.viewer.lighting_state import environment_maps
 from vasim.cli import main
 from vasim.core.errors import ConfigError
 from vasim.mrcp.scenarios import ScenarioOptions, get_scenario
@@ -314,3 +315,11 @@ def test_a_safety_stop_is_shown_with_its_cause_and_the_scenario_restarts() -> No
         assert not a.errors and a.alive()
         h = a.live.history()
         assert not [e for _, e in h.events if e.startswith("fault:")]
+
+
+def test_the_station_page_draws_without_viser_s_environment_map(app) -> None:
+    """Issue #26.2 (``vasim.viewer.lighting``): the MRCP page is lit like the
+    experimenter's, without the map a software-drawn frame paid most for."""
+    assert app.server is not None
+    maps = environment_maps(app.server)
+    assert len(maps) == 1 and maps[0].hdri_data is None

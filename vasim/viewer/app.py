@@ -88,6 +88,7 @@ from vasim.viewer.flow import (
     slowest_page_hz,
 )
 from vasim.viewer.instrument_input import CONTROLS_TEXT, InstrumentInput, screen_axes
+from vasim.viewer.lighting import third_person_lighting
 from vasim.viewer.notify import ErrorReporter
 from vasim.viewer.page_notices import PageNotices
 from vasim.viewer.panel import ExperimenterPanel
@@ -285,6 +286,7 @@ class ViewerApp(ErrorReporter):
             self.exp_server = guarded_server(self.host, exp_port, self.exp_access)
             lock_trainee_chrome(self.server)  # before any other GUI (chrome.py)
             experimenter_chrome(self.exp_server)
+            third_person_lighting(self.exp_server)
             self.acks = PageAcks(self.server)
             self.exp_acks = PageAcks(self.exp_server)
             self.notices = PageNotices(self.acks, self.exp_acks)

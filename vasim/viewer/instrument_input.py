@@ -23,11 +23,15 @@ Transport (**decision**): viser 1.1 has no client-to-server channel for custom d
 page writes each batch as JSON into a hidden GUI text field through viser's own message
 (``GuiUpdateMessage``), which reaches :meth:`InstrumentInput._apply` through the field's
 ``on_update`` callback. Batches are sent every 33 ms while there is input (30 Hz: the
-device smooths them for the 1 kHz loop) and carry a sequence number so that two equal
-batches are both delivered. The page's keys are taken in the capture phase, so viser's own
-keyboard camera controls never see them; pointer events over the 3-D view are taken too
-(**decision**: the trainee's camera is the endoscope, so viser's orbit controls must not
-move it; only Mag or the scope's aim do). ``window.__vasimInput`` exposes counters for
+device smooths them for the 1 kHz loop), and at once when a key is pressed or released,
+and carry a sequence number so that two equal batches are both delivered. **Latency**
+(issue #26.2, measured with ``bench/viewer.py``'s throttled run, 4x, 2026-12-02): on a page
+drawing a frame every ~300 ms, the key handler ran 3-330 ms after the press and the next
+timer tick sent its batch up to 230 ms after that; a press now leaves with its handler.
+The page's keys are taken in the capture phase, so viser's own keyboard camera controls
+never see them; pointer events over the 3-D view are taken too (**decision**: the trainee's
+camera is the endoscope, so viser's orbit controls must not move it; only Mag or the scope's
+aim do). ``window.__vasimInput`` exposes counters for
 tests.
 """
 
@@ -81,12 +85,18 @@ CONTROL_JS = r"""
       // event later.
       var now = e.timeStamp || performance.now();
       S.quiet = false;
+      var fresh = false;
       if (down) {
-        if (S.held[e.code] === undefined) { S.held[e.code] = now; }
+        fresh = S.held[e.code] === undefined;
+        if (fresh) { S.held[e.code] = now; }
         S.lastDown = {code: e.code, t: now};  // for bench/viewer.py's latency (it cannot
       }                                       // listen itself: the event stops here)
       else { release(e.code, now); }
       e.preventDefault(); e.stopImmediatePropagation();
+      // A new press or a release is sent at once, not at the next tick: on a busy page the
+      // handler itself runs late (the time since the press is then already held time) and
+      // the 33 ms timer later still (module doc, "latency").
+      if (fresh || !down) { flush(); }
     };
   }
   window.addEventListener("keydown", onKey(true), true);
@@ -129,7 +139,7 @@ CONTROL_JS = r"""
   function axis(v) { return Math.abs(v) < 0.15 ? 0 : v; }
   function held(code) { return heldFor[code] || 0; }
   var last = performance.now();
-  setInterval(function () {
+  function flush() {
     var now = performance.now(), dt = Math.min(0.25, (now - last) / 1000); last = now;
     for (var c in S.held) { release(c, now); S.held[c] = now; }
     var b = {dx: acc.dx, dy: acc.dy, wheel: acc.wheel,
@@ -157,7 +167,8 @@ CONTROL_JS = r"""
     m.sendMessage({type: "GuiUpdateMessage", uuid: UUID,
                    updates: {value: JSON.stringify(b)}});
     S.sent += 1;
-  }, 33);
+  }
+  setInterval(flush, 33);
 })();
 """
 

@@ -60,6 +60,7 @@ from vasim.core.config import check_array, check_number, expect
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import matrix_from_quat
 from vasim.viewer.access import viewer_url
+from vasim.viewer.lighting import third_person_lighting
 from vasim.viewer.mrcp_view import (
     StationFrame,
     StationGeometry,
@@ -607,6 +608,7 @@ class MrcpViewerApp(ErrorReporter):
             s = self.server
             s.gui.configure_theme(control_width="large")
             s.scene.set_up_direction("+z")
+            third_person_lighting(s)
             position, look_at = station_camera(geometry)
             s.initial_camera.position = np.asarray(position, dtype=np.float64)
             s.initial_camera.look_at = np.asarray(look_at, dtype=np.float64)
