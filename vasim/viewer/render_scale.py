@@ -6,7 +6,8 @@ frame. Measured on the trainee page of the default abdomen at 1280x800 (2026-11-
 depend on how loaded the host is; ``bench/viewer.py`` prints the same figure): **1,517 ms
 at full resolution, 179 ms at half, 67 ms at a quarter** (a bare viser page with one box:
 0.7 ms). Without viser's environment map (:mod:`vasim.viewer.lighting`, 2026-12-02): 518 ms
-at full, 263 ms at 0.7, 179 ms at half, 123 ms at 0.35. The cost is the pixels: the organs, the translucent abdominal wall over them and
+at full, 263 ms at 0.7, 179 ms at half, 123 ms at 0.35.
+The cost is the pixels: the organs, the translucent abdominal wall over them and
 the lit tissue cover the endoscope's whole view, so halving the resolution cuts the
 fragments (and the cost) about four- to eight-fold. The scene, the camera and the
 simulation are unchanged: only the canvas's backing store shrinks (the browser scales it
