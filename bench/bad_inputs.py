@@ -482,12 +482,15 @@ def _page_start(protocol: Path, db: Path, subject: str, again: str | None) -> No
     protocol, ``again`` is typed in "Again, because" first (None: left empty). A refusal
     raises ConfigError (the case's one line)."""
     import vasim.study.protocol.loader as loader
+    from vasim.viewer.app_options import TrialOptions
     from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 
     folder = protocols_folder(protocol.parent / "studies",
                               **{protocol.stem: protocol.read_text(encoding="utf-8")})
     loader.studies_dir = lambda: folder            # type: ignore[assignment]  # this process
-    ctl = TrainingController(TrainingSettings(scene="none", db=db, speed=25.0, pause_s=0.05))
+    ctl = TrainingController(TrainingSettings(
+        scene="none", db=db, speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05)))
     try:
         for cmd in (Command("mode", "protocol"), Command("subject", subject),
                     Command("protocol", protocol.stem)):

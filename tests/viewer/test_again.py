@@ -20,6 +20,7 @@ from vasim.core.errors import ConfigError
 from vasim.study.protocol import parse_protocol
 from vasim.study.session import MAX_REASON_CHARS, start_session
 from vasim.study.store import TrialStore
+from vasim.viewer.app_options import TrialOptions
 from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 from vasim.viewer.history import (
     AGAIN_FIELD,
@@ -115,8 +116,9 @@ def test_the_reason_field_refuses_more_than_one_line(text: str) -> None:
 @pytest.fixture
 def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingController]:
     install(monkeypatch, tmp_path / "studies", tiny=TINY)
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "v.sqlite", speed=25.0,
-                                            pause_s=0.05))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "v.sqlite", speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05)))
     try:
         yield c
     finally:

@@ -25,6 +25,7 @@ from vasim.fixtures.logistic import Logistic5
 from vasim.fixtures.schema import load_schema, schema_path
 from vasim.study.store import TrialStore
 from vasim.trials.registry import run_trial
+from vasim.viewer.app_options import TrialOptions
 from vasim.viewer.controller import (
     Command,
     TrainingController,
@@ -39,8 +40,9 @@ SPEED = 25.0
 
 @pytest.fixture
 def ctl(tmp_path: Path) -> Iterator[TrainingController]:
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
-                                            pause_s=0.05, max_time=20.0))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05, max_time=20.0)))
     try:
         yield c
     finally:
@@ -57,8 +59,9 @@ def store(ctl: TrainingController) -> TrialStore:
 
 
 def test_demo_loops_over_variants_and_stores_nothing(tmp_path: Path) -> None:
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "d.sqlite", speed=SPEED,
-                                            pause_s=0.02, max_time=0.5))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "d.sqlite", speed=SPEED,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.02, max_time=0.5)))
     try:
         assert c.panel.mode == "demo" and c.info.trial_id is None
         assert drive(c, lambda: c.info.number >= 3)
@@ -208,8 +211,8 @@ def test_a_failing_trial_loop_is_stored_as_interrupted_and_reported(tmp_path: Pa
         trial.runner.advance = flaky  # type: ignore[method-assign]
         return trial
 
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "f.sqlite", speed=SPEED,
-                                            trial_factory=factory))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "f.sqlite", speed=SPEED, trial_factory=factory))
     try:
         run(c, Command("mode", "free"), Command("subject", "S05"), Command("start"))
         tid = c.info.trial_id
@@ -334,8 +337,9 @@ def test_one_trial_number_and_how_the_trial_ended(ctl: TrainingController) -> No
 
 
 def test_a_timed_out_trial_says_so_and_gets_a_score_card(tmp_path: Path) -> None:
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
-                                            pause_s=0.05, max_time=1.0))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05, max_time=1.0)))
     try:
         run(c, Command("mode", "free"), Command("subject", "S04"), Command("start"))
         tid = c.info.trial_id
@@ -386,8 +390,9 @@ def test_protocol_trials_keep_the_sessions_input_and_store_the_condition(
 def test_a_person_driven_start_counts_down_first(tmp_path: Path) -> None:
     # A countdown no stall of a loaded machine can outlast between the checks (a 0.3 s one
     # could end between start and poll); then it is run out by moving its end to now.
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
-                                            countdown_s=600.0))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=SPEED,
+        trials=TrialOptions(countdown_s=600.0)))
     try:
         run(c, Command("mode", "free"), Command("input", "browser"), Command("start"))
         n = c.info.number
@@ -413,8 +418,9 @@ def test_a_schema_outside_the_menu_is_refused_without_reading_it(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     secret = tmp_path / "notaschema.toml"
     secret.write_text('secret_token = "hunter2"\n')
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", speed=25.0,
-                                            max_time=20.0))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, max_time=20.0)))
     try:
         c.handle(Command("mode", "free"))
         read: list[str] = []
@@ -444,8 +450,9 @@ def test_a_schema_outside_the_menu_is_refused_without_reading_it(
 def test_a_schema_file_given_at_start_up_stays_selectable(tmp_path: Path) -> None:
     own = tmp_path / "own.toml"
     shutil.copy(schema_path("trajectory_following"), own)
-    c = TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite", schema=str(own),
-                                            speed=25.0, max_time=20.0))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, schema=str(own), max_time=20.0)))
     try:
         assert str(own) in schema_choices(str(own))
         c.handle(Command("mode", "free"))

@@ -17,6 +17,7 @@ from tests.viewer.driving import drive
 from vasim.core.errors import StoreError
 from vasim.study.session import SITTING_EVENT
 from vasim.study.store import TrialStore
+from vasim.viewer.app_options import TrialOptions
 from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 
 
@@ -24,8 +25,9 @@ def test_the_browser_records_the_sitting_that_begins_the_retention_block(
         tmp_path: Path) -> None:
     t_test = time.time()
     db = tmp_path / "s.sqlite"
-    c = TrainingController(TrainingSettings(scene="none", db=db, speed=25.0, pause_s=0.05,
-                                            max_time=0.3))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=db, speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05, max_time=0.3)))
 
 
     try:

@@ -34,6 +34,7 @@ from vasim.study.store import TrialStore
 from vasim.trials.configs import TeleopTrialConfig
 from vasim.trials.teleop import CAMERA_ZOOM, CYCLE_DT, TeleopTrial
 from vasim.trials.vf import TrialConfig
+from vasim.viewer.app_options import TrialOptions
 from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 from vasim.viewer.questionnaire_form import answers_template
 from vasim.viewer.teleop_live import LiveTeleopTrial, person_config
@@ -142,8 +143,9 @@ def ctl(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[TrainingCon
     install(monkeypatch, tmp_path / "protocols", teleop_tiny=TELEOP_TINY,
             teleop_twice=teleop_protocol("teleop_twice", 0.3, ("mrcp", "stdt"),
                                          question=False, repetitions=2))
-    with closing(TrainingController(TrainingSettings(scene="none", db=tmp_path / "s.sqlite",
-                                                     speed=4.0, pause_s=0.05))) as c:
+    with closing(TrainingController(TrainingSettings(
+        scene="none", db=tmp_path / "s.sqlite", speed=4.0,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05)))) as c:
         yield c
 
 

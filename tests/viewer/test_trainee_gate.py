@@ -114,14 +114,16 @@ def test_a_browser_session_decides_the_gate_and_shows_it(tmp_path: Path) -> None
     from vasim.study.cohort import CohortPlan, CohortRun, simulate_cohort
     from vasim.study.gates import gate_records
     from vasim.study.protocol import load_protocol
+    from vasim.viewer.app_options import TrialOptions
     from vasim.viewer.controller import Command, TrainingController, TrainingSettings
 
     db = tmp_path / "v.sqlite"
     simulate_cohort(db, load_protocol("vf_proficiency"),
                     CohortPlan(n_subjects=2, n_surgeons=2, seed=1, max_trial_time=0.5),
                     CohortRun(workers=0, progress=False))
-    c = TrainingController(TrainingSettings(scene="none", db=db, speed=25.0, pause_s=0.05,
-                                            max_time=0.5))
+    c = TrainingController(TrainingSettings(
+        scene="none", db=db, speed=25.0,
+        trials=TrialOptions(countdown_s=0.0, pause_s=0.05, max_time=0.5)))
 
 
     try:

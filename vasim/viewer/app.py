@@ -203,11 +203,8 @@ class ViewerApp(ErrorReporter):
         self.view_period = 1.0 / pace.view_hz
         self.audio_hz = float(pace.audio_hz)
         # Built here so that a bad schema/task/scene fails before a socket is opened.
-        t = trials
         self.controller = TrainingController(TrainingSettings(
-            scene=scene, db=db, schema=t.schema, task=t.task, skill=t.skill, seed=t.seed,
-            variant=t.variant, max_time=t.max_time, pause_s=t.pause_s, speed=pace.speed,
-            trial_factory=trial_factory, countdown_s=t.countdown_s, optics_deg=t.optics))
+            scene=scene, db=db, trials=trials, speed=pace.speed, trial_factory=trial_factory))
         self.scene_name = scene
         # The instrument's screen motion follows the scope's image of each trial's task.
         self.controller.view_axes = self._view_axes

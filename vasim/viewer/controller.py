@@ -77,6 +77,7 @@ from vasim.trials.lifecycle import StoredTrial, begin_stored_trial
 from vasim.trials.teleop_run import teleop_meta
 from vasim.trials.vf import TrialConfig, TrialFrame, make_profile, make_task, tool_trocar
 from vasim.trials.vf_run import trial_meta
+from vasim.viewer.app_options import TrialOptions
 from vasim.viewer.condition import viewer_condition
 from vasim.viewer.condition_commands import DEFAULT_SCHEMA_FOR_TASK, ConditionCommands
 from vasim.viewer.history import (
@@ -121,6 +122,11 @@ MODES: tuple[str, ...] = ("demo", "free", "protocol")
 
 
 
+NO_START_CUE = TrialOptions(countdown_s=0.0)
+"""A controller's trials by default: the viewer's, without the start cue (a controller
+driven by a program, not a person at a page)."""
+
+
 @dataclass(frozen=True)
 class TrainingSettings:
     """What a ``TrainingController`` runs (``ViewerApp`` builds it from its options).
@@ -129,30 +135,21 @@ class TrainingSettings:
         scene: the abdomen scene of every trial (``"none"``: a static task).
         db: the study store's path (opened on first use), or None (nothing is stored;
             free training and protocols are then refused).
-        schema, task, skill, seed, variant: the first demo trial.
-        max_time: time limit of demo and free trials [s].
-        pause_s: wall time a finished trial is shown before the next starts (demo,
-            auto-advance) [s].
+        trials: the first demo trial, the time limit of demo and free trials, the pause
+            after a finished trial (demo, auto-advance), the start cue of a trial a person
+            drives (free and protocol modes, input not scripted: Start counts down this
+            long before the trial begins) and the endoscope's optics stored with every
+            trial (:class:`~vasim.viewer.app_options.TrialOptions`; default
+            :data:`NO_START_CUE`).
         speed: simulated seconds per wall second (1 = real time).
         trial_factory: builds the live trial (default ``make_live_trial``).
-        countdown_s: the start cue of a trial a person drives (free and protocol modes,
-            input not scripted): Start counts down this long [s] before the trial begins.
-        optics_deg: the endoscope's optics [deg] (0 or 30), stored with every trial.
     """
 
     scene: str = "default"
     db: str | Path | None = None
-    schema: str = "trajectory_following"
-    task: str = "trajectory"
-    skill: str = "intermediate"
-    seed: int = 0
-    variant: int = 0
-    max_time: float = 180.0
-    pause_s: float = 1.5
+    trials: TrialOptions = NO_START_CUE
     speed: float = 1.0
     trial_factory: Callable[..., LiveTrial] | None = None
-    countdown_s: float = 0.0
-    optics_deg: float = 0.0
 
 
 class TrainingController(ConditionCommands, SessionCommands):
@@ -170,11 +167,11 @@ class TrainingController(ConditionCommands, SessionCommands):
     """
 
     def __init__(self, settings: TrainingSettings = TrainingSettings()):
-        st = settings
-        scene, db, schema, task, skill = st.scene, st.db, st.schema, st.task, st.skill
-        seed, variant, max_time, pause_s = st.seed, st.variant, st.max_time, st.pause_s
-        speed, trial_factory, countdown_s = st.speed, st.trial_factory, st.countdown_s
-        optics_deg = st.optics_deg
+        st, t = settings, settings.trials
+        scene, db, schema, task, skill = st.scene, st.db, t.schema, t.task, t.skill
+        seed, variant, max_time, pause_s = t.seed, t.variant, t.max_time, t.pause_s
+        speed, trial_factory, countdown_s = st.speed, st.trial_factory, t.countdown_s
+        optics_deg = t.optics
         self.scene = scene
         self.countdown_s = float(countdown_s)
         self.optics_deg = float(optics_deg)
@@ -218,8 +215,8 @@ class TrainingController(ConditionCommands, SessionCommands):
         rates beside the loop's: issue #26.2); None: none."""
         self.browser: BrowserDevice | None = None
         """The device the page's drag input feeds (replaced per browser-driven trial)."""
-        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,  # type: ignore[arg-type]  # valid
-                                 skill=skill, max_time=max_time, scene=scene)  # type: ignore[arg-type]  # str c
+        self._base = TrialConfig(task=task, variant=variant, schema=schema, seed=seed,
+                                 skill=skill, max_time=max_time, scene=scene)
         self.panel = PanelState(schema=schema, task=task,
                                 f5pl=f5pl_fields(load_schema(schema)))
         self.info: TrialInfo = self._launch(self._base, mode="demo")
