@@ -245,6 +245,18 @@ def frame_messages(seconds: float, scene_hz: float | None) -> dict[str, float]:
 LATENCY_JS = """(key) => { window.__vasimLatency = undefined; new Promise((resolve) => {
   const m = window.__viserMutable, tip = () => m.nodeRefFromName['/tool/tip'];
   const p0 = tip().position.clone();
+  // Arrival times of the tip's messages in the page (for the split of the latency).
+  if (!window.__vasimTipArrivals) {
+    const got = window.__vasimTipArrivals = [], q = m.messageQueue, push = q.push;
+    q.push = function (...msgs) {
+      for (const msg of msgs) {
+        if (msg.type === "SetPositionMessage" && msg.name === "/tool/tip") {
+          got.push(performance.now()); if (got.length > 400) { got.shift(); }
+        }
+      }
+      return push.apply(this, msgs);
+    };
+  }
   // The key's time stamp as the instrument's script took it (its listener stops the event,
   // so a listener here would never hear it).
   const armed = performance.now(), S = window.__vasimInput;
@@ -253,12 +265,39 @@ LATENCY_JS = """(key) => { window.__vasimLatency = undefined; new Promise((resol
   const give_up = performance.now() + 20000;
   const look = (now) => {
     const t0 = pressed();
-    if (t0 !== null && tip().position.distanceTo(p0) > 1e-5) { resolve(now - t0); return; }
+    if (t0 !== null && tip().position.distanceTo(p0) > 1e-5) {
+      const d = S.lastDown, recv = window.__vasimTipArrivals.find((x) => x >= d.h);
+      window.__vasimLatencySplit = {t0: t0, handler: d.h, seq: d.seq, drawn: now,
+        received: recv === undefined ? null : recv, origin: performance.timeOrigin};
+      resolve(now - t0); return;
+    }
     if (now > give_up) { resolve(null); return; }
     requestAnimationFrame(look);
   };
   requestAnimationFrame(look);
 }).then((ms) => { window.__vasimLatency = ms; }); return true; }"""
+
+
+LATENCY_PARTS = ("handler", "server", "received", "drawn")
+"""The key-to-picture latency split at the key's handler running in the page, its batch
+arriving at the server, the first tip message after it arriving in the page's queue, and
+the frame that shows the tip moved: the time of each step after the previous one."""
+
+
+def _latency_split(split: Any, arrivals: Any) -> tuple[float, float, float, float] | None:
+    """One key press's :data:`LATENCY_PARTS` [ms] from the page's time stamps and the
+    server's batch arrivals ``(seq, wall-clock s)``; None when a step was not seen. The
+    page's and the server's clocks are one machine's (``performance.timeOrigin`` is wall
+    time), so the server's step is within a millisecond or so."""
+    if not split or split.get("received") is None or not split.get("seq"):
+        return None
+    at = next((t for seq, t in list(arrivals) if seq == split["seq"]), None)
+    if at is None:
+        return None
+    server = at * 1000.0 - split["origin"]  # on the page's clock [ms]
+    steps = (split["t0"], split["handler"], server, split["received"], split["drawn"])
+    a, b, c, d, e = steps
+    return (float(b - a), float(c - b), float(d - c), float(e - d))
 
 
 def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dict[str, float]:
@@ -300,7 +339,8 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
             ahead.append(f["trainee_windows_ahead_max"])
             rates.append(f["trainee_page_update_hz_min"])
             time.sleep(0.25)
-        latencies = []
+        latencies: list[float] = []
+        splits: list[tuple[float, float, float, float]] = []
         for i in range(1 if SMOKE else 5):
             key = "ArrowRight" if i % 2 == 0 else "ArrowLeft"
             page.evaluate(LATENCY_JS, key)
@@ -315,6 +355,10 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
             ms = page.evaluate("() => window.__vasimLatency")
             if ms is not None:
                 latencies.append(float(ms))
+                split = _latency_split(page.evaluate("() => window.__vasimLatencySplit"),
+                                       app.instrument_input.arrivals)
+                if split is not None:
+                    splits.append(split)
             time.sleep(0.5)
         got = page.evaluate("() => window.__vasimBacklog")
         backlog = np.array(got["samples"], dtype=float)
@@ -345,6 +389,9 @@ def _throttled(app: Any, browser: Any, seconds: float, rate: float = 4.0) -> dic
         "latency_ms_p50": float(np.median(latencies)) if latencies else float("nan"),
         "latency_ms_max": float(max(latencies)) if latencies else float("nan"),
         "latency_n": float(len(latencies)),
+        **{f"latency_{k}_ms_p50": (float(np.median([x[i] for x in splits])) if splits
+                                   else float("nan"))
+           for i, k in enumerate(LATENCY_PARTS)},
         "realtime_factor": factor,
         "render_scale_min": app.notices.scales.coarsest.get(app.acks.port, 1.0),
     }
@@ -497,6 +544,10 @@ def main(argv: list[str] | None = None) -> None:
               "at the coarsest (render_scale.py)")
         print(f"  control-to-photon latency: p50 {t['latency_ms_p50']:.0f} ms, max "
               f"{t['latency_ms_max']:.0f} ms ({t['latency_n']:.0f} key presses)")
+        print("  where it goes (p50 of each step after the previous one): "
+              + ", ".join(f"{k} {t[f'latency_{k}_ms_p50']:.0f} ms" for k in LATENCY_PARTS)
+              + " (key -> its handler ran in the page -> its batch at the server -> the "
+              "first tip message after it in the page -> the frame showing the tip moved)")
 
 
 if __name__ == "__main__":

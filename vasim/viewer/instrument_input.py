@@ -37,9 +37,11 @@ tests.
 
 from __future__ import annotations
 
+import collections
 import json
 import logging
 import math
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -97,6 +99,7 @@ CONTROL_JS = r"""
       // handler itself runs late (the time since the press is then already held time) and
       // the 33 ms timer later still (module doc, "latency").
       if (fresh || !down) { flush(); }
+      if (fresh) { S.lastDown.h = performance.now(); S.lastDown.seq = S.seq; }
     };
   }
   window.addEventListener("keydown", onKey(true), true);
@@ -274,6 +277,9 @@ class InstrumentInput:
         self.last_seq = 0
         """The page's sequence number of the last batch applied to an instrument (a test
         that has seen the page send batch n knows when the instrument has taken it)."""
+        self.arrivals: collections.deque[tuple[int, float]] = collections.deque(maxlen=256)
+        """(sequence number, wall-clock time [s]) of recent batches as they arrived
+        (``bench/viewer.py`` splits the key-to-picture latency with them)."""
         apply = guard(self._apply)
 
         async def on_batch(event: Any) -> None:
@@ -296,13 +302,15 @@ class InstrumentInput:
         run_js(client, CONTROL_JS % {"uuid": self.uuid})
 
     def _apply(self, text: str) -> None:
+        seq = batch_seq(text)
+        self.arrivals.append((seq, time.time()))
         inc = parse_batch(text)
         dev = self._device()
         if inc is None or dev is None or not dev.push(inc):
             self.refused += 1
             return
         self.batches += 1
-        self.last_seq = batch_seq(text)
+        self.last_seq = seq
 
 
 __all__ = ["CONTROLS_TEXT", "InstrumentInput", "instrument_device", "parse_batch",
