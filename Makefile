@@ -41,7 +41,9 @@ PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
 # groups one test at a time (each paces real time or starts process trees sized to the
 # machine's cores); then every benchmark in its seconds-long smoke mode. Each phase prints
 # its slowest 20 tests. (Running the Ray tests and the benchmarks beside the browser tests
-# would gain nothing: Chromium's software drawing keeps both cores ~95 % busy.)
+# would gain nothing: Chromium's software drawing keeps both cores ~95 % busy. Measured again
+# on 2026-12-02, after the pages stopped drawing viser's environment map: the browser tests
+# beside the Ray tests took 430 s, one at a time 463 s, with the CPU 97.7 % busy.)
 test: install
 	.ci/ensure-chromium
 	$(MAKE) --no-print-directory -j3 -Otarget lint kernels-mrcp kernels-physics
