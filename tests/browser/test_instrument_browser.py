@@ -188,3 +188,38 @@ def _lit_fraction(path: Any) -> float:
     h, w = img.shape[:2]
     region = img[h // 2:, : w // 2]
     return float((region.max(axis=2) > 0.2).mean())
+
+
+PRESS_JS = """() => {
+  const S = window.__vasimInput, before = S.sent, seq0 = S.seq;
+  const wait = (ms) => { const t = performance.now(); while (performance.now() - t < ms) {} };
+  const down = new KeyboardEvent("keydown", {code: "KeyQ", bubbles: true});
+  wait(5);                        // the page handles the press 5 ms late (held time > 0)
+  window.dispatchEvent(down);
+  const onDown = S.sent - before;
+  const up = new KeyboardEvent("keyup", {code: "KeyQ", bubbles: true});
+  wait(5);
+  window.dispatchEvent(up);
+  return [onDown, S.sent - before - onDown, seq0, S.seq];
+}"""
+
+
+def test_a_key_press_and_its_release_leave_the_page_from_their_handlers(
+        app: ViewerApp, browser: Any) -> None:
+    """Issue #26.2: the batch of a new press (and of a release) is sent in the key event's
+    own turn of the page's script, before any timer can run (the page's 33 ms timer used to
+    send it: on a throttled page, up to 230 ms later); the server records each batch's
+    arrival (``InstrumentInput.arrivals``, which bench/viewer.py splits latency with)."""
+    page = browser.new_page(viewport=TRAINEE_VIEW)
+    try:
+        page.goto(app.url)
+        wait_ready(page)
+        page.wait_for_function("() => window.__vasimInput !== undefined", timeout=WAIT_MS)
+        on_down, on_up, seq0, seq1 = page.evaluate(PRESS_JS)
+        assert (on_down, on_up) == (1, 1)
+        assert seq1 == seq0 + 2
+        sent = {seq0 + 1, seq0 + 2}
+        assert wait_for(lambda: sent <= {s for s, _ in app.instrument_input.arrivals},
+                        timeout=WAIT_MS / 1000)
+    finally:
+        page.close()
