@@ -246,11 +246,14 @@ def quat_z_to(direction: ArrayLike) -> FloatArray:
     if n < 1e-12:
         return np.array([1.0, 0.0, 0.0, 0.0])
     d = d / n
-    axis = np.array([-d[1], d[0], 0.0])  # z x d
-    s = float(np.linalg.norm(axis))
+    # |z x d| by hypot, not by squaring: for a direction within ~1e-154 of the z axis the
+    # squares underflow to subnormals and the norm lost its precision (hypothesis found
+    # d = (0, 1.1e-162, -0.5) turned onto (0, 0.0092, -0.99996)).
+    s = math.hypot(float(d[0]), float(d[1]))
     if s == 0.0:
         return np.array([1.0, 0.0, 0.0, 0.0]) if d[2] > 0 else np.array([0.0, 1.0, 0.0, 0.0])
-    return quat_of(Rotation.from_rotvec(axis * (math.atan2(s, float(d[2])) / s)))
+    axis = np.array([-d[1] / s, d[0] / s, 0.0])  # z x d, unit
+    return quat_of(Rotation.from_rotvec(axis * math.atan2(s, float(d[2]))))
 
 
 def matrix_z_to(direction: ArrayLike) -> FloatArray:
