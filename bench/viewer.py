@@ -295,8 +295,7 @@ def _latency_split(split: Any, arrivals: Any) -> tuple[float, float, float, floa
     if at is None:
         return None
     server = at * 1000.0 - split["origin"]  # on the page's clock [ms]
-    steps = (split["t0"], split["handler"], server, split["received"], split["drawn"])
-    a, b, c, d, e = steps
+    a, b, c, d, e = split["t0"], split["handler"], server, split["received"], split["drawn"]
     return (float(b - a), float(c - b), float(d - c), float(e - d))
 
 

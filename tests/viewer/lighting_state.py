@@ -6,11 +6,14 @@ from __future__ import annotations
 from typing import Any
 
 
-def environment_maps(server: Any) -> list[Any]:
-    """The ``EnvironmentMapMessage`` objects in ``server``'s state for new pages (viser
-    1.1's broadcast buffer; none when nothing configured it, and the page then draws
-    viser's default map)."""
+def state_messages(server: Any) -> list[Any]:
+    """The messages in ``server``'s state for new pages (viser 1.1's broadcast buffer)."""
     buffer = server._websock_server._broadcast_buffer
     with buffer.buffer_lock:
-        messages = list(buffer.message_from_id.values())
-    return [m for m in messages if type(m).__name__ == "EnvironmentMapMessage"]
+        return list(buffer.message_from_id.values())
+
+
+def environment_maps(server: Any) -> list[Any]:
+    """The ``EnvironmentMapMessage`` objects in ``server``'s state (none when nothing
+    configured it, and the page then draws viser's default map)."""
+    return [m for m in state_messages(server) if type(m).__name__ == "EnvironmentMapMessage"]

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from tests.polling import wait_for, wait_until
-from tests.viewer.lighting_state import environment_maps
+from tests.viewer.lighting_state import environment_maps, state_messages
 from vasim.cli import main
 from vasim.cli import viewer as viewer_cli
 from vasim.core.errors import ConfigError, InputError
@@ -498,6 +498,5 @@ def test_no_page_of_the_viewer_draws_viser_s_environment_map(app) -> None:
     for server in (app.server, app.exp_server):
         maps = environment_maps(server)
         assert len(maps) == 1 and maps[0].hdri_data is None
-    lights = [type(m).__name__ for m in
-              app.exp_server._websock_server._broadcast_buffer.message_from_id.values()]
+    lights = [type(m).__name__ for m in state_messages(app.exp_server)]
     assert "HemisphereLightMessage" in lights  # the experimenter's fill

@@ -31,8 +31,7 @@ timer tick sent its batch up to 230 ms after that; a press now leaves with its h
 The page's keys are taken in the capture phase, so viser's own keyboard camera controls
 never see them; pointer events over the 3-D view are taken too (**decision**: the trainee's
 camera is the endoscope, so viser's orbit controls must not move it; only Mag or the scope's
-aim do). ``window.__vasimInput`` exposes counters for
-tests.
+aim do). ``window.__vasimInput`` exposes counters for tests.
 """
 
 from __future__ import annotations
@@ -98,8 +97,10 @@ CONTROL_JS = r"""
       // A new press or a release is sent at once, not at the next tick: on a busy page the
       // handler itself runs late (the time since the press is then already held time) and
       // the 33 ms timer later still (module doc, "latency").
+      var sent = S.sent;
       if (fresh || !down) { flush(); }
-      if (fresh) { S.lastDown.h = performance.now(); S.lastDown.seq = S.seq; }
+      // the handler's time and the press's batch (0: none was sent), for the bench
+      if (fresh) { S.lastDown.h = performance.now(); S.lastDown.seq = S.sent > sent ? S.seq : 0; }
     };
   }
   window.addEventListener("keydown", onKey(true), true);

@@ -8,12 +8,12 @@ map's lookups in every lit pixel of every frame. CPU of Chromium's GPU process p
 frame at 1280x800, full resolution, default abdomen (2026-12-02, one block of runs, the
 measure of ``bench/viewer_pixels.py``):
 
-==========================  =================  ==================
-page                        with the map [ms]  without it [ms]
-==========================  =================  ==================
+===========================  =================  ===============================
+page                         with the map [ms]  without it [ms]
+===========================  =================  ===============================
 trainee (the scope's light)  3,940              556
 experimenter (third person)  5,435              441 (450 with the fill below)
-==========================  =================  ==================
+===========================  =================  ===============================
 
 Turning the organs' shadows off instead changed nothing (3,837 ms). On the trainee page the
 endoscope's own lights (:class:`vasim.viewer.endoscope.ScopeLight`) replace it, as in a
