@@ -36,6 +36,7 @@ from vasim.core.geometry import (
     rotvec_from_matrix,
     slerp_matrix,
     to_xyzw,
+    vector_norm,
 )
 
 finite = st.floats(min_value=-1.0, max_value=1.0, allow_nan=False)
@@ -313,3 +314,36 @@ def test_frame_z_x_is_a_rotation_with_z_and_x_in_the_hint_s_plane(d: np.ndarray,
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-9)
     assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-9)
     np.testing.assert_array_equal(r[:, 2], z)
+
+
+wide = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_subnormal=True)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(wide, min_size=0, max_size=9).map(lambda v: np.array(v, dtype=np.float64)))
+@example(np.array([1e-200, 1e-200, 0.0]))          # squares underflow: both give 0.0
+@example(np.array([3.0, 4.0]))
+def test_vector_norm_is_numpys_norm_bit_for_bit(x: np.ndarray) -> None:
+    """The MRCP cycle's fast norm is np.linalg.norm's value, bit for bit (the simulated
+    trials, stored and replayed, stay what they were): for 1-D arrays, a strided view and a
+    (3, 3) matrix's Frobenius norm."""
+    assert vector_norm(x) == float(np.linalg.norm(x))
+    assert vector_norm(x[::2]) == float(np.linalg.norm(x[::2]))
+    m = np.resize(x, (3, 3)) if x.size else np.zeros((3, 3))
+    assert vector_norm(m.T) == float(np.linalg.norm(m.T))
+    assert vector_norm([3.0, 4.0]) == 5.0           # a list: numpy's own norm
+
+
+@settings(max_examples=300, deadline=None)
+@given(vectors.filter(lambda d: np.linalg.norm(d) > 1e-3), vectors)
+def test_frame_z_x_is_numpys_cross_and_column_stack_bit_for_bit(d: np.ndarray,
+                                                                hint: np.ndarray) -> None:
+    """frame_z_x's written-out cross product gives the frame np.cross and np.column_stack
+    gave (the same float operations), bit for bit."""
+    z = d / np.linalg.norm(d)
+    r = frame_z_x(z, hint, any_x=True)
+    x = r[:, 0]
+    np.testing.assert_array_equal(r, np.column_stack([x, np.cross(z, x), z]))
+    n = float(np.linalg.norm(hint - z * float(hint @ z)))
+    if n >= max(1e-9, 1e-4 * float(np.linalg.norm(hint))):   # one Gram-Schmidt step
+        np.testing.assert_array_equal(x, (hint - z * float(hint @ z)) / n)

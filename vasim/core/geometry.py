@@ -284,22 +284,46 @@ def frame_z_x(z: ArrayLike, x_hint: ArrayLike, *, any_x: bool = False,
     zz = np.asarray(z, dtype=np.float64)
     hint = np.asarray(x_hint, dtype=np.float64)
     x = hint - zz * float(hint @ zz)
-    n = float(np.linalg.norm(x))
+    n = vector_norm(x)
     if n < 1e-9:
         if not any_x:
             raise ValueError(f"{what} {x_hint!r} is parallel to {zz.tolist()!r}")
         x = np.eye(3)[int(np.argmin(np.abs(zz)))]
         x = x - zz * float(x @ zz)
-        n = float(np.linalg.norm(x))
-    elif n < 1e-4 * float(np.linalg.norm(hint)):
+        n = vector_norm(x)
+    elif n < 1e-4 * vector_norm(hint):
         # A hint within 1e-4 rad of z: the subtraction cancels and x keeps a part along z of
         # order eps/n (2.6e-9 for a hint 2.6e-9 rad off z, a hypothesis example); a second
         # Gram-Schmidt step removes it ("twice is enough"). Above that angle one step is kept:
         # every frame the callers build stays bit for bit what it was.
         x = x - zz * float(x @ zz)
-        n = float(np.linalg.norm(x))
-    x = x / n
-    return np.column_stack([x, np.cross(zz, x), zz])
+        n = vector_norm(x)
+    if x.shape != (3,) or zz.shape != (3,) or n == 0.0:   # (n == 0: numpy's inf/nan)
+        x = x / n
+        return np.column_stack([x, np.cross(zz, x), zz])
+    # Speed (the MRCP IK builds a frame per call): np.cross and np.column_stack cost tens of
+    # microseconds of dispatch on 3-vectors; the explicit x / n and cross product below are
+    # numpy's float operations (a1 b2 - a2 b1, ...), so the frame is bit for bit the same.
+    x0, x1, x2 = x.tolist()
+    x0, x1, x2 = x0 / n, x1 / n, x2 / n
+    z0, z1, z2 = zz.tolist()
+    return np.array([[x0, z1 * x2 - z2 * x1, z0],
+                     [x1, z2 * x0 - z0 * x2, z1],
+                     [x2, z0 * x1 - z1 * x0, z2]])
+
+
+def vector_norm(x: FloatArray) -> float:
+    """``float(np.linalg.norm(x))`` of a float64 array, bit for bit.
+
+    **Decision** (speed of the MRCP control cycle): numpy's 2-norm of a float array is
+    ``sqrt(y.dot(y))`` with ``y = x.ravel(order="K")`` (numpy 2.x ``linalg.norm``, ord and
+    axis None); doing exactly that skips microseconds of argument handling per call. Any
+    other input goes to ``np.linalg.norm`` itself. Not ``math.hypot``: it rounds differently.
+    """
+    if not isinstance(x, np.ndarray) or x.dtype != np.float64:
+        return float(np.linalg.norm(x))
+    y = x.ravel(order="K")
+    return math.sqrt(float(y.dot(y)))
 
 
 def align_vectors(a: ArrayLike, b: ArrayLike) -> FloatArray:
@@ -346,4 +370,5 @@ __all__ = [
     "rotvec_from_matrix",
     "slerp_matrix",
     "to_xyzw",
+    "vector_norm",
 ]

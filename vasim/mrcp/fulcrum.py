@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vasim.core.config import check_array, check_number, expect
-from vasim.core.geometry import frame_z_x
+from vasim.core.geometry import frame_z_x, vector_norm
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray
 
 
@@ -85,6 +85,10 @@ class ToolPose:
     insertion: float       # shaft length past the fulcrum, inside the body [m]
 
 
+_WORLD_X = np.array([1.0, 0.0, 0.0])
+"""The default x hint (read only: ``frame_z_x`` does not write its arguments)."""
+
+
 def _frame(z: FloatArray, x_hint: FloatArray) -> FloatArray:
     """Rotation with z axis ``z`` and x axis the part of ``x_hint`` orthogonal to it (any
     orthogonal axis if ``x_hint`` is parallel to ``z``): ``core.geometry.frame_z_x``."""
@@ -108,7 +112,7 @@ def tool_pose_through_fulcrum(tip: FloatArray, fulcrum: Fulcrum, tool: Laparosco
     """
     tip = np.asarray(tip, dtype=float)
     u = tip - fulcrum.point
-    insertion = float(np.linalg.norm(u))
+    insertion = vector_norm(u)     # np.linalg.norm's value, without its overhead
     if insertion < 1e-9:
         raise ValueError(f"the tip {tip.tolist()} is at the fulcrum: the shaft is undefined")
     z = u / insertion
@@ -118,8 +122,7 @@ def tool_pose_through_fulcrum(tip: FloatArray, fulcrum: Fulcrum, tool: Laparosco
     if insertion > tool.max_insertion:
         raise ValueError(f"the tip is {insertion:.4f} m past the fulcrum; the tool reaches "
                          f"{tool.max_insertion:.4f} m")
-    rot = _frame(z, np.array([1.0, 0.0, 0.0]) if x_hint is None
-                 else np.asarray(x_hint, dtype=float))
+    rot = _frame(z, _WORLD_X if x_hint is None else np.asarray(x_hint, dtype=float))
     mount = fulcrum.point - (tool.length - insertion) * z
     return ToolPose(mount, rot, tip.copy(), insertion)
 
@@ -129,7 +132,7 @@ def fulcrum_offset(mount: FloatArray, rotation: FloatArray, point: FloatArray) -
     ``rotation[:, 2]``): 0 when the tool passes through the fulcrum."""
     r = np.asarray(point, dtype=float) - np.asarray(mount, dtype=float)
     z = np.asarray(rotation, dtype=float)[:, 2]
-    return float(np.linalg.norm(r - float(r @ z) * z))
+    return vector_norm(r - float(r @ z) * z)    # np.linalg.norm's value, faster
 
 
 def polar_azimuth(shaft: FloatArray, fulcrum: Fulcrum, reference: FloatArray | None = None

@@ -98,7 +98,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.core.geometry import rotvec_from_matrix
+from vasim.core.geometry import rotvec_from_matrix, vector_norm
 from vasim.mrcp.batch_ik import TrajectoryRequest, solve_first_attempts
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
 from vasim.mrcp.indices.base import (
@@ -719,7 +719,7 @@ class MRCPKernel:
         pre, _ = self.pregrasp(q, pos, rot)
         tcp, _ = arm.tcp_pose(q_meas[r])
         if self.state is KernelState.TT_APPROACH:
-            if np.linalg.norm(pre - tcp) <= cfg.grasp_tolerance:
+            if vector_norm(pre - tcp) <= cfg.grasp_tolerance:
                 self.state = next_state(self.state, KernelEvent.AT_PREGRASP)
                 events.append(f"transfer_pregrasp {r}@{q}")
             else:
@@ -727,7 +727,7 @@ class MRCPKernel:
                                self._bodies(r), self._memory, cfg.planner, cfg.dt, self._rng)
                 return
         if self.state is KernelState.TT_GRASP:
-            if np.linalg.norm(grasp - tcp) <= cfg.grasp_tolerance and self._snap(
+            if vector_norm(grasp - tcp) <= cfg.grasp_tolerance and self._snap(
                     r, arm, q_meas[r], grasp, grot):
                 self.state = next_state(self.state, KernelEvent.GRASPED)
                 self.holders = (self.rsel, r)

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.core.geometry import rotation_angle, slerp_matrix
+from vasim.core.geometry import rotation_angle, slerp_matrix, vector_norm
 from vasim.mrcp.interfaces import ArmKinematics, ProximityWorld
 
 FloatArray = NDArray[np.float64]
@@ -105,7 +105,7 @@ def attraction(delta: FloatArray, dr_max: float) -> FloatArray:
         array([0.06, 0.08, 0.  ])
     """
     d = np.asarray(delta, dtype=np.float64)
-    n = float(np.linalg.norm(d))
+    n = vector_norm(d)
     return d * (dr_max / n) if n >= dr_max else d.copy()
 
 
@@ -127,7 +127,7 @@ def repulsion(u_now: FloatArray, u_prev: FloatArray | None, dist_now: float,
         return np.zeros(3)
     h = repulsion_magnitude(dist_now, p.dr_max, p.shape_l, p.d_offset, p.d_scale)
     du = np.asarray(u_now) - np.asarray(u_prev)
-    ndu = float(np.linalg.norm(du))
+    ndu = vector_norm(du)
     direction = -du / ndu if ndu > 1e-6 else -np.asarray(u_now)
     return h * direction
 
@@ -141,13 +141,13 @@ def guidance(f_attr: FloatArray, f_reps: Iterable[FloatArray], p: PlannerParams,
     jitter every cycle and wander off, e.g. an idle instrument near tissue).
     """
     f = np.asarray(f_attr, dtype=np.float64).copy()
-    pulled = float(np.linalg.norm(f)) >= 1e-3 * p.dr_max
+    pulled = vector_norm(f) >= 1e-3 * p.dr_max
     for r in f_reps:
         f = f + r
-    if pulled and float(np.linalg.norm(f)) < 1e-3 * p.dr_max and p.w_rand > 0.0:
+    if pulled and vector_norm(f) < 1e-3 * p.dr_max and p.w_rand > 0.0:
         rnd = rng.standard_normal(3)
-        f = f + p.w_rand * p.dr_max * rnd / max(float(np.linalg.norm(rnd)), 1e-12)
-    n = float(np.linalg.norm(f))
+        f = f + p.w_rand * p.dr_max * rnd / max(vector_norm(rnd), 1e-12)
+    n = vector_norm(f)
     return f * (p.dr_max / n) if n > p.dr_max else f
 
 
@@ -173,7 +173,7 @@ class ObstacleMemory:
 
 def _unit(a: FloatArray, b: FloatArray) -> FloatArray | None:
     d = np.asarray(b) - np.asarray(a)
-    n = float(np.linalg.norm(d))
+    n = vector_norm(d)
     if not np.isfinite(n) or n < 1e-12:
         return None
     return d / n
@@ -218,7 +218,7 @@ def move_candidate(mover: Mover, q: FloatArray,
     world, arm, robot = mover.world, mover.arm, mover.robot
     tcp, rot = arm.tcp_pose(q)
     f_attr = attraction(goal - tcp, p.dr_max) if goal is not None else np.zeros(3)
-    if goal is not None and float(np.linalg.norm(goal - tcp)) < p.dr_max:
+    if goal is not None and vector_norm(goal - tcp) < p.dr_max:
         repel = False                   # the last step onto the goal: settle, no limit cycle
     reps = []
     before: dict[str, float] = {}
@@ -238,7 +238,7 @@ def move_candidate(mover: Mover, q: FloatArray,
         else:
             memory.last.pop(key, None)
     f = guidance(f_attr, reps, p, rng)
-    if float(np.linalg.norm(f)) < 1e-9 and (goal_rotation is None):
+    if vector_norm(f) < 1e-9 and (goal_rotation is None):
         return q
     target_rot = (_limit_rotation(rot, goal_rotation, p.rot_max)
                   if goal_rotation is not None else None)
@@ -274,10 +274,10 @@ def fallback_steps(f: FloatArray, n: FloatArray) -> list[FloatArray]:
     """
     f = np.asarray(f, dtype=np.float64)
     n = np.asarray(n, dtype=np.float64)
-    size = float(np.linalg.norm(f))
+    size = vector_norm(f)
     out: list[FloatArray] = []
     slide = f - max(float(f @ n), 0.0) * n
-    if float(np.linalg.norm(slide)) > 1e-6 * size:
+    if vector_norm(slide) > 1e-6 * size:
         out.append(slide)
     if size > 0.0:
         out.append(-size * n)

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.geometry import vector_norm
 from vasim.mrcp.interfaces import ArmKinematics
 
 FloatArray = NDArray[np.float64]
@@ -120,7 +121,7 @@ def transfer_time(tcp: FloatArray, goal: FloatArray, max_tcp_speed: float) -> fl
     """Straight-line time at half the maximum TCP speed [s] (the seed's experiments)."""
     if max_tcp_speed <= 0.0:
         raise ValueError(f"transfer_time: max_tcp_speed must be > 0, got {max_tcp_speed!r}")
-    return float(np.linalg.norm(np.asarray(goal) - np.asarray(tcp))) / (0.5 * max_tcp_speed)
+    return vector_norm(np.asarray(goal) - np.asarray(tcp)) / (0.5 * max_tcp_speed)
 
 
 def transfer_complexity(joint_path: FloatArray | None, duration: float,

@@ -51,7 +51,7 @@ import numpy as np
 
 from vasim.core.config import check_choice
 from vasim.core.errors import ConfigError
-from vasim.core.geometry import rot_x, rot_y, rot_z
+from vasim.core.geometry import rot_x, rot_y, rot_z, vector_norm
 from vasim.mrcp.fulcrum import Fulcrum, LaparoscopicArm, LaparoscopicTool
 from vasim.mrcp.indices.cone import ConeSector, ToolCone
 from vasim.mrcp.interfaces import ArmKinematics, FloatArray, Proximity
@@ -70,6 +70,9 @@ MOUNT_HEIGHT = 0.20
 
 _R0 = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
 """Rx(pi): the positioner's wrist frame at zero, tool z axis pointing down."""
+
+_ROTATION_CACHE = 32
+"""Wrist rotations a ``ToolPositioner`` keeps (most MRCP-cycle repeats are within ~16)."""
 
 
 class ToolPositioner:
@@ -95,6 +98,7 @@ class ToolPositioner:
         self._upper = np.array([travel] * 3 + [tilt, tilt, 2 * math.pi])
         self._vmax = np.array([linear_speed] * 3 + [angular_speed] * 3)
         self.home = np.zeros(6)
+        self._rotations: dict[bytes, FloatArray] = {}   # rotation()'s recent results
 
     @property
     def n_joints(self) -> int:
@@ -118,7 +122,21 @@ class ToolPositioner:
 
     def rotation(self, q: FloatArray) -> FloatArray:
         """``(3, 3)`` mount rotation at ``q``."""
-        return _R0 @ rot_x(float(q[3])) @ rot_y(float(q[4])) @ rot_z(float(q[5]))
+        # Speed: the MRCP cycle asks for the same wrist angles again and again (an IK's
+        # solution is the next IK's seed, whose x axis sets the roll; the fulcrum check
+        # poses the solution), so the last results are kept, keyed by the angles' exact
+        # bits (-0.0 is not 0.0), and a copy returned. The product is kept as is: a closed
+        # form sums in another order than the matrix products (BLAS, with FMA) and differs
+        # in the last bit.
+        qa = np.asarray(q, dtype=float)
+        key = qa[3:6].tobytes()
+        rot = self._rotations.get(key)
+        if rot is None:
+            rot = _R0 @ rot_x(float(qa[3])) @ rot_y(float(qa[4])) @ rot_z(float(qa[5]))
+            if len(self._rotations) >= _ROTATION_CACHE:
+                self._rotations.clear()     # (clear: one atomic step, no eviction order)
+            self._rotations[key] = rot
+        return rot.copy()
 
     def tcp_pose(self, q: FloatArray) -> tuple[FloatArray, FloatArray]:
         q = np.asarray(q, dtype=float)
@@ -141,14 +159,18 @@ class ToolPositioner:
         q = seed.copy()
         q[:3] = np.asarray(position, dtype=float) - self.origin
         if rotation is not None:
-            m = _R0.T @ np.asarray(rotation, dtype=float)
-            sv = float(np.clip(m[0, 2], -1.0, 1.0))
+            # (as Python floats, and np.clip's value (NaN passes) by comparisons: the same
+            # numbers without numpy's per-call dispatch, ~10 us per IK)
+            m = (_R0.T @ np.asarray(rotation, dtype=float)).tolist()
+            sv = m[0][2]
+            sv = -1.0 if sv < -1.0 else 1.0 if sv > 1.0 else sv
             q[4] = math.asin(sv)
-            q[3] = math.atan2(-m[1, 2], m[2, 2])
-            c = math.atan2(-m[0, 1], m[0, 0])
-            c += 2 * math.pi * round((seed[5] - c) / (2 * math.pi))   # nearest to the seed
+            q[3] = math.atan2(-m[1][2], m[2][2])
+            c = math.atan2(-m[0][1], m[0][0])
+            # nearest to the seed (float(): the same arithmetic and int as on numpy's float)
+            c += 2 * math.pi * round((float(seed[5]) - c) / (2 * math.pi))
             q[5] = c
-        if np.any(q < self._lower - 1e-12) or np.any(q > self._upper + 1e-12):
+        if (q < self._lower - 1e-12).any() or (q > self._upper + 1e-12).any():
             return None
         return q
 
@@ -256,7 +278,7 @@ class ShaftWorld:
             centre, rb = self.spheres[b]
             ca, cb = segment_closest_points(pa0, pa1, centre, centre)
         gap = cb - ca
-        n = float(np.linalg.norm(gap))
+        n = vector_norm(gap)
         d = n - ra - rb
         if d >= max_distance:
             nan = np.full(3, np.nan)
@@ -286,7 +308,7 @@ class CameraRobot:
     def lens(self, aim: FloatArray) -> FloatArray:
         """Lens position when the scope points at ``aim`` (on the trocar-aim line)."""
         d = np.asarray(aim, dtype=float) - self.fulcrum
-        return self.fulcrum + self.insertion * d / max(float(np.linalg.norm(d)), 1e-12)
+        return self.fulcrum + self.insertion * d / max(vector_norm(d), 1e-12)
 
 
 @dataclass(frozen=True, eq=False)

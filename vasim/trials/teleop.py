@@ -161,6 +161,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from vasim.core.geometry import vector_norm
 from vasim.mrcp.kernel import CycleRecord, IndexSpec, KernelConfig, MRCPKernel, TaskPoint
 from vasim.mrcp.modes import KernelState
 from vasim.mrcp.planner import PlannerParams
@@ -389,7 +390,7 @@ class TeleopTrial:
         """Marks the via point reached when the needle is within the ring radius of it."""
         ts = self.state
         w = self._waypoint()
-        if ts.via and float(np.linalg.norm(ts.needle - w)) <= self.task.ring_radius:
+        if ts.via and vector_norm(ts.needle - w) <= self.task.ring_radius:
             ts.via = False
             ts.route_j += 1
             ts.route_log.append((-1, ts.t, w.copy(), ts.needle.copy()))
@@ -401,8 +402,8 @@ class TeleopTrial:
 
     def _check_ring(self) -> None:
         ts = self.state
-        if ts.i < self.task.n_rings and not ts.via and float(
-                np.linalg.norm(ts.needle - self._goal())) <= self.task.ring_radius:
+        if ts.i < self.task.n_rings and not ts.via and vector_norm(
+                ts.needle - self._goal()) <= self.task.ring_radius:
             ts.reach_times.append(ts.t)
             ts.route_log.append((ts.i, ts.t, self._goal().copy(), ts.needle.copy()))
             ts.events.append((ts.t, "ring", f"ring {ts.i} passed ({ts.holder})"))
@@ -448,7 +449,7 @@ class TeleopTrial:
         """The needle's path of this cycle, by what moved it (``EM_PARTS``)."""
         st = self.state
         part = "transfer" if st.transferring else "to_via" if st.via else "to_ring"
-        st.em_parts[part] += float(np.linalg.norm(st.needle - st.em_from))
+        st.em_parts[part] += vector_norm(st.needle - st.em_from)
         st.em_from = st.needle.copy()
 
     def route_phase(self) -> None:
@@ -519,7 +520,7 @@ class TeleopTrial:
         for _ in range(OPERATOR_SUBSTEPS):
             dx = m.hand.move(dt_op, ts.needle, self._waypoint(), self.camera.zoom)
             m.master = m.master + dx
-            ts.master_path += float(np.linalg.norm(dx))
+            ts.master_path += vector_norm(dx)
 
     def mrcp_master_phase(self, m: MrcpLoop) -> CycleRecord:
         """The kernel applies the master's increments: the needle, its holder, the clutch
@@ -654,7 +655,7 @@ class TeleopTrial:
         # across the needle: where the tip is, plus the misjudgement
         error = self.station.tip(other) - (ts.needle + grasp_offset(other))
         error = error * np.array([0.0, 1.0, 1.0]) + lateral_error(self.rng, s.sigma)
-        miss = float(np.linalg.norm(error))
+        miss = vector_norm(error)
         outcome = classify_grasp(miss)
         if outcome == "missed" and s.attempts < MAX_GRASP_ATTEMPTS:
             ts.counts["regrasps"] += 1
@@ -717,7 +718,7 @@ class TeleopTrial:
         st = self.station
         arm = st.arms[side]
         q = st.world.configuration(side)
-        self.state.master_path += float(np.linalg.norm(dx))
+        self.state.master_path += vector_norm(dx)
         sol = arm.ik(st.tip(side) + dx, None, q)
         if sol is None:
             self.state.counts["tool_holds"] += 1
