@@ -1,12 +1,13 @@
 """Screenshots of the viewer's pages for the docs (issue #26): the trainee's page with its
-score card, the experimenter's page, and the experimenter's f5PL editor, in headless
-Chromium at 1280x800.
+score card and during a trial (README's picture), the experimenter's page, the
+experimenter's f5PL editor and the MRCP station's page, in headless Chromium at 1280x800.
 
 Run from the repository (Debian's ``/usr/bin/chromium`` and the ``playwright`` package, as
 the browser tests; never ``playwright install``)::
 
     python docs/screenshots.py            # writes docs/trainee.png, docs/experimenter.png,
-                                          # docs/f5pl_editor.png
+                                          # docs/viewer.png, docs/f5pl_editor.png,
+                                          # docs/mrcp.png
     python docs/screenshots.py --smoke    # the same, into a temporary folder (a check)
 
 What it does: a viewer on loopback (``scene="none"``: the static page without the deforming
@@ -54,6 +55,16 @@ def ready(page: Any, node: str = "/tool/tip") -> None:
         timeout=READY_MS)
     page.evaluate("() => new Promise(r => requestAnimationFrame(() => "
                   "requestAnimationFrame(() => r(true))))")
+
+
+def dismiss_notices(page: Any) -> int:
+    """Closes viser's pop-up notices (Chromium drawing in software gets "Software WebGL
+    rendering detected"), as a reader would before looking at the page; returns how many."""
+    return int(page.evaluate("""() => {
+        const close = [...document.querySelectorAll('[class*="Notification-closeButton"]')];
+        close.forEach(b => b.click());
+        return close.length;
+    }"""))
 
 
 def settle(page: Any, seconds: float = 1.5) -> None:
@@ -115,6 +126,7 @@ def shoot(out: Path) -> list[Path]:
                     trainee.wait_for_function(
                         "() => document.body.innerText.includes('Score card')",
                         timeout=READY_MS)
+                    dismiss_notices(trainee)
                     settle(trainee)
                     written.append(out / "trainee.png")
                     trainee.screenshot(path=str(written[-1]), timeout=SHOT_MS)
@@ -129,9 +141,12 @@ def shoot(out: Path) -> list[Path]:
                                                                            timeout=READY_MS)
                     # A second, slow trial runs while the page is shot: the live metrics
                     # and the editor's operating point are current.
-                    app.controller.speed = 0.2
+                    # (both: the controller paces the next trial, the app judges "running
+                    # behind" against its speed)
+                    app.speed = app.controller.speed = 0.2
                     n = app.snapshot.info.number
                     request("start", None, lambda: app.snapshot.info.number > n)
+                    dismiss_notices(exp)
                     settle(exp, 4.0)
                     written.append(out / "experimenter.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
@@ -147,11 +162,64 @@ def shoot(out: Path) -> list[Path]:
                     written.append(out / "f5pl_editor.png")
                     exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
                     exp.close()
+                    # The trainee's page during that trial (README's picture): the path,
+                    # the fixtures at work and the live status, no score card yet; the
+                    # only page open (two pages drawing in software fall behind).
+                    live = browser.new_page(viewport=VIEWPORT)
+                    live.goto(app.url)
+                    ready(live)
+                    dismiss_notices(live)
+                    settle(live, 4.0)
+                    written.append(out / "viewer.png")
+                    live.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                    live.close()
                 finally:
                     browser.close()
         finally:
             app.stop()
     return written
+
+
+MRCP_AT_S = 12.0
+"""Simulated time of the MRCP shot: ``obstacle_hole``'s first two hand-overs (R0 to R1 at
+about 6 s, and back at about 12 s) are on the charts."""
+
+
+def shoot_mrcp(out: Path) -> Path:
+    """The MRCP station's page of ``vasim serve --scene mrcp:obstacle_hole`` (coarse 36 ms
+    cycle) at about :data:`MRCP_AT_S` of simulated time (of whichever run the scenario's
+    loop is in once the page is ready): the station, the NTT / texec / tus charts."""
+    from playwright.sync_api import sync_playwright
+
+    from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp
+
+    app = MrcpViewerApp(port=0, scenario="obstacle_hole", coarse=True,
+                        pace=MrcpPace(view_hz=15.0, plot_hz=2.0)).start()
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                        args=LAUNCH_ARGS)
+            try:
+                page = browser.new_page(viewport=VIEWPORT)
+                page.goto(app.url)
+                ready(page, "/mrcp/robots/R1/link6")
+
+                def at_shot() -> bool:
+                    frame = app.live.latest()
+                    return frame is not None and MRCP_AT_S <= frame.sample.t < MRCP_AT_S + 2
+
+                if not wait_for(at_shot, 300):
+                    raise RuntimeError(f"the MRCP run did not reach {MRCP_AT_S} s")
+                dismiss_notices(page)
+                settle(page, 1.0)       # the charts' next refresh (2 Hz) and the last poses
+                path = out / "mrcp.png"
+                page.screenshot(path=str(path), timeout=SHOT_MS)
+                page.close()
+            finally:
+                browser.close()
+    finally:
+        app.stop()
+    return path
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -166,14 +234,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.smoke:
         with tempfile.TemporaryDirectory() as tmp:
-            files = shoot(Path(tmp))
+            files = [*shoot(Path(tmp)), shoot_mrcp(Path(tmp))]
             sizes = {f.name: f.stat().st_size for f in files}
     else:
-        files = shoot(args.out)
+        files = [*shoot(args.out), shoot_mrcp(args.out)]
         sizes = {str(f): f.stat().st_size for f in files}
     for name, size in sizes.items():
         print(f"{name}: {size} bytes")
-    return 0 if len(sizes) == 3 and all(s > 10_000 for s in sizes.values()) else 1
+    return 0 if len(sizes) == 5 and all(s > 10_000 for s in sizes.values()) else 1
 
 
 if __name__ == "__main__":
