@@ -26,7 +26,8 @@ import os
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +56,27 @@ def ready(page: Any, node: str = "/tool/tip") -> None:
         timeout=READY_MS)
     page.evaluate("() => new Promise(r => requestAnimationFrame(() => "
                   "requestAnimationFrame(() => r(true))))")
+
+
+@contextmanager
+def chromium() -> Iterator[Any]:
+    """Headless Debian Chromium at :data:`LAUNCH_ARGS` (closed on leaving)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=LAUNCH_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+def open_page(browser: Any, url: str, node: str = "/tool/tip") -> Any:
+    """A new 1280x800 page at ``url``, ready (:func:`ready`) once ``node`` is drawn."""
+    page = browser.new_page(viewport=VIEWPORT)
+    page.goto(url)
+    ready(page, node)
+    return page
 
 
 def dismiss_notices(page: Any) -> int:
@@ -93,8 +115,6 @@ def editor_to_top(page: Any) -> None:
 
 
 def shoot(out: Path) -> list[Path]:
-    from playwright.sync_api import sync_playwright
-
     from vasim.viewer import TrialOptions, ViewerApp, ViewerPace
 
     out.mkdir(parents=True, exist_ok=True)
@@ -116,65 +136,54 @@ def shoot(out: Path) -> list[Path]:
             request("start", None, lambda: app.snapshot.info.trial_id is not None)
             if not wait_for(lambda: app.panel.scorecard is not None, 240):
                 raise RuntimeError(f"no score card: {app.panel.status} {app.errors[-3:]}")
-            with sync_playwright() as p:
-                browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                            args=LAUNCH_ARGS)
-                try:
-                    trainee = browser.new_page(viewport=VIEWPORT)
-                    trainee.goto(app.url)
-                    ready(trainee)
-                    trainee.wait_for_function(
-                        "() => document.body.innerText.includes('Score card')",
-                        timeout=READY_MS)
-                    dismiss_notices(trainee)
-                    settle(trainee)
-                    written.append(out / "trainee.png")
-                    trainee.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    trainee.close()
+            with chromium() as browser:
+                trainee = open_page(browser, app.url)
+                trainee.wait_for_function(
+                    "() => document.body.innerText.includes('Score card')",
+                    timeout=READY_MS)
+                dismiss_notices(trainee)
+                settle(trainee)
+                written.append(out / "trainee.png")
+                trainee.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                trainee.close()
 
-                    exp = browser.new_page(viewport=VIEWPORT)
-                    exp.goto(app.experimenter_url)
-                    ready(exp)
-                    # the "Fixture schema" folder is open by default: choose FF's curve
-                    exp.get_by_role("combobox", name="f5PL of").click(force=True, timeout=READY_MS)
-                    exp.get_by_role("option", name="ff", exact=True).click(force=True,
-                                                                           timeout=READY_MS)
-                    # A second, slow trial runs while the page is shot: the live metrics
-                    # and the editor's operating point are current.
-                    # (both: the controller paces the next trial, the app judges "running
-                    # behind" against its speed)
-                    app.speed = app.controller.speed = 0.2
-                    n = app.snapshot.info.number
-                    request("start", None, lambda: app.snapshot.info.number > n)
-                    dismiss_notices(exp)
-                    settle(exp, 4.0)
-                    written.append(out / "experimenter.png")
-                    exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    # The whole editor in frame (issue #26 §5: a fixed mouse-wheel distance
-                    # scrolled past the curve once the panel grew): a taller page, and the
-                    # panel scrolled to put the editor's "f5PL of" menu at its top.
-                    exp.set_viewport_size(EDITOR_VIEWPORT)
-                    exp.mouse.move(600, EDITOR_VIEWPORT["height"] - 10)  # no hint tooltip
-                    editor_to_top(exp)
-                    settle(exp, 3.0)
-                    editor_to_top(exp)      # again, after the resized page's layout settled
-                    settle(exp, 1.0)
-                    written.append(out / "f5pl_editor.png")
-                    exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    exp.close()
-                    # The trainee's page during that trial (README's picture): the path,
-                    # the fixtures at work and the live status, no score card yet; the
-                    # only page open (two pages drawing in software fall behind).
-                    live = browser.new_page(viewport=VIEWPORT)
-                    live.goto(app.url)
-                    ready(live)
-                    dismiss_notices(live)
-                    settle(live, 4.0)
-                    written.append(out / "viewer.png")
-                    live.screenshot(path=str(written[-1]), timeout=SHOT_MS)
-                    live.close()
-                finally:
-                    browser.close()
+                exp = open_page(browser, app.experimenter_url)
+                # the "Fixture schema" folder is open by default: choose FF's curve
+                exp.get_by_role("combobox", name="f5PL of").click(force=True, timeout=READY_MS)
+                exp.get_by_role("option", name="ff", exact=True).click(force=True,
+                                                                       timeout=READY_MS)
+                # A second, slow trial runs while the page is shot: the live metrics
+                # and the editor's operating point are current.
+                # (both: the controller paces the next trial, the app judges "running
+                # behind" against its speed)
+                app.speed = app.controller.speed = 0.2
+                n = app.snapshot.info.number
+                request("start", None, lambda: app.snapshot.info.number > n)
+                dismiss_notices(exp)
+                settle(exp, 4.0)
+                written.append(out / "experimenter.png")
+                exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                # The whole editor in frame (issue #26 §5: a fixed mouse-wheel distance
+                # scrolled past the curve once the panel grew): a taller page, and the
+                # panel scrolled to put the editor's "f5PL of" menu at its top.
+                exp.set_viewport_size(EDITOR_VIEWPORT)
+                exp.mouse.move(600, EDITOR_VIEWPORT["height"] - 10)  # no hint tooltip
+                editor_to_top(exp)
+                settle(exp, 3.0)
+                editor_to_top(exp)      # again, after the resized page's layout settled
+                settle(exp, 1.0)
+                written.append(out / "f5pl_editor.png")
+                exp.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                exp.close()
+                # The trainee's page during that trial (README's picture): the path,
+                # the fixtures at work and the live status, no score card yet; the
+                # only page open (two pages drawing in software fall behind).
+                live = open_page(browser, app.url)
+                dismiss_notices(live)
+                settle(live, 4.0)
+                written.append(out / "viewer.png")
+                live.screenshot(path=str(written[-1]), timeout=SHOT_MS)
+                live.close()
         finally:
             app.stop()
     return written
@@ -189,34 +198,25 @@ def shoot_mrcp(out: Path) -> Path:
     """The MRCP station's page of ``vasim serve --scene mrcp:obstacle_hole`` (coarse 36 ms
     cycle) at about :data:`MRCP_AT_S` of simulated time (of whichever run the scenario's
     loop is in once the page is ready): the station, the NTT / texec / tus charts."""
-    from playwright.sync_api import sync_playwright
-
     from vasim.viewer.mrcp_panel import MrcpPace, MrcpViewerApp
 
     app = MrcpViewerApp(port=0, scenario="obstacle_hole", coarse=True,
                         pace=MrcpPace(view_hz=15.0, plot_hz=2.0)).start()
     try:
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                        args=LAUNCH_ARGS)
-            try:
-                page = browser.new_page(viewport=VIEWPORT)
-                page.goto(app.url)
-                ready(page, "/mrcp/robots/R1/link6")
+        with chromium() as browser:
+            page = open_page(browser, app.url, "/mrcp/robots/R1/link6")
 
-                def at_shot() -> bool:
-                    frame = app.live.latest()
-                    return frame is not None and MRCP_AT_S <= frame.sample.t < MRCP_AT_S + 2
+            def at_shot() -> bool:
+                frame = app.live.latest()
+                return frame is not None and MRCP_AT_S <= frame.sample.t < MRCP_AT_S + 2
 
-                if not wait_for(at_shot, 300):
-                    raise RuntimeError(f"the MRCP run did not reach {MRCP_AT_S} s")
-                dismiss_notices(page)
-                settle(page, 1.0)       # the charts' next refresh (2 Hz) and the last poses
-                path = out / "mrcp.png"
-                page.screenshot(path=str(path), timeout=SHOT_MS)
-                page.close()
-            finally:
-                browser.close()
+            if not wait_for(at_shot, 300):
+                raise RuntimeError(f"the MRCP run did not reach {MRCP_AT_S} s")
+            dismiss_notices(page)
+            settle(page, 1.0)       # the charts' next refresh (2 Hz) and the last poses
+            path = out / "mrcp.png"
+            page.screenshot(path=str(path), timeout=SHOT_MS)
+            page.close()
     finally:
         app.stop()
     return path
