@@ -116,6 +116,9 @@ def _head(tmp_path: Path) -> Iterator[tuple[int, int]]:
     # ... and a specific server (one per client) that sees no client for 30 s (Ray's
     # default) ends itself: under load its start and the client's arrival drift apart.
     env["TIMEOUT_FOR_SPECIFIC_SERVER_S"] = "180"
+    # Its workers at the niceness of the test, as a local power run's (ray_join.py
+    # LOCAL_SYSTEM_CONFIG): at Ray's default of 15 any busy process took their cores
+    env["RAY_worker_niceness"] = "0"
     temp = Path("/tmp") / f"vasim_ray_{os.getpid()}_{port}"   # short: unix socket paths
     with log.open("wb") as out:
         proc = subprocess.Popen(

@@ -4,6 +4,7 @@ down (vasim/study/power/driver.py, vasim/cli/study.py)."""
 from __future__ import annotations
 
 import math
+import os
 import time
 from pathlib import Path
 
@@ -15,6 +16,7 @@ from vasim.cli import main
 from vasim.study.power.design import COARSE_DT, PowerDesign
 from vasim.study.power.driver import run_power
 from vasim.study.power.estimate import POWER_COLUMNS
+from vasim.study.power.ray_join import init_ray
 from vasim.study.protocol import Protocol
 
 RAY_DAEMONS = ("raylet", "gcs_server")
@@ -133,3 +135,16 @@ def test_an_out_folder_under_a_file_fails_before_ray_starts(
         err = capsys.readouterr().err
         assert code == 2 and "afile" in err and err.count("\n") == 1, (flag, err)
         assert not _ray_daemons()
+
+
+def test_a_local_ray_s_workers_run_at_the_command_s_niceness() -> None:
+    # Ray's default puts its workers 15 niceness steps below the command (issue #31)
+    import ray
+
+    try:
+        assert init_ray(None, 1) == 1
+        niceness = ray.get(ray.remote(lambda: os.nice(0)).remote())
+    finally:
+        ray.shutdown()
+    assert niceness == os.nice(0)
+    assert _no_ray_left()
