@@ -20,21 +20,27 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
+# Python caches each module's bytecode when it first imports it; with PYTHONDONTWRITEBYTECODE
+# set (some shells and containers set it) every process compiles every module it imports
+# again: ~6 s of the ~17 s of CPU a test worker's collection takes. So no make step sees it,
+# and pip does not byte-compile the ~1.5 GB it installs (`--no-compile`): most of it (Ray's
+# dashboard, serve, tune ...) is never imported, and compiling it all took 49 of `make
+# test`'s 89 s of install on a 2-core machine (40 s without, 2026-12-02).
+unexport PYTHONDONTWRITEBYTECODE
+PIP_INSTALL := $(PY) -m pip install --quiet --no-compile
+
 $(CORE_STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e .
+	$(PIP_INSTALL) -e .
 	touch $(CORE_STAMP)
 
 $(STAMP): pyproject.toml | $(PY)
-	$(PY) -m pip install --quiet -e '.[$(FULL_EXTRAS)]'
+	$(PIP_INSTALL) -e '.[$(FULL_EXTRAS)]'
 	touch $(STAMP) $(CORE_STAMP)
 
 run: install-core
 	$(VENV)/bin/vasim serve --host 127.0.0.1 --port 8080 --db study.sqlite
 
-# pytest caches the assert-rewritten test modules as bytecode; with PYTHONDONTWRITEBYTECODE
-# set (some shells and containers set it) every run rewrites all ~250 of them again: ~6 s of
-# the ~17 s of CPU collection takes, which each parallel worker pays.
-PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
+PYTEST := $(PY) -m pytest
 
 # The whole suite (CI): lint beside `kernels-*` (below); then in parallel (pytest-xdist, one
 # worker per core, a test file per worker) all but the browser and Ray tests; then those two
