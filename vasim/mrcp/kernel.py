@@ -98,7 +98,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from vasim.core.geometry import rotvec_from_matrix, vector_norm
+from vasim.core.geometry import rotvec_between, vector_norm
 from vasim.mrcp.batch_ik import TrajectoryRequest, solve_first_attempts
 from vasim.mrcp.indices import INDICES, EvalContext, GroupIndex, Index, Wrench
 from vasim.mrcp.indices.base import (
@@ -186,7 +186,7 @@ def _linear_step(arm: ArmKinematics, q: FloatArray, dp: FloatArray,
     if r0 is None or r1 is None:
         dq = np.linalg.pinv(jac[:3], rcond=1e-6) @ dp
     else:
-        dw = rotvec_from_matrix(r1 @ r0.T)
+        dw = rotvec_between(r0, r1)   # the log map of r1 r0^T (closed form, as the arm IK's)
         dq = np.linalg.pinv(jac, rcond=1e-6) @ np.concatenate([dp, dw])
     out = q + dq
     if np.any(out < arm.joint_lower) or np.any(out > arm.joint_upper):
