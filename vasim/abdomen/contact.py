@@ -73,6 +73,7 @@ from numpy.typing import NDArray
 
 from vasim.abdomen._contact_kernels import patch_tip_force, tool_contacts
 from vasim.core.config import check_int, check_number, expect
+from vasim.core.kernel_args import readonly_c, writable_c
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -279,7 +280,9 @@ def detect_contacts(
         The contact forces on the tool and on the tissue nodes, and the haptic patch.
     """
     r = shape.radius
-    x, faces, mass = _f64(x), _i64(faces), _f64(mass)
+    # one kernel type per argument (vasim.core.kernel_args): the organ's own faces and
+    # masses are read-only, its positions writable
+    x, faces, mass = writable_c(x), readonly_c(faces, np.int64), readonly_c(mass)
     if x.ndim != 2 or x.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3 \
             or mass.shape != (x.shape[0],):
         raise ValueError(f"detect_contacts needs x (n, 3), faces (f, 3) and mass (n,), got "
@@ -289,7 +292,7 @@ def detect_contacts(
     # sphere the nearest face with a node within r + h of its centre, then the forces.
     (count, max_pen, force, force_tip, torque, stiff, node_index, node_force, points,
      normals, k, ell) = tool_contacts(
-        x, faces, mass, _vec3(pose.tip), _vec3(pose.fulcrum), float(r),
+        x, faces, mass, writable_c(pose.tip), writable_c(pose.fulcrum), float(r),
         float(shape.spacing), int(shape.max_spheres), float(shape.contact_stiffness),
         STABILITY_FRACTION, float(dt), -1.0 if max_edge is None else float(max_edge))
     if count <= 0:
@@ -305,27 +308,6 @@ def detect_contacts(
                          float(max_pen), patch)
 
 
-def _f64(a: FloatArray) -> FloatArray:
-    """``a`` as a C-contiguous float64 array (no copy when it already is one)."""
-    if type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=np.float64)
-
-
-def _vec3(a: FloatArray) -> FloatArray:
-    """A point as a writable C-contiguous float64 array: the compiled kernels then see one
-    array type whatever the caller holds (a read-only snapshot array would be another type,
-    compiled on its first call -- in the 1 kHz loop)."""
-    if (type(a) is np.ndarray and a.dtype == np.float64 and a.flags.c_contiguous
-            and a.flags.writeable):
-        return a
-    return np.array(a, dtype=np.float64)
-
-
-def _i64(a: IntArray) -> IntArray:
-    if type(a) is np.ndarray and a.dtype == np.int64 and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=np.int64)
 
 
 def patch_force(patch: ContactPatch, pose: ToolPose) -> tuple[FloatArray, FloatArray]:
@@ -380,7 +362,8 @@ def patch_force_into(patch: ContactPatch, fulcrum: FloatArray, tip: FloatArray,
         0.2
     """
     return int(patch_tip_force(patch.points, patch.normals, patch.stiffness, patch.offsets,
-                               float(patch.radius), _vec3(tip), _vec3(fulcrum), force, stiff))
+                               float(patch.radius), writable_c(tip), writable_c(fulcrum),
+                               force, stiff))
 
 
 __all__ = [

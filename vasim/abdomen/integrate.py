@@ -87,6 +87,7 @@ from vasim.abdomen.model import (
     OrganModel,
     OrganState,
 )
+from vasim.core.kernel_args import writable_c
 
 Preconditioner = Literal["auto", "diagonal", "factor"]
 _PRECONDITIONERS = ("auto", "diagonal", "factor")
@@ -392,7 +393,7 @@ class OrganSolver:
         """
         model = self.model
         n = model.n_nodes
-        targets = np.ascontiguousarray(anchor_targets, dtype=np.float64)
+        targets = writable_c(anchor_targets)   # one kernel type (vasim.core.kernel_args)
         if targets.shape != self._target_shape:
             raise ValueError(f"anchor_targets must have shape {self._target_shape}, got "
                              f"{np.shape(anchor_targets)}")

@@ -77,7 +77,6 @@ from vasim.abdomen.contact import (
     ContactResult,
     ToolPose,
     ToolShape,
-    _vec3,
     detect_contacts,
 )
 from vasim.abdomen.integrate import OrganSolver, StepReport
@@ -87,6 +86,7 @@ from vasim.abdomen.quality import TissueQuality
 from vasim.abdomen.scene import Scene, dumps_scene, load_scene
 from vasim.abdomen.snapshot import AbdomenSnapshot, OrganView, ToolContact, readonly
 from vasim.core.errors import ConfigError
+from vasim.core.kernel_args import writable_c
 
 FloatArray = NDArray[np.float64]
 
@@ -473,7 +473,7 @@ class Abdomen:
                 and float(np.sum((tip - last[1]) ** 2)) < last[2] ** 2):
             return {}
         near, gap = cells_near(self._cell_centres, self._cell_r2, self._cell_body,
-                               len(self._bodies), _vec3(ful), _vec3(tip))
+                               len(self._bodies), writable_c(ful), writable_c(tip))
         self._clears[slot] = None if near.any() else (ful.copy(), tip.copy(), float(gap))
         out: dict[int, ContactResult] = {}
         lo = np.minimum(ful, tip) - self.tool.radius

@@ -42,6 +42,7 @@ from scipy.stats import qmc
 
 from vasim.core import geometry
 from vasim.core.config import check_choice
+from vasim.core.kernel_args import readonly_c, writable_c
 from vasim.mrcp import _ik_kernels, closed_form_ik, dh
 from vasim.mrcp.batch_ik import FirstAttempt
 from vasim.mrcp.dh import RobotModel
@@ -398,14 +399,14 @@ class PybulletArm:
         if rot is None:     # the same iteration, compiled (dh.position_dls)
             return dh.position_dls(self.robot, q0, target, self.base, tol_p, iterations)
         history = np.empty(iterations)
-        q = np.ascontiguousarray(q0, dtype=float)
-        rot = np.ascontiguousarray(rot, dtype=float)
+        q, target, rot = writable_c(q0), writable_c(target), writable_c(rot)
+        base = writable_c(self.base)
+        lower, upper = readonly_c(self.robot.lower), readonly_c(self.robot.upper)
         it = 0
         while True:
             q, status, it = _ik_kernels.pose_dls(
-                self.robot.table, self.robot.tcp, self.base, q, target, rot, self.robot.lower,
-                self.robot.upper, float(tol_p), float(tol_r), int(iterations), 1e-6, it,
-                history)
+                self.robot.table, self.robot.tcp, base, q, target, rot, lower, upper,
+                float(tol_p), float(tol_r), int(iterations), 1e-6, it, history)
             if status != _ik_kernels.NEEDS_PYTHON:
                 return q if status == _ik_kernels.REACHED else None
             q, status = self._python_step(q, target, rot, tol_p, tol_r, it, history)

@@ -92,6 +92,7 @@ from vasim.core.config import (
 )
 from vasim.core.errors import ConfigError
 from vasim.core.geometry import rot_x, rot_z
+from vasim.core.kernel_args import readonly_c, writable_c
 from vasim.core.resources import data_file, protocols_dir, read_data_file
 
 FloatArray = NDArray[np.float64]
@@ -448,7 +449,7 @@ def _position_dls_kernel(table: FloatArray, tcp: FloatArray, base: FloatArray,
 def wrap_clip(q: FloatArray, lower: FloatArray, upper: FloatArray) -> FloatArray:
     """Each joint of ``q`` ``(n,)`` outside its limits moved by a multiple of 2π (-1, 1,
     -2, 2) into them when one fits, then clamped (compiled; the numeric IK's projection)."""
-    return _wrap_clip(np.ascontiguousarray(q, dtype=float), lower, upper)
+    return _wrap_clip(writable_c(q), readonly_c(lower), readonly_c(upper))
 
 
 def position_dls(robot: RobotModel, q0: FloatArray, target: FloatArray,
@@ -460,10 +461,9 @@ def position_dls(robot: RobotModel, q0: FloatArray, target: FloatArray,
     (above 0.7 x its value 5 steps earlier, from step 8 on) or after ``iterations``. The
     3 x 3 system is solved by an explicit Cholesky factorisation (no LAPACK call)."""
     q, ok = _position_dls_kernel(
-        robot.table, robot.tcp,
-        _EYE4 if base is None else np.ascontiguousarray(base, dtype=float),
-        np.ascontiguousarray(q0, dtype=float), np.ascontiguousarray(target, dtype=float),
-        robot.lower, robot.upper, float(tol), int(iterations), float(damping))
+        robot.table, robot.tcp, _EYE4 if base is None else writable_c(base),
+        writable_c(q0), writable_c(target), readonly_c(robot.lower), readonly_c(robot.upper),
+        float(tol), int(iterations), float(damping))
     return q if ok else None
 
 
@@ -471,12 +471,11 @@ def frames_many(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
                 ) -> FloatArray:
     """``(m, n + 2, 4, 4)`` frames of configurations ``(m, n)`` (compiled; the maths of
     :func:`frames_one` per configuration)."""
-    q = np.ascontiguousarray(np.atleast_2d(q), dtype=float)
+    q = writable_c(np.atleast_2d(q))
     if q.ndim != 2 or q.shape[1] != robot.n_joints:
         raise ValueError(f"q must have shape (m, {robot.n_joints}), got {q.shape}")
     frames = np.empty((q.shape[0], robot.n_joints + 2, 4, 4))
-    _many_kernel(robot.table, robot.tcp,
-                 _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), q,
+    _many_kernel(robot.table, robot.tcp, _EYE4 if base is None else writable_c(base), q,
                  frames, np.empty((1, 6, robot.n_joints)), False)
     return frames
 
@@ -487,12 +486,12 @@ _EYE4 = np.eye(4)
 def frames_one(robot: RobotModel, q: FloatArray, base: FloatArray | None = None
                ) -> FloatArray:
     """``(n + 2, 4, 4)`` frames of one configuration ``(n,)`` (compiled; a few µs)."""
-    q = np.ascontiguousarray(q, dtype=float)
+    q = writable_c(q)
     if q.shape != (robot.n_joints,):
         raise ValueError(f"q must have shape ({robot.n_joints},), got {q.shape}")
     frames = np.empty((robot.n_joints + 2, 4, 4))
-    _chain_kernel(robot.table, robot.tcp, _EYE4 if base is None
-                  else np.ascontiguousarray(base, dtype=float), q, frames)
+    _chain_kernel(robot.table, robot.tcp, _EYE4 if base is None else writable_c(base), q,
+                  frames)
     return frames
 
 
@@ -537,10 +536,9 @@ def jacobian_batch(robot: RobotModel, q: FloatArray, base: FloatArray | None = N
     """
     q = np.asarray(q, dtype=float)
     if q.ndim == 2 and q.shape[1] == robot.n_joints:
-        qc = np.ascontiguousarray(q)
+        qc = writable_c(q)
         jac = np.empty((q.shape[0], 6, robot.n_joints))
-        _many_kernel(robot.table, robot.tcp,
-                     _EYE4 if base is None else np.ascontiguousarray(base, dtype=float), qc,
+        _many_kernel(robot.table, robot.tcp, _EYE4 if base is None else writable_c(base), qc,
                      np.empty((q.shape[0], robot.n_joints + 2, 4, 4)), jac, True)
         return jac
     frames = link_frames(robot, q, base)

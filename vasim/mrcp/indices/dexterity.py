@@ -33,6 +33,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.kernel_args import readonly_c, writable_c
 from vasim.mrcp.indices._theta_kernels import (
     sample_configs,
     sigma_min_at_least,
@@ -128,7 +129,8 @@ class AnisotropicDexterityIndex:
             # (``dh_chain() -> (table, tcp, base)``, PybulletArm) gets the whole index in
             # one compiled call, the same steps as below (the tests hold the two equal)
             table, tcp, base = chain()
-            seg = theta_dh_segments(table, tcp, base, configs, pos, std, z, dens,
+            seg = theta_dh_segments(readonly_c(table), readonly_c(tcp), writable_c(base),
+                                    configs, pos, std, z, dens,
                                     np.ascontiguousarray(reach), self._rows, self._tr,
                                     self.sigma_min_threshold, len(self.threshold_rows) <= n)
             w = prediction_weights(kk)
@@ -183,8 +185,9 @@ class AnisotropicDexterityIndex:
                 [np.where(contexts[i].reachable[:, None], contexts[i].configs,
                           contexts[i].configs[0][None, :]) for i in members], dtype=np.float64)
             segs = np.empty((len(members), kk))
-            theta_dh_many(np.ascontiguousarray([c[0] for c in chains], dtype=np.float64),
-                          np.ascontiguousarray([c[1] for c in chains], dtype=np.float64),
+            # read-only, as a robot's own: theta_dh_segments, which this calls per arm, is
+            # then compiled once for both calls (vasim.core.kernel_args)
+            theta_dh_many(readonly_c([c[0] for c in chains]), readonly_c([c[1] for c in chains]),
                           np.ascontiguousarray([c[2] for c in chains], dtype=np.float64),
                           np.array([arms[id(contexts[i].arm)] for i in members],
                                    dtype=np.int64), configs,

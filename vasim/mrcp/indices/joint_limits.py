@@ -39,6 +39,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from vasim.core.kernel_args import readonly_c, writable_c
 from vasim.mrcp.indices._index_kernels import rj_along
 from vasim.mrcp.indices.base import INDICES, EvalContext, prediction_weights
 
@@ -155,15 +156,10 @@ class JointLimitIndex:
         if not ctx.reachable[0]:
             return 0.0
         arm = ctx.arm
-        reach = np.ascontiguousarray(ctx.reachable)
+        reach = writable_c(ctx.reachable, np.bool_)
         configs = np.ascontiguousarray(
             np.where(reach[:, None], ctx.configs, ctx.configs[0][None, :]), dtype=np.float64)
         errors = prediction_errors(configs, list(ctx.past_configs))
-        return float(rj_along(configs, reach, np.ascontiguousarray(ctx.joint_velocity,
-                                                                    dtype=np.float64),
-                              _f64(arm.joint_lower), _f64(arm.joint_upper),
-                              _f64(arm.max_velocity), self.b_min, self.b_max, errors))
-
-
-def _f64(a: FloatArray) -> FloatArray:
-    return np.ascontiguousarray(a, dtype=np.float64)
+        return float(rj_along(configs, reach, writable_c(ctx.joint_velocity),
+                              readonly_c(arm.joint_lower), readonly_c(arm.joint_upper),
+                              readonly_c(arm.max_velocity), self.b_min, self.b_max, errors))
