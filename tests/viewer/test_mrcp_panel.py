@@ -23,7 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from tests.polling import wait_for
+from tests.polling import WAIT_S, wait_for
 from tests.viewer.lighting_state import environment_maps
 from vasim.cli import main
 from vasim.core.errors import ConfigError
@@ -84,15 +84,17 @@ def test_scene_nodes_exist_for_every_robot_link_obstacle_and_the_task(
 
 
 def test_robots_move_over_cycles(app: MrcpViewerApp) -> None:
-    assert wait_for(lambda: app.live.latest() is not None and app.view_updates > 0, 30)
+    # Bounds on conditions, not timing goals (WAIT_S): the first cycle took over 30 s at
+    # load 6 on 2 cores (issue #31's stress run)
+    assert wait_for(lambda: app.live.latest() is not None and app.view_updates > 0, WAIT_S)
     before = {r: link_state(app, r, 6) for r in ("R0", "R1")}
     seq = app.live.latest().seq  # type: ignore[union-attr]
-    assert wait_for(lambda: app.live.latest().seq > seq + 20, 30)  # type: ignore[union-attr]
+    assert wait_for(lambda: app.live.latest().seq > seq + 20, WAIT_S)  # type: ignore[union-attr]
     assert wait_for(lambda: any(not np.allclose(link_state(app, r, 6), before[r], atol=1e-6)
-                                for r in ("R0", "R1")), 45)
+                                for r in ("R0", "R1")), WAIT_S)
     # R1 holds the turning cube: its wrist link turns with it.
     assert wait_for(lambda: not np.allclose(link_state(app, "R1", 6), before["R1"],
-                                            atol=1e-4), 45)
+                                            atol=1e-4), WAIT_S)
 
 
 def test_holder_label_changes_at_the_transfer(app: MrcpViewerApp) -> None:
@@ -104,16 +106,19 @@ def test_holder_label_changes_at_the_transfer(app: MrcpViewerApp) -> None:
             seen.append(text)
         return text.startswith("task: R0")
 
-    assert wait_for(transferred, 60, step=0.01), (seen, app.errors)
-    assert seen[0].startswith("task: R1 @ point 0"), seen
+    assert wait_for(transferred, WAIT_S, step=0.01), (seen, app.errors)
+    # The first holder shown is R1 (before the first cycle is drawn, a loaded host shows
+    # the label's initial "task": issue #31's stress run)
+    held = [text for text in seen if text != "task"]
+    assert held[0].startswith("task: R1 @ point 0"), seen
     # The new holder is coloured and labelled as RSel, the old one as waiting.
-    assert wait_for(lambda: app.station.labels["R0"].text == "R0: holds the task", 45)  # type: ignore[union-attr]
+    assert wait_for(lambda: app.station.labels["R0"].text == "R0: holds the task", WAIT_S)  # type: ignore[union-attr]
     assert tuple(app.station.links["R0"][0].color) == (235, 120, 30)  # type: ignore[union-attr]
     assert app.station.labels["R1"].text in ("R1: waiting", "R1: grasping (hand-over)")  # type: ignore[union-attr]
 
 
 def test_plots_and_event_log_receive_data(app: MrcpViewerApp) -> None:
-    assert wait_for(lambda: any(tr["t_done"] for tr in app.live.history().transfers), 60)
+    assert wait_for(lambda: any(tr["t_done"] for tr in app.live.history().transfers))
     app.render(force_plots=True)
     panel = app.panel
     assert panel is not None
@@ -141,7 +146,7 @@ def test_plots_and_event_log_receive_data(app: MrcpViewerApp) -> None:
 def test_finished_run_loops() -> None:
     with MrcpViewerApp(port=0, scenario="cube_rotation", coarse=True, duration=0.4,
                        pace=MrcpPace(speed=50.0)) as a:
-        assert wait_for(lambda: a.live.run >= 2, 60), a.errors
+        assert wait_for(lambda: a.live.run >= 2), a.errors
         assert a.alive() and not a.errors
 
 
@@ -168,7 +173,7 @@ def test_failing_cycle_is_notified_logged_and_restarts(caplog: pytest.LogCapture
     caplog.set_level(logging.ERROR, logger="vasim.viewer.mrcp_panel")
     with MrcpViewerApp(port=0, scenario=FailingScenario(), coarse=True,
                        pace=MrcpPace(speed=50.0, retry_s=0.05)) as a:
-        assert wait_for(lambda: a.live.failures >= 2, 60)
+        assert wait_for(lambda: a.live.failures >= 2)
         assert a.alive()  # the app survives and the scenario restarts
         assert "scripted failure" in a.errors[0] and "restarting" in a.errors[0]
         assert any("failing_cube" in r.getMessage() for r in caplog.records)
@@ -307,11 +312,11 @@ def test_a_safety_stop_is_shown_with_its_cause_and_the_scenario_restarts() -> No
 
     with MrcpViewerApp(port=0, scenario=CollidingScenario(), coarse=True,
                        pace=MrcpPace(speed=20.0, stop_pause_s=0.5)) as a:
-        assert wait_for(lambda: a.live.stopped is not None, 60), a.errors
-        assert wait_for(lambda: "safety stop" in a.panel.status.content, 30)  # type: ignore[union-attr]
+        assert wait_for(lambda: a.live.stopped is not None), a.errors
+        assert wait_for(lambda: "safety stop" in a.panel.status.content)  # type: ignore[union-attr]
         status = a.panel.status.content  # type: ignore[union-attr]
         assert "rsel_collision R1" in status and "nearest body ball" in status
-        assert wait_for(lambda: a.live.run >= 2, 60)
+        assert wait_for(lambda: a.live.run >= 2)
         assert not a.errors and a.alive()
         h = a.live.history()
         assert not [e for _, e in h.events if e.startswith("fault:")]

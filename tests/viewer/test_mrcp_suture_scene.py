@@ -31,7 +31,7 @@ def test_scene_has_the_station_the_needle_the_thread_and_the_subtask(app: MrcpVi
         assert f"/mrcp/robots/{r}/link6" in nodes
     assert "/mrcp/obstacles/tissue_left" in nodes and "/mrcp/obstacles/tissue_right" in nodes
     assert "/mrcp/task/body" in nodes
-    assert wait_for(lambda: app.subtasks is not None and app.subtasks.updates > 0, 60)
+    assert wait_for(lambda: app.subtasks is not None and app.subtasks.updates > 0)
     nodes = app.scene_nodes()
     for n in ("/mrcp/suture/thread", "/mrcp/suture/subtask", "/mrcp/suture/pinned"):
         assert n in nodes
@@ -48,9 +48,9 @@ def test_status_shows_the_mrcp_pairing_once_stitching(app: MrcpViewerApp) -> Non
         f = app.live.latest()
         return f is not None and f.sample.mode == "MRCP"
 
-    assert wait_for(stitching, 90)
+    assert wait_for(stitching)
     assert app.subtasks is not None
-    assert wait_for(lambda: "MRCP" in app.subtasks.label.text, 10)
+    assert wait_for(lambda: "MRCP" in app.subtasks.label.text)
     assert app.stats()["failures"] == 0
 
 
