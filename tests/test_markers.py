@@ -6,6 +6,8 @@ from __future__ import annotations
 import re
 import tomllib
 
+import pytest
+
 from tests.markers import MARKS, ROOT, SLOW, marks_for
 
 
@@ -41,3 +43,33 @@ def test_hypothesis_has_no_wall_clock_checks() -> None:
 
     assert settings.default.deadline is None
     assert HealthCheck.too_slow in settings.default.suppress_health_check
+
+
+
+class _Item:
+    """What conftest's collection hook reads and writes of a pytest item."""
+
+    def __init__(self, nodeid: str, timeout: float | None = None) -> None:
+        self.nodeid = nodeid
+        self.marks = [] if timeout is None else [pytest.mark.timeout(timeout).mark]
+
+    def add_marker(self, marker: pytest.MarkDecorator) -> None:
+        self.marks.append(marker.mark)
+
+    def get_closest_marker(self, name: str) -> pytest.Mark | None:
+        return next((m for m in reversed(self.marks) if m.name == name), None)
+
+
+def test_browser_ray_and_slow_tests_get_the_long_hang_guard() -> None:
+    """tests/conftest.py gives them LONG_TIMEOUT_S unless they set their own (pyproject's
+    300 s for the others): the slow null cohort outgrew 300 s at a load of 7."""
+    from tests.conftest import LONG_TIMEOUT_S, pytest_collection_modifyitems
+
+    items = [_Item("tests/browser/test_x.py::test_y"),
+             _Item("tests/study/power/test_driver.py::t"),
+             _Item("tests/study/test_null_full_engine.py::t"),
+             _Item("tests/core/test_config.py::t"),
+             _Item("tests/mrcp/test_eight_robots_minutes.py::t", timeout=3600)]
+    pytest_collection_modifyitems(None, items)  # type: ignore[arg-type]  # unused by the hook
+    limits = [(m.args[0] if (m := i.get_closest_marker("timeout")) else None) for i in items]
+    assert limits == [LONG_TIMEOUT_S, LONG_TIMEOUT_S, LONG_TIMEOUT_S, None, 3600]
